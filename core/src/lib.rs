@@ -1,0 +1,22 @@
+//! volscatter-core: scene model, VDB and EXR I/O, phase functions, solvers, reference path
+//! tracer and compositor. Pure CPU; no FFI (that is `plugin/`).
+
+pub mod compositor;
+pub mod error;
+pub mod image;
+pub mod io;
+pub mod medium;
+pub mod phase;
+pub mod rng;
+pub mod sampling;
+pub mod scene;
+pub mod solvers;
+pub mod vdb;
+
+pub use error::{Error, Result};
+pub use image::Image;
+pub use medium::Medium;
+pub use scene::Scene;
+pub use solvers::{Progress, ScatteringGrid, SolveOutput, Solver};
+
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

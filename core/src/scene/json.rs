@@ -1,0 +1,128 @@
+//! The versioned JSON form of a scene (format 1), as read from disk or from a host. These are
+//! plain serde structs; `super::Scene::from_json` validates them and builds the scene model.
+//! Documented in docs/scene-format.md — keep the two in step.
+
+use serde::{Deserialize, Serialize};
+
+/// A number or an RGB triple (`10.0` means `[10, 10, 10]`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum Rgb {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl Rgb {
+    pub fn to_array(self) -> [f32; 3] {
+        match self {
+            Rgb::Grey(v) => [v; 3],
+            Rgb::Rgb(a) => a,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneJson {
+    pub format: u32,
+    pub medium: MediumJson,
+    #[serde(default)]
+    pub lights: Vec<LightJson>,
+    pub camera: CameraJson,
+    /// Solver name and settings; each solver reads the keys it knows (see docs).
+    #[serde(default)]
+    pub solver: serde_json::Map<String, serde_json::Value>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MediumJson {
+    /// OpenVDB file, relative to the scene file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vdb: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid: Option<String>,
+    /// Built-in procedural medium: "plume".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub procedural: Option<String>,
+    /// Raw little-endian float32 file, x fastest, with `dims`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw: Option<String>,
+    /// Voxel counts for `procedural` (one number, cubic) or `raw` (three numbers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dims: Option<Vec<u32>>,
+    /// For `raw`: world position of the centre of voxel (0,0,0), and the voxel edge length.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<[f32; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub voxel_size: Option<f32>,
+    #[serde(default = "one")]
+    pub density_scale: Rgb,
+    #[serde(default = "white")]
+    pub albedo: Rgb,
+    #[serde(default)]
+    pub g: f32,
+    /// Row-major object-to-world matrix applied after the grid's own index-to-object map.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transform: Option<Vec<f32>>,
+}
+
+fn one() -> Rgb {
+    Rgb::Grey(1.0)
+}
+fn white() -> Rgb {
+    Rgb::Grey(1.0)
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum LightJson {
+    /// `direction` is the direction light travels; irradiance in W/m^2 perpendicular to it.
+    Distant {
+        direction: [f32; 3],
+        irradiance: Rgb,
+        #[serde(default)]
+        angle_deg: f32,
+    },
+    /// Intensity in W/sr; `radius` > 0 makes a sphere light of the same total power.
+    Point {
+        position: [f32; 3],
+        intensity: Rgb,
+        #[serde(default)]
+        radius: f32,
+    },
+    /// Uniform `color` radiance (W/m^2/sr), or a lat-long `texture` times `intensity`.
+    Dome {
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        color: Option<Rgb>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        texture: Option<String>,
+        #[serde(default = "one_f")]
+        intensity: f32,
+    },
+}
+
+fn one_f() -> f32 {
+    1.0
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraJson {
+    pub position: [f32; 3],
+    pub look_at: [f32; 3],
+    #[serde(default = "z_up")]
+    pub up: [f32; 3],
+    /// Horizontal field of view in degrees.
+    #[serde(default = "default_fov")]
+    pub fov_deg: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+fn z_up() -> [f32; 3] {
+    [0.0, 0.0, 1.0]
+}
+fn default_fov() -> f32 {
+    39.6
+}

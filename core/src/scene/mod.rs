@@ -1,0 +1,281 @@
+//! The scene model: one medium, its lights, a camera and solver settings. Built from the
+//! versioned JSON form (`json.rs`, docs/scene-format.md) or piecewise by hosts.
+
+pub mod camera;
+pub mod environment;
+pub mod json;
+pub mod light;
+
+use glam::{Affine3A, Mat4, Vec3};
+use std::path::{Path, PathBuf};
+
+pub use camera::Camera;
+pub use environment::{Environment, LatLongMap};
+pub use json::SceneJson;
+pub use light::Light;
+
+use crate::error::{Error, Result};
+use crate::medium::{procedural, raw, GridLimits, Medium};
+
+/// Largest image side and pixel count accepted (checked before any buffer is allocated).
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 26;
+
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub medium: Medium,
+    pub lights: Vec<Light>,
+    pub camera: Camera,
+    /// The `solver` block of the JSON: `name` and per-solver settings.
+    pub solver: serde_json::Map<String, serde_json::Value>,
+}
+
+/// The embedded default scene: the procedural plume under a warm sun and a blue sky.
+pub const DEFAULT_SCENE_JSON: &str = r#"{
+  "format": 1,
+  "medium": {"procedural": "plume", "dims": [64], "density_scale": 12.0,
+             "albedo": [0.95, 0.95, 0.95], "g": 0.6},
+  "lights": [
+    {"type": "distant", "direction": [-0.5, 0.6, -0.62], "irradiance": [5.0, 4.6, 4.0], "angle_deg": 0.53},
+    {"type": "dome", "color": [0.12, 0.17, 0.28]}
+  ],
+  "camera": {"position": [0, -6, 0.2], "look_at": [0, 0, 0], "up": [0, 0, 1],
+             "fov_deg": 39.6, "width": 256, "height": 256},
+  "solver": {"name": "reference", "spp": 64}
+}"#;
+
+fn finite3(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(Vec3::from(v))
+    } else {
+        Err(Error::scene(field, format!("must be finite numbers, got {v:?}")))
+    }
+}
+
+fn non_negative(field: &str, v: json::Rgb) -> Result<Vec3> {
+    let a = v.to_array();
+    if a.iter().all(|x| x.is_finite() && *x >= 0.0) {
+        Ok(Vec3::from(a))
+    } else {
+        Err(Error::scene(field, format!("must be finite and >= 0, got {a:?}")))
+    }
+}
+
+impl Scene {
+    pub fn default_scene() -> Self {
+        Scene::from_json_str(DEFAULT_SCENE_JSON, Path::new(".")).expect("embedded default scene is valid")
+    }
+
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+        Scene::from_json_str(&text, &base).map_err(|e| match e {
+            Error::Scene { field, message } => Error::Scene { field: format!("{}: {field}", path.display()), message },
+            other => other,
+        })
+    }
+
+    /// Parses and validates scene JSON; relative file paths resolve against `base_dir`.
+    pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Self> {
+        let de = &mut serde_json::Deserializer::from_str(text);
+        let parsed: SceneJson = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = e.path().to_string();
+            Error::scene(if path == "." { "(root)".to_string() } else { path }, e.into_inner().to_string())
+        })?;
+        Scene::from_json(parsed, base_dir)
+    }
+
+    pub fn from_json(j: SceneJson, base_dir: &Path) -> Result<Self> {
+        if j.format != 1 {
+            return Err(Error::scene("format", format!("version {} is not supported (this build reads 1)", j.format)));
+        }
+        let medium = build_medium(&j.medium, base_dir)?;
+        let mut lights = Vec::with_capacity(j.lights.len());
+        for (i, l) in j.lights.iter().enumerate() {
+            lights.push(build_light(l, &format!("lights[{i}]"), base_dir)?);
+        }
+        let camera = build_camera(&j.camera)?;
+        if let Some(name) = j.solver.get("name") {
+            if !name.is_string() {
+                return Err(Error::scene("solver.name", "must be a string"));
+            }
+        }
+        Ok(Scene { medium, lights, camera, solver: j.solver })
+    }
+
+    pub fn solver_name(&self) -> Option<&str> {
+        self.solver.get("name").and_then(|v| v.as_str())
+    }
+
+    pub fn environment(&self) -> Option<&Environment> {
+        self.lights.iter().find_map(|l| match l {
+            Light::Dome(e) => Some(e),
+            _ => None,
+        })
+    }
+}
+
+pub fn build_camera(c: &json::CameraJson) -> Result<Camera> {
+    let position = finite3("camera.position", c.position)?;
+    let look_at = finite3("camera.look_at", c.look_at)?;
+    let up = finite3("camera.up", c.up)?;
+    if (look_at - position).length() < 1e-6 {
+        return Err(Error::scene("camera.look_at", "must differ from camera.position"));
+    }
+    if (look_at - position).normalize().cross(up).length() < 1e-4 {
+        return Err(Error::scene("camera.up", "must not be parallel to the viewing direction"));
+    }
+    if !(c.fov_deg > 0.0 && c.fov_deg < 179.0) {
+        return Err(Error::scene("camera.fov_deg", format!("must be in (0, 179), got {}", c.fov_deg)));
+    }
+    for (name, v) in [("camera.width", c.width), ("camera.height", c.height)] {
+        if v == 0 || v > MAX_IMAGE_SIDE {
+            return Err(Error::scene(name, format!("must be in 1..={MAX_IMAGE_SIDE}, got {v}")));
+        }
+    }
+    if c.width as u64 * c.height as u64 > MAX_IMAGE_PIXELS {
+        return Err(Error::scene(
+            "camera.width",
+            format!("{}x{} pixels is over the limit of {MAX_IMAGE_PIXELS}", c.width, c.height),
+        ));
+    }
+    Ok(Camera::look_at(position, look_at, up, c.fov_deg, c.width, c.height))
+}
+
+pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<Light> {
+    Ok(match l {
+        json::LightJson::Distant { direction, irradiance, angle_deg } => {
+            let d = finite3(&format!("{field}.direction"), *direction)?;
+            if d.length() < 1e-6 {
+                return Err(Error::scene(format!("{field}.direction"), "must not be zero"));
+            }
+            if !(angle_deg.is_finite() && (0.0..180.0).contains(angle_deg)) {
+                return Err(Error::scene(format!("{field}.angle_deg"), format!("must be in [0, 180), got {angle_deg}")));
+            }
+            Light::Distant {
+                direction: d.normalize(),
+                irradiance: non_negative(&format!("{field}.irradiance"), *irradiance)?,
+                half_angle: 0.5 * angle_deg.to_radians(),
+            }
+        }
+        json::LightJson::Point { position, intensity, radius } => {
+            if !(radius.is_finite() && *radius >= 0.0) {
+                return Err(Error::scene(format!("{field}.radius"), format!("must be finite and >= 0, got {radius}")));
+            }
+            Light::Point {
+                position: finite3(&format!("{field}.position"), *position)?,
+                intensity: non_negative(&format!("{field}.intensity"), *intensity)?,
+                radius: *radius,
+            }
+        }
+        json::LightJson::Dome { color, texture, intensity } => {
+            if !(intensity.is_finite() && *intensity >= 0.0) {
+                return Err(Error::scene(format!("{field}.intensity"), format!("must be finite and >= 0, got {intensity}")));
+            }
+            let map = match texture {
+                Some(t) => Some(crate::io::exr::read_latlong(&base_dir.join(t))?),
+                None => None,
+            };
+            let colour = match color {
+                Some(c) => non_negative(&format!("{field}.color"), *c)?,
+                None if map.is_some() => Vec3::ONE,
+                None => return Err(Error::scene(field, "a dome needs `color` or `texture`")),
+            };
+            Light::Dome(Environment { color: colour * *intensity, map })
+        }
+    })
+}
+
+fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
+    let density_scale = non_negative("medium.density_scale", m.density_scale)?;
+    let albedo = non_negative("medium.albedo", m.albedo)?;
+    if albedo.max_element() > 1.0 {
+        return Err(Error::scene("medium.albedo", format!("must be in [0, 1], got {albedo}")));
+    }
+    if !(m.g.is_finite() && m.g > -1.0 && m.g < 1.0) {
+        return Err(Error::scene("medium.g", format!("must be in (-1, 1), got {}", m.g)));
+    }
+    let object_to_world = match &m.transform {
+        None => Affine3A::IDENTITY,
+        Some(t) => {
+            if t.len() != 16 || t.iter().any(|x| !x.is_finite()) {
+                return Err(Error::scene("medium.transform", "must be 16 finite numbers (row-major 4x4)"));
+            }
+            // Row-major in JSON, column-major in glam.
+            let mat = Mat4::from_cols_array(&t[..].try_into().unwrap()).transpose();
+            if mat.row(3).abs_diff_eq(glam::Vec4::W, 1e-6) && mat.determinant().abs() > 1e-12 {
+                Affine3A::from_mat4(mat)
+            } else {
+                return Err(Error::scene("medium.transform", "must be an invertible affine matrix (last row 0 0 0 1)"));
+            }
+        }
+    };
+    let limits = GridLimits::default();
+    let sources = [m.vdb.is_some(), m.procedural.is_some(), m.raw.is_some()].iter().filter(|&&b| b).count();
+    if sources != 1 {
+        return Err(Error::scene("medium", "needs exactly one of `vdb`, `procedural`, `raw`"));
+    }
+    let (grid, index_to_object) = if let Some(name) = &m.procedural {
+        if name != "plume" {
+            return Err(Error::scene("medium.procedural", format!("unknown procedural medium `{name}` (known: plume)")));
+        }
+        let n = match m.dims.as_deref() {
+            None => 64,
+            Some([n]) if (4..=1024).contains(n) => *n,
+            Some(_) => return Err(Error::scene("medium.dims", "for `procedural` must be one number in 4..=1024")),
+        };
+        procedural::plume(n, limits)?
+    } else if let Some(file) = &m.raw {
+        let dims = match m.dims.as_deref() {
+            Some(&[x, y, z]) => [x, y, z],
+            _ => return Err(Error::scene("medium.dims", "for `raw` must be three voxel counts")),
+        };
+        let origin = finite3("medium.origin", m.origin.unwrap_or([0.0; 3]))?;
+        let voxel = m.voxel_size.unwrap_or(1.0);
+        if !(voxel.is_finite() && voxel > 0.0) {
+            return Err(Error::scene("medium.voxel_size", format!("must be > 0, got {voxel}")));
+        }
+        let grid = raw::read_raw_f32(&base_dir.join(file), dims, limits)?;
+        (grid, Affine3A::from_translation(origin) * Affine3A::from_scale(Vec3::splat(voxel)))
+    } else {
+        let file = m.vdb.as_ref().unwrap();
+        crate::vdb::load_density(&base_dir.join(file), m.grid.as_deref(), limits)?
+    };
+    Ok(Medium::new(grid, object_to_world * index_to_object, density_scale, albedo, m.g))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_scene_parses() {
+        let s = Scene::default_scene();
+        assert_eq!(s.lights.len(), 2);
+        assert!(s.medium.grid.max_value() > 0.5);
+        assert_eq!(s.camera.width, 256);
+    }
+
+    fn err_of(json: &str) -> String {
+        Scene::from_json_str(json, Path::new(".")).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn bad_scenes_name_the_field() {
+        let base = DEFAULT_SCENE_JSON;
+        let e = err_of(&base.replace(r#""type": "dome""#, r#""type": "laser""#));
+        assert!(e.contains("lights[1]") && e.contains("laser"), "{e}");
+        let e = err_of(&base.replace(r#""width": 256"#, r#""width": 1000000"#));
+        assert!(e.contains("camera.width"), "{e}");
+        let e = err_of(&base.replace(r#""g": 0.6"#, r#""g": 1.5"#));
+        assert!(e.contains("medium.g"), "{e}");
+        let e = err_of(&base.replace(r#""density_scale": 12.0"#, r#""density_scale": -1"#));
+        assert!(e.contains("medium.density_scale"), "{e}");
+        let e = err_of(&base.replace(r#""format": 1"#, r#""format": 7"#));
+        assert!(e.contains("format"), "{e}");
+        let e = err_of(&base.replace(r#""camera": {"#, r#""kamera": {"#));
+        assert!(e.contains("kamera"), "{e}");
+        let e = err_of(&base.replace(r#""irradiance": [5.0, 4.6, 4.0]"#, r#""irradiance": "bright""#));
+        assert!(e.contains("lights[0]"), "{e}");
+    }
+}

@@ -1,0 +1,273 @@
+//! The path-tracing kernels of `reference`: free flights, shadow transmittance, next-event
+//! estimation, and the path loop shared by camera paths and scattering-grid estimates.
+
+use glam::{Affine3A, Vec3};
+use std::f32::consts::PI;
+
+use super::ReferenceSettings;
+use crate::medium::{MajorantGrid, Medium};
+use crate::phase::{hg, HenyeyGreenstein};
+use crate::rng::Rng;
+use crate::sampling::uniform_cone;
+use crate::scene::{Environment, Light, Scene};
+
+/// Radiance reaching the camera along one path, split by scattering order.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PathRadiance {
+    /// Light scattered exactly once (direct lighting at the first vertex).
+    pub single: Vec3,
+    /// Light scattered two or more times.
+    pub multiple: Vec3,
+    /// The environment seen through the medium, unscattered.
+    pub background: Vec3,
+}
+
+impl PathRadiance {
+    pub fn add(&mut self, o: &PathRadiance) {
+        self.single += o.single;
+        self.multiple += o.multiple;
+        self.background += o.background;
+    }
+    pub fn total(&self) -> Vec3 {
+        self.single + self.multiple + self.background
+    }
+}
+
+pub struct Tracer<'a> {
+    medium: &'a Medium,
+    world_to_index: Affine3A,
+    majorant: MajorantGrid,
+    lights: &'a [Light],
+    env: Option<&'a Environment>,
+    phase: HenyeyGreenstein,
+    max_depth: u32,
+    rr_depth: u32,
+}
+
+/// Power heuristic for two strategies with one sample each.
+#[inline]
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 { a2 / (a2 + b2) } else { 0.0 }
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(scene: &'a Scene, s: &ReferenceSettings) -> Self {
+        let medium = &scene.medium;
+        Tracer {
+            medium,
+            world_to_index: medium.world_to_index,
+            majorant: MajorantGrid::new(medium, s.majorant_resolution as i32),
+            lights: &scene.lights,
+            env: scene.environment(),
+            phase: HenyeyGreenstein::new(medium.g),
+            max_depth: s.max_depth,
+            rr_depth: s.rr_depth,
+        }
+    }
+
+    /// Spectral tracking from `x` along unit `d`. Returns the distance to a real collision, or
+    /// None if the ray leaves the medium; `beta` receives the tracking weights.
+    fn free_flight(&self, x: Vec3, d: Vec3, beta: &mut Vec3, rng: &mut Rng) -> Option<f32> {
+        // Index space keeps the ray parameter: t stays a world distance because d is unit in
+        // world space and the map is affine.
+        let o = self.world_to_index.transform_point3(x);
+        let di = self.world_to_index.transform_vector3(d);
+        let scale = self.medium.density_scale;
+        let grid = &self.medium.grid;
+        let mut hit = None;
+        self.majorant.traverse(o, di, 0.0, f32::INFINITY, |seg| {
+            let m = seg.majorant;
+            if m <= 0.0 {
+                return true;
+            }
+            let mut t = seg.t0;
+            loop {
+                t -= (1.0 - rng.f32()).ln() / m;
+                if t >= seg.t1 {
+                    return true;
+                }
+                let sigma_t = scale * grid.sample(o + di * t);
+                let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
+                let p_real_w = (*beta * sigma_t).max_element();
+                let p_null_w = (*beta * sigma_n).max_element();
+                let total = p_real_w + p_null_w;
+                if total <= 0.0 {
+                    continue;
+                }
+                let p_real = p_real_w / total;
+                if rng.f32() < p_real {
+                    *beta *= sigma_t / (m * p_real);
+                    hit = Some(t);
+                    return false;
+                }
+                *beta *= sigma_n / (m * (1.0 - p_real));
+            }
+        });
+        hit
+    }
+
+    /// Ratio-tracking estimate of the RGB transmittance from `x` along unit `d` over `t_max`.
+    pub fn transmittance(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Vec3 {
+        let o = self.world_to_index.transform_point3(x);
+        let di = self.world_to_index.transform_vector3(d);
+        let scale = self.medium.density_scale;
+        let grid = &self.medium.grid;
+        let mut tr = Vec3::ONE;
+        self.majorant.traverse(o, di, 0.0, t_max, |seg| {
+            let m = seg.majorant;
+            if m <= 0.0 {
+                return true;
+            }
+            let mut t = seg.t0;
+            loop {
+                t -= (1.0 - rng.f32()).ln() / m;
+                if t >= seg.t1 {
+                    return true;
+                }
+                let sigma_t = scale * grid.sample(o + di * t);
+                tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
+                // Russian roulette on small transmittance keeps thick media cheap, unbiased.
+                let mx = tr.max_element();
+                if mx < 0.1 {
+                    if rng.f32() >= mx * 10.0 {
+                        tr = Vec3::ZERO;
+                        return false;
+                    }
+                    tr /= mx * 10.0;
+                }
+            }
+        });
+        tr
+    }
+
+    /// Next-event estimation at `x` for a path arriving along propagation direction `d`:
+    /// sum over lights of phase * radiance * transmittance / pdf (the phase function is
+    /// evaluated for light scattered into -d, i.e. towards where the path came from).
+    fn direct_light(&self, x: Vec3, d: Vec3, rng: &mut Rng) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        for light in self.lights {
+            match light {
+                Light::Distant { direction, irradiance, half_angle } => {
+                    let to_light = -*direction;
+                    let (wi, weight) = if *half_angle > 0.0 {
+                        // Uniform disc of radiance E / (pi sin^2), sampled uniformly in its
+                        // cone of solid angle 2 pi (1 - cos): weight Omega / (pi sin^2).
+                        let s = (0.5 * half_angle).sin();
+                        let one_minus_cos = 2.0 * s * s;
+                        let sin2 = half_angle.sin().powi(2);
+                        (uniform_cone(to_light, one_minus_cos, rng.pair()), 2.0 * one_minus_cos / sin2)
+                    } else {
+                        (to_light, 1.0)
+                    };
+                    let ph = hg(wi.dot(d), self.phase.g);
+                    sum += *irradiance * weight * ph * self.transmittance(x, wi, f32::INFINITY, rng);
+                }
+                Light::Point { position, intensity, radius } => {
+                    let to = *position - x;
+                    let dist2 = to.length_squared();
+                    let dist = dist2.sqrt();
+                    if *radius > 0.0 && dist > *radius * 1.0001 {
+                        // Sphere of radiance I / (pi r^2) sampled uniformly in the cone it subtends.
+                        let sin2 = (radius * radius / dist2).min(1.0);
+                        let cos_max = (1.0 - sin2).max(0.0).sqrt();
+                        let one_minus_cos = if sin2 < 1e-4 { 0.5 * sin2 + 0.125 * sin2 * sin2 } else { 1.0 - cos_max };
+                        let axis = to / dist;
+                        let wi = uniform_cone(axis, one_minus_cos, rng.pair());
+                        let solid_angle = 2.0 * PI * one_minus_cos;
+                        // Distance to the sphere's near surface along wi.
+                        let b = wi.dot(to);
+                        let t_hit = b - (b * b - dist2 + radius * radius).max(0.0).sqrt();
+                        let radiance = *intensity / (PI * radius * radius);
+                        let ph = hg(wi.dot(d), self.phase.g);
+                        sum += radiance * solid_angle * ph * self.transmittance(x, wi, t_hit.max(0.0), rng);
+                    } else if dist > 1e-6 {
+                        let wi = to / dist;
+                        let ph = hg(wi.dot(d), self.phase.g);
+                        sum += *intensity / dist2 * ph * self.transmittance(x, wi, dist, rng);
+                    }
+                }
+                Light::Dome(env) => {
+                    let (wi, pdf) = env.sample(rng.pair());
+                    if pdf > 0.0 {
+                        let ph = hg(wi.dot(d), self.phase.g);
+                        let w = power_heuristic(pdf, ph);
+                        sum += env.radiance(wi) * ph * w / pdf * self.transmittance(x, wi, f32::INFINITY, rng);
+                    }
+                }
+            }
+        }
+        sum
+    }
+
+    /// Radiance escaping to the environment along a phase-sampled direction, MIS-weighted
+    /// against the dome's own sampling.
+    fn escaped(&self, d: Vec3, pdf_phase: f32) -> Vec3 {
+        match self.env {
+            Some(env) => env.radiance(d) * power_heuristic(pdf_phase, env.pdf(d)),
+            None => Vec3::ZERO,
+        }
+    }
+
+    /// The random walk from a scattering vertex at `x`, reached along propagation direction
+    /// `d`, with throughput `beta` *after* the vertex's albedo. `depth` counts the vertex.
+    /// Returns (direct light at this and later vertices by order: first vertex, others).
+    fn walk(&self, mut x: Vec3, mut d: Vec3, mut beta: Vec3, mut depth: u32, rng: &mut Rng) -> (Vec3, Vec3) {
+        let mut first = Vec3::ZERO;
+        let mut later = Vec3::ZERO;
+        let albedo = self.medium.albedo;
+        loop {
+            let ld = beta * self.direct_light(x, d, rng);
+            if depth == 1 { first += ld } else { later += ld }
+            if depth >= self.max_depth {
+                break;
+            }
+            if depth >= self.rr_depth {
+                let q = beta.max_element().min(0.95);
+                if q <= 0.0 || rng.f32() >= q {
+                    break;
+                }
+                beta /= q;
+            }
+            let new_d = self.phase.sample(d, rng.pair());
+            let pdf = hg(new_d.dot(d), self.phase.g);
+            d = new_d;
+            match self.free_flight(x, d, &mut beta, rng) {
+                None => {
+                    let le = beta * self.escaped(d, pdf);
+                    if depth == 1 { first += le } else { later += le }
+                    break;
+                }
+                Some(t) => {
+                    x += d * t;
+                    depth += 1;
+                    beta *= albedo;
+                }
+            }
+            if beta.max_element() <= 0.0 {
+                break;
+            }
+        }
+        (first, later)
+    }
+
+    /// Radiance along a camera ray from `o` in unit direction `d`.
+    pub fn camera_path(&self, o: Vec3, d: Vec3, rng: &mut Rng) -> PathRadiance {
+        let mut beta = Vec3::ONE;
+        match self.free_flight(o, d, &mut beta, rng) {
+            None => PathRadiance { background: beta * self.env.map_or(Vec3::ZERO, |e| e.radiance(d)), ..Default::default() },
+            Some(t) => {
+                let (single, multiple) = self.walk(o + d * t, d, beta * self.medium.albedo, 1, rng);
+                PathRadiance { single, multiple, background: Vec3::ZERO }
+            }
+        }
+    }
+
+    /// One-sample estimate of the integral of p * L over incident directions at `x`, for light
+    /// leaving towards a viewer along `view` (the propagation direction of the camera ray
+    /// through x). Multiplied by sigma_s(x) it is the scattering grid S.
+    pub fn in_scattered(&self, x: Vec3, view: Vec3, rng: &mut Rng) -> Vec3 {
+        let (first, later) = self.walk(x, view, Vec3::ONE, 1, rng);
+        first + later
+    }
+}

@@ -1,0 +1,147 @@
+//! `volscatter render`: scene -> solver -> image (EXR with AOVs, optional PNG, JSON report).
+
+use clap::Args;
+use serde_json::json;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use super::progress::StderrProgress;
+use volscatter_core::solvers::{self, reference::Reference, Timings};
+use volscatter_core::{compositor, io, Error, Result, Scene};
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Scene JSON (docs/scene-format.md). Without it: the embedded default scene.
+    pub scene: Option<PathBuf>,
+    /// Solver: reference (path-traced image) or a scattering solver composited by ray marching.
+    #[arg(long)]
+    pub solver: Option<String>,
+    #[arg(long, default_value = "out/render.exr")]
+    pub out: PathBuf,
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Samples per pixel (reference).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Leave the directly seen environment out (alpha from the medium only).
+    #[arg(long)]
+    pub transparent: bool,
+    /// Multiplier applied to the PNG only.
+    #[arg(long, default_value_t = 1.0)]
+    pub exposure: f32,
+    /// Write settings, per-phase times and image statistics as JSON.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Solver setting KEY=VALUE (JSON value), repeatable: --set grid_resolution=48.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub settings: Vec<String>,
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// The solver block that applies: the scene's own when it names the chosen solver (or none),
+/// then the command-line overrides.
+pub fn solver_settings(scene: &Scene, name: &str, args: &RenderArgs) -> Result<serde_json::Map<String, serde_json::Value>> {
+    let mut map = match scene.solver_name() {
+        None => scene.solver.clone(),
+        Some(n) if n == name => scene.solver.clone(),
+        Some(_) => Default::default(),
+    };
+    map.remove("name");
+    if let Some(spp) = args.spp {
+        map.insert("spp".into(), json!(spp));
+    }
+    if let Some(seed) = args.seed {
+        map.insert("seed".into(), json!(seed));
+    }
+    if args.transparent && name == "reference" {
+        map.insert("transparent".into(), json!(true));
+    }
+    for kv in &args.settings {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| Error::InvalidArgument(format!("--set {kv}: expected KEY=VALUE")))?;
+        let value = serde_json::from_str(v).unwrap_or_else(|_| json!(v));
+        map.insert(k.to_string(), value);
+    }
+    Ok(map)
+}
+
+fn ensure_parent(path: &std::path::Path) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    Ok(())
+}
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    let start = Instant::now();
+    let mut timings = Timings::default();
+    let scene = timings.time("load scene", || match &args.scene {
+        Some(p) => Scene::load(p),
+        None => Ok(Scene::default_scene()),
+    })?;
+    let name = args.solver.clone().or_else(|| scene.solver_name().map(String::from)).unwrap_or_else(|| "reference".into());
+    let settings = solver_settings(&scene, &name, &args)?;
+    let progress = StderrProgress::new(args.quiet);
+    let image = if name == "reference" {
+        let r = Reference::from_settings(&settings)?;
+        let img = r.render_image(&scene, &progress, &mut timings)?;
+        progress.finish();
+        img
+    } else {
+        let solver = solvers::by_name(&name, &settings)?;
+        let out = solver.solve(&scene, &progress)?;
+        progress.finish();
+        timings.0.extend(out.timings.0);
+        timings.time("composite", || {
+            compositor::composite(&scene, &out.scattering, &compositor::CompositeOptions { transparent: args.transparent, ..Default::default() })
+        })?
+    };
+    ensure_parent(&args.out)?;
+    timings.time("write", || -> Result<()> {
+        io::exr::write_image(&args.out, &image)?;
+        if let Some(png) = &args.png {
+            ensure_parent(png)?;
+            io::png::write_png(png, &image, args.exposure, args.transparent)?;
+        }
+        Ok(())
+    })?;
+    let stats = image.stats();
+    if !args.quiet {
+        eprintln!(
+            "{}: {}x{} with `{name}` in {:.2} s, mean RGB ({:.4}, {:.4}, {:.4}), mean alpha {:.3}",
+            args.out.display(),
+            image.width,
+            image.height,
+            start.elapsed().as_secs_f64(),
+            stats.mean_rgb[0],
+            stats.mean_rgb[1],
+            stats.mean_rgb[2],
+            stats.mean_alpha
+        );
+    }
+    if let Some(report) = &args.report {
+        let phases: serde_json::Map<String, serde_json::Value> = timings.0.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+        let doc = json!({
+            "scene": args.scene.as_ref().map(|p| p.display().to_string()),
+            "solver": name,
+            "settings": settings,
+            "width": image.width,
+            "height": image.height,
+            "threads": rayon_threads(),
+            "phases_seconds": phases,
+            "total_seconds": start.elapsed().as_secs_f64(),
+            "image": stats,
+        });
+        ensure_parent(report)?;
+        std::fs::write(report, serde_json::to_string_pretty(&doc).unwrap()).map_err(|e| Error::io(report, e))?;
+    }
+    Ok(())
+}
+
+fn rayon_threads() -> usize {
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}
