@@ -2,6 +2,7 @@
 //! `Scene` into a scattering grid S(x) = sigma_s(x) * integral p(w_view, w') L(x, w') dw' —
 //! in-scattered radiance per metre towards the camera, RGB, on a grid over the medium.
 
+pub mod pop;
 pub mod reference;
 
 use glam::{Affine3A, IVec3, Vec3};
@@ -118,12 +119,13 @@ pub trait Solver: Send + Sync {
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput>;
 }
 
-pub const SOLVER_NAMES: &[&str] = &["reference"];
+pub const SOLVER_NAMES: &[&str] = &["reference", "pop"];
 
 /// Builds a solver from its name and the scene's `solver` settings block.
 pub fn by_name(name: &str, settings: &serde_json::Map<String, serde_json::Value>) -> Result<Box<dyn Solver>> {
     match name {
         "reference" => Ok(Box::new(reference::Reference::from_settings(settings)?)),
+        "pop" => Ok(Box::new(pop::Pop::from_settings(settings)?)),
         other => Err(Error::InvalidArgument(format!("unknown solver `{other}` (known: {})", SOLVER_NAMES.join(", ")))),
     }
 }

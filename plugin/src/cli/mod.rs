@@ -1,7 +1,9 @@
 //! Subcommands of the `volscatter` CLI, one module each.
 
+mod compare;
 mod progress;
 mod render;
+mod vdb_info;
 
 use clap::{Parser, Subcommand};
 
@@ -16,6 +18,10 @@ struct Cli {
 enum Command {
     /// Render a scene (or the embedded default scene) to EXR and optionally PNG.
     Render(render::RenderArgs),
+    /// Render a scene with several solvers and print relative RMSE against the first.
+    Compare(compare::CompareArgs),
+    /// Print the grids of an OpenVDB file as JSON.
+    VdbInfo(vdb_info::VdbInfoArgs),
 }
 
 /// Runs the CLI and returns the process exit code. Errors are printed, never panicked.
@@ -23,6 +29,8 @@ pub fn main() -> i32 {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render::run(args),
+        Command::Compare(args) => compare::run(args),
+        Command::VdbInfo(args) => vdb_info::run(args),
     };
     match result {
         Ok(()) => 0,
