@@ -48,11 +48,11 @@ fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
 pub fn plume_density(p: Vec3) -> f32 {
     let h = (p.z + 1.0) * 0.5;
     let centre = glam::Vec2::new(0.15 * (3.0 * h).sin(), 0.1 * (2.3 * h).cos());
-    let radius = 0.18 + 0.45 * h;
+    let radius = 0.3 + 0.5 * h;
     let r = (p.truncate() - centre).length() / radius;
     let envelope = (-2.5 * r * r).exp() * smoothstep(0.0, 0.12, h) * (1.0 - smoothstep(0.8, 1.0, h));
     let billow = fbm(p * 3.0 + Vec3::new(0.0, 0.0, -1.7 * h));
-    (envelope * (0.3 + 1.4 * billow) - 0.12).max(0.0) * 1.4
+    (envelope * (0.35 + 1.3 * billow) - 0.1).max(0.0) * 1.4
 }
 
 /// The plume on an `n`^3 voxel grid and the index-to-world map placing it in [-1, 1]^3.

@@ -39,7 +39,7 @@ pub const DEFAULT_SCENE_JSON: &str = r#"{
     {"type": "distant", "direction": [-0.5, 0.6, -0.62], "irradiance": [5.0, 4.6, 4.0], "angle_deg": 0.53},
     {"type": "dome", "color": [0.12, 0.17, 0.28]}
   ],
-  "camera": {"position": [0, -6, 0.2], "look_at": [0, 0, 0], "up": [0, 0, 1],
+  "camera": {"position": [0, -4.6, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1],
              "fov_deg": 39.6, "width": 256, "height": 256},
   "solver": {"name": "reference", "spp": 64}
 }"#;

@@ -203,4 +203,4 @@ impl Solver for Reference {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Runs every test of volscatter on a fresh machine that has only Rust and Python:
+# installs what the tests need (Debian packages, a Python venv), builds, then runs the Rust
+# tests (cargo nextest) and the Python tests (pytest: Mitsuba agreement, OpenVDB, ...).
+# Prints one closing line: "tests: N passed, N failed, N skipped".
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$(pwd)
+
+log() { printf '\n== %s\n' "$*" >&2; }
+
+# --- system packages (OpenVDB itself, to check our VDB files) ---------------------------------
+apt_packages=(python3-openvdb libopenvdb-tools)
+missing=()
+for p in "${apt_packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+  log "installing ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+# --- Python venv for the cross-renderer and host tests ----------------------------------------
+if [ ! -x .venv/bin/python ]; then
+  log "creating .venv"
+  python3 -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip >/dev/null
+.venv/bin/python -m pip install -q -r tests/requirements.txt
+
+# --- build --------------------------------------------------------------------------------------
+command -v cargo-nextest >/dev/null 2>&1 || cargo install --locked cargo-nextest
+log "building (release: the CLI and libvolscatter used by the Python tests)"
+cargo build --release --workspace --all-targets --quiet
+export VOLSCATTER_BIN="$root/target/release/volscatter"
+export VOLSCATTER_LIB="$root/target/release/libvolscatter.so"
+
+# --- Rust tests -----------------------------------------------------------------------------------
+log "cargo nextest"
+set +e
+cargo nextest run --workspace --cargo-profile release --no-fail-fast 2>&1 | tee /tmp/volscatter-nextest.log
+rust_rc=${PIPESTATUS[0]}
+set -e
+
+# --- Python tests -----------------------------------------------------------------------------------
+log "pytest"
+set +e
+.venv/bin/python -m pytest -rs -q tests/ 2>&1 | tee /tmp/volscatter-pytest.log
+py_rc=${PIPESTATUS[0]}
+set -e
+# pytest exits 5 when it collected no test: that is not a failure of ours, but say so.
+[ "$py_rc" = 5 ] && { echo "pytest: no Python tests collected"; py_rc=0; }
+
+# --- one closing line -------------------------------------------------------------------------------
+summary=$(.venv/bin/python scripts/test_summary.py /tmp/volscatter-nextest.log /tmp/volscatter-pytest.log)
+echo "$summary"
+[ "$rust_rc" = 0 ] && [ "$py_rc" = 0 ]
