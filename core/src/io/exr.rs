@@ -168,6 +168,26 @@ mod tests {
         assert_eq!(env.pixels[7], Vec3::new(7.0, 0.5, 2.0));
     }
 
+    /// exr 1.74 aborts the process (1 TiB allocation) decoding some DWAA files, so DWAA/DWAB
+    /// must be refused from the header alone. A valid file whose compression attribute is
+    /// patched to DWAA (8) must come back as a clear error before any decoding.
+    #[test]
+    fn dwaa_is_refused_from_the_header() {
+        let dir = std::env::temp_dir().join(format!("vs-exr-dwaa-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("dwaa.exr");
+        let mut img = Image::new(4, 4);
+        img.rgba.fill(Vec4::ONE);
+        write_image(&path, &img).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let key = b"compression\0compression\0\x01\0\0\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).expect("compression attribute") + key.len();
+        bytes[at] = 8; // DWAA_COMPRESSION
+        std::fs::write(&path, &bytes).unwrap();
+        let e = read_latlong(&path).unwrap_err().to_string();
+        assert!(e.contains("not supported") && e.contains("DWAA"), "{e}");
+    }
+
     #[test]
     fn garbage_is_refused_with_a_message() {
         let dir = std::env::temp_dir().join(format!("vs-exr-bad-{}", std::process::id()));
