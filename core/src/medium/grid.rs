@@ -185,6 +185,27 @@ impl DensityGrid {
         m
     }
 
+    /// Visits every stored brick: its minimum voxel (a multiple of 8) and either its 512
+    /// values (x fastest) or the constant that fills it. Empty bricks are not visited.
+    pub fn for_each_brick(&self, mut f: impl FnMut(IVec3, BrickRef<'_>)) {
+        for bz in 0..self.brick_dims.z {
+            for by in 0..self.brick_dims.y {
+                for bx in 0..self.brick_dims.x {
+                    let e = self.table[(bx + self.brick_dims.x * (by + self.brick_dims.y * bz)) as usize];
+                    if e == EMPTY {
+                        continue;
+                    }
+                    let origin = (IVec3::new(bx, by, bz) + self.brick_min) << BRICK_LOG2;
+                    if e & CONSTANT_BIT != 0 {
+                        f(origin, BrickRef::Constant(self.constants[(e & !CONSTANT_BIT) as usize]));
+                    } else {
+                        f(origin, BrickRef::Dense(&self.bricks[(e - 1) as usize]));
+                    }
+                }
+            }
+        }
+    }
+
     /// Sum of all stored voxel values and their count (constant bricks counted by the voxels
     /// they cover). Used by `vdb-info`-style statistics and tests.
     pub fn sum_and_count_nonzero(&self) -> (f64, u64) {
@@ -209,6 +230,15 @@ impl DensityGrid {
         }
         (sum, count)
     }
+}
+
+/// One stored brick, as [`DensityGrid::for_each_brick`] sees it.
+#[derive(Clone, Copy, Debug)]
+pub enum BrickRef<'a> {
+    /// 512 values, x fastest (offset `x | y << 3 | z << 6`).
+    Dense(&'a [f32; BRICK_VOXELS]),
+    /// Every voxel of the brick has this value.
+    Constant(f32),
 }
 
 /// Collects voxels and constant bricks, checking limits as it goes, then lays out the table.
@@ -304,6 +334,49 @@ impl DensityGridBuilder {
             self.reserve_extent(ijk, ijk)?;
         }
         self.bricks.get_mut(&key).unwrap()[voxel_offset(ijk & (BRICK - 1))] = v;
+        Ok(())
+    }
+
+    /// Sets a whole brick at once (the fast path of the VDB reader): `origin` must be a
+    /// multiple of 8, `values` are x fastest. Negative values are clamped to zero and counted,
+    /// NaN/inf is an error; an all-zero brick stores nothing. The bounding box grows to the
+    /// non-zero voxels only, after checking the limits.
+    pub fn set_leaf(&mut self, origin: IVec3, values: &[f32; BRICK_VOXELS]) -> Result<()> {
+        if (origin & (BRICK - 1)) != IVec3::ZERO {
+            return Err(Error::InvalidArgument(format!("brick at {origin} is not brick-aligned")));
+        }
+        let mut lo = IVec3::splat(BRICK);
+        let mut hi = IVec3::splat(-1);
+        let mut negatives = 0u64;
+        for (i, &v) in values.iter().enumerate() {
+            let local = IVec3::new(i as i32 & (BRICK - 1), (i as i32 >> BRICK_LOG2) & (BRICK - 1), i as i32 >> (2 * BRICK_LOG2));
+            Self::check_value(v, origin + local)?;
+            if v < 0.0 {
+                negatives += 1;
+            } else if v > 0.0 {
+                lo = lo.min(local);
+                hi = hi.max(local);
+            }
+        }
+        self.clamped_negative += negatives;
+        let key = origin >> BRICK_LOG2;
+        if hi.x < 0 {
+            // Nothing non-zero: the brick only clears what was there.
+            if self.bricks.remove(&key).is_some() || self.constants.remove(&key).is_some() {
+                // Keep the bbox as declared; the brick now reads as zero.
+            }
+            return Ok(());
+        }
+        let (lo, hi) = (origin + lo, origin + hi);
+        if !self.bricks.contains_key(&key) || lo.cmplt(self.bbox_min).any() || hi.cmpgt(self.bbox_max).any() {
+            self.reserve_extent(lo, hi)?;
+        }
+        self.constants.remove(&key);
+        let mut brick = Box::new([0.0f32; BRICK_VOXELS]);
+        for (d, &v) in brick.iter_mut().zip(values.iter()) {
+            *d = v.max(0.0);
+        }
+        self.bricks.insert(key, brick);
         Ok(())
     }
 

@@ -1,0 +1,198 @@
+//! Bounds-checked little-endian reading of an in-memory file. Every read checks the bytes
+//! left first; an error names the file, the offset and what was being read.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+pub(crate) struct Reader<'a> {
+    data: &'a [u8],
+    pos: usize,
+    path: &'a Path,
+}
+
+impl<'a> Reader<'a> {
+    pub fn new(data: &'a [u8], path: &'a Path) -> Self {
+        Reader { data, pos: 0, path }
+    }
+
+    pub fn path(&self) -> &'a Path {
+        self.path
+    }
+    pub fn pos(&self) -> usize {
+        self.pos
+    }
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+    pub fn remaining(&self) -> usize {
+        self.data.len() - self.pos
+    }
+
+    /// A format error at the current offset.
+    pub fn err(&self, msg: impl std::fmt::Display) -> Error {
+        Error::format(self.path, format!("at byte {}: {msg}", self.pos))
+    }
+
+    /// Moves to an absolute offset taken from the file (checked against the file size).
+    pub fn seek(&mut self, pos: i64, what: &str) -> Result<()> {
+        if pos < 0 || pos as u64 > self.data.len() as u64 {
+            return Err(self.err(format!("{what} offset {pos} lies outside the file ({} bytes)", self.data.len())));
+        }
+        self.pos = pos as usize;
+        Ok(())
+    }
+
+    pub fn bytes(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
+        if n > self.remaining() {
+            return Err(self.err(format!(
+                "truncated: {what} needs {n} bytes, {} left",
+                self.remaining()
+            )));
+        }
+        let s = &self.data[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+
+    pub fn skip(&mut self, n: usize, what: &str) -> Result<()> {
+        self.bytes(n, what).map(|_| ())
+    }
+
+    pub fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
+        let b = self.bytes(N, what)?;
+        let mut a = [0u8; N];
+        a.copy_from_slice(b);
+        Ok(a)
+    }
+
+    pub fn u8(&mut self, what: &str) -> Result<u8> {
+        Ok(self.array::<1>(what)?[0])
+    }
+    pub fn i8(&mut self, what: &str) -> Result<i8> {
+        Ok(self.u8(what)? as i8)
+    }
+    pub fn u32(&mut self, what: &str) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array(what)?))
+    }
+    pub fn i32(&mut self, what: &str) -> Result<i32> {
+        Ok(i32::from_le_bytes(self.array(what)?))
+    }
+    pub fn i64(&mut self, what: &str) -> Result<i64> {
+        Ok(i64::from_le_bytes(self.array(what)?))
+    }
+    pub fn f64(&mut self, what: &str) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.array(what)?))
+    }
+
+    /// OpenVDB string: uint32 length, then that many bytes (not NUL-terminated).
+    pub fn string(&mut self, what: &str) -> Result<String> {
+        let n = self.u32(what)? as usize;
+        let b = self.bytes(n, what)?;
+        Ok(String::from_utf8_lossy(b).into_owned())
+    }
+
+    /// A node mask of `words` uint64 words.
+    pub fn mask(&mut self, words: usize, what: &str) -> Result<Vec<u64>> {
+        let b = self.bytes(words * 8, what)?;
+        Ok(b.chunks_exact(8).map(|c| u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])).collect())
+    }
+}
+
+/// Little-endian writing into a growing buffer, with offsets to patch afterwards.
+#[derive(Default)]
+pub(crate) struct Writer {
+    pub buf: Vec<u8>,
+}
+
+impl Writer {
+    pub fn pos(&self) -> usize {
+        self.buf.len()
+    }
+    pub fn bytes(&mut self, b: &[u8]) {
+        self.buf.extend_from_slice(b);
+    }
+    pub fn u8(&mut self, v: u8) {
+        self.buf.push(v);
+    }
+    pub fn u32(&mut self, v: u32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn i32(&mut self, v: i32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn i64(&mut self, v: i64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn f32(&mut self, v: f32) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn f64(&mut self, v: f64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn string(&mut self, s: &str) {
+        self.u32(s.len() as u32);
+        self.bytes(s.as_bytes());
+    }
+    pub fn mask(&mut self, words: &[u64]) {
+        for w in words {
+            self.bytes(&w.to_le_bytes());
+        }
+    }
+    pub fn patch_i64(&mut self, at: usize, v: i64) {
+        self.buf[at..at + 8].copy_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// Number of set bits in a mask.
+pub(crate) fn count_on(mask: &[u64]) -> usize {
+    mask.iter().map(|w| w.count_ones() as usize).sum()
+}
+
+#[inline]
+pub(crate) fn bit(mask: &[u64], i: usize) -> bool {
+    (mask[i >> 6] >> (i & 63)) & 1 != 0
+}
+
+/// Indices of the set bits, ascending.
+pub(crate) fn ones(mask: &[u64]) -> impl Iterator<Item = usize> + '_ {
+    mask.iter().enumerate().flat_map(|(wi, &w)| {
+        let mut w = w;
+        std::iter::from_fn(move || {
+            if w == 0 {
+                return None;
+            }
+            let b = w.trailing_zeros() as usize;
+            w &= w - 1;
+            Some(wi * 64 + b)
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_check_bounds() {
+        let data = [1u8, 0, 0, 0, 5];
+        let mut r = Reader::new(&data, Path::new("x.vdb"));
+        assert_eq!(r.u32("a").unwrap(), 1);
+        assert!(r.u32("b").is_err());
+        assert_eq!(r.u8("c").unwrap(), 5);
+        let data = [0xff, 0xff, 0xff, 0xff];
+        let mut r = Reader::new(&data, Path::new("x.vdb"));
+        let e = r.string("name").unwrap_err().to_string();
+        assert!(e.contains("truncated") && e.contains("name"), "{e}");
+        assert!(r.seek(-1, "grid").is_err());
+        assert!(r.seek(5, "grid").is_err());
+    }
+
+    #[test]
+    fn mask_bits() {
+        let m = [0b1010u64, 1 << 63];
+        assert_eq!(count_on(&m), 3);
+        assert_eq!(ones(&m).collect::<Vec<_>>(), vec![1, 3, 127]);
+        assert!(bit(&m, 127) && !bit(&m, 0));
+    }
+}

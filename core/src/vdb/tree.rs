@@ -1,0 +1,157 @@
+//! The 5-4-3 tree: root tiles and children, internal nodes of 32^3 and 16^3 slots, leaves of
+//! 8^3 voxels (`openvdb/tree/RootNode.h`, `InternalNode.h`, `LeafNode.h`).
+//!
+//! Topology is parsed first (tiles go straight to the visitor, leaves are remembered as origin
+//! plus value mask), then the leaf buffers follow in the same order. Nothing is allocated from
+//! a count in the file before the bytes that the count implies are known to be there.
+
+use std::collections::HashSet;
+
+use glam::IVec3;
+
+use super::bytes::{bit, ones, Reader};
+use super::values::Codec;
+use crate::error::Result;
+
+/// log2 of the voxels per side covered by a tile at each level.
+pub const ROOT_TILE_LOG2: u32 = 12;
+pub const INTERNAL5_TILE_LOG2: u32 = 7;
+pub const INTERNAL4_TILE_LOG2: u32 = 3;
+
+/// Receives what the tree holds. Values are `comps` numbers each; leaf values are in VDB
+/// order (offset `x << 6 | y << 3 | z`, z fastest).
+pub(crate) trait Visitor {
+    /// The root's background value, before anything else.
+    fn background(&mut self, _value: &[f64]) -> Result<()> {
+        Ok(())
+    }
+    /// A tile covering `(1 << log2)^3` voxels from `origin`. Called for every active tile and
+    /// for inactive tiles whose value differs from the background.
+    fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], active: bool) -> Result<()>;
+    fn leaf(&mut self, origin: IVec3, mask: &[u64; 8], values: &[f64]) -> Result<()>;
+}
+
+struct LeafTopo {
+    origin: IVec3,
+    mask: [u64; 8],
+}
+
+/// Reads topology and buffers of one tree at the reader's position.
+pub(crate) fn read_tree(r: &mut Reader, codec: &mut Codec, visitor: &mut dyn Visitor) -> Result<()> {
+    let buffers = r.i32("buffer count")?;
+    if buffers != 1 {
+        return Err(r.err(format!("tree has {buffers} buffers; only 1 is supported")));
+    }
+    let full = codec.kind.full_size();
+    let bg_bytes = r.bytes(full, "background value")?;
+    let mut bg = vec![0.0; codec.kind.comps];
+    codec.kind.decode_full(bg_bytes, &mut bg);
+    if bg.iter().any(|v| !v.is_finite()) {
+        return Err(r.err("background value is not finite"));
+    }
+    codec.background = bg.clone();
+    visitor.background(&bg)?;
+    let num_tiles = r.u32("root tile count")? as u64;
+    let num_children = r.u32("root child count")? as u64;
+    let tile_bytes = 12 + full as u64 + 1;
+    // Smallest possible internal node: origin, two masks.
+    let child_bytes = 12 + 2 * 4096;
+    if num_tiles.saturating_mul(tile_bytes).saturating_add(num_children.saturating_mul(child_bytes)) > r.remaining() as u64 {
+        return Err(r.err(format!(
+            "root claims {num_tiles} tiles and {num_children} children, more than the {} bytes left can hold",
+            r.remaining()
+        )));
+    }
+    let mut seen = HashSet::new();
+    let mut value = vec![0.0; codec.kind.comps];
+    let root_origin = |r: &mut Reader, seen: &mut HashSet<IVec3>, what: &str| -> Result<IVec3> {
+        let o = IVec3::new(r.i32(what)?, r.i32(what)?, r.i32(what)?);
+        if o & IVec3::splat((1 << ROOT_TILE_LOG2) - 1) != IVec3::ZERO {
+            return Err(r.err(format!("{what} {o} is not a multiple of 4096")));
+        }
+        if !seen.insert(o) {
+            return Err(r.err(format!("{what} {o} appears twice in the root")));
+        }
+        Ok(o)
+    };
+    for _ in 0..num_tiles {
+        let origin = root_origin(r, &mut seen, "root tile origin")?;
+        let b = r.bytes(full, "root tile value")?;
+        codec.kind.decode_full(b, &mut value);
+        let active = r.u8("root tile active flag")? != 0;
+        if active || value != bg {
+            visitor.tile(origin, ROOT_TILE_LOG2, &value, active)?;
+        }
+    }
+    let mut leaves = Vec::new();
+    let mut scratch = Vec::new();
+    for _ in 0..num_children {
+        let origin = root_origin(r, &mut seen, "root child origin")?;
+        read_internal(r, codec, visitor, origin, 5, &mut leaves, &mut scratch)?;
+    }
+    // Leaf buffers, in topology order. The value mask is stored again; OpenVDB skips it when
+    // reading from a file and keeps the topology's, and so does this reader.
+    for leaf in &leaves {
+        r.skip(64, "leaf value mask")?;
+        codec.read_block(r, 512, &leaf.mask, &mut scratch)?;
+        visitor.leaf(leaf.origin, &leaf.mask, &scratch)?;
+    }
+    Ok(())
+}
+
+/// An internal node of `1 << (3 * log2)` slots (log2 = 5 or 4) at `origin`.
+fn read_internal(
+    r: &mut Reader,
+    codec: &Codec,
+    visitor: &mut dyn Visitor,
+    origin: IVec3,
+    log2: u32,
+    leaves: &mut Vec<LeafTopo>,
+    scratch: &mut Vec<f64>,
+) -> Result<()> {
+    let slots = 1usize << (3 * log2);
+    let words = slots / 64;
+    let child_log2 = if log2 == 5 { INTERNAL5_TILE_LOG2 } else { INTERNAL4_TILE_LOG2 };
+    let child_mask = r.mask(words, "child mask")?;
+    let value_mask = r.mask(words, "value mask")?;
+    codec.read_block(r, slots, &value_mask, scratch)?;
+    let comps = codec.kind.comps;
+    let slot_origin = |n: usize| {
+        let m = (1usize << log2) - 1;
+        let x = (n >> (2 * log2)) & m;
+        let y = (n >> log2) & m;
+        let z = n & m;
+        origin + (IVec3::new(x as i32, y as i32, z as i32) << child_log2 as i32)
+    };
+    for n in 0..slots {
+        if bit(&child_mask, n) {
+            continue;
+        }
+        let v = &scratch[n * comps..(n + 1) * comps];
+        let active = bit(&value_mask, n);
+        if active || v != codec.background.as_slice() {
+            visitor.tile(slot_origin(n), child_log2, v, active)?;
+        }
+    }
+    let children: Vec<usize> = ones(&child_mask).collect();
+    if log2 == 5 {
+        // Each child needs at least its two 512-byte masks.
+        if children.len() as u64 * 1024 > r.remaining() as u64 {
+            return Err(r.err(format!("internal node claims {} children, more than the bytes left can hold", children.len())));
+        }
+        for n in children {
+            read_internal(r, codec, visitor, slot_origin(n), 4, leaves, scratch)?;
+        }
+    } else {
+        if children.len() as u64 * 64 > r.remaining() as u64 {
+            return Err(r.err(format!("internal node claims {} leaves, more than the bytes left can hold", children.len())));
+        }
+        for n in children {
+            let m = r.mask(8, "leaf value mask")?;
+            let mut mask = [0u64; 8];
+            mask.copy_from_slice(&m);
+            leaves.push(LeafTopo { origin: slot_origin(n), mask });
+        }
+    }
+    Ok(())
+}
