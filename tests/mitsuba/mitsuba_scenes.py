@@ -1,0 +1,315 @@
+"""Shared scenes for comparing volscatter's `reference` path tracer with Mitsuba 3.
+
+Each scene is described once (`SceneSpec`) and built twice: as volscatter scene JSON (format 1,
+raw float32 density) and as a Mitsuba 3 scene dict (`scalar_rgb`, `volpath`). The conventions
+follow ../../../shared/notes/mitsuba-reference.md (copied into the docstrings below where they
+matter):
+
+- Density: numpy array indexed [z][y][x], voxel (i,j,k) centred at `origin + (i,j,k) * voxel`,
+  trilinear between centres, ramping to zero one voxel beyond the stored voxels (OpenVDB).
+  Mitsuba's `gridvolume` is cell-centred on [0,1]^3, so the grid is padded with one zero voxel on
+  every side and placed with `T = translate(min - voxel/2) * scale(N * voxel)` (N, min of the
+  padded grid); the `cube` that carries the medium spans the same box.
+- Lights: distant `irradiance` (W/m^2 perpendicular, `direction` = travel direction) ->
+  `directional`; point `intensity` (W/sr) -> `point`; dome `color` (radiance) -> `constant`.
+- Camera: horizontal `fov_deg` -> `perspective` with `fov_axis: x`; `box` pixel filter in both.
+
+Used by test_agreement.py and by scripts/bench_reference.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def volscatter_bin() -> Path:
+    """The CLI under test: $VOLSCATTER_BIN, else target/release/volscatter in the repo."""
+    env = os.environ.get("VOLSCATTER_BIN")
+    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
+
+
+def import_mitsuba():
+    """Mitsuba with the `scalar_rgb` variant, or None when it cannot be imported."""
+    try:
+        import mitsuba as mi
+    except Exception:  # ImportError, or a broken native library
+        return None
+    mi.set_variant("scalar_rgb")
+    return mi
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes
+
+
+@dataclass
+class SceneSpec:
+    name: str
+    density: np.ndarray  # [z][y][x] float32
+    origin: tuple  # world centre of voxel (0,0,0)
+    voxel: float
+    density_scale: float
+    albedo: list
+    g: float
+    lights: list  # volscatter light JSON objects
+    camera: dict  # volscatter camera JSON object
+    spp_ours: int  # per seed
+    spp_mitsuba: int  # per seed
+    seeds: tuple = (1, 2)
+    extra: dict = field(default_factory=dict)
+
+
+def _grid_coords(n: int):
+    """World coordinates of the voxel centres of an n^3 grid spanning [-1, 1]^3."""
+    voxel = 2.0 / n
+    c = -1.0 + voxel * (np.arange(n) + 0.5)
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    return x, y, z, voxel, float(c[0])
+
+
+def sphere_density(n: int = 32, radius: float = 0.8) -> tuple:
+    """A homogeneous sphere (density 1), its edge anti-aliased over one voxel."""
+    x, y, z, voxel, c0 = _grid_coords(n)
+    r = np.sqrt(x * x + y * y + z * z)
+    d = np.clip((radius - r) / voxel + 0.5, 0.0, 1.0)
+    return d.astype(np.float32), voxel, c0
+
+
+def cloud_density(n: int = 32) -> tuple:
+    """A smooth, deliberately asymmetric procedural cloud (max 1): Gaussian puffs (the biggest
+    right of centre and low, smaller ones upper left) modulated by smooth waves, with a soft
+    radial window that reaches zero inside the grid."""
+    x, y, z, voxel, c0 = _grid_coords(n)
+
+    def blob(cx, cy, cz, s):
+        return np.exp(-((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2) / (2 * s * s))
+
+    d = (blob(0.25, 0.05, -0.2, 0.28) + 0.8 * blob(-0.35, -0.1, 0.3, 0.2)
+         + 0.6 * blob(-0.1, 0.2, -0.45, 0.18) + 0.5 * blob(0.45, -0.2, 0.35, 0.14))
+    d *= 1.0 + 0.4 * np.sin(7.0 * x + 0.3) * np.sin(6.0 * y + 1.0) * np.sin(8.0 * z + 0.5)
+    r = np.sqrt(x * x + y * y + z * z)
+    d = np.clip(d * np.clip((0.95 - r) / 0.25, 0.0, 1.0), 0.0, None)
+    return (d / d.max()).astype(np.float32), voxel, c0
+
+
+def scenes() -> dict:
+    """The three agreement scenes, keyed by name."""
+    sph, sv, s0 = sphere_density(32)
+    cloud, cv, c0 = cloud_density(32)
+    grid_cam = {"position": [0.3, -4.2, 0.6], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1],
+                "fov_deg": 36.0, "width": 64, "height": 48}
+    return {
+        "sphere_point": SceneSpec(
+            name="sphere_point", density=sph, origin=(s0, s0, s0), voxel=sv,
+            density_scale=2.5, albedo=[0.9, 0.75, 0.5], g=0.3,
+            lights=[{"type": "point", "position": [0.3, -0.1, 0.2], "intensity": [3.0, 3.0, 3.0]}],
+            camera={"position": [0.0, -4.0, 0.0], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1],
+                    "fov_deg": 35.0, "width": 48, "height": 48},
+            spp_ours=1024, spp_mitsuba=1024),
+        "grid_distant": SceneSpec(
+            name="grid_distant", density=cloud, origin=(c0, c0, c0), voxel=cv,
+            density_scale=12.0, albedo=[0.9, 0.9, 0.9], g=0.8,
+            lights=[{"type": "distant", "direction": [-0.7, 0.3, -0.65], "irradiance": [3.0, 2.8, 2.5]}],
+            camera=grid_cam, spp_ours=1024, spp_mitsuba=1024),
+        "grid_dome": SceneSpec(
+            name="grid_dome", density=cloud, origin=(c0, c0, c0), voxel=cv,
+            density_scale=12.0, albedo=[0.9, 0.9, 0.9], g=0.8,
+            lights=[{"type": "dome", "color": [0.25, 0.35, 0.55]}],
+            camera=grid_cam, spp_ours=512, spp_mitsuba=512),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# volscatter
+
+
+def scene_json(spec: SceneSpec, raw_name: str, light_scale: float = 1.0) -> dict:
+    """volscatter scene JSON; `light_scale` multiplies every light (for the units check)."""
+    nz, ny, nx = spec.density.shape
+    lights = []
+    for light in spec.lights:
+        light = dict(light)
+        for key in ("irradiance", "intensity", "color"):
+            if key in light:
+                light[key] = [light_scale * v for v in light[key]]
+        lights.append(light)
+    return {
+        "format": 1,
+        "medium": {"raw": raw_name, "dims": [nx, ny, nz], "origin": list(spec.origin),
+                   "voxel_size": spec.voxel, "density_scale": spec.density_scale,
+                   "albedo": spec.albedo, "g": spec.g},
+        "lights": lights,
+        "camera": spec.camera,
+        "solver": {"name": "reference", "max_depth": 1000, "rr_depth": 8},
+    }
+
+
+def read_exr_rgb(path: Path) -> np.ndarray:
+    """R, G, B channels of an EXR as a float64 [height][width][3] array (via mitsuba.Bitmap)."""
+    mi = import_mitsuba()
+    bmp = mi.Bitmap(str(path))
+    names = [f.name for f in bmp.struct_()]
+    data = np.array(bmp, copy=False)
+    return np.stack([data[..., names.index(c)] for c in "RGB"], axis=-1).astype(np.float64)
+
+
+def render_ours(spec: SceneSpec, workdir: Path, seed: int, spp: int | None = None,
+                light_scale: float = 1.0) -> tuple[np.ndarray, dict]:
+    """Renders with `volscatter render --solver reference`; returns (RGB image, report)."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    raw = workdir / f"{spec.name}.f32"
+    spec.density.astype("<f4").tofile(raw)
+    tag = f"{spec.name}_s{seed}_x{light_scale:g}"
+    scene_path = workdir / f"{tag}.json"
+    scene_path.write_text(json.dumps(scene_json(spec, raw.name, light_scale), indent=1))
+    out, report = workdir / f"{tag}.exr", workdir / f"{tag}.report.json"
+    cmd = [str(volscatter_bin()), "render", str(scene_path), "--solver", "reference",
+           "--out", str(out), "--spp", str(spp or spec.spp_ours), "--seed", str(seed),
+           "--report", str(report), "-q"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr}")
+    return read_exr_rgb(out), json.loads(report.read_text())
+
+
+# --------------------------------------------------------------------------------------------
+# Mitsuba
+
+
+def _rgb(v):
+    return {"type": "rgb", "value": [float(c) for c in v]}
+
+
+def mitsuba_dict(spec: SceneSpec, spp: int | None = None) -> dict:
+    mi = import_mitsuba()
+    T = mi.ScalarTransform4f
+    # Pad one zero voxel on every side: the trilinear ramp to zero beyond the stored voxels.
+    padded = np.pad(spec.density, 1).astype(np.float32)
+    n = np.array(padded.shape[::-1], dtype=np.float64)  # x, y, z counts
+    lo_centre = np.array(spec.origin, dtype=np.float64) - spec.voxel  # centre of padded voxel 0
+    box_min = lo_centre - 0.5 * spec.voxel
+    box_size = n * spec.voxel
+    grid_to_world = T().translate(box_min.tolist()).scale(box_size.tolist())
+    cube_to_world = T().translate((box_min + 0.5 * box_size).tolist()).scale((0.5 * box_size).tolist())
+    medium = {
+        "type": "heterogeneous",
+        "albedo": _rgb(spec.albedo),
+        "scale": float(spec.density_scale),
+        "phase": {"type": "hg", "g": float(spec.g)},
+        "sigma_t": {"type": "gridvolume", "grid": mi.VolumeGrid(padded[..., None].copy()),
+                    "to_world": grid_to_world, "filter_type": "trilinear"},
+    }
+    cam = spec.camera
+    d = {
+        "type": "scene",
+        "integrator": {"type": "volpath", "max_depth": 1000, "rr_depth": 1000},
+        "sensor": {
+            "type": "perspective", "fov": float(cam["fov_deg"]), "fov_axis": "x",
+            "to_world": T().look_at(origin=cam["position"], target=cam["look_at"], up=cam["up"]),
+            "film": {"type": "hdrfilm", "width": cam["width"], "height": cam["height"],
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": spp or spec.spp_mitsuba},
+        },
+        "medium_box": {"type": "cube", "to_world": cube_to_world, "bsdf": {"type": "null"},
+                       "interior": medium},
+    }
+    for i, light in enumerate(spec.lights):
+        if light["type"] == "distant":
+            e = {"type": "directional", "direction": light["direction"], "irradiance": _rgb(light["irradiance"])}
+        elif light["type"] == "point":
+            e = {"type": "point", "position": light["position"], "intensity": _rgb(light["intensity"])}
+        elif light["type"] == "dome":
+            e = {"type": "constant", "radiance": _rgb(light["color"])}
+        else:
+            raise ValueError(f"no Mitsuba equivalent for light {light}")
+        d[f"light_{i}"] = e
+    return d
+
+
+def render_mitsuba(spec: SceneSpec, seed: int, spp: int | None = None) -> np.ndarray:
+    mi = import_mitsuba()
+    scene = mi.load_dict(mitsuba_dict(spec, spp))
+    img = mi.render(scene, seed=seed, spp=spp or spec.spp_mitsuba)
+    return np.array(img, dtype=np.float64)[..., :3]
+
+
+# --------------------------------------------------------------------------------------------
+# Metrics
+#
+# A and B are each the average of two independent renders (seeds s1, s2): A = (a1 + a2) / 2.
+# For independent, unbiased pixel estimates, E||a1 - a2||^2 = 2 sum_p var(a_p), so
+# ||a1 - a2||^2 / 4 estimates sum_p var(A_p): the squared noise of the average. If A and B
+# estimate the same image, E||A - B||^2 = sum var(A) + sum var(B), so the relative RMSE
+# ||A - B|| / ||B|| that pure noise produces is
+#     noise = sqrt(||a1 - a2||^2 + ||b1 - b2||^2) / (2 ||B||)
+# (each term being the note's ||h1 - h2|| / (2 ||img||)). A systematic difference (bias) adds in
+# quadrature: rel^2 ~ noise^2 + bias^2. Block averages (k x k pixels) keep a bias while dividing
+# independent per-pixel noise by k, so they make the comparison sensitive to small biases.
+
+
+def block_average(img: np.ndarray, k: int) -> np.ndarray:
+    if k == 1:
+        return img
+    h, w = img.shape[0] // k * k, img.shape[1] // k * k
+    return img[:h, :w].reshape(h // k, k, w // k, k, -1).mean(axis=(1, 3))
+
+
+@dataclass
+class Comparison:
+    block: int
+    rel_rmse: float  # ||A - B|| / ||B||
+    noise_ours: float  # ||a1 - a2|| / (2 ||B||)
+    noise_mitsuba: float  # ||b1 - b2|| / (2 ||B||)
+    noise: float  # sqrt(noise_ours^2 + noise_mitsuba^2): rel_rmse expected from noise alone
+    tolerance: float
+    mean_ratio: float  # mean(A) / mean(B), all channels
+
+    @property
+    def ok(self) -> bool:
+        return self.rel_rmse <= self.tolerance
+
+    def __str__(self):
+        return (f"block {self.block}: rel RMSE {self.rel_rmse:.4f}, noise {self.noise:.4f} "
+                f"(ours {self.noise_ours:.4f}, Mitsuba {self.noise_mitsuba:.4f}), "
+                f"tolerance {self.tolerance:.4f}, mean ratio {self.mean_ratio:.4f} -> "
+                f"{'ok' if self.ok else 'FAIL'}")
+
+
+# Tolerance = K_NOISE * noise + FLOOR.
+# K_NOISE: with hundreds of blocks/pixels, ||A - B||^2 and the noise estimate are sums of many
+# independent terms, each within ~10-15% of its mean for Gaussian noise; 1.5 leaves room for the
+# heavy-tailed (firefly) noise of a point light inside a medium, while a bias b still fails once
+# sqrt(noise^2 + b^2) > 1.5 noise + FLOOR, i.e. b > ~1.1 noise + FLOOR.
+# FLOOR: differences that are not noise and not bugs: float32 grid and lookups, and different
+# random-number streams; 0.5% of the image norm.
+K_NOISE = 1.5
+FLOOR = 0.005
+
+
+def compare(ours: tuple, theirs: tuple, block: int = 1) -> Comparison:
+    """`ours` and `theirs`: two renders (different seeds) each."""
+    a1, a2 = (block_average(x, block) for x in ours)
+    b1, b2 = (block_average(x, block) for x in theirs)
+    A, B = 0.5 * (a1 + a2), 0.5 * (b1 + b2)
+    norm = np.linalg.norm(B)
+    rel = np.linalg.norm(A - B) / norm
+    na = np.linalg.norm(a1 - a2) / (2 * norm)
+    nb = np.linalg.norm(b1 - b2) / (2 * norm)
+    noise = float(np.hypot(na, nb))
+    return Comparison(block, float(rel), float(na), float(nb), noise,
+                      K_NOISE * noise + FLOOR, float(A.mean() / B.mean()))
+
+
+def timed(f, *args, **kw):
+    t = time.perf_counter()
+    r = f(*args, **kw)
+    return r, time.perf_counter() - t
