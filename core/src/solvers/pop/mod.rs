@@ -1,22 +1,184 @@
-//! `pop`: principal-ordinates propagation (paper 01). Being written (issue 3/9).
+//! `pop`: principal-ordinates propagation (paper 01, Sec. 4) for distant lights.
+//!
+//! Pipeline per distant light: a propagation grid aligned with the light (light_grid.rs) over
+//! a mip-prefiltered copy of the medium (mip.rs); a transmittance sweep that gives the exact
+//! unscattered light and the energy it scatters (init.rs); propagation of that energy by
+//! Eq. 1-6 with ping-pong grids until the residual is small (propagate.rs), accumulating the
+//! view-dependent in-scattered radiance (accumulate.rs, Eq. 7-8). Then all lights are merged
+//! into one medium-aligned grid (merge.rs) and upsampled to the output grid by a joint
+//! bilateral filter guided by the density (upsample.rs), which gives the scattering grid S.
+//!
+//! Not here yet (later issues): point lights (radial grids, Sec. 6) and environment lighting
+//! (ordinates, prefiltering, importance, isotropic residuum, Sec. 5). A dome or point light
+//! in the scene is left out with a warning on stderr; S then holds the distant lights only.
 
-use super::{Progress, SolveOutput, Solver};
+pub mod accumulate;
+pub mod init;
+pub mod light_grid;
+pub mod merge;
+pub mod mip;
+pub mod propagate;
+pub mod settings;
+pub mod upsample;
+
+use glam::Vec3;
+
+use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
-use crate::scene::Scene;
+use crate::scene::{Light, Scene};
+use light_grid::LightGrid;
+use mip::MediumMip;
+pub use propagate::PropagationStats;
+pub use settings::PopSettings;
 
-pub struct Pop;
+pub struct Pop {
+    pub settings: PopSettings,
+}
+
+/// Energy bookkeeping of one light, per unit cell cross-section of its grid (W/m^2 x cells),
+/// RGB. `entering` = `transmitted` + `absorbed_direct` + `propagation.injected`, and
+/// `injected` = `escaped` + `absorbed` + `residual`.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct LightReport {
+    pub dims: [u32; 3],
+    pub cell_size: f32,
+    pub entering: [f32; 3],
+    pub transmitted: [f32; 3],
+    pub absorbed_direct: [f32; 3],
+    pub propagation: PropagationStats,
+}
+
+impl LightReport {
+    /// (light leaving the medium + light absorbed) / light entering, per channel. 1 means
+    /// energy is conserved; the dropped residual counts as lost.
+    pub fn energy_balance(&self) -> [f32; 3] {
+        let mut r = [0.0; 3];
+        for c in 0..3 {
+            let out = self.transmitted[c] + self.absorbed_direct[c] + self.propagation.escaped[c] + self.propagation.absorbed[c];
+            r[c] = if self.entering[c] > 0.0 { out / self.entering[c] } else { 1.0 };
+        }
+        r
+    }
+}
+
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct PopReport {
+    pub lights: Vec<LightReport>,
+    pub warnings: Vec<String>,
+}
 
 impl Pop {
-    pub fn from_settings(_map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
-        Ok(Pop)
+    pub fn new(settings: PopSettings) -> Result<Self> {
+        settings.validate()?;
+        Ok(Pop { settings })
     }
+
+    pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
+        Pop::new(parse_settings(map)?)
+    }
+
+    /// Solves and returns the per-light energy report along with S and the timings.
+    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PopReport)> {
+        let s = &self.settings;
+        let medium = &scene.medium;
+        let mut timings = Timings::default();
+        let mut report = PopReport::default();
+        let mut distant = Vec::new();
+        for (i, light) in scene.lights.iter().enumerate() {
+            match light {
+                Light::Distant { direction, irradiance, half_angle } => distant.push((*direction, *irradiance, *half_angle)),
+                Light::Point { .. } => report.warnings.push(format!(
+                    "pop: lights[{i}] is a point light, which pop does not handle yet (radial grids, paper Sec. 6): left out of the result"
+                )),
+                Light::Dome(_) => report.warnings.push(format!(
+                    "pop: lights[{i}] is a dome, which pop does not handle yet (ordinates, paper Sec. 5): its light is left out of the scattering (the compositor still shows it behind the medium)"
+                )),
+            }
+        }
+        for w in &report.warnings {
+            eprintln!("warning: {w}");
+        }
+        if distant.is_empty() {
+            return Err(Error::InvalidArgument("pop: the scene has no distant light; pop handles distant lights only so far".into()));
+        }
+        if !progress.update("pop setup", 0.0) {
+            return Err(Error::Cancelled);
+        }
+
+        // The finest footprint asked of the mip: the output grid's spacing or the light grids'
+        // cells, whichever is smaller.
+        let out_probe = ScatteringGrid::over_medium(medium, s.output_resolution)?;
+        let merge_probe = ScatteringGrid::over_medium(medium, s.merge_resolution())?;
+        let (wlo, whi) = medium.world_bounds();
+        let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
+        let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
+        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
+
+        let g = medium.g;
+        let mut lights = Vec::with_capacity(distant.len());
+        for (direction, irradiance, half_angle) in distant {
+            let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, s.grid_resolution))?;
+            // A disc of angular radius theta and irradiance E (perpendicular): fluence
+            // E * 2 / (1 + cos theta), mean cosine (1 + cos theta) / 2 = initial anisotropy.
+            let one_minus_cos = 2.0 * (0.5 * half_angle).sin().powi(2);
+            let cos_t = 1.0 - one_minus_cos;
+            let fluence = irradiance * (2.0 / (1.0 + cos_t));
+            let a0 = 1.0 - 0.5 * one_minus_cos;
+            let init = timings.time("pop init", || init::sweep(&grid, fluence));
+            let mut j_acc = vec![Vec3::ZERO; grid.len()];
+            let mu = accumulate::view_cosines(&grid, scene.camera.position);
+            accumulate::add_direct(&init.direct, &mu, a0, g, &mut j_acc);
+            let prop = propagate::Propagation {
+                grid: &grid,
+                g,
+                mu: &mu,
+                diffusion_correction: s.diffusion_correction,
+                max_iterations: s.max_iterations,
+                residual_threshold: s.residual_threshold,
+            };
+            let t0 = std::time::Instant::now();
+            let stats = prop.run(&init, a0 * g, &mut j_acc, progress)?;
+            timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
+            report.lights.push(LightReport {
+                dims: grid.dims.to_array(),
+                cell_size: grid.h,
+                entering: init.entering.to_array(),
+                transmitted: init.transmitted.to_array(),
+                absorbed_direct: init.absorbed.to_array(),
+                propagation: stats,
+            });
+            lights.push((grid, j_acc));
+        }
+        let merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
+        if !progress.update("pop upsample", 0.0) {
+            return Err(Error::Cancelled);
+        }
+        let scattering = timings.time("pop upsample", || upsample::upsample(medium, &mip, &merged, s))?;
+        progress.update("pop upsample", 1.0);
+        Ok((SolveOutput { scattering, timings: merge_timings(timings) }, report))
+    }
+}
+
+/// Sums repeated phases (one entry per light) into one entry each, keeping the order.
+fn merge_timings(t: Timings) -> Timings {
+    let mut out: Vec<(String, f64)> = Vec::new();
+    for (k, v) in t.0 {
+        match out.iter_mut().find(|(n, _)| *n == k) {
+            Some(e) => e.1 += v,
+            None => out.push((k, v)),
+        }
+    }
+    Timings(out)
 }
 
 impl Solver for Pop {
     fn name(&self) -> &'static str {
         "pop"
     }
-    fn solve(&self, _scene: &Scene, _progress: &dyn Progress) -> Result<SolveOutput> {
-        Err(Error::InvalidArgument("solver `pop` is not implemented yet".into()))
+    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
+        self.solve_detailed(scene, progress).map(|(out, _)| out)
     }
 }
+
+#[cfg(test)]
+mod tests;

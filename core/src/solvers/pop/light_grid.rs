@@ -1,0 +1,124 @@
+//! The propagation domain of one distant light (Sec. 4, Fig. 2 top): a rectilinear grid of
+//! cubic cells whose third axis is the light's direction of travel `d`, spanning the medium's
+//! bounds, with the medium's coefficients prefiltered to the cell size.
+
+use glam::{Affine3A, Mat3A, UVec3, Vec3};
+use rayon::prelude::*;
+
+use super::mip::MediumMip;
+use crate::error::{Error, Result};
+use crate::medium::Medium;
+use crate::sampling::orthonormal_basis;
+
+pub struct LightGrid {
+    /// Cells along (u, v, d); x (u) fastest, d slowest so that a slab is one depth slice.
+    pub dims: UVec3,
+    /// Cell edge, metres.
+    pub h: f32,
+    /// Principal direction (direction of travel of the light), unit.
+    pub d: Vec3,
+    /// Grid index space (cell centres at integers, axes u, v, d) to world.
+    pub index_to_world: Affine3A,
+    pub world_to_index: Affine3A,
+    /// Per cell: scattering and absorption coefficients (1/m, RGB), cell averages.
+    pub sigma_s: Vec<Vec3>,
+    pub sigma_a: Vec<Vec3>,
+}
+
+impl LightGrid {
+    pub fn len(&self) -> usize {
+        self.sigma_s.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.sigma_s.is_empty()
+    }
+    #[inline]
+    pub fn index(&self, i: u32, j: u32, k: u32) -> usize {
+        i as usize + self.dims.x as usize * (j as usize + self.dims.y as usize * k as usize)
+    }
+    pub fn slab(&self) -> usize {
+        (self.dims.x * self.dims.y) as usize
+    }
+
+    /// Sets up the frame and samples the medium. `resolution` cells along the longest side.
+    pub fn new(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32) -> Result<Self> {
+        let d = d.normalize();
+        let (u, v) = orthonormal_basis(d);
+        let rot = Mat3A::from_cols(u.into(), v.into(), d.into());
+        // Extent of the medium's index-space box in the (u, v, d) frame.
+        let (lo, hi) = medium.index_bounds();
+        let mut pmin = Vec3::splat(f32::INFINITY);
+        let mut pmax = Vec3::splat(f32::NEG_INFINITY);
+        for c in 0..8 {
+            let corner = Vec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            let w = medium.index_to_world.transform_point3(corner);
+            let p = Vec3::new(w.dot(u), w.dot(v), w.dot(d));
+            pmin = pmin.min(p);
+            pmax = pmax.max(p);
+        }
+        let extent = (pmax - pmin).max(Vec3::splat(1e-6));
+        let h = extent.max_element() / resolution as f32;
+        let dims = (extent / h).ceil().as_uvec3().max(UVec3::ONE);
+        let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
+        if count > 1 << 27 {
+            return Err(Error::TooLarge(format!("pop propagation grid {}x{}x{}", dims.x, dims.y, dims.z)));
+        }
+        // Centre the cells on the extent (ceil may add up to one cell per axis).
+        let origin = pmin - 0.5 * (dims.as_vec3() * h - extent) + Vec3::splat(0.5 * h);
+        // world = rot * (origin + h * index)
+        let index_to_world = Affine3A { matrix3: rot * h, translation: rot * glam::Vec3A::from(origin) };
+        let world_to_index = index_to_world.inverse();
+
+        // Cell averages of the density: footprint of one cell in medium voxels.
+        let voxel = medium.voxel_size_world();
+        let footprint = h / voxel.min_element();
+        let w2i = medium.world_to_index;
+        let slab = (dims.x * dims.y) as usize;
+        let mut density = vec![0.0f32; count as usize];
+        density.par_chunks_mut(slab).enumerate().for_each(|(k, out)| {
+            for j in 0..dims.y {
+                for i in 0..dims.x {
+                    let w = index_to_world.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
+                    out[(i + dims.x * j) as usize] = mip.sample(medium, w2i.transform_point3(w), footprint);
+                }
+            }
+        });
+        let sigma_s = density.iter().map(|&r| medium.sigma_s(r)).collect();
+        let sigma_a = density.iter().map(|&r| medium.sigma_t(r) - medium.sigma_s(r)).map(|s| s.max(Vec3::ZERO)).collect();
+        Ok(LightGrid { dims, h, d, index_to_world, world_to_index, sigma_s, sigma_a })
+    }
+
+    /// World position of cell (i, j, k)'s centre.
+    #[inline]
+    pub fn position(&self, i: u32, j: u32, k: u32) -> Vec3 {
+        self.index_to_world.transform_point3(Vec3::new(i as f32, j as f32, k as f32))
+    }
+
+    /// Trilinear lookup of a per-cell field at a world point; zero outside the grid.
+    pub fn sample(&self, field: &[Vec3], w: Vec3) -> Vec3 {
+        let p = self.world_to_index.transform_point3(w);
+        let dims = self.dims.as_ivec3();
+        if p.x < -0.5 || p.y < -0.5 || p.z < -0.5 || p.x > dims.x as f32 - 0.5 || p.y > dims.y as f32 - 0.5 || p.z > dims.z as f32 - 0.5 {
+            return Vec3::ZERO;
+        }
+        // Clamp to the outermost centres: the outer half cells hold the edge value.
+        let p = p.clamp(Vec3::ZERO, (dims - glam::IVec3::ONE).as_vec3());
+        let f = p.floor();
+        let i = f.as_ivec3();
+        let t = p - f;
+        let at = |x: i32, y: i32, z: i32| {
+            let c = glam::IVec3::new(x, y, z).min(dims - glam::IVec3::ONE);
+            field[(c.x + dims.x * (c.y + dims.y * c.z)) as usize]
+        };
+        let lerp = |a: Vec3, b: Vec3, t: f32| a + (b - a) * t;
+        let c00 = lerp(at(i.x, i.y, i.z), at(i.x + 1, i.y, i.z), t.x);
+        let c10 = lerp(at(i.x, i.y + 1, i.z), at(i.x + 1, i.y + 1, i.z), t.x);
+        let c01 = lerp(at(i.x, i.y, i.z + 1), at(i.x + 1, i.y, i.z + 1), t.x);
+        let c11 = lerp(at(i.x, i.y + 1, i.z + 1), at(i.x + 1, i.y + 1, i.z + 1), t.x);
+        lerp(lerp(c00, c10, t.y), lerp(c01, c11, t.y), t.z)
+    }
+}

@@ -1,0 +1,145 @@
+//! A box-filtered mip pyramid of the density, so that coarse propagation cells read the mean
+//! density of the volume they cover instead of a point sample (Sec. 4.2: "the medium
+//! parameters need to be sampled from a downscaled version of the volume"). Point samples
+//! alias: a 32^3 grid over a 256^3 cloud would see one voxel in 512 and miss thin sheets.
+//!
+//! Only the levels the solver needs are built: the base level already averages `base` voxels
+//! per axis, chosen from the finest footprint that will be asked for, which bounds memory by
+//! the solver's resolution rather than the VDB's.
+
+use glam::{IVec3, Vec3};
+use rayon::prelude::*;
+
+use crate::medium::Medium;
+
+struct Level {
+    dims: IVec3,
+    /// Voxels per cell along each axis at this level.
+    factor: i32,
+    data: Vec<f32>,
+}
+
+pub struct MediumMip {
+    /// Index-space corner (voxel units) of cell 0 of every level.
+    lo: IVec3,
+    levels: Vec<Level>,
+}
+
+impl Level {
+    #[inline]
+    fn at(&self, c: IVec3) -> f32 {
+        if c.x < 0 || c.y < 0 || c.z < 0 || c.x >= self.dims.x || c.y >= self.dims.y || c.z >= self.dims.z {
+            0.0
+        } else {
+            self.data[(c.x + self.dims.x * (c.y + self.dims.y * c.z)) as usize]
+        }
+    }
+
+    /// Trilinear between cell centres, zero outside (like the density grid itself).
+    #[inline]
+    fn sample(&self, q: Vec3) -> f32 {
+        let f = q.floor();
+        let i = f.as_ivec3();
+        let t = q - f;
+        let v = |dx: i32, dy: i32, dz: i32| self.at(i + IVec3::new(dx, dy, dz));
+        let c00 = v(0, 0, 0) * (1.0 - t.x) + v(1, 0, 0) * t.x;
+        let c10 = v(0, 1, 0) * (1.0 - t.x) + v(1, 1, 0) * t.x;
+        let c01 = v(0, 0, 1) * (1.0 - t.x) + v(1, 0, 1) * t.x;
+        let c11 = v(0, 1, 1) * (1.0 - t.x) + v(1, 1, 1) * t.x;
+        (c00 * (1.0 - t.y) + c10 * t.y) * (1.0 - t.z) + (c01 * (1.0 - t.y) + c11 * t.y) * t.z
+    }
+}
+
+impl MediumMip {
+    /// Builds levels from `min_footprint` voxels per sample (the finest the caller will ask
+    /// for) up to one cell covering the whole grid.
+    pub fn new(medium: &Medium, min_footprint: f32) -> Self {
+        let grid = &medium.grid;
+        if grid.is_empty() {
+            return MediumMip { lo: IVec3::ZERO, levels: vec![Level { dims: IVec3::ONE, factor: 1, data: vec![0.0] }] };
+        }
+        let (blo, bhi) = grid.bbox();
+        // One voxel of trilinear ramp on each side, as Medium::index_bounds.
+        let lo = blo - IVec3::ONE;
+        let hi = bhi + IVec3::ONE;
+        let extent = hi - lo + IVec3::ONE;
+        // Base factor: largest power of two not above half the finest footprint, so the
+        // finest requested level is still interpolated between two stored ones.
+        let mut base = 1i32;
+        while (base * 2) as f32 <= 0.5 * min_footprint.max(1.0) && base < 256 {
+            base *= 2;
+        }
+        let dims = (extent + IVec3::splat(base - 1)) / base;
+        let mut data = vec![0.0f32; (dims.x * dims.y * dims.z) as usize];
+        let inv = 1.0 / (base * base * base) as f32;
+        data.par_chunks_mut((dims.x * dims.y) as usize).enumerate().for_each(|(cz, slab)| {
+            for cy in 0..dims.y {
+                for cx in 0..dims.x {
+                    let o = lo + IVec3::new(cx, cy, cz as i32) * base;
+                    let mut s = 0.0;
+                    if base == 1 {
+                        s = grid.voxel(o);
+                    } else if grid.max_in_box(o, o + IVec3::splat(base - 1)) > 0.0 {
+                        for z in 0..base {
+                            for y in 0..base {
+                                for x in 0..base {
+                                    s += grid.voxel(o + IVec3::new(x, y, z));
+                                }
+                            }
+                        }
+                        s *= inv;
+                    }
+                    slab[(cx + dims.x * cy) as usize] = s;
+                }
+            }
+        });
+        let mut levels = vec![Level { dims, factor: base, data }];
+        while levels.last().unwrap().dims.max_element() > 1 {
+            let prev = levels.last().unwrap();
+            let nd = (prev.dims + IVec3::ONE) / 2;
+            let mut nd_data = vec![0.0f32; (nd.x * nd.y * nd.z) as usize];
+            nd_data.par_chunks_mut((nd.x * nd.y) as usize).enumerate().for_each(|(z, slab)| {
+                for y in 0..nd.y {
+                    for x in 0..nd.x {
+                        let mut s = 0.0;
+                        for k in 0..8 {
+                            let c = IVec3::new(2 * x + (k & 1), 2 * y + ((k >> 1) & 1), 2 * z as i32 + ((k >> 2) & 1));
+                            s += prev.at(c); // outside the data: zero, as the density
+                        }
+                        slab[(x + nd.x * y) as usize] = s * 0.125;
+                    }
+                }
+            });
+            let factor = prev.factor * 2;
+            levels.push(Level { dims: nd, factor, data: nd_data });
+        }
+        MediumMip { lo, levels }
+    }
+
+    fn sample_level(&self, l: usize, p_index: Vec3) -> f32 {
+        let lev = &self.levels[l];
+        let f = lev.factor as f32;
+        // Cell c covers voxels [lo + c f, lo + (c+1) f): its centre is lo + c f + (f - 1) / 2.
+        let q = (p_index - self.lo.as_vec3() - Vec3::splat(0.5 * (f - 1.0))) / f;
+        lev.sample(q)
+    }
+
+    /// Mean density around index-space point `p` over a box of about `footprint` voxels per
+    /// side: trilinear within and linear between the two nearest levels (like GPU trilinear
+    /// mip filtering). Footprints of one voxel or less read the density grid itself.
+    pub fn sample(&self, medium: &Medium, p_index: Vec3, footprint: f32) -> f32 {
+        let base = self.levels[0].factor as f32;
+        if footprint <= 1.0 && base <= 1.0 {
+            return medium.grid.sample(p_index);
+        }
+        let lf = (footprint.max(1.0) / base).log2().max(0.0);
+        let l0 = (lf.floor() as usize).min(self.levels.len() - 1);
+        let l1 = (l0 + 1).min(self.levels.len() - 1);
+        let t = (lf - l0 as f32).clamp(0.0, 1.0);
+        let a = if base <= 1.0 && l0 == 0 && footprint <= 1.0 { medium.grid.sample(p_index) } else { self.sample_level(l0, p_index) };
+        if t == 0.0 || l1 == l0 {
+            return a;
+        }
+        a * (1.0 - t) + self.sample_level(l1, p_index) * t
+    }
+}

@@ -1,0 +1,231 @@
+//! Light propagation in one light's grid (Sec. 4.2-4.3, Eq. 1-8), ping-pong between two
+//! grids, gathering from the six neighbours.
+//!
+//! Every cell holds the energy P of light still travelling (W/m^2 per cell, per RGB channel)
+//! and its anisotropy a about the principal direction d: L(x, w) = P f_hg(w . d, a). Per
+//! iteration each source cell sends P F(a) to its neighbours, with F the HG cumulative
+//! distribution over the solid angle each neighbour subtends (Eq. 1-3): the cone of half-angle
+//! 45 degrees to the cell in front, the band from 45 to 135 degrees split in four quarters to
+//! the side cells, the remaining cone to the cell behind. The fractions sum to one, so the
+//! scheme moves energy and never creates it. On the way, absorption only (Eq. 2) and the
+//! anisotropy decay a g^(sigma_s t) (Eq. 4), both with the coefficients averaged over the two
+//! cells; contributions combine by Eq. 5-6.
+//!
+//! Departure: the length of light path one iteration stands for. The paper takes t = one cell
+//! edge h. That is right for light moving along d (a near 1), but once the light is isotropic
+//! the lattice is a random walk with steps h, whose mean square displacement per step is h^2;
+//! physical diffusion gives 2 l* per unit path (l* = 1 / sigma_tr, sigma_tr = sigma_s (1 - g) +
+//! sigma_a). Taking t = h as path length makes the fluence of diffuse light depend on the grid
+//! (at 16 cells per metre and sigma_tr = 4 it is 8x too high). With `diffusion_correction` an
+//! iteration stands for the path s = h kappa with kappa = |a| + (1 - |a|) h sigma_tr / 2:
+//! one cell for directional light, the diffusion-matched h^2 sigma_tr / 2 for isotropic
+//! light. The fluence a packet leaves in a cell is P s / h (fluence = energy x path length
+//! per volume), and absorption and the decay of a use the same s. Energy accounting is
+//! unchanged: the fractions still sum to one.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::init::Initial;
+use super::light_grid::LightGrid;
+use crate::error::{Error, Result};
+use crate::phase::{hg, hg_cone_fraction};
+use crate::solvers::Progress;
+
+const COS_45: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
+/// How one source cell emits this iteration.
+#[derive(Clone, Copy, Default)]
+struct Emit {
+    /// Fractions of P towards the cell in front (along d), each side cell, and behind.
+    front: Vec3,
+    side: Vec3,
+    back: Vec3,
+    /// Light path this iteration stands for (metres).
+    path: Vec3,
+}
+
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct PropagationStats {
+    pub iterations: u32,
+    /// Energy scattered into the grid, left through its faces, absorbed, and still travelling
+    /// when the iterations stopped (dropped), per cell cross-section as in `Initial`.
+    pub injected: [f32; 3],
+    pub escaped: [f32; 3],
+    pub absorbed: [f32; 3],
+    pub residual: [f32; 3],
+}
+
+#[inline]
+fn per_channel(a: Vec3, f: impl Fn(f32) -> f32) -> Vec3 {
+    Vec3::new(f(a.x), f(a.y), f(a.z))
+}
+
+/// HG anisotropy parameter clamped away from the delta (|a| = 1).
+#[inline]
+fn clamp_a(a: f32) -> f32 {
+    a.clamp(-0.9995, 0.9995)
+}
+
+pub struct Propagation<'a> {
+    pub grid: &'a LightGrid,
+    /// Medium phase anisotropy.
+    pub g: f32,
+    /// Per cell: cosine between d and the direction from the cell to the camera.
+    pub mu: &'a [f32],
+    pub diffusion_correction: bool,
+    pub max_iterations: u32,
+    pub residual_threshold: f32,
+}
+
+impl Propagation<'_> {
+    fn emit(&self, c: usize, a: Vec3) -> Emit {
+        let grid = self.grid;
+        let front = per_channel(a, |a| hg_cone_fraction(COS_45, clamp_a(a)));
+        let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
+        let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
+        let kappa = if self.diffusion_correction {
+            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c];
+            let iso = (sigma_tr * (0.5 * grid.h)).min(Vec3::splat(64.0));
+            let aa = a.abs().min(Vec3::ONE);
+            aa + (Vec3::ONE - aa) * iso
+        } else {
+            Vec3::ONE
+        };
+        Emit { front, side, back, path: kappa * grid.h }
+    }
+
+    /// Runs Eq. 1-8 from the injected packets; adds the view-dependent in-scattered radiance
+    /// per unit sigma_s, J = sum P (s / h) f_hg(mu, a g), into `j_acc` (the accumulation grid,
+    /// Eq. 7-8, with the phase function applied: see accumulate.rs) and returns energy
+    /// statistics.
+    pub fn run(&self, init: &Initial, a_scattered: f32, j_acc: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
+        let grid = self.grid;
+        let n = grid.len();
+        let (nx, ny, nz) = (grid.dims.x as usize, grid.dims.y as usize, grid.dims.z as usize);
+        let slab = nx * ny;
+        let h = grid.h;
+        let g = self.g;
+        let ln_g = g.abs().max(1e-6).ln();
+        let mut p = init.packets.clone();
+        let mut a = vec![Vec3::splat(a_scattered); n];
+        let mut p_next = vec![Vec3::ZERO; n];
+        let mut a_next = vec![Vec3::ZERO; n];
+        let mut emit = vec![Emit::default(); n];
+        let injected: Vec3 = p.iter().copied().sum();
+
+        // Iteration 0: the packets were born in their cells, on average half a cell from the
+        // exit: half the fluence of a full step there.
+        let escaped_at = |c: usize, e: &Emit, pc: Vec3| -> Vec3 {
+            let (i, j, k) = (c % nx, (c / nx) % ny, c / slab);
+            let sides = (i == 0) as u32 + (i == nx - 1) as u32 + (j == 0) as u32 + (j == ny - 1) as u32;
+            pc * (e.side * sides as f32 + if k == nz - 1 { e.front } else { Vec3::ZERO } + if k == 0 { e.back } else { Vec3::ZERO })
+        };
+        let mut esc_next = emit
+            .par_iter_mut()
+            .zip(j_acc.par_iter_mut())
+            .enumerate()
+            .map(|(c, (e, jc))| {
+                *e = self.emit(c, a[c]);
+                let w = p[c] * e.path / h * 0.5;
+                *jc += w * per_channel(a[c], |ac| hg(self.mu[c], clamp_a(ac * g)));
+                escaped_at(c, e, p[c])
+            })
+            .sum::<Vec3>();
+        let mut escaped = Vec3::ZERO;
+        let mut absorbed = Vec3::ZERO;
+        let mut remaining = injected;
+        let mut before = injected;
+        let mut iterations = 0;
+        let target = injected * self.residual_threshold;
+        while iterations < self.max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
+            iterations += 1;
+            // Gather (Eq. 2-6).
+            let (p_ref, a_ref, e_ref) = (&p, &a, &emit);
+            p_next.par_chunks_mut(slab).zip(a_next.par_chunks_mut(slab)).enumerate().for_each(|(k, (pn, an))| {
+                for jj in 0..ny {
+                    for ii in 0..nx {
+                        let dst = ii + nx * jj + slab * k;
+                        let (sa_d, ss_d) = (grid.sigma_a[dst], grid.sigma_s[dst]);
+                        let mut l = Vec3::ZERO;
+                        let mut la = Vec3::ZERO;
+                        let mut add = |src: usize, frac: Vec3| {
+                            let ps = p_ref[src];
+                            if ps == Vec3::ZERO {
+                                return;
+                            }
+                            let e = &e_ref[src];
+                            let sa = 0.5 * (grid.sigma_a[src] + sa_d);
+                            let ss = 0.5 * (grid.sigma_s[src] + ss_d);
+                            let dl = ps * frac * (-sa * e.path).exp();
+                            let da = a_ref[src] * (ss * e.path * ln_g).exp();
+                            l += dl;
+                            la += dl * da;
+                        };
+                        if k > 0 {
+                            add(dst - slab, e_ref[dst - slab].front);
+                        }
+                        if k + 1 < nz {
+                            add(dst + slab, e_ref[dst + slab].back);
+                        }
+                        if ii > 0 {
+                            add(dst - 1, e_ref[dst - 1].side);
+                        }
+                        if ii + 1 < nx {
+                            add(dst + 1, e_ref[dst + 1].side);
+                        }
+                        if jj > 0 {
+                            add(dst - nx, e_ref[dst - nx].side);
+                        }
+                        if jj + 1 < ny {
+                            add(dst + nx, e_ref[dst + nx].side);
+                        }
+                        let o = ii + nx * jj;
+                        pn[o] = l;
+                        // Eq. 6: energy-weighted mean of the decayed anisotropies.
+                        an[o] = Vec3::select(l.cmpgt(Vec3::splat(1e-30)), la / l.max(Vec3::splat(1e-30)), Vec3::ZERO);
+                    }
+                }
+            });
+            std::mem::swap(&mut p, &mut p_next);
+            std::mem::swap(&mut a, &mut a_next);
+            // Accumulate (Eq. 7-8) and prepare the next emission.
+            let (p_ref, a_ref) = (&p, &a);
+            let (sum, esc) = emit
+                .par_iter_mut()
+                .zip(j_acc.par_iter_mut())
+                .enumerate()
+                .map(|(c, (e, jc))| {
+                    let pc = p_ref[c];
+                    if pc == Vec3::ZERO {
+                        *e = Emit::default();
+                        return (Vec3::ZERO, Vec3::ZERO);
+                    }
+                    *e = self.emit(c, a_ref[c]);
+                    let w = pc * e.path / h;
+                    *jc += w * per_channel(a_ref[c], |ac| hg(self.mu[c], clamp_a(ac * g)));
+                    (pc, escaped_at(c, e, pc))
+                })
+                .reduce(|| (Vec3::ZERO, Vec3::ZERO), |x, y| (x.0 + y.0, x.1 + y.1));
+            // What left `before` and neither arrived in a cell nor left the grid was absorbed.
+            absorbed += (before - esc_next - sum).max(Vec3::ZERO);
+            escaped += esc_next;
+            esc_next = esc;
+            before = sum;
+            remaining = sum;
+            // Progress: iterations, or orders of magnitude of the residual, whichever is ahead.
+            let decades = (remaining / injected.max(Vec3::splat(1e-30))).max_element().max(1e-12).log10();
+            let frac = (iterations as f32 / self.max_iterations as f32).max(decades / self.residual_threshold.max(1e-12).log10());
+            if !progress.update("pop propagation", frac.clamp(0.0, 1.0)) {
+                return Err(Error::Cancelled);
+            }
+        }
+        Ok(PropagationStats {
+            iterations,
+            injected: injected.to_array(),
+            escaped: escaped.to_array(),
+            absorbed: absorbed.to_array(),
+            residual: remaining.to_array(),
+        })
+    }
+}

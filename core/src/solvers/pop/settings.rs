@@ -1,0 +1,84 @@
+//! Settings of `pop`, read from the scene JSON's `solver` block and `--set KEY=VALUE`.
+//! Unknown keys are an error (a typo must not silently fall back to a default).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct PopSettings {
+    /// Cells along the longest side of each light's propagation grid. Cells are cubes (the
+    /// solid-angle split of Eq. 3 assumes cubic cells), so the other sides get proportionally
+    /// fewer. The paper uses 8^3 to 20^3 on a GPU.
+    pub grid_resolution: u32,
+    /// Cap on propagation iterations per light.
+    pub max_iterations: u32,
+    /// Stop when the energy still travelling in the propagation grid falls below this fraction
+    /// of the energy that was scattered into it (the paper's epsilon_L, made relative).
+    pub residual_threshold: f32,
+    /// Largest side of the medium-aligned grid the lights are merged into (Sec. 5.3); 0 = twice
+    /// `grid_resolution` (the paper's choice: propagation grids are rotated, so merging at
+    /// the same resolution would undersample them).
+    pub merge_resolution: u32,
+    /// Largest side of the returned scattering grid (the medium's own voxels when it is
+    /// smaller than this).
+    pub output_resolution: u32,
+    /// Joint bilateral upsampling guided by the density (Sec. 4.4). Off: trilinear.
+    pub upsample: bool,
+    /// Range sigma of the bilateral filter, as a fraction of the medium's largest density.
+    pub range_sigma: f32,
+    /// Spatial sigma of the bilateral filter, in merged-grid cells.
+    pub spatial_sigma: f32,
+    /// Correct the lattice's diffusion towards the physical one where light has become
+    /// isotropic (see propagate.rs). Off: every iteration is one cell of light path, as in the
+    /// paper.
+    pub diffusion_correction: bool,
+}
+
+impl Default for PopSettings {
+    fn default() -> Self {
+        PopSettings {
+            grid_resolution: 32,
+            max_iterations: 400,
+            residual_threshold: 1e-3,
+            merge_resolution: 0,
+            output_resolution: 128,
+            upsample: true,
+            range_sigma: 0.15,
+            spatial_sigma: 0.8,
+            diffusion_correction: true,
+        }
+    }
+}
+
+impl PopSettings {
+    pub fn validate(&self) -> Result<()> {
+        if !(2..=512).contains(&self.grid_resolution) {
+            return Err(Error::scene("solver.grid_resolution", format!("must be in 2..=512, got {}", self.grid_resolution)));
+        }
+        if !(1..=100_000).contains(&self.max_iterations) {
+            return Err(Error::scene("solver.max_iterations", format!("must be in 1..=100000, got {}", self.max_iterations)));
+        }
+        if !(self.residual_threshold.is_finite() && self.residual_threshold >= 0.0 && self.residual_threshold < 1.0) {
+            return Err(Error::scene("solver.residual_threshold", format!("must be in [0, 1), got {}", self.residual_threshold)));
+        }
+        if self.merge_resolution != 0 && !(2..=1024).contains(&self.merge_resolution) {
+            return Err(Error::scene("solver.merge_resolution", format!("must be 0 or in 2..=1024, got {}", self.merge_resolution)));
+        }
+        if !(2..=1024).contains(&self.output_resolution) {
+            return Err(Error::scene("solver.output_resolution", format!("must be in 2..=1024, got {}", self.output_resolution)));
+        }
+        if !(self.range_sigma.is_finite() && self.range_sigma > 0.0) {
+            return Err(Error::scene("solver.range_sigma", format!("must be > 0, got {}", self.range_sigma)));
+        }
+        if !(self.spatial_sigma.is_finite() && self.spatial_sigma > 0.0 && self.spatial_sigma <= 4.0) {
+            return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {}", self.spatial_sigma)));
+        }
+        Ok(())
+    }
+
+    pub fn merge_resolution(&self) -> u32 {
+        if self.merge_resolution == 0 { (2 * self.grid_resolution).min(1024) } else { self.merge_resolution }
+    }
+}
