@@ -321,7 +321,8 @@ pub struct GridInfo {
     pub sum: Option<Sum>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
-    pub metadata: Vec<(String, MetaValue)>,
+    /// Grid metadata of known types, by name.
+    pub metadata: std::collections::BTreeMap<String, MetaValue>,
 }
 
 /// `vdb-info` for a whole file.

@@ -330,3 +330,26 @@ pub fn write_rgb_grids(path: &Path, prefix: &str, dims: [u32; 3], data: &[Vec3],
         (0..3).map(|c| (names[c].as_str(), FloatTree::from_dense(dims, |i| data[i][c]))).collect();
     write_file(path, &trees, index_to_world, options)
 }
+
+/// Writes a density grid through the dense writer: the grid's bounding box as one dense
+/// array, index (0,0,0) at the box's minimum corner, the transform moved to match. For
+/// testing the dense path against OpenVDB; refuses boxes over 2^28 voxels.
+pub fn write_density_as_dense(path: &Path, name: &str, grid: &DensityGrid, index_to_world: Affine3A, options: &WriteOptions) -> Result<()> {
+    let (lo, hi) = if grid.is_empty() { (IVec3::ZERO, IVec3::ZERO) } else { grid.bbox() };
+    let d = (hi - lo + IVec3::ONE).as_i64vec3();
+    let n = d.x * d.y * d.z;
+    if n > 1 << 28 {
+        return Err(Error::TooLarge(format!("dense copy of {} x {} x {} voxels", d.x, d.y, d.z)));
+    }
+    let mut values = Vec::with_capacity(n as usize);
+    for z in lo.z..=hi.z {
+        for y in lo.y..=hi.y {
+            for x in lo.x..=hi.x {
+                values.push(grid.voxel(IVec3::new(x, y, z)));
+            }
+        }
+    }
+    let dims = [d.x as u32, d.y as u32, d.z as u32];
+    let xf = index_to_world * Affine3A::from_translation(lo.as_vec3());
+    write_dense_float_grids(path, &[DenseFloat { name, dims, values: &values }], xf, options)
+}
