@@ -44,6 +44,8 @@ def import_mitsuba():
     except Exception:  # ImportError, or a broken native library
         return None
     mi.set_variant("scalar_rgb")
+    # volpath warns about tiny negative samples (ratio-tracking round-off): keep the log quiet.
+    mi.set_log_level(mi.LogLevel.Error)
     return mi
 
 
@@ -289,10 +291,11 @@ class Comparison:
 # independent terms, each within ~10-15% of its mean for Gaussian noise; 1.5 leaves room for the
 # heavy-tailed (firefly) noise of a point light inside a medium, while a bias b still fails once
 # sqrt(noise^2 + b^2) > 1.5 noise + FLOOR, i.e. b > ~1.1 noise + FLOOR.
-# FLOOR: differences that are not noise and not bugs: float32 grid and lookups, and different
-# random-number streams; 0.5% of the image norm.
+# FLOOR: room for differences that are neither noise nor bugs (float32 grids and lookups, the
+# two renderers' different ray epsilons); 0.2% of the image norm. Measured: the dome scene,
+# whose 8x8-block noise is 0.1%, agrees to 0.1%, so no systematic difference is visible above it.
 K_NOISE = 1.5
-FLOOR = 0.005
+FLOOR = 0.002
 
 
 def compare(ours: tuple, theirs: tuple, block: int = 1) -> Comparison:
