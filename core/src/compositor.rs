@@ -159,8 +159,11 @@ fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, ste
         let x = o + d * (t0 + (i as f32 + 0.5) * h);
         let sigma_t = medium.sigma_t(medium.density_world(x));
         let seg_t = (-sigma_t * h).exp();
-        // Exact integral of T over the step for constant sigma_t: (1 - e^{-sigma h}) / sigma.
-        let weight = Vec3::select(sigma_t.cmpgt(Vec3::splat(1e-6)), (Vec3::ONE - seg_t) / sigma_t, Vec3::splat(h));
+        // Exact integral of T over the step for constant sigma_t: (1 - e^{-sigma h}) / sigma,
+        // by its series where sigma h is small (the difference would cancel catastrophically).
+        let od = sigma_t * h;
+        let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
+        let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
         l += tr * weight * s.at(x);
         l1 += tr * weight * s1.at(x);
         tr *= seg_t;

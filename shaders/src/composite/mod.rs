@@ -1,0 +1,177 @@
+//! The compositor's ray march on the GPU: same inputs and output as
+//! `volscatter_core::compositor::composite` (tested against it in `tests.rs`).
+//! The single-scattering grid S1 is computed on the CPU (`single_scattering_grid`) and
+//! uploaded; only the per-pixel march runs here.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec3, Vec4};
+use std::mem::{offset_of, size_of};
+
+use crate::context::{GpuContext, GpuError};
+use crate::upload::{affine_rows, dense_density, dense_density_bytes, grid_dims, rgb_as_vec4};
+use volscatter_core::compositor::{single_scattering_grid, CompositeOptions};
+use volscatter_core::{Image, ScatteringGrid, Scene};
+
+pub const WGSL: &str = include_str!("composite.wgsl");
+
+/// Mirrors `struct Params` in composite.wgsl (uniform address space: every member 16-byte
+/// aligned, which vec4/array-of-vec4 members give us).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub struct CompositeParams {
+    pub density_w2i: [[f32; 4]; 3],
+    pub s_w2i: [[f32; 4]; 3],
+    pub s1_w2i: [[f32; 4]; 3],
+    pub density_origin: [i32; 4],
+    pub density_dims: [u32; 4],
+    pub s_dims: [u32; 4],
+    pub s1_dims: [u32; 4],
+    pub density_scale: [f32; 4],
+    pub bounds_lo: [f32; 4],
+    pub bounds_hi: [f32; 4],
+    pub cam_pos: [f32; 4],
+    pub cam_fwd: [f32; 4],
+    pub cam_right: [f32; 4],
+    pub cam_up: [f32; 4],
+    pub env_color: [f32; 4],
+    pub image: [u32; 4],
+    pub env_dims: [u32; 4],
+    pub misc: [f32; 4],
+}
+
+// Layout checked at compile time against the WGSL declaration's offsets.
+const _: () = {
+    assert!(size_of::<CompositeParams>() == 384);
+    assert!(offset_of!(CompositeParams, s_w2i) == 48);
+    assert!(offset_of!(CompositeParams, density_origin) == 144);
+    assert!(offset_of!(CompositeParams, density_scale) == 208);
+    assert!(offset_of!(CompositeParams, cam_pos) == 256);
+    assert!(offset_of!(CompositeParams, env_color) == 320);
+    assert!(offset_of!(CompositeParams, misc) == 368);
+};
+
+fn v4(v: Vec3, w: f32) -> [f32; 4] {
+    [v.x, v.y, v.z, w]
+}
+
+/// Renders `s` like the CPU compositor, on the GPU.
+pub fn composite(ctx: &GpuContext, scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> Result<Image, GpuError> {
+    let single = single_scattering_grid(scene, opts.single_resolution, opts.dome_directions)
+        .map_err(|e| GpuError::Internal(e.to_string()))?;
+    composite_with_single(ctx, scene, s, &single, opts)
+}
+
+pub fn composite_with_single(
+    ctx: &GpuContext,
+    scene: &Scene,
+    s: &ScatteringGrid,
+    single: &ScatteringGrid,
+    opts: &CompositeOptions,
+) -> Result<Image, GpuError> {
+    let medium = &scene.medium;
+    let cam = &scene.camera;
+    ctx.check_storage_size("density", dense_density_bytes(medium))?;
+    ctx.check_storage_size("scattering grid", s.data.len() as u64 * 16)?;
+    let pixels = cam.width as u64 * cam.height as u64;
+    ctx.check_storage_size("image", pixels * 48)?;
+    let (origin, dims, values) = dense_density(medium);
+    let env = scene.environment();
+    let (env_pixels, env_dims, has_map) = match env.and_then(|e| e.map.as_ref()) {
+        Some(m) => (m.pixels.iter().map(|p| [p.x, p.y, p.z, 0.0]).collect::<Vec<_>>(), [m.width as u32, m.height as u32, 0, 0], true),
+        None => (vec![[0.0f32; 4]], [1, 1, 0, 0], false),
+    };
+    let (lo, hi) = medium.world_bounds();
+    let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
+    let k = opts.subpixels.clamp(1, 8);
+    let params = CompositeParams {
+        density_w2i: affine_rows(&medium.world_to_index),
+        s_w2i: affine_rows(&s.index_to_world.inverse()),
+        s1_w2i: affine_rows(&single.index_to_world.inverse()),
+        density_origin: [origin.x, origin.y, origin.z, 0],
+        density_dims: [dims.x as u32, dims.y as u32, dims.z as u32, 0],
+        s_dims: grid_dims(s),
+        s1_dims: grid_dims(single),
+        density_scale: v4(medium.density_scale, 0.0),
+        bounds_lo: v4(lo, 0.0),
+        bounds_hi: v4(hi, 0.0),
+        cam_pos: v4(cam.position, 0.0),
+        cam_fwd: v4(cam.forward, 0.0),
+        cam_right: v4(cam.right, 0.0),
+        cam_up: v4(cam.up, 0.0),
+        env_color: match env {
+            Some(e) => v4(e.color, 1.0),
+            None => [0.0; 4],
+        },
+        image: [cam.width, cam.height, k, (has_map as u32) | ((opts.transparent as u32) << 1)],
+        env_dims,
+        misc: [(0.5 * cam.fov_deg.to_radians()).tan(), step, 0.0, 0.0],
+    };
+    let device = &ctx.device;
+    let uniform = wgpu::util::DeviceExt::create_buffer_init(
+        device,
+        &wgpu::util::BufferInitDescriptor { label: Some("composite params"), contents: bytemuck::bytes_of(&params), usage: wgpu::BufferUsages::UNIFORM },
+    );
+    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&values))?;
+    let s_buf = ctx.storage_buffer("scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&s.data)))?;
+    let s1_buf = ctx.storage_buffer("single scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&single.data)))?;
+    let env_buf = ctx.storage_buffer("environment", bytemuck::cast_slice(&env_pixels))?;
+    let out_bytes = pixels * 48;
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("composite out"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("composite.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("composite"),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("composite"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: density.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: s_buf.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 3, resource: s1_buf.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 4, resource: env_buf.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 5, resource: out.as_entire_binding() },
+        ],
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(cam.width.div_ceil(8), cam.height.div_ceil(8), 1);
+    }
+    ctx.queue.submit([enc.finish()]);
+    ctx.check()?;
+    let bytes = ctx.read_buffer(&out, out_bytes)?;
+    let px: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+    let mut img = Image::new(cam.width, cam.height);
+    let n = pixels as usize;
+    let mut single_aov = Vec::with_capacity(n);
+    let mut multiple_aov = Vec::with_capacity(n);
+    let mut bg_aov = Vec::with_capacity(n);
+    for i in 0..n {
+        let rgba = Vec4::from(px[3 * i]);
+        let l1 = Vec4::from(px[3 * i + 1]).truncate();
+        let bg = Vec4::from(px[3 * i + 2]).truncate();
+        img.rgba[i] = rgba;
+        let scattered = rgba.truncate() - if opts.transparent { Vec3::ZERO } else { bg };
+        single_aov.push(l1);
+        multiple_aov.push(scattered - l1);
+        bg_aov.push(bg);
+    }
+    img.aovs = vec![("single".into(), single_aov), ("multiple".into(), multiple_aov), ("background".into(), bg_aov)];
+    Ok(img)
+}
+
+#[cfg(test)]
+mod tests;

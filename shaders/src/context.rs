@@ -1,0 +1,168 @@
+//! Adapter and device acquisition, error capture, and buffer helpers shared by the kernels.
+
+use std::sync::{Arc, Mutex};
+use wgpu::util::DeviceExt;
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found (install a Vulkan, Metal or DX12 driver; Mesa's lavapipe works)")]
+    NoAdapter,
+    #[error("GPU device request failed: {0}")]
+    RequestDevice(String),
+    #[error("GPU out of memory: {0}")]
+    OutOfMemory(String),
+    #[error("GPU device lost: {0}")]
+    DeviceLost(String),
+    #[error("GPU error: {0}")]
+    Internal(String),
+    #[error("too large for this GPU: {0}")]
+    TooLarge(String),
+}
+
+/// A device and queue, with the adapter's description and the errors wgpu reported.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    errors: Arc<Mutex<Vec<String>>>,
+    lost: Arc<Mutex<Option<String>>>,
+}
+
+impl GpuContext {
+    /// Picks the best adapter (high performance; software adapters such as lavapipe allowed as
+    /// a last resort) and opens a device with the adapter's own limits.
+    pub fn new() -> Result<Self, GpuError> {
+        std::panic::catch_unwind(|| pollster::block_on(Self::new_async()))
+            .map_err(|_| GpuError::Internal("wgpu panicked while opening a device".into()))?
+    }
+
+    async fn new_async() -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(&wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY),
+            ..Default::default()
+        });
+        let mut adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+            })
+            .await
+            .ok();
+        if adapter.is_none() {
+            adapter = instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::HighPerformance,
+                    force_fallback_adapter: true,
+                    compatible_surface: None,
+                })
+                .await
+                .ok();
+        }
+        let adapter = adapter.ok_or(GpuError::NoAdapter)?;
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("volscatter"),
+                required_features: wgpu::Features::empty(),
+                required_limits: limits.clone(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| GpuError::RequestDevice(e.to_string()))?;
+        let errors = Arc::new(Mutex::new(Vec::new()));
+        let lost = Arc::new(Mutex::new(None));
+        {
+            // wgpu's default handler panics; a host process must never see that.
+            let errors = errors.clone();
+            device.on_uncaptured_error(Box::new(move |e| {
+                if let Ok(mut v) = errors.lock() {
+                    v.push(e.to_string());
+                }
+            }));
+            let lost = lost.clone();
+            device.set_device_lost_callback(move |reason, msg| {
+                if let Ok(mut l) = lost.lock() {
+                    *l = Some(format!("{reason:?}: {msg}"));
+                }
+            });
+        }
+        Ok(GpuContext { device, queue, info, limits, errors, lost })
+    }
+
+    /// One line naming the adapter, for logs and benchmark tables.
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {:?}, driver {} {})", self.info.name, self.info.device_type, self.info.backend, self.info.driver, self.info.driver_info)
+    }
+
+    /// Fails if the device was lost or wgpu reported an error since the last check.
+    pub fn check(&self) -> Result<(), GpuError> {
+        if let Some(l) = self.lost.lock().ok().and_then(|l| l.clone()) {
+            return Err(GpuError::DeviceLost(l));
+        }
+        let mut errs = self.errors.lock().map_err(|_| GpuError::Internal("error list poisoned".into()))?;
+        if let Some(first) = errs.drain(..).next() {
+            return Err(if first.contains("out of memory") || first.contains("OutOfMemory") {
+                GpuError::OutOfMemory(first)
+            } else {
+                GpuError::Internal(first)
+            });
+        }
+        Ok(())
+    }
+
+    /// Checks that a storage buffer of `bytes` fits the device's limits before allocating.
+    pub fn check_storage_size(&self, what: &str, bytes: u64) -> Result<(), GpuError> {
+        let max = (self.limits.max_storage_buffer_binding_size as u64).min(self.limits.max_buffer_size);
+        if bytes > max {
+            return Err(GpuError::TooLarge(format!("{what} needs {} MiB, the adapter allows {} MiB per buffer", bytes >> 20, max >> 20)));
+        }
+        Ok(())
+    }
+
+    pub fn storage_buffer(&self, label: &str, data: &[u8]) -> Result<wgpu::Buffer, GpuError> {
+        self.check_storage_size(label, data.len() as u64)?;
+        // Zero-sized bindings are invalid: pad to one vec4.
+        let padded;
+        let contents = if data.is_empty() {
+            padded = [0u8; 16];
+            &padded[..]
+        } else {
+            data
+        };
+        Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        }))
+    }
+
+    /// Copies a buffer back to the host and waits for it.
+    pub fn read_buffer(&self, src: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(src, 0, &staging, 0, bytes);
+        self.queue.submit([enc.finish()]);
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
+        self.check()?;
+        rx.recv()
+            .map_err(|_| GpuError::Internal("readback never completed".into()))?
+            .map_err(|e| GpuError::Internal(e.to_string()))?;
+        let out = slice.get_mapped_range().to_vec();
+        staging.unmap();
+        Ok(out)
+    }
+}
