@@ -1,0 +1,190 @@
+//! The one wrapper every export runs through, and the argument checks it offers.
+//!
+//! `protect` is the single `catch_unwind`: no panic leaves the library (an `extern "C"`
+//! function that unwinds aborts the host). On top of it, `call` runs a body that returns a
+//! status, and `on_handle` looks a handle up first and stores the body's error message on it.
+//! Argument helpers check NULL pointers, UTF-8, finiteness, lengths and alignment before any
+//! slice is formed or memory allocated.
+
+use std::any::Any;
+use std::ffi::{c_char, CStr};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use super::handle::{Handle, Registry};
+use super::status::{FfiError, FfiResult, VsStatus};
+
+fn panic_message(payload: &(dyn Any + Send)) -> String {
+    let what = if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic".to_string()
+    };
+    format!("internal error (please report): {what}")
+}
+
+/// Runs `body`; a panic becomes `on_panic(message)`.
+pub(crate) fn protect<T>(body: impl FnOnce() -> T, on_panic: impl FnOnce(String) -> T) -> T {
+    match catch_unwind(AssertUnwindSafe(body)) {
+        Ok(v) => v,
+        Err(payload) => {
+            // Dropping a payload can itself panic; never let that escape either.
+            let msg = catch_unwind(AssertUnwindSafe(|| panic_message(&*payload))).unwrap_or_else(|_| "internal error".into());
+            if catch_unwind(AssertUnwindSafe(move || drop(payload))).is_err() {
+                // The payload of the payload is leaked: nothing better to do.
+            }
+            on_panic(msg)
+        }
+    }
+}
+
+/// For exports that return a value rather than a status (version strings, messages).
+pub(crate) fn value<T>(fallback: T, body: impl FnOnce() -> T) -> T {
+    protect(body, |_| fallback)
+}
+
+/// For exports without a handle (or that create one): the status of `body`, panics included.
+pub(crate) fn call(body: impl FnOnce() -> FfiResult) -> VsStatus {
+    match protect(body, |m| Err(FfiError::new(VsStatus::Internal, m))) {
+        Ok(()) => VsStatus::Ok,
+        Err(e) => e.status,
+    }
+}
+
+/// For exports on a handle: looks it up (NULL and dead handles are refused), runs `body`, and
+/// records the outcome as the handle's last error ("" on success).
+pub(crate) fn on_handle<T, O>(registry: &Registry<T, O>, h: *const O, body: impl FnOnce(&Arc<Handle<T>>) -> FfiResult) -> VsStatus {
+    protect(
+        || {
+            let handle = match registry.get(h) {
+                Ok(handle) => handle,
+                Err(e) => return e.status,
+            };
+            let outcome = protect(|| body(&handle), |m| Err(FfiError::new(VsStatus::Internal, m)));
+            handle.error.record(&outcome);
+            match outcome {
+                Ok(()) => VsStatus::Ok,
+                Err(e) => e.status,
+            }
+        },
+        |_| VsStatus::Internal,
+    )
+}
+
+// ---- argument checks ---------------------------------------------------------------------
+
+/// A NUL-terminated UTF-8 string argument.
+pub(crate) unsafe fn str_arg<'a>(p: *const c_char, what: &str) -> FfiResult<&'a str> {
+    if p.is_null() {
+        return Err(FfiError::null(what));
+    }
+    CStr::from_ptr(p).to_str().map_err(|e| FfiError::invalid(format!("{what} is not valid UTF-8: {e}")))
+}
+
+/// An optional string: NULL gives `None`.
+pub(crate) unsafe fn opt_str_arg<'a>(p: *const c_char, what: &str) -> FfiResult<Option<&'a str>> {
+    if p.is_null() {
+        Ok(None)
+    } else {
+        str_arg(p, what).map(Some)
+    }
+}
+
+/// A file path (bytes on Unix, UTF-8 elsewhere); must not be empty.
+pub(crate) unsafe fn path_arg(p: *const c_char, what: &str) -> FfiResult<PathBuf> {
+    if p.is_null() {
+        return Err(FfiError::null(what));
+    }
+    let bytes = CStr::from_ptr(p).to_bytes();
+    if bytes.is_empty() {
+        return Err(FfiError::invalid(format!("{what} is empty")));
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        Ok(PathBuf::from(std::ffi::OsStr::from_bytes(bytes)))
+    }
+    #[cfg(not(unix))]
+    {
+        Ok(PathBuf::from(std::str::from_utf8(bytes).map_err(|e| FfiError::invalid(format!("{what} is not valid UTF-8: {e}")))?))
+    }
+}
+
+/// `N` floats read from `p`, each finite.
+pub(crate) unsafe fn floats_arg<const N: usize>(p: *const f32, what: &str) -> FfiResult<[f32; N]> {
+    if p.is_null() {
+        return Err(FfiError::null(what));
+    }
+    let mut out = [0.0f32; N];
+    for (i, v) in out.iter_mut().enumerate() {
+        // Unaligned reads: a host may pass floats packed in a byte buffer.
+        *v = p.add(i).read_unaligned();
+        if !v.is_finite() {
+            return Err(FfiError::invalid(format!("{what}[{i}] is {v}: must be finite")));
+        }
+    }
+    Ok(out)
+}
+
+pub(crate) fn finite_arg(v: f32, what: &str) -> FfiResult<f32> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(FfiError::invalid(format!("{what} is {v}: must be finite")))
+    }
+}
+
+/// A caller buffer of exactly `needed` elements, checked for NULL, length and alignment.
+pub(crate) unsafe fn out_slice<'a, T>(p: *mut T, len: usize, needed: usize, what: &str) -> FfiResult<&'a mut [T]> {
+    if p.is_null() {
+        return Err(FfiError::null(what));
+    }
+    if len != needed {
+        return Err(FfiError::buffer(format!("{what} holds {len} values; this call needs exactly {needed}")));
+    }
+    if (p as usize) % std::mem::align_of::<T>() != 0 {
+        return Err(FfiError::buffer(format!("{what} at {p:p} is not aligned to {} bytes", std::mem::align_of::<T>())));
+    }
+    if needed.checked_mul(std::mem::size_of::<T>()).is_none_or(|b| b > isize::MAX as usize) {
+        return Err(FfiError::new(VsStatus::TooLarge, format!("{what}: {needed} values is too large")));
+    }
+    Ok(std::slice::from_raw_parts_mut(p, len))
+}
+
+/// A caller input buffer of `len` elements (len > 0), checked for NULL and alignment.
+pub(crate) unsafe fn in_slice<'a, T>(p: *const T, len: usize, what: &str) -> FfiResult<&'a [T]> {
+    if p.is_null() {
+        return Err(FfiError::null(what));
+    }
+    if len == 0 {
+        return Err(FfiError::buffer(format!("{what} is empty (length 0)")));
+    }
+    if (p as usize) % std::mem::align_of::<T>() != 0 {
+        return Err(FfiError::buffer(format!("{what} at {p:p} is not aligned to {} bytes", std::mem::align_of::<T>())));
+    }
+    if len.checked_mul(std::mem::size_of::<T>()).is_none_or(|b| b > isize::MAX as usize) {
+        return Err(FfiError::new(VsStatus::TooLarge, format!("{what}: length {len} is too large")));
+    }
+    Ok(std::slice::from_raw_parts(p, len))
+}
+
+/// Writes `*out = value` after checking `out` for NULL.
+pub(crate) unsafe fn write_out<T>(out: *mut T, value: T, what: &str) -> FfiResult {
+    if out.is_null() {
+        return Err(FfiError::null(what));
+    }
+    out.write_unaligned(value);
+    Ok(())
+}
+
+/// Clears an output handle pointer first thing, so that it is NULL on every failure.
+pub(crate) unsafe fn clear_out<T>(out: *mut *mut T, what: &str) -> FfiResult {
+    if out.is_null() {
+        return Err(FfiError::null(what));
+    }
+    out.write_unaligned(std::ptr::null_mut());
+    Ok(())
+}

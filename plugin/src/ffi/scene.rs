@@ -1,0 +1,480 @@
+//! `VsScene`: a scene loaded from JSON or built piecewise, and the calls that solve or render
+//! it. The state is an `Arc<Scene>`: a solve works on a snapshot, so the host may keep editing
+//! the scene (or destroy it) while a solve runs on another thread.
+
+use std::ffi::{c_char, c_void};
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::{Affine3A, IVec3, Mat4, Vec3, Vec4};
+use volscatter_core::medium::{DensityGrid, GridLimits};
+use volscatter_core::scene::json::{CameraJson, LightJson, Rgb};
+use volscatter_core::scene::{self, Camera};
+use volscatter_core::solvers::{self, reference::Reference, Timings};
+use volscatter_core::{Medium, Scene};
+
+use super::guard::{self, clear_out, finite_arg, floats_arg, in_slice, on_handle, opt_str_arg, path_arg, str_arg, write_out};
+use super::handle::{lock, Handle, Registry};
+use super::image::{ImageState, IMAGES};
+use super::progress::{CProgress, VsProgressCallback};
+use super::result::{ResultState, VsResult, RESULTS};
+use super::status::{FfiError, FfiResult, VsStatus};
+use super::VsImage;
+
+/// Opaque scene handle. Create with `vs_scene_new`, destroy with `vs_scene_destroy`.
+pub struct VsScene {
+    _private: [u8; 0],
+}
+
+pub(crate) struct SceneState {
+    scene: Arc<Scene>,
+    has_medium: bool,
+    has_camera: bool,
+}
+
+pub(crate) static SCENES: Registry<SceneState, VsScene> = Registry::new("VsScene");
+
+/// Largest voxel count per axis of a caller's dense buffer (keeps index arithmetic in i32).
+const MAX_DENSE_SIDE: u32 = 1 << 16;
+
+impl SceneState {
+    fn empty() -> Self {
+        let medium = Medium::new(DensityGrid::empty(), Affine3A::IDENTITY, Vec3::ONE, Vec3::ONE, 0.0);
+        let camera = Camera::look_at(Vec3::new(0.0, -6.0, 0.0), Vec3::ZERO, Vec3::Z, 39.6, 256, 256);
+        SceneState {
+            scene: Arc::new(Scene { medium, lights: Vec::new(), camera, solver: Default::default() }),
+            has_medium: false,
+            has_camera: false,
+        }
+    }
+    fn loaded(scene: Scene) -> Self {
+        SceneState { scene: Arc::new(scene), has_medium: true, has_camera: true }
+    }
+    fn edit(&mut self) -> &mut Scene {
+        Arc::make_mut(&mut self.scene)
+    }
+    /// A snapshot of a complete scene.
+    fn snapshot(&self) -> FfiResult<Arc<Scene>> {
+        if !self.has_medium {
+            return Err(FfiError::scene("the scene has no medium: load a scene or call vs_scene_set_medium_vdb / vs_scene_set_medium_dense"));
+        }
+        if !self.has_camera {
+            return Err(FfiError::scene("the scene has no camera: load a scene or call vs_scene_set_camera"));
+        }
+        Ok(self.scene.clone())
+    }
+}
+
+fn with_scene(scene: *mut VsScene, body: impl FnOnce(&Arc<Handle<SceneState>>) -> FfiResult) -> VsStatus {
+    on_handle(&SCENES, scene, body)
+}
+
+fn edit_scene(scene: *mut VsScene, body: impl FnOnce(&mut SceneState) -> FfiResult) -> VsStatus {
+    with_scene(scene, |h| body(&mut lock(&h.state)))
+}
+
+/// 16 floats, row-major, an invertible affine map (last row 0 0 0 1).
+unsafe fn affine_arg(p: *const f32, what: &str) -> FfiResult<Affine3A> {
+    let m: [f32; 16] = floats_arg(p, what)?;
+    let mat = Mat4::from_cols_array(&m).transpose();
+    if !mat.row(3).abs_diff_eq(Vec4::W, 1e-6) {
+        return Err(FfiError::invalid(format!("{what}: last row must be 0 0 0 1 (row-major affine matrix), got {:?}", mat.row(3).to_array())));
+    }
+    let det = mat.determinant();
+    if !(det.is_finite() && det.abs() > 1e-12) {
+        return Err(FfiError::invalid(format!("{what}: matrix is not invertible (determinant {det})")));
+    }
+    Ok(Affine3A::from_mat4(mat))
+}
+
+fn rgb(v: [f32; 3]) -> Rgb {
+    Rgb::Rgb(v)
+}
+
+// ---- lifetime -----------------------------------------------------------------------------
+
+/// Creates an empty scene (no medium, no lights, no camera, default solver) in `*out`.
+/// `*out` is set to NULL on failure. Destroy it with `vs_scene_destroy`.
+///
+/// Thread safety: may be called from any thread at any time.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_new(out: *mut *mut VsScene) -> VsStatus {
+    guard::call(|| {
+        clear_out(out, "out")?;
+        let h = SCENES.insert(SceneState::empty())?;
+        write_out(out, h, "out")
+    })
+}
+
+/// Destroys a scene. NULL is accepted and ignored. Destroying a handle twice, or a handle that
+/// is not a live scene, returns `VS_STATUS_INVALID_HANDLE` and does nothing else. Results and
+/// images made from the scene stay valid. A solve running on another thread finishes normally.
+///
+/// Thread safety: may be called from any thread; the handle must not be used afterwards.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_destroy(scene: *mut VsScene) -> VsStatus {
+    guard::call(|| if scene.is_null() { Ok(()) } else { SCENES.remove(scene) })
+}
+
+/// The message of the last call on this scene that failed, or "" if the last call succeeded.
+/// The string belongs to the scene and stays valid until the next call on it (from any thread)
+/// or its destruction; copy it to keep it. For a NULL or dead handle, a static description.
+///
+/// Thread safety: meaningful only when no other thread calls functions on this scene meanwhile.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_last_error(scene: *const VsScene) -> *const c_char {
+    guard::value(VsStatus::Internal.description().as_ptr().cast(), || match SCENES.get(scene) {
+        Ok(h) => h.error.as_ptr(),
+        Err(e) => e.status.description().as_ptr().cast(),
+    })
+}
+
+// ---- whole scenes -------------------------------------------------------------------------
+
+/// Replaces the scene with one parsed from JSON text (scene format 1, docs/scene-format.md).
+/// Relative file paths in it resolve against `base_dir` (NULL: the current directory).
+/// On failure the scene is unchanged and the message names the offending field.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_load_json(scene: *mut VsScene, json: *const c_char, base_dir: *const c_char) -> VsStatus {
+    with_scene(scene, |h| {
+        let text = str_arg(json, "json")?;
+        let base = if base_dir.is_null() { Path::new(".").to_path_buf() } else { path_arg(base_dir, "base_dir")? };
+        let parsed = Scene::from_json_str(text, &base)?;
+        *lock(&h.state) = SceneState::loaded(parsed);
+        Ok(())
+    })
+}
+
+/// Replaces the scene with the JSON scene file at `path` (relative paths inside it resolve
+/// against the file's directory). On failure the scene is unchanged.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_load_file(scene: *mut VsScene, path: *const c_char) -> VsStatus {
+    with_scene(scene, |h| {
+        let path = path_arg(path, "path")?;
+        let parsed = Scene::load(&path)?;
+        *lock(&h.state) = SceneState::loaded(parsed);
+        Ok(())
+    })
+}
+
+/// Replaces the scene with the built-in default scene (a procedural plume under a sun and a
+/// blue sky, 256x256 camera, reference solver).
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_load_default(scene: *mut VsScene) -> VsStatus {
+    with_scene(scene, |h| {
+        *lock(&h.state) = SceneState::loaded(Scene::default_scene());
+        Ok(())
+    })
+}
+
+// ---- medium -------------------------------------------------------------------------------
+
+/// Sets the medium's density from the float grid `grid_name` (NULL: the first float grid) of
+/// the OpenVDB file at `path`, placed by the file's transform followed by `object_to_world`
+/// (16 floats, row-major 4x4 affine; NULL: identity). Keeps the material (see
+/// `vs_scene_set_material`). On failure the scene is unchanged.
+///
+/// Thread safety: any thread; calls on one scene are serialised (the file is read before the
+/// scene is locked).
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_set_medium_vdb(
+    scene: *mut VsScene,
+    path: *const c_char,
+    grid_name: *const c_char,
+    object_to_world: *const f32,
+) -> VsStatus {
+    with_scene(scene, |h| {
+        let path = path_arg(path, "path")?;
+        let grid_name = opt_str_arg(grid_name, "grid_name")?;
+        let o2w = if object_to_world.is_null() { Affine3A::IDENTITY } else { affine_arg(object_to_world, "object_to_world")? };
+        let (grid, index_to_object) = volscatter_core::vdb::load_density(&path, grid_name, GridLimits::default())?;
+        let mut st = lock(&h.state);
+        let m = &st.scene.medium;
+        let medium = Medium::new(grid, o2w * index_to_object, m.density_scale, m.albedo, m.g);
+        st.edit().medium = medium;
+        st.has_medium = true;
+        Ok(())
+    })
+}
+
+/// Sets the medium's density from the caller's dense buffer: `len` floats, x fastest then y
+/// then z, `len == nx * ny * nz`, each finite (negative values are clamped to zero). Voxel
+/// (i, j, k) sits at index coordinates (i, j, k), placed in the world by `index_to_world`
+/// (16 floats, row-major 4x4 affine, required). The data is copied; the buffer may be freed
+/// when the call returns. Keeps the material. On failure the scene is unchanged.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_set_medium_dense(
+    scene: *mut VsScene,
+    density: *const f32,
+    len: usize,
+    nx: u32,
+    ny: u32,
+    nz: u32,
+    index_to_world: *const f32,
+) -> VsStatus {
+    with_scene(scene, |h| {
+        let dims = [nx, ny, nz];
+        if dims.iter().any(|&d| d == 0) {
+            return Err(FfiError::invalid(format!("dimensions {nx}x{ny}x{nz}: each must be at least 1")));
+        }
+        if dims.iter().any(|&d| d > MAX_DENSE_SIDE) {
+            return Err(FfiError::new(VsStatus::TooLarge, format!("dimensions {nx}x{ny}x{nz}: each must be at most {MAX_DENSE_SIDE}")));
+        }
+        let count = nx as u64 * ny as u64 * nz as u64;
+        let limits = GridLimits::default();
+        if count > limits.max_extent_voxels {
+            return Err(FfiError::new(
+                VsStatus::TooLarge,
+                format!("dimensions {nx}x{ny}x{nz} = {count} voxels, over the limit of {}", limits.max_extent_voxels),
+            ));
+        }
+        if len as u64 != count {
+            return Err(FfiError::buffer(format!("density holds {len} floats; {nx}x{ny}x{nz} needs {count}")));
+        }
+        let values = in_slice(density, len, "density")?;
+        let i2w = affine_arg(index_to_world, "index_to_world")?;
+        let grid = DensityGrid::from_dense(IVec3::ZERO, IVec3::new(nx as i32, ny as i32, nz as i32), values, limits)?;
+        let mut st = lock(&h.state);
+        let m = &st.scene.medium;
+        let medium = Medium::new(grid, i2w, m.density_scale, m.albedo, m.g);
+        st.edit().medium = medium;
+        st.has_medium = true;
+        Ok(())
+    })
+}
+
+/// Sets the medium's material: extinction per unit density `density_scale` (3 floats, RGB,
+/// 1/m, >= 0), single-scattering `albedo` (3 floats in [0, 1]) and Henyey-Greenstein `g` in
+/// (-1, 1). Applies to the current and any later medium of this scene. A new scene starts
+/// with density_scale 1, albedo 1, g 0.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_set_material(scene: *mut VsScene, density_scale: *const f32, albedo: *const f32, g: f32) -> VsStatus {
+    edit_scene(scene, |st| {
+        let ds: [f32; 3] = floats_arg(density_scale, "density_scale")?;
+        let al: [f32; 3] = floats_arg(albedo, "albedo")?;
+        if ds.iter().any(|v| *v < 0.0) {
+            return Err(FfiError::invalid(format!("density_scale {ds:?}: must be >= 0")));
+        }
+        if al.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            return Err(FfiError::invalid(format!("albedo {al:?}: must be in [0, 1]")));
+        }
+        let g = finite_arg(g, "g")?;
+        if !(g > -1.0 && g < 1.0) {
+            return Err(FfiError::invalid(format!("g is {g}: must be in (-1, 1)")));
+        }
+        let m = &mut st.edit().medium;
+        m.density_scale = Vec3::from(ds);
+        m.albedo = Vec3::from(al);
+        m.g = g;
+        Ok(())
+    })
+}
+
+// ---- lights -------------------------------------------------------------------------------
+
+fn add_light(scene: *mut VsScene, make: impl FnOnce() -> FfiResult<LightJson>) -> VsStatus {
+    edit_scene(scene, |st| {
+        let json = make()?;
+        let field = format!("lights[{}]", st.scene.lights.len());
+        let light = scene::build_light(&json, &field, Path::new("."))?;
+        st.edit().lights.push(light);
+        Ok(())
+    })
+}
+
+/// Removes all lights.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_clear_lights(scene: *mut VsScene) -> VsStatus {
+    edit_scene(scene, |st| {
+        st.edit().lights.clear();
+        Ok(())
+    })
+}
+
+/// Adds a distant (sun) light: `direction` (3 floats, not zero) is the direction light
+/// travels, `irradiance` (3 floats, RGB, W/m^2, >= 0) is measured perpendicular to it, and
+/// `angle_deg` in [0, 180) is the apparent diameter of its disc (0: a delta direction).
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_distant_light(scene: *mut VsScene, direction: *const f32, irradiance: *const f32, angle_deg: f32) -> VsStatus {
+    add_light(scene, || {
+        Ok(LightJson::Distant {
+            direction: floats_arg(direction, "direction")?,
+            irradiance: rgb(floats_arg(irradiance, "irradiance")?),
+            angle_deg: finite_arg(angle_deg, "angle_deg")?,
+        })
+    })
+}
+
+/// Adds a point light at `position` (3 floats, world metres) with `intensity` (3 floats, RGB,
+/// W/sr, >= 0); `radius` > 0 makes it a sphere light of the same power (0: a point).
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_point_light(scene: *mut VsScene, position: *const f32, intensity: *const f32, radius: f32) -> VsStatus {
+    add_light(scene, || {
+        Ok(LightJson::Point {
+            position: floats_arg(position, "position")?,
+            intensity: rgb(floats_arg(intensity, "intensity")?),
+            radius: finite_arg(radius, "radius")?,
+        })
+    })
+}
+
+/// Adds a uniform dome (environment) light of radiance `color` (3 floats, RGB, W/m^2/sr, >= 0).
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_dome_light(scene: *mut VsScene, color: *const f32) -> VsStatus {
+    add_light(scene, || Ok(LightJson::Dome { color: Some(rgb(floats_arg(color, "color")?)), texture: None, intensity: 1.0 }))
+}
+
+/// Adds a dome light from a lat-long environment map (EXR, Blender's equirectangular layout,
+/// Z up) at `path` (UTF-8; relative to the current directory) times `intensity` (>= 0).
+///
+/// Thread safety: any thread; calls on one scene are serialised (the map is read with the
+/// scene locked).
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_dome_texture(scene: *mut VsScene, path: *const c_char, intensity: f32) -> VsStatus {
+    add_light(scene, || {
+        let path = str_arg(path, "path")?;
+        if path.is_empty() {
+            return Err(FfiError::invalid("path is empty"));
+        }
+        Ok(LightJson::Dome { color: None, texture: Some(path.to_string()), intensity: finite_arg(intensity, "intensity")? })
+    })
+}
+
+/// Writes the number of lights to `*out`.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_light_count(scene: *const VsScene, out: *mut usize) -> VsStatus {
+    on_handle(&SCENES, scene, |h| write_out(out, lock(&h.state).scene.lights.len(), "out"))
+}
+
+// ---- camera and solver --------------------------------------------------------------------
+
+/// Sets the pinhole camera: `position`, `look_at` and `up` (3 floats each; `up` NULL: +Z),
+/// horizontal field of view `fov_deg` in (0, 179), and the image size in pixels (each side
+/// 1..=16384, at most 2^26 pixels). The scattering grid is computed towards this camera.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_set_camera(
+    scene: *mut VsScene,
+    position: *const f32,
+    look_at: *const f32,
+    up: *const f32,
+    fov_deg: f32,
+    width: u32,
+    height: u32,
+) -> VsStatus {
+    edit_scene(scene, |st| {
+        let json = CameraJson {
+            position: floats_arg(position, "position")?,
+            look_at: floats_arg(look_at, "look_at")?,
+            up: if up.is_null() { [0.0, 0.0, 1.0] } else { floats_arg(up, "up")? },
+            fov_deg: finite_arg(fov_deg, "fov_deg")?,
+            width,
+            height,
+        };
+        let camera = scene::build_camera(&json)?;
+        st.edit().camera = camera;
+        st.has_camera = true;
+        Ok(())
+    })
+}
+
+/// Chooses the solver by `name` ("reference", "pop", ...) with its settings as a JSON object
+/// (`settings_json` NULL or "": defaults), e.g. `{"grid_resolution": 32, "seed": 1}`. The
+/// settings are validated now: unknown solvers and keys are refused and the scene unchanged.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_set_solver(scene: *mut VsScene, name: *const c_char, settings_json: *const c_char) -> VsStatus {
+    edit_scene(scene, |st| {
+        let name = str_arg(name, "name")?;
+        let text = opt_str_arg(settings_json, "settings_json")?.unwrap_or("");
+        let mut settings = if text.trim().is_empty() {
+            serde_json::Map::new()
+        } else {
+            match serde_json::from_str::<serde_json::Value>(text) {
+                Ok(serde_json::Value::Object(m)) => m,
+                Ok(_) => return Err(FfiError::invalid("settings_json must be a JSON object")),
+                Err(e) => return Err(FfiError::invalid(format!("settings_json: {e}"))),
+            }
+        };
+        settings.insert("name".into(), serde_json::Value::String(name.to_string()));
+        solvers::by_name(name, &settings)?;
+        st.edit().solver = settings;
+        Ok(())
+    })
+}
+
+// ---- solving ------------------------------------------------------------------------------
+
+/// Runs the scene's solver (the one chosen by `vs_scene_set_solver` or the scene JSON;
+/// default "reference") and puts the scattering grid in a new result `*out` (NULL on failure;
+/// destroy with `vs_result_destroy`). `progress` (may be NULL) is called with `user` as work
+/// proceeds and can cancel (`VS_STATUS_CANCELLED`). Needs a medium and a camera.
+///
+/// Thread safety: any thread. The solve works on a snapshot of the scene and does not hold
+/// the scene locked: other calls on the same scene (edits, other solves) proceed meanwhile.
+/// Solves of independent scenes run in parallel, sharing one worker pool.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgressCallback, user: *mut c_void, out: *mut *mut VsResult) -> VsStatus {
+    with_scene(scene, |h| {
+        clear_out(out, "out")?;
+        let snapshot = lock(&h.state).snapshot()?;
+        let name = snapshot.solver_name().unwrap_or("reference").to_string();
+        let solver = solvers::by_name(&name, &snapshot.solver)?;
+        let progress = CProgress::new(progress, user);
+        let output = solver.solve(&snapshot, &progress)?;
+        if progress.cancelled() {
+            return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
+        }
+        let state = ResultState::new(output, snapshot)?;
+        write_out(out, RESULTS.insert(state)?, "out")
+    })
+}
+
+/// Path-traces the scene's image directly with the reference solver (RGBA plus AOVs
+/// "single", "multiple", "background") into a new image `*out` (NULL on failure; destroy with
+/// `vs_image_destroy`). Uses the scene's solver settings when its solver is "reference" (or
+/// unset), else the reference defaults. Deterministic for a seed. `progress` as for
+/// `vs_scene_solve`.
+///
+/// Thread safety: as `vs_scene_solve`.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_render_reference(scene: *mut VsScene, progress: VsProgressCallback, user: *mut c_void, out: *mut *mut VsImage) -> VsStatus {
+    with_scene(scene, |h| {
+        clear_out(out, "out")?;
+        let snapshot = lock(&h.state).snapshot()?;
+        let settings = match snapshot.solver_name() {
+            None | Some("reference") => snapshot.solver.clone(),
+            Some(_) => Default::default(),
+        };
+        let reference = Reference::from_settings(&settings)?;
+        let progress = CProgress::new(progress, user);
+        let mut timings = Timings::default();
+        let image = reference.render_image(&snapshot, &progress, &mut timings)?;
+        if progress.cancelled() {
+            return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
+        }
+        write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
+    })
+}
