@@ -155,18 +155,29 @@ def scene_json(spec: SceneSpec, raw_name: str, light_scale: float = 1.0) -> dict
     }
 
 
-def read_exr_rgb(path: Path) -> np.ndarray:
-    """R, G, B channels of an EXR as a float64 [height][width][3] array (via mitsuba.Bitmap)."""
+def read_exr_layers(path: Path) -> dict:
+    """An EXR's RGB layers as float64 [height][width][3] arrays (via mitsuba.Bitmap), keyed by
+    layer name: "rgb" for R,G,B, and "single", "multiple", "background" for our AOVs."""
     mi = import_mitsuba()
     bmp = mi.Bitmap(str(path))
     names = [f.name for f in bmp.struct_()]
     data = np.array(bmp, copy=False)
-    return np.stack([data[..., names.index(c)] for c in "RGB"], axis=-1).astype(np.float64)
+    layers = {}
+    for prefix in sorted({n.rsplit(".", 1)[0] if "." in n else "" for n in names}):
+        chans = [f"{prefix}.{c}" if prefix else c for c in "RGB"]
+        if all(c in names for c in chans):
+            layers[prefix or "rgb"] = np.stack([data[..., names.index(c)] for c in chans], -1).astype(np.float64)
+    return layers
+
+
+def read_exr_rgb(path: Path) -> np.ndarray:
+    return read_exr_layers(path)["rgb"]
 
 
 def render_ours(spec: SceneSpec, workdir: Path, seed: int, spp: int | None = None,
-                light_scale: float = 1.0) -> tuple[np.ndarray, dict]:
-    """Renders with `volscatter render --solver reference`; returns (RGB image, report)."""
+                light_scale: float = 1.0, layers: bool = False) -> tuple:
+    """Renders with `volscatter render --solver reference`; returns (RGB image, report), or
+    (dict of EXR layers, report) with `layers`."""
     workdir.mkdir(parents=True, exist_ok=True)
     raw = workdir / f"{spec.name}.f32"
     spec.density.astype("<f4").tofile(raw)
@@ -180,7 +191,8 @@ def render_ours(spec: SceneSpec, workdir: Path, seed: int, spp: int | None = Non
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr}")
-    return read_exr_rgb(out), json.loads(report.read_text())
+    found = read_exr_layers(out)
+    return (found if layers else found["rgb"]), json.loads(report.read_text())
 
 
 # --------------------------------------------------------------------------------------------
@@ -191,7 +203,9 @@ def _rgb(v):
     return {"type": "rgb", "value": [float(c) for c in v]}
 
 
-def mitsuba_dict(spec: SceneSpec, spp: int | None = None) -> dict:
+def mitsuba_dict(spec: SceneSpec, spp: int | None = None, max_depth: int = 1000) -> dict:
+    """The Mitsuba scene. `max_depth` 2 keeps camera ray + one scattering vertex with its
+    next-event estimate: single scattering plus the environment seen through the medium."""
     mi = import_mitsuba()
     T = mi.ScalarTransform4f
     # Pad one zero voxel on every side: the trilinear ramp to zero beyond the stored voxels.
@@ -213,7 +227,7 @@ def mitsuba_dict(spec: SceneSpec, spp: int | None = None) -> dict:
     cam = spec.camera
     d = {
         "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": 1000, "rr_depth": 1000},
+        "integrator": {"type": "volpath", "max_depth": max_depth, "rr_depth": 1000},
         "sensor": {
             "type": "perspective", "fov": float(cam["fov_deg"]), "fov_axis": "x",
             "to_world": T().look_at(origin=cam["position"], target=cam["look_at"], up=cam["up"]),
@@ -237,9 +251,9 @@ def mitsuba_dict(spec: SceneSpec, spp: int | None = None) -> dict:
     return d
 
 
-def render_mitsuba(spec: SceneSpec, seed: int, spp: int | None = None) -> np.ndarray:
+def render_mitsuba(spec: SceneSpec, seed: int, spp: int | None = None, max_depth: int = 1000) -> np.ndarray:
     mi = import_mitsuba()
-    scene = mi.load_dict(mitsuba_dict(spec, spp))
+    scene = mi.load_dict(mitsuba_dict(spec, spp, max_depth))
     img = mi.render(scene, seed=seed, spp=spp or spec.spp_mitsuba)
     return np.array(img, dtype=np.float64)[..., :3]
 

@@ -20,6 +20,9 @@ How images are compared (see mitsuba_scenes.compare):
   renderers) enter ||A - B|| and the noise estimate alike, so they loosen the test but do not
   make it fail by chance.
 
+Single scattering is compared on its own too: our `single` + `background` AOVs against Mitsuba
+with max_depth 2.
+
 Negative checks: the same comparison must FAIL when our image is flipped left/right or up/down
 (camera orientation; the cloud and the point light are off-centre) and when our light is twice
 as strong (light units).
@@ -70,20 +73,29 @@ def renders(workdir):
         pytest.fail(f"volscatter binary not found at {binary}: run `cargo build --release` "
                     f"or set VOLSCATTER_BIN")
 
-    def get(name, light_scale=1.0):
+    def get(name, light_scale=1.0, single=False):
+        """Two seeds each of (ours, Mitsuba). `single`: our single-scattering + background
+        AOVs against Mitsuba's volpath with max_depth 2."""
         spec = SCENES[name]
         key = (name, "ours", light_scale)
         if key not in _cache:
             t = time.perf_counter()
             _cache[key] = [ms.render_ours(spec, workdir, s, spp=_spp(spec.spp_ours),
-                                          light_scale=light_scale)[0] for s in spec.seeds]
+                                          light_scale=light_scale, layers=True)[0] for s in spec.seeds]
             _cache[key + ("t",)] = time.perf_counter() - t
-        key_m = (name, "mitsuba")
+        depth = 2 if single else 1000
+        key_m = (name, "mitsuba", depth)
         if key_m not in _cache:
             t = time.perf_counter()
-            _cache[key_m] = [ms.render_mitsuba(spec, s, spp=_spp(spec.spp_mitsuba)) for s in spec.seeds]
+            # Single scattering converges faster: half the samples suffice.
+            spp = _spp(spec.spp_mitsuba // 2 if single else spec.spp_mitsuba)
+            _cache[key_m] = [ms.render_mitsuba(spec, s, spp=spp, max_depth=depth) for s in spec.seeds]
             _cache[key_m + ("t",)] = time.perf_counter() - t
-        return _cache[key], _cache[key_m]
+        if single:
+            ours = [layers["single"] + layers["background"] for layers in _cache[key]]
+        else:
+            ours = [layers["rgb"] for layers in _cache[key]]
+        return ours, _cache[key_m]
 
     return get
 
@@ -100,6 +112,24 @@ def test_images_agree_within_noise(renders, name):
     assert blocks.ok, f"{name}: block averages differ beyond noise (a bias): {blocks}"
     # The test must be able to see what it is for: a 2x error is far outside the tolerance.
     assert blocks.tolerance < 0.25, f"{name}: too noisy to detect a factor-2 error: {blocks}"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_single_scattering_agrees(renders, name):
+    """Our `single` + `background` AOVs against Mitsuba's volpath with max_depth 2 (camera ray,
+    one scattering vertex, its next-event estimate): isolates the phase function, the lights'
+    units and directions and the shadow transmittance from the multiple-scattering walk."""
+    ours, theirs = renders(name, single=True)
+    full = ms.compare(ours, theirs, 1)
+    blocks = ms.compare(ours, theirs, BLOCK)
+    print(f"\n{name} single scattering: {full}\n{name} single scattering: {blocks}")
+    assert full.ok and blocks.ok, f"{name}: single scattering differs: {full}; {blocks}"
+    # Multiple scattering must matter in these scenes, or the full comparison says little more.
+    layers = _cache[(name, "ours", 1.0)]
+    multiple = sum(np.mean(x["multiple"]) for x in layers)
+    share = multiple / (multiple + sum(np.mean(x["single"]) for x in layers))
+    print(f"{name}: multiple scattering is {share:.1%} of the scattered light")
+    assert share > 0.2, f"{name}: multiple scattering is only {share:.1%} of the scattered light"
 
 
 def test_noise_estimate_is_calibrated(renders, workdir):
