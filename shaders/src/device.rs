@@ -38,3 +38,30 @@ impl std::fmt::Display for DeviceUsed {
         }
     }
 }
+
+/// Runs `gpu` on a fresh GPU context according to `choice`; with `Auto`, any GPU failure (no
+/// adapter, out of memory, device lost, too large) falls back to `cpu` with a message on
+/// stderr. With `Gpu`, failures are errors. Panics inside wgpu are caught.
+pub fn run_on<T>(
+    choice: DeviceChoice,
+    gpu: impl FnOnce(&crate::GpuContext) -> Result<T, crate::GpuError>,
+    cpu: impl FnOnce() -> T,
+) -> Result<(T, DeviceUsed), crate::GpuError> {
+    if choice == DeviceChoice::Cpu {
+        return Ok((cpu(), DeviceUsed::Cpu));
+    }
+    let attempt = crate::GpuContext::new().and_then(|ctx| {
+        let name = ctx.describe();
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| gpu(&ctx)))
+            .map_err(|_| crate::GpuError::Internal("a GPU kernel panicked".into()))??;
+        Ok((out, DeviceUsed::Gpu(name)))
+    });
+    match (attempt, choice) {
+        (Ok(r), _) => Ok(r),
+        (Err(e), DeviceChoice::Auto) => {
+            eprintln!("note: running on the CPU ({e})");
+            Ok((cpu(), DeviceUsed::Cpu))
+        }
+        (Err(e), _) => Err(e),
+    }
+}

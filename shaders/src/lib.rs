@@ -19,4 +19,4 @@ pub mod upload;
 mod test_support;
 
 pub use context::{GpuContext, GpuError};
-pub use device::{DeviceChoice, DeviceUsed};
+pub use device::{run_on, DeviceChoice, DeviceUsed};

@@ -1,6 +1,7 @@
 //! Subcommands of the `volscatter` CLI, one module each.
 
 mod compare;
+mod gpu_info;
 mod progress;
 mod render;
 mod vdb_info;
@@ -20,6 +21,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Render a scene with several solvers and print relative RMSE against the first.
     Compare(compare::CompareArgs),
+    /// Describe the GPU adapter volscatter would use; exit code 1 when there is none.
+    GpuInfo,
     /// Print the grids of an OpenVDB file as JSON.
     VdbInfo(vdb_info::VdbInfoArgs),
 }
@@ -30,6 +33,7 @@ pub fn main() -> i32 {
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::GpuInfo => gpu_info::run(),
         Command::VdbInfo(args) => vdb_info::run(args),
     };
     match result {

@@ -37,6 +37,10 @@ pub struct RenderArgs {
     /// Solver setting KEY=VALUE (JSON value), repeatable: --set grid_resolution=48.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub settings: Vec<String>,
+    /// Where GPU-capable stages run (today: the compositor): gpu, cpu, or auto (a GPU adapter
+    /// when one exists, else the CPU with a message).
+    #[arg(long, default_value = "auto")]
+    pub device: volscatter_gpu::DeviceChoice,
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -86,6 +90,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let name = args.solver.clone().or_else(|| scene.solver_name().map(String::from)).unwrap_or_else(|| "reference".into());
     let settings = solver_settings(&scene, &name, &args)?;
     let progress = StderrProgress::new(args.quiet);
+    let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
     let image = if name == "reference" {
         let r = Reference::from_settings(&settings)?;
         let img = r.render_image(&scene, &progress, &mut timings)?;
@@ -96,9 +101,17 @@ pub fn run(args: RenderArgs) -> Result<()> {
         let out = solver.solve(&scene, &progress)?;
         progress.finish();
         timings.0.extend(out.timings.0);
-        timings.time("composite", || {
-            compositor::composite(&scene, &out.scattering, &compositor::CompositeOptions { transparent: args.transparent, ..Default::default() })
-        })?
+        let opts = compositor::CompositeOptions { transparent: args.transparent, ..Default::default() };
+        let (img, used) = timings.time("composite", || {
+            volscatter_gpu::run_on(
+                args.device,
+                |ctx| volscatter_gpu::composite::composite(ctx, &scene, &out.scattering, &opts).map(Ok),
+                || compositor::composite(&scene, &out.scattering, &opts),
+            )
+        })
+        .map_err(|e| Error::InvalidArgument(format!("--device gpu: {e}")))?;
+        device_used = used;
+        img?
     };
     ensure_parent(&args.out)?;
     timings.time("write", || -> Result<()> {
@@ -128,6 +141,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         let doc = json!({
             "scene": args.scene.as_ref().map(|p| p.display().to_string()),
             "solver": name,
+            "device": device_used.to_string(),
             "settings": settings,
             "width": image.width,
             "height": image.height,
