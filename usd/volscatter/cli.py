@@ -1,0 +1,248 @@
+"""``volscatter-usd``: render a USD stage with multiple scattering, or bake the scattering into USD.
+
+    volscatter-usd render STAGE.usda [--camera PATH] [--time T | --frames A-B] [--solver pop]
+                          --out FILE.exr [--png FILE.png] [--width W] [--height H] ...
+    volscatter-usd bake STAGE.usda --out-layer scatter.usda [--time T | --frames A-B] ...
+    volscatter-usd info STAGE.usda [--json]
+
+Exit codes: 0 success, 1 an error (bad stage, missing file, library error: one message on
+stderr), 2 bad command line (argparse). Warnings (unsupported lights, lights a solver leaves
+out, ignored camera settings) go to stderr and do not fail the command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+import threading
+import time as _time
+from typing import List, Optional
+
+from ._native import VolscatterError
+
+PROG = "volscatter-usd"
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr: ``[#####-----]  50% frame 2/4 pop propagate``.
+    Thread-safe (the library calls back from worker threads); redraws at most 10 times a second."""
+
+    def __init__(self, enabled: bool = True, stream=None, width: int = 30):
+        self.enabled = enabled
+        self.stream = stream or sys.stderr
+        self.width = width
+        self.prefix = ""
+        self._last = 0.0
+        self._lock = threading.Lock()
+        self._drawn = False
+
+    def __call__(self, stage: str, fraction: float):
+        if not self.enabled:
+            return True
+        now = _time.monotonic()
+        with self._lock:
+            if now - self._last < 0.1 and fraction < 1.0:
+                return True
+            self._last = now
+            f = min(max(fraction, 0.0), 1.0)
+            n = int(round(f * self.width))
+            line = f"\r[{'#' * n}{'-' * (self.width - n)}] {f * 100:5.1f}% {self.prefix}{stage}"
+            self.stream.write(line[:160].ljust(80))
+            self.stream.flush()
+            self._drawn = True
+        return True
+
+    def finish(self):
+        with self._lock:
+            if self.enabled and self._drawn:
+                self.stream.write("\n")
+                self.stream.flush()
+            self._drawn = False
+
+
+def _rgb_arg(text: str):
+    parts = [p for p in re.split(r"[,\s]+", text.strip()) if p]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number or R,G,B")
+    if len(vals) == 1:
+        return vals[0]
+    if len(vals) == 3:
+        return vals
+    raise argparse.ArgumentTypeError(f"{text!r}: expected a number or R,G,B")
+
+
+def parse_frames(text: str) -> List[float]:
+    """``A-B`` (inclusive, step 1) or ``A-B:STEP``; A and B may be negative (``-5--1``)."""
+    m = re.fullmatch(r"\s*(-?\d+(?:\.\d*)?)\s*(?:-|\.\.)\s*(-?\d+(?:\.\d*)?)\s*(?::\s*(\d+(?:\.\d*)?))?\s*", text)
+    if not m:
+        raise VolscatterError(f"--frames {text!r}: expected A-B (e.g. 1-24) or A-B:STEP", 2)
+    a, b = float(m.group(1)), float(m.group(2))
+    step = float(m.group(3)) if m.group(3) else 1.0
+    if step <= 0 or b < a:
+        raise VolscatterError(f"--frames {text!r}: need A <= B and a positive step", 2)
+    n = int(math.floor((b - a) / step + 1e-9)) + 1
+    if n > 100000:
+        raise VolscatterError(f"--frames {text!r}: {n} frames is too many", 2)
+    return [a + i * step for i in range(n)]
+
+
+def _settings(args) -> dict:
+    s = {}
+    if args.spp is not None:
+        if args.solver != "reference":
+            raise VolscatterError(f"--spp applies to the reference solver, not {args.solver}", 2)
+        s["spp"] = args.spp
+    if args.seed is not None:
+        s["seed"] = args.seed
+    for kv in args.set or []:
+        if "=" not in kv:
+            raise VolscatterError(f"--set {kv}: expected KEY=VALUE", 2)
+        k, v = kv.split("=", 1)
+        try:
+            s[k] = json.loads(v)
+        except ValueError:
+            s[k] = v
+    return s
+
+
+def _medium_defaults(args) -> dict:
+    return {"density_scale": args.density_scale, "albedo": args.albedo, "g": args.g}
+
+
+def _common(p: argparse.ArgumentParser, what: str):
+    p.add_argument("stage", help="the USD stage (.usd, .usda, .usdc, .usdz)")
+    p.add_argument("--camera", metavar="PATH", help="camera prim path (default: the first Camera of the stage)")
+    t = p.add_mutually_exclusive_group()
+    t.add_argument("--time", type=float, metavar="T",
+                   help="time code to read (default: the stage's start time code, else the default time)")
+    t.add_argument("--frames", metavar="A-B", help=f"{what} every frame A..B (inclusive; A-B:STEP for a step)")
+    p.add_argument("--solver", default="reference", help="reference (path-traced, default) or pop")
+    p.add_argument("--width", type=int, default=320, help="image width in pixels (default 320)")
+    p.add_argument("--height", type=int, help="image height (default: width / the camera's aperture ratio)")
+    p.add_argument("--spp", type=int, help="samples per pixel (reference)")
+    p.add_argument("--seed", type=int, help="random seed")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="solver setting (JSON value), repeatable")
+    p.add_argument("--density-scale", type=_rgb_arg, metavar="X|R,G,B",
+                   help="extinction per unit density (1/m) for volumes without volscatter:densityScale (default 1)")
+    p.add_argument("--albedo", type=_rgb_arg, metavar="X|R,G,B",
+                   help="single-scattering albedo for volumes without volscatter:albedo (default 1)")
+    p.add_argument("--g", type=float, help="Henyey-Greenstein g for volumes without volscatter:g (default 0)")
+    p.add_argument("--light-convention", choices=["auto", "usdlux", "blender"], default="auto",
+                   help="how light intensities are read: plain UsdLux, or Blender's exporter (sun strength / 4); "
+                        "auto picks blender for stages Blender wrote (default)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog=PROG, description="Multiple scattering for USD stages (libvolscatter).")
+    sub = ap.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("render", help="render a stage to EXR (and PNG)")
+    _common(r, "render")
+    r.add_argument("--out", required=True, metavar="FILE.exr",
+                   help="EXR output; with --frames a pattern: out.####.exr or out.{frame:04d}.exr")
+    r.add_argument("--png", metavar="FILE.png", help="also write an sRGB PNG preview (same pattern rules)")
+    r.add_argument("--exposure", type=float, default=1.0, help="multiplier for the PNG only")
+    r.add_argument("--volume", metavar="PATH", help="which Volume to render when the stage has several")
+    b = sub.add_parser("bake", help="solve and write the scattering grid into a USD layer + VDB")
+    _common(b, "bake")
+    b.add_argument("--out-layer", required=True, metavar="scatter.usda",
+                   help="the layer to write (sublayers the stage); VDBs are written beside it")
+    i = sub.add_parser("info", help="print what volscatter reads from a stage")
+    i.add_argument("stage")
+    i.add_argument("--camera", metavar="PATH")
+    i.add_argument("--time", type=float)
+    i.add_argument("--light-convention", choices=["auto", "usdlux", "blender"], default="auto")
+    i.add_argument("--json", action="store_true", help="print the scene JSON (format 1) instead of the summary")
+    i.add_argument("--width", type=int, default=320)
+    return ap
+
+
+def _warn(msg: str):
+    sys.stderr.write(f"{PROG}: warning: {msg}\n")
+
+
+def cmd_render(args) -> int:
+    from . import render as R
+    from . import stage as S
+    settings = _settings(args)
+    frames = parse_frames(args.frames) if args.frames else [args.time]
+    if len(frames) > 1:
+        for opt, val in (("--out", args.out), ("--png", args.png)):
+            if val and not R.has_frame_pattern(val):
+                raise VolscatterError(f"{opt} {val}: with --frames it needs a frame pattern (# or {{frame}})", 2)
+    stage = S.open_stage(args.stage)
+    bar = ProgressBar(enabled=not args.quiet)
+    seen = set()
+
+    def warn(w):
+        if w not in seen:
+            seen.add(w)
+            if bar._drawn:
+                bar.finish()
+            _warn(w)
+
+    for k, t in enumerate(frames):
+        out = R.frame_path(args.out, t) if t is not None else args.out
+        png = (R.frame_path(args.png, t) if t is not None else args.png) if args.png else None
+        bar.prefix = f"frame {t:g} ({k + 1}/{len(frames)}) " if len(frames) > 1 else ""
+        try:
+            res = R.render(args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver,
+                           settings=settings, width=args.width, height=args.height, volume=args.volume,
+                           light_convention=args.light_convention, medium_defaults=_medium_defaults(args),
+                           progress=bar, png_exposure=args.exposure, stage=stage, warn=warn)
+        finally:
+            bar.finish()
+        if not args.quiet:
+            sys.stderr.write(f"{res.out}: {res.width}x{res.height} with {args.solver}"
+                             f"{'' if math.isnan(res.time) else f' at time {res.time:g}'}, mean RGB "
+                             f"({res.mean_rgb[0]:.4g}, {res.mean_rgb[1]:.4g}, {res.mean_rgb[2]:.4g}), "
+                             f"mean alpha {res.mean_alpha:.3f}\n")
+    return 0
+
+
+def cmd_bake(args) -> int:
+    from . import render as R
+    settings = _settings(args)
+    times = parse_frames(args.frames) if args.frames else [args.time]
+    bar = ProgressBar(enabled=not args.quiet)
+    try:
+        res = R.bake(args.stage, args.out_layer, times=times, camera=args.camera, solver=args.solver,
+                     settings=settings, width=args.width, height=args.height, light_convention=args.light_convention,
+                     medium_defaults=_medium_defaults(args), progress=bar, warn=_warn)
+    finally:
+        bar.finish()
+    if not args.quiet:
+        n = sum(len(v) for v in res.vdbs.values())
+        sys.stderr.write(f"{res.layer}: {len(res.vdbs)} volume(s), {n} VDB file(s) beside it\n")
+    return 0
+
+
+def cmd_info(args) -> int:
+    from . import stage as S
+    sc = S.read_stage(args.stage, time=args.time, camera=args.camera, light_convention=args.light_convention)
+    if args.json:
+        print(json.dumps(sc.scene_json(width=args.width), indent=2))
+    else:
+        print(S.dumps(sc))
+    return 0
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return {"render": cmd_render, "bake": cmd_bake, "info": cmd_info}[args.command](args)
+    except VolscatterError as e:
+        sys.stderr.write(f"{PROG}: error: {e.message}\n")
+        return 1
+    except KeyboardInterrupt:
+        sys.stderr.write(f"{PROG}: interrupted\n")
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,313 @@
+"""Rendering and baking USD stages with libvolscatter.
+
+- :func:`render` -- one frame: stage -> scene JSON -> native scene -> image (EXR, optional PNG).
+  Solver "reference" path-traces the image (``vs_scene_render_reference``); any other solver
+  computes the scattering grid (``vs_scene_solve``) and ray-marches it (``vs_result_composite``).
+- :func:`bake` -- solves each volume and writes its scattering grid S as a VDB beside a new USD
+  layer that sublayers the stage and adds, per Volume, OpenVDBAsset fields ``scatter_r``,
+  ``scatter_g``, ``scatter_b`` (the VDB's grids ``scattering_r/g/b``) and a material binding
+  whose volume shader names those fields as emission (see usd/README.md).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Dict, List, Optional, Sequence
+
+from . import stage as stage_mod
+from ._native import GRID_FORMAT_VDB, Scene, VolscatterError
+
+Progress = Optional[Callable[[str, float], Optional[bool]]]
+
+#: Solvers and the light types they use today (pop: distant lights only, issues 8 and 9 add the rest).
+SOLVER_LIGHTS = {"reference": {"distant", "point", "dome"}, "pop": {"distant"}}
+
+
+@dataclass
+class FrameResult:
+    time: float
+    out: str
+    width: int
+    height: int
+    mean_rgb: List[float]
+    mean_alpha: float
+    warnings: List[str] = field(default_factory=list)
+
+
+def solver_warnings(scene: stage_mod.StageScene, solver: str) -> List[str]:
+    """Lights in the scene the chosen solver leaves out (warned, never dropped silently)."""
+    handled = SOLVER_LIGHTS.get(solver)
+    if handled is None:
+        return []
+    out = []
+    for l in scene.lights:
+        if l.json["type"] not in handled:
+            out.append(f"solver {solver} does not handle {l.json['type']} lights yet: light {l.path} is left out of "
+                       "the scattering (use --solver reference)")
+    return out
+
+
+def native_scene(doc: dict, solver: str, settings: Optional[dict]) -> Scene:
+    """A native Scene from scene JSON, with the solver chosen."""
+    s = Scene.from_json(doc)
+    try:
+        s.set_solver(solver, settings or None)
+    except BaseException:
+        s.close()
+        raise
+    return s
+
+
+def frame_path(pattern: str, frame: float) -> str:
+    """``out.####.exr`` -> ``out.0012.exr``; ``out_{frame}.exr`` / ``out_{frame:04d}.exr`` ->
+    Python formatting with the (integer when whole) frame number."""
+    f = int(frame) if float(frame).is_integer() else frame
+    if "{frame" in pattern:
+        return pattern.format(frame=f)
+    m = re.search(r"#+", pattern)
+    if m:
+        width = len(m.group(0))
+        s = f"{f:0{width}d}" if isinstance(f, int) else f"{f:0{width}.3f}"
+        return pattern[:m.start()] + s + pattern[m.end():]
+    return pattern
+
+
+def has_frame_pattern(pattern: str) -> bool:
+    return "{frame" in pattern or "#" in pattern
+
+
+def _ensure_parent(path):
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+
+
+def render(stage_path, out, png: Optional[str] = None, time=None, camera: Optional[str] = None,
+           solver: str = "reference", settings: Optional[dict] = None, width: int = 320, height: Optional[int] = None,
+           volume: Optional[str] = None, light_convention: str = "auto", medium_defaults: Optional[dict] = None,
+           progress: Progress = None, png_exposure: float = 1.0, stage=None,
+           warn: Optional[Callable[[str], None]] = None) -> FrameResult:
+    """Renders one frame of a stage into ``out`` (EXR: RGBA + AOVs) and optionally ``png``."""
+    sc = stage_mod.read_stage(stage_path, time=time, camera=camera, light_convention=light_convention,
+                              medium_defaults=medium_defaults, stage=stage)
+    warnings = list(sc.warnings) + solver_warnings(sc, solver)
+    vi = pick_volume(sc, volume, warnings)
+    doc = sc.scene_json(volume=vi, width=width, height=height)
+    if warn:
+        for w in warnings:
+            warn(w)
+    with native_scene(doc, solver, settings) as scene:
+        if solver == "reference":
+            image = scene.render_reference(progress)
+        else:
+            with scene.solve(progress) as result:
+                image = result.composite()
+        with image:
+            _ensure_parent(out)
+            image.write_exr(out)
+            rgba = image.rgba()
+            w, h = image.size()
+            if png:
+                _ensure_parent(png)
+                write_png(png, rgba, w, h, png_exposure)
+    mean = _mean_rgba(rgba, w, h)
+    return FrameResult(time=sc.time, out=str(out), width=w, height=h, mean_rgb=mean[:3], mean_alpha=mean[3],
+                       warnings=warnings)
+
+
+def pick_volume(sc: stage_mod.StageScene, volume: Optional[str], warnings: List[str]) -> int:
+    if not sc.volumes:
+        raise VolscatterError(f"{sc.stage_path}: the stage has no UsdVolVolume prim: nothing to render", 5)
+    if volume:
+        for i, v in enumerate(sc.volumes):
+            if v.path == volume:
+                return i
+        raise VolscatterError(f"volume {volume} not found (volumes: {', '.join(v.path for v in sc.volumes)})", 2)
+    if len(sc.volumes) > 1:
+        warnings.append(f"the stage has {len(sc.volumes)} volumes; rendering {sc.volumes[0].path} only "
+                        "(volscatter renders one medium at a time; pick with --volume)")
+    return 0
+
+
+def _mean_rgba(rgba, w, h) -> List[float]:
+    try:
+        import numpy as np
+        if isinstance(rgba, np.ndarray):
+            return [float(x) for x in rgba.reshape(-1, 4).mean(axis=0)]
+    except ImportError:
+        pass
+    n = max(1, w * h)
+    return [sum(rgba[i::4]) / n for i in range(4)]
+
+
+# ----------------------------------------------------------------------------------------------
+# PNG (sRGB, 8 bit RGBA) without dependencies beyond zlib; numpy when present
+
+def _srgb(c: float) -> int:
+    c = 0.0 if not c > 0.0 else (1.0 if c >= 1.0 else c)
+    v = 12.92 * c if c <= 0.0031308 else 1.055 * c ** (1 / 2.4) - 0.055
+    return int(round(v * 255.0))
+
+
+def write_png(path, rgba, width: int, height: int, exposure: float = 1.0):
+    """Writes linear RGBA (rows top to bottom) as an sRGB PNG; colour times ``exposure``."""
+    try:
+        import numpy as np
+        a = np.asarray(rgba, dtype=np.float32).reshape(height, width, 4)
+        rgb = np.clip(np.nan_to_num(a[..., :3] * exposure), 0.0, 1.0)
+        srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.power(rgb, 1 / 2.4) - 0.055)
+        out = np.empty((height, width, 4), dtype=np.uint8)
+        out[..., :3] = np.round(srgb * 255.0)
+        out[..., 3] = np.round(np.clip(np.nan_to_num(a[..., 3]), 0.0, 1.0) * 255.0)
+        rows = b"".join(b"\0" + out[y].tobytes() for y in range(height))
+    except ImportError:
+        flat = list(rgba)
+        rows = bytearray()
+        for y in range(height):
+            rows.append(0)
+            for x in range(width):
+                i = (y * width + x) * 4
+                rows.extend([_srgb(flat[i] * exposure), _srgb(flat[i + 1] * exposure), _srgb(flat[i + 2] * exposure),
+                             int(round(min(max(flat[i + 3], 0.0), 1.0) * 255))])
+        rows = bytes(rows)
+
+    def chunk(tag, data):
+        c = struct.pack(">I", len(data)) + tag + data
+        return c + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
+
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0))
+    png += chunk(b"sRGB", b"\0") + chunk(b"IDAT", zlib.compress(rows, 6)) + chunk(b"IEND", b"")
+    with open(path, "wb") as f:
+        f.write(png)
+
+
+# ----------------------------------------------------------------------------------------------
+# bake
+
+@dataclass
+class BakeResult:
+    layer: str
+    vdbs: Dict[str, List[str]]     # volume path -> VDB files written (one per frame)
+    warnings: List[str]
+
+
+def _safe_name(path: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_]+", "_", path.strip("/")) or "volume"
+
+
+def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = None, camera: Optional[str] = None,
+         solver: str = "reference", settings: Optional[dict] = None, width: int = 320, height: Optional[int] = None,
+         light_convention: str = "auto", medium_defaults: Optional[dict] = None, progress: Progress = None,
+         warn: Optional[Callable[[str], None]] = None) -> BakeResult:
+    """Solves every Volume of the stage (at each time in ``times``; default: one solve at the
+    default time) and writes ``out_layer``: a layer that sublayers the stage and adds the
+    scattering fields. The VDBs go beside the layer, named ``<layer stem>.<volume>[.<frame>].vdb``.
+    The scattering is computed towards the stage's camera (S is view-dependent for g != 0)."""
+    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
+    src_stage = stage_mod.open_stage(stage_path)
+    out_layer = os.path.abspath(out_layer)
+    out_dir = os.path.dirname(out_layer)
+    os.makedirs(out_dir, exist_ok=True)
+    if os.path.abspath(stage_path) == out_layer:
+        raise VolscatterError("--out-layer must not be the stage itself", 2)
+    times = list(times) if times else [None]
+    animated = len(times) > 1
+    stem = Path(out_layer).stem
+    written: Dict[str, List[str]] = {}
+    all_warnings: List[str] = []
+    per_volume: Dict[str, List] = {}
+    for t in times:
+        sc = stage_mod.read_stage(stage_path, time=t, camera=camera, light_convention=light_convention,
+                                  medium_defaults=medium_defaults, stage=src_stage)
+        warnings = list(sc.warnings) + solver_warnings(sc, solver)
+        if not sc.volumes:
+            raise VolscatterError(f"{stage_path}: the stage has no UsdVolVolume prim: nothing to bake", 5)
+        for w in warnings:
+            if w not in all_warnings:
+                all_warnings.append(w)
+                if warn:
+                    warn(w)
+        if sc.camera is None:
+            msg = ("the stage has no camera: the scattering is solved towards a camera on -Y looking at each volume "
+                   "(exact for g = 0; pass --camera for anisotropic media)")
+            if msg not in all_warnings:
+                all_warnings.append(msg)
+                if warn:
+                    warn(msg)
+        for vi, v in enumerate(sc.volumes):
+            if sc.camera is None:
+                o = [v.object_to_world[3], v.object_to_world[7], v.object_to_world[11]]
+                sc.camera = stage_mod.CameraInfo(path="(none)", position=[o[0], o[1] - 10.0, o[2]], look_at=o,
+                                                 up=[0.0, 0.0, 1.0], fov_deg=39.6, aspect=1.0, clipping=(0.0, 1e30))
+            doc = sc.scene_json(volume=vi, width=width, height=height)
+            name = f"{stem}.{_safe_name(v.path)}"
+            fname = f"{name}.{int(t) if t is not None and float(t).is_integer() else t}.vdb" if animated and t is not None \
+                else f"{name}.vdb"
+            vdb = os.path.join(out_dir, fname)
+            with native_scene(doc, solver, settings) as scene, scene.solve(progress) as result:
+                result.write_grid(vdb, GRID_FORMAT_VDB)
+            written.setdefault(v.path, []).append(vdb)
+            per_volume.setdefault(v.path, []).append((t, fname, v))
+
+    # the layer
+    if os.path.exists(out_layer):
+        os.remove(out_layer)
+    layer_stage = Usd.Stage.CreateNew(out_layer)
+    root = layer_stage.GetRootLayer()
+    rel = os.path.relpath(os.path.abspath(stage_path), out_dir)
+    root.subLayerPaths.append(rel)
+    src_root = src_stage.GetRootLayer()
+    # stage metadata lives on the root layer only: carry it over
+    for key in ("upAxis", "metersPerUnit", "defaultPrim", "startTimeCode", "endTimeCode", "timeCodesPerSecond",
+                "framesPerSecond"):
+        if src_root.pseudoRoot.HasInfo(key):
+            root.pseudoRoot.SetInfo(key, src_root.pseudoRoot.GetInfo(key))
+    root.documentation = f"volscatter bake of {os.path.basename(stage_path)} (solver {solver})"
+    layer_stage = Usd.Stage.Open(root)  # recompose with the sublayer
+    for vpath, entries in per_volume.items():
+        vprim = layer_stage.GetPrimAtPath(vpath)
+        if not vprim:
+            vprim = layer_stage.OverridePrim(vpath)
+        vol = UsdVol.Volume(vprim)
+        for c, grid in (("r", "scattering_r"), ("g", "scattering_g"), ("b", "scattering_b")):
+            fpath = Sdf.Path(vpath).AppendChild(f"scatter_{c}")
+            asset = UsdVol.OpenVDBAsset.Define(layer_stage, fpath)
+            asset.CreateFieldNameAttr().Set(grid)
+            asset.CreateFieldDataTypeAttr().Set("float")
+            fp = asset.CreateFilePathAttr()
+            for t, fname, _v in entries:
+                if animated and t is not None:
+                    fp.Set(Sdf.AssetPath("./" + fname), Usd.TimeCode(t))
+                else:
+                    fp.Set(Sdf.AssetPath("./" + fname))
+            vol.CreateFieldRelationship(f"scatter_{c}", fpath)
+        # a material binding: the volume's emission is S per channel (W/m^3/sr), extinction is
+        # density_scale * density, as volscatter computed it
+        v = entries[0][2]
+        mpath = Sdf.Path(vpath).AppendChild("VolscatterScatter")
+        mat = UsdShade.Material.Define(layer_stage, mpath)
+        sh = UsdShade.Shader.Define(layer_stage, mpath.AppendChild("ScatterEmission"))
+        sh.CreateIdAttr("volscatter:ScatterEmission")
+        sh.CreateInput("emission_r_field", Sdf.ValueTypeNames.Token).Set("scatter_r")
+        sh.CreateInput("emission_g_field", Sdf.ValueTypeNames.Token).Set("scatter_g")
+        sh.CreateInput("emission_b_field", Sdf.ValueTypeNames.Token).Set("scatter_b")
+        sh.CreateInput("density_field", Sdf.ValueTypeNames.Token).Set(v.field_path.rsplit("/", 1)[-1])
+        sh.CreateInput("density_scale", Sdf.ValueTypeNames.Color3f).Set(tuple(v.medium.density_scale))
+        sh.CreateInput("albedo", Sdf.ValueTypeNames.Color3f).Set(tuple(v.medium.albedo))
+        sh.CreateInput("anisotropy", Sdf.ValueTypeNames.Float).Set(v.medium.g)
+        sh.CreateInput("emission_scale", Sdf.ValueTypeNames.Float).Set(1.0)
+        out = sh.CreateOutput("volume", Sdf.ValueTypeNames.Token)
+        mat.CreateOutput("volume", Sdf.ValueTypeNames.Token).ConnectToSource(out)
+        mat.GetPrim().SetDocumentation(
+            "volscatter multiple scattering as emission: radiance per metre S = fields scatter_r/g/b "
+            "(W/m^3/sr, towards the camera it was solved for); extinction = density_scale * density")
+        UsdShade.MaterialBindingAPI.Apply(vprim).Bind(mat)
+        vprim.CreateAttribute("volscatter:bakedSolver", Sdf.ValueTypeNames.String, custom=True).Set(solver)
+    layer_stage.GetRootLayer().Save()
+    del UsdGeom
+    return BakeResult(layer=out_layer, vdbs=written, warnings=all_warnings)
