@@ -1,0 +1,501 @@
+"""Operators: Compute Scattering and Render Preview.
+
+Both run the same job: for each frame, export the scene (main thread, reads bpy), then solve in
+a worker thread (the library releases nothing but its own locks; ctypes drops the GIL while it
+runs), reporting progress through a shared state read by a modal timer. Invoked from the UI they
+are modal (status bar progress, Esc cancels); `execute` (scripts, tests) runs the same steps
+blocking. Blender data is created only after every frame succeeded, so a failure or a
+cancellation leaves the scene as it was (files written so far are deleted).
+"""
+
+import os
+import tempfile
+import threading
+import time
+
+import bpy
+from bpy.props import StringProperty
+
+from . import native, scene_export
+from .scene_export import ExportError
+
+RESULT_TAG = "volscatter_source"
+
+
+def _out_dir(settings):
+    path = settings.output_dir or "//volscatter/"
+    if path.startswith("//") and not bpy.data.filepath:
+        return os.path.join(tempfile.gettempdir(), "volscatter", path[2:])
+    return os.path.normpath(bpy.path.abspath(path))
+
+
+def _unique_name(base):
+    name, i = base, 1
+    while name in bpy.data.objects or name in bpy.data.volumes:
+        name = "%s.%03d" % (base, i)
+        i += 1
+    return name
+
+
+class _State:
+    """Shared between the main thread and the worker."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.stage = ""
+        self.fraction = 0.0
+        self.cancel = False
+        self.done = False
+        self.error = None
+        self.value = None
+
+
+class _JobOperator:
+    """Common machinery. Subclasses set `per_frame` (runs in the worker with the solved
+    result, returns a value) and `finish` (main thread, gets the values)."""
+
+    _timer = None
+
+    # -- what subclasses provide ----------------------------------------------------------
+    def frames(self, context):
+        return [context.scene.frame_current]
+
+    def per_frame(self, result, frame):
+        raise NotImplementedError
+
+    def finish(self, context, values):
+        raise NotImplementedError
+
+    def cleanup_files(self):
+        for p in self._files:
+            try:
+                os.remove(p)
+            except OSError:
+                pass
+        self._files = []
+
+    # -- shared -----------------------------------------------------------------------------
+    @classmethod
+    def poll(cls, context):
+        ob = context.object
+        return ob is not None and ob.type == 'VOLUME'
+
+    def _setup(self, context):
+        self._obj = context.object
+        self._settings = self._obj.volscatter
+        self._frames = self.frames(context)
+        self._index = 0
+        self._values = []
+        self._files = []
+        self._warned = set()
+        self._frame0 = context.scene.frame_current
+        self._out = _out_dir(self._settings)
+        self._solver = {"name": self._settings.solver}
+        self._solver.update(self._settings.solver_settings())
+        try:
+            native.lib()
+        except native.LibraryNotFound as e:
+            raise ExportError(str(e))
+        if self._settings.device == 'GPU':
+            self._warn("the GPU device cannot be chosen through libvolscatter's C API yet; solving on the CPU")
+
+    def _warn(self, msg):
+        if msg not in self._warned:
+            self._warned.add(msg)
+            self.report({'WARNING'}, msg)
+
+    def _export(self, context, frame):
+        """Main thread: the scene JSON of `frame`."""
+        scene = context.scene
+        if scene.frame_current != frame:
+            scene.frame_set(frame)
+        doc, warnings, generated = scene_export.export(context, self._obj, self._out, frame, self._solver,
+                                                       size=self.image_size(context))
+        self._files.extend(generated)
+        for w in warnings:
+            self._warn(w)
+        if self._solver["name"] == "pop":
+            kinds = [l["type"] for l in doc["lights"]]
+            if "distant" not in kinds:
+                raise ExportError("the Principal Ordinates solver handles sun lights only so far, and the scene has "
+                                  "none; choose the Reference solver")
+            if any(k != "distant" for k in kinds):
+                self._warn("the Principal Ordinates solver handles sun lights only so far: point lights and the "
+                           "world are left out (choose Reference to include them)")
+        return doc
+
+    def image_size(self, context):
+        return None
+
+    def _work(self, doc, frame, state):
+        """Worker thread: solve one frame and run per_frame."""
+        def progress(stage, fraction):
+            with state.lock:
+                state.stage = stage
+                state.fraction = fraction
+                return not state.cancel
+        try:
+            with native.Scene.from_json(doc) as sc:
+                with sc.solve(progress) as result:
+                    state.value = self.per_frame(result, frame)
+        except BaseException as e:  # reported on the main thread
+            state.error = e
+        finally:
+            state.done = True
+
+    def _message(self, e):
+        if isinstance(e, native.Cancelled):
+            return None
+        if isinstance(e, native.VolscatterError):
+            return "volscatter: %s" % e
+        if isinstance(e, ExportError):
+            return str(e)
+        return "volscatter: unexpected error: %s: %s" % (type(e).__name__, e)
+
+    def _fail(self, context, e):
+        self.cleanup_files()
+        self._restore_frame(context)
+        msg = self._message(e)
+        if msg is None:
+            self.report({'WARNING'}, "volscatter: cancelled; nothing was created")
+        else:
+            self.report({'ERROR'}, msg)
+        return {'CANCELLED'}
+
+    def _restore_frame(self, context):
+        if context.scene.frame_current != self._frame0:
+            context.scene.frame_set(self._frame0)
+
+    def _complete(self, context):
+        self._restore_frame(context)
+        try:
+            self.finish(context, self._values)
+        except Exception as e:
+            return self._fail(context, e)
+        return {'FINISHED'}
+
+    # -- blocking (scripts, tests) ----------------------------------------------------------
+    def execute(self, context):
+        try:
+            self._setup(context)
+            wm = context.window_manager
+            wm.progress_begin(0, len(self._frames))
+            try:
+                for i, frame in enumerate(self._frames):
+                    doc = self._export(context, frame)
+                    state = _State()
+                    self._work(doc, frame, state)
+                    if state.error is not None:
+                        raise state.error
+                    self._values.append(state.value)
+                    wm.progress_update(i + 1)
+            finally:
+                wm.progress_end()
+        except Exception as e:
+            return self._fail(context, e)
+        return self._complete(context)
+
+    # -- modal (UI) ---------------------------------------------------------------------------
+    def invoke(self, context, event):
+        if context.window is None:
+            return self.execute(context)
+        try:
+            self._setup(context)
+            self._start_next(context)
+        except Exception as e:
+            return self._fail(context, e)
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.progress_begin(0, 1000)
+        wm.modal_handler_add(self)
+        self._status(context)
+        return {'RUNNING_MODAL'}
+
+    def _start_next(self, context):
+        frame = self._frames[self._index]
+        doc = self._export(context, frame)
+        self._state = _State()
+        self._thread = threading.Thread(target=self._work, args=(doc, frame, self._state), daemon=True)
+        self._t0 = time.monotonic()
+        self._thread.start()
+
+    def _status(self, context):
+        st = self._state
+        with st.lock:
+            stage, frac = st.stage, st.fraction
+        n = len(self._frames)
+        total = (self._index + min(max(frac, 0.0), 1.0)) / n
+        context.window_manager.progress_update(int(total * 1000))
+        text = "volscatter: frame %d (%d/%d) %s %3.0f%%  -  Esc to cancel" % (
+            self._frames[self._index], self._index + 1, n, stage, 100.0 * frac)
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+        if context.area is not None:
+            context.area.header_text_set(text)
+
+    def _end_modal(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        if context.area is not None:
+            context.area.header_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == 'ESC' and event.value == 'PRESS':
+            with self._state.lock:
+                self._state.cancel = True
+            return {'RUNNING_MODAL'}
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        if not self._state.done:
+            self._status(context)
+            return {'RUNNING_MODAL'}
+        self._thread.join()
+        if self._state.error is not None:
+            self._end_modal(context)
+            return self._fail(context, self._state.error)
+        self._values.append(self._state.value)
+        self._index += 1
+        if self._index < len(self._frames):
+            try:
+                self._start_next(context)
+            except Exception as e:
+                self._end_modal(context)
+                return self._fail(context, e)
+            return {'RUNNING_MODAL'}
+        self._end_modal(context)
+        return self._complete(context)
+
+    def cancel(self, context):  # Blender quits or the window closes while running
+        with self._state.lock:
+            self._state.cancel = True
+        self._thread.join()
+        self._end_modal(context)
+        self.cleanup_files()
+
+
+# ---------------------------------------------------------------------------------------------
+# Compute Scattering
+
+
+def _link(tree, a, b):
+    tree.links.new(a, b)
+
+
+def build_emission_material(name, density_grid, density_scale):
+    """Renders the scattering grids as volume emission, with the medium's extinction from the
+    density grid: emission = (scattering_r, scattering_g, scattering_b) per metre, absorption
+    sigma_a = density_scale * density (a black Volume Absorption; RGB scale through its colour)."""
+    mat = bpy.data.materials.new(name)
+    if hasattr(mat, "use_nodes") and not mat.use_nodes:
+        mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new('ShaderNodeOutputMaterial')
+    out.location = (600, 0)
+    comb = tree.nodes.new('ShaderNodeCombineColor')
+    comb.location = (-100, 200)
+    comb.mode = 'RGB'
+    for i, ch in enumerate("rgb"):
+        a = tree.nodes.new('ShaderNodeAttribute')
+        a.name = a.label = "scattering_" + ch
+        a.attribute_type = 'GEOMETRY'
+        a.attribute_name = "scattering_" + ch
+        a.location = (-400, 400 - 180 * i)
+        _link(tree, a.outputs["Fac"], comb.inputs[i])
+    em = tree.nodes.new('ShaderNodeEmission')
+    em.location = (150, 200)
+    em.inputs["Strength"].default_value = 1.0
+    _link(tree, comb.outputs[0], em.inputs["Color"])
+    dens = tree.nodes.new('ShaderNodeAttribute')
+    dens.name = dens.label = "density"
+    dens.attribute_type = 'GEOMETRY'
+    dens.attribute_name = density_grid
+    dens.location = (-400, -250)
+    mx = max(density_scale)
+    mul = tree.nodes.new('ShaderNodeMath')
+    mul.operation = 'MULTIPLY'
+    mul.inputs[1].default_value = mx
+    mul.location = (-100, -250)
+    _link(tree, dens.outputs["Fac"], mul.inputs[0])
+    ab = tree.nodes.new('ShaderNodeVolumeAbsorption')
+    ab.location = (150, -200)
+    ab.inputs["Color"].default_value = [1.0 - s / mx for s in density_scale] + [1.0]
+    _link(tree, mul.outputs[0], ab.inputs["Density"])
+    add = tree.nodes.new('ShaderNodeAddShader')
+    add.location = (400, 0)
+    _link(tree, em.outputs[0], add.inputs[0])
+    _link(tree, ab.outputs[0], add.inputs[1])
+    _link(tree, add.outputs[0], out.inputs["Volume"])
+    return mat
+
+
+def build_density_nodes(name, source, grid):
+    """Geometry Nodes that copy the source volume's density grid (evaluated, in the result's
+    space) onto the scattering volume, so the emission material has the extinction."""
+    ng = bpy.data.node_groups.new(name, 'GeometryNodeTree')
+    ng.interface.new_socket("Geometry", in_out='INPUT', socket_type='NodeSocketGeometry')
+    ng.interface.new_socket("Geometry", in_out='OUTPUT', socket_type='NodeSocketGeometry')
+    n = ng.nodes
+    gin = n.new('NodeGroupInput')
+    gout = n.new('NodeGroupOutput')
+    info = n.new('GeometryNodeObjectInfo')
+    info.transform_space = 'RELATIVE'
+    info.inputs["Object"].default_value = source
+    get = n.new('GeometryNodeGetNamedGrid')
+    get.data_type = 'FLOAT'
+    get.inputs["Name"].default_value = grid
+    store = n.new('GeometryNodeStoreNamedGrid')
+    store.data_type = 'FLOAT'
+    store.inputs["Name"].default_value = grid
+    gin.location, info.location, get.location, store.location, gout.location = \
+        (-400, 100), (-400, -100), (-150, -100), (100, 0), (300, 0)
+    ng.links.new(info.outputs["Geometry"], get.inputs["Volume"])
+    ng.links.new(gin.outputs[0], store.inputs["Volume"])
+    ng.links.new(get.outputs["Grid"], store.inputs["Grid"])
+    ng.links.new(store.outputs["Volume"], gout.inputs[0])
+    return ng
+
+
+class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
+    """Compute multiple scattering for the active volume and add it as an emissive volume"""
+
+    bl_idname = "volscatter.compute_scattering"
+    bl_label = "Compute Scattering"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def frames(self, context):
+        s = context.object.volscatter
+        if s.use_frame_range:
+            if s.frame_end < s.frame_start:
+                raise ExportError("frame range %d..%d is empty" % (s.frame_start, s.frame_end))
+            return list(range(s.frame_start, s.frame_end + 1))
+        return [context.scene.frame_current]
+
+    def _setup(self, context):
+        super()._setup(context)
+        self._name = _unique_name(self._obj.name + "_scattering")
+        self._grid = None
+        self._density_scale = None
+
+    def _export(self, context, frame):
+        doc = super()._export(context, frame)
+        if self._grid is None:
+            self._grid = doc["medium"]["grid"]
+            self._density_scale = doc["medium"]["density_scale"]
+        os.makedirs(self._out, exist_ok=True)
+        return doc
+
+    def per_frame(self, result, frame):
+        path = os.path.join(self._out, "%s_%04d.vdb" % (bpy.path.clean_name(self._name), frame))
+        self._files.append(path)
+        result.write_grid(path, native.GRID_FORMAT_VDB)
+        return path
+
+    def finish(self, context, paths):
+        created = []
+        try:
+            vol = bpy.data.volumes.new(self._name)
+            created.append((bpy.data.volumes, vol))
+            vol.filepath = paths[0]
+            if len(paths) > 1:
+                vol.is_sequence = True
+                vol.frame_start = self._frames[0]
+                vol.frame_duration = len(paths)
+                # file number = frame - frame_start + 1 + frame_offset == frame
+                vol.frame_offset = self._frames[0] - 1
+                vol.sequence_mode = 'CLIP'
+            vol.grids.load()
+            names = [g.name for g in vol.grids]
+            if "scattering_r" not in names:
+                raise ExportError("volscatter wrote %s but Blender reads no scattering grid from it (%s)"
+                                  % (paths[0], vol.grids.error_message or "no grids"))
+            mat = build_emission_material(self._name, self._grid, self._density_scale)
+            created.append((bpy.data.materials, mat))
+            vol.materials.append(mat)
+            ob = bpy.data.objects.new(self._name, vol)
+            created.append((bpy.data.objects, ob))
+            ng = build_density_nodes(self._name + "_density", self._obj, self._grid)
+            created.append((bpy.data.node_groups, ng))
+            mod = ob.modifiers.new("volscatter density", 'NODES')
+            mod.node_group = ng
+            ob[RESULT_TAG] = self._obj.name
+            cols = list(self._obj.users_collection) or [context.scene.collection]
+            for c in cols:
+                c.objects.link(ob)
+        except Exception:
+            for coll, idb in reversed(created):
+                try:
+                    coll.remove(idb)
+                except Exception:
+                    pass
+            raise
+        self._files = []  # they belong to the new volume now
+        if self._settings.hide_original:
+            self._obj.hide_render = True
+            if self._obj.name in context.view_layer.objects:
+                self._obj.hide_set(True)
+        for o in context.view_layer.objects:
+            o.select_set(False)
+        if ob.name in context.view_layer.objects:
+            ob.select_set(True)
+            context.view_layer.objects.active = ob
+        self.report({'INFO'}, "volscatter: '%s' holds the scattering of '%s' (%d frame%s, %s)"
+                    % (ob.name, self._obj.name, len(paths), "" if len(paths) == 1 else "s", self._out))
+
+
+# ---------------------------------------------------------------------------------------------
+# Render Preview
+
+
+class VOLSCATTER_OT_render_preview(_JobOperator, bpy.types.Operator):
+    """Composite the scattering of the active volume into an image (Image Editor: 'volscatter Preview')"""
+
+    bl_idname = "volscatter.render_preview"
+    bl_label = "Render Preview"
+    bl_options = {'REGISTER'}
+
+    image_name: StringProperty(name="Image", default="volscatter Preview")
+
+    def image_size(self, context):
+        return scene_export.render_size(context.scene)
+
+    def per_frame(self, result, frame):
+        with result.composite() as img:
+            w, h = img.size()
+            return w, h, img.rgba()
+
+    def finish(self, context, values):
+        w, h, rgba = values[-1]
+        try:
+            import numpy as np
+            px = np.ctypeslib.as_array(rgba).reshape(h, w, 4)[::-1].ravel()
+        except ImportError:
+            rows = [rgba[(h - 1 - y) * w * 4:(h - y) * w * 4] for y in range(h)]
+            px = [v for r in rows for v in r]
+        img = bpy.data.images.get(self.image_name)
+        if img is not None and (tuple(img.size) != (w, h) or not img.is_float):
+            bpy.data.images.remove(img)
+            img = None
+        if img is None:
+            img = bpy.data.images.new(self.image_name, w, h, alpha=True, float_buffer=True)
+        img.pixels.foreach_set(px)
+        img.update()
+        self.report({'INFO'}, "volscatter: preview %dx%d in image '%s'" % (w, h, img.name))
+
+
+classes = (VOLSCATTER_OT_compute_scattering, VOLSCATTER_OT_render_preview)
+
+
+def register():
+    for c in classes:
+        bpy.utils.register_class(c)
+
+
+def unregister():
+    for c in reversed(classes):
+        bpy.utils.unregister_class(c)
