@@ -1,16 +1,221 @@
-//! `volscatter compare SCENE --solvers pop,reference` (issue 3/9, being written).
+//! `volscatter compare SCENE --solvers pop,reference`: renders the scene with each solver
+//! (`reference`: path-traced image; others: solve, then the compositor), and reports the
+//! relative RMSE of each image and scattering grid against the baseline (`reference` when it
+//! is listed, else the last solver), with the time each took. `--json FILE` writes the same.
 
 use clap::Args;
+use serde_json::json;
 use std::path::PathBuf;
-use volscatter_core::{Error, Result};
+use std::time::Instant;
+
+use super::progress::StderrProgress;
+use volscatter_core::compositor::{self, CompositeOptions};
+use volscatter_core::image::relative_rmse;
+use volscatter_core::solvers::{self, reference::Reference, ScatteringGrid, Timings};
+use volscatter_core::{Error, Image, Result, Scene};
 
 #[derive(Args)]
 pub struct CompareArgs {
+    /// Scene JSON. Without it: the embedded default scene.
     pub scene: Option<PathBuf>,
+    /// Comma-separated solver names; the baseline is `reference` if listed, else the last.
     #[arg(long, default_value = "pop,reference")]
     pub solvers: String,
+    /// Setting for one solver, SOLVER.KEY=VALUE (JSON value), repeatable:
+    /// --set pop.grid_resolution=16 --set reference.spp=256.
+    #[arg(long = "set", value_name = "SOLVER.KEY=VALUE")]
+    pub settings: Vec<String>,
+    /// Override the camera's image size.
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Resolution (largest side) of the grid on which scattering grids are compared; the
+    /// reference estimates S there with `--grid-spp` paths per point.
+    #[arg(long, default_value_t = 32)]
+    pub grid_resolution: u32,
+    #[arg(long, default_value_t = 256)]
+    pub grid_spp: u32,
+    /// Skip the scattering-grid comparison (it costs a reference grid estimate).
+    #[arg(long)]
+    pub no_grid: bool,
+    /// Write the results as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write each image as EXR into this directory (SOLVER.exr).
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
-pub fn run(_args: CompareArgs) -> Result<()> {
-    Err(Error::InvalidArgument("compare is not implemented yet".into()))
+struct Run {
+    name: String,
+    image: Image,
+    grid: Option<ScatteringGrid>,
+    image_seconds: f64,
+    grid_seconds: f64,
+    phases: Timings,
+    settings: serde_json::Map<String, serde_json::Value>,
+}
+
+fn settings_for(scene: &Scene, name: &str, args: &CompareArgs) -> Result<serde_json::Map<String, serde_json::Value>> {
+    let mut map = match scene.solver_name() {
+        Some(n) if n == name => scene.solver.clone(),
+        _ => Default::default(),
+    };
+    map.remove("name");
+    for kv in &args.settings {
+        let (k, v) = kv.split_once('=').ok_or_else(|| Error::InvalidArgument(format!("--set {kv}: expected SOLVER.KEY=VALUE")))?;
+        let (solver, key) = k
+            .split_once('.')
+            .ok_or_else(|| Error::InvalidArgument(format!("--set {kv}: name the solver, as in pop.{k}=...")))?;
+        if !solvers::SOLVER_NAMES.contains(&solver) {
+            return Err(Error::InvalidArgument(format!("--set {kv}: unknown solver `{solver}`")));
+        }
+        if solver == name {
+            map.insert(key.to_string(), serde_json::from_str(v).unwrap_or_else(|_| json!(v)));
+        }
+    }
+    Ok(map)
+}
+
+/// Resamples `g` (trilinear) at the points of `frame`.
+fn resample(g: &ScatteringGrid, frame: &ScatteringGrid) -> Vec<glam::Vec3> {
+    let to_g = g.index_to_world.inverse();
+    let [nx, ny, nz] = frame.dims;
+    let mut out = Vec::with_capacity(frame.len());
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                out.push(g.sample_index(to_g.transform_point3(frame.position(i, j, k))));
+            }
+        }
+    }
+    out
+}
+
+fn scattered(img: &Image) -> Vec<glam::Vec3> {
+    let bg = img.aov("background");
+    img.rgba.iter().enumerate().map(|(i, p)| p.truncate() - bg.map(|b| b[i]).unwrap_or_default()).collect()
+}
+
+pub fn run(args: CompareArgs) -> Result<()> {
+    let mut scene = match &args.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default_scene(),
+    };
+    if args.width.is_some() || args.height.is_some() {
+        let c = &scene.camera;
+        let (w, h) = (args.width.unwrap_or(c.width), args.height.unwrap_or(c.height));
+        if w == 0 || h == 0 || w > 16384 || h > 16384 {
+            return Err(Error::InvalidArgument(format!("image size {w}x{h} out of range")));
+        }
+        scene.camera.width = w;
+        scene.camera.height = h;
+    }
+    let names: Vec<String> = args.solvers.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect();
+    if names.len() < 2 {
+        return Err(Error::InvalidArgument("--solvers needs at least two names".into()));
+    }
+    for n in &names {
+        if !solvers::SOLVER_NAMES.contains(&n.as_str()) {
+            return Err(Error::InvalidArgument(format!("unknown solver `{n}` (known: {})", solvers::SOLVER_NAMES.join(", "))));
+        }
+    }
+    // The frame every scattering grid is compared on.
+    let frame = ScatteringGrid::over_medium(&scene.medium, args.grid_resolution)?;
+    let progress = StderrProgress::new(args.quiet);
+    let mut runs = Vec::new();
+    for name in &names {
+        let settings = settings_for(&scene, name, &args)?;
+        let mut phases = Timings::default();
+        let (image, grid, image_seconds, grid_seconds) = if name == "reference" {
+            let r = Reference::from_settings(&settings)?;
+            let t = Instant::now();
+            let image = r.render_image(&scene, &progress, &mut phases)?;
+            let image_seconds = t.elapsed().as_secs_f64();
+            let (grid, grid_seconds) = if args.no_grid {
+                (None, 0.0)
+            } else {
+                let mut gs = r.settings.clone();
+                gs.grid_resolution = args.grid_resolution;
+                gs.grid_spp = args.grid_spp;
+                let t = Instant::now();
+                let g = Reference::new(gs)?.scattering_grid(&scene, &progress, &mut phases)?;
+                (Some(g), t.elapsed().as_secs_f64())
+            };
+            (image, grid, image_seconds, grid_seconds)
+        } else {
+            let solver = solvers::by_name(name, &settings)?;
+            let t = Instant::now();
+            let out = solver.solve(&scene, &progress)?;
+            let grid_seconds = t.elapsed().as_secs_f64();
+            phases.0.extend(out.timings.0);
+            let t = Instant::now();
+            let image = phases.time("composite", || compositor::composite(&scene, &out.scattering, &CompositeOptions::default()))?;
+            let composite_seconds = t.elapsed().as_secs_f64();
+            (image, Some(out.scattering), grid_seconds + composite_seconds, grid_seconds)
+        };
+        progress.finish();
+        if let Some(dir) = &args.out_dir {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            volscatter_core::io::exr::write_image(&dir.join(format!("{name}.exr")), &image)?;
+        }
+        runs.push(Run { name: name.clone(), image, grid, image_seconds, grid_seconds, phases, settings });
+    }
+    let base = names.iter().position(|n| n == "reference").unwrap_or(names.len() - 1);
+    let base_rgb: Vec<glam::Vec3> = runs[base].image.rgba.iter().map(|p| p.truncate()).collect();
+    let base_scat = scattered(&runs[base].image);
+    let base_grid = runs[base].grid.as_ref().map(|g| resample(g, &frame));
+    let mut rows = Vec::new();
+    println!("baseline: {}   image {}x{}", runs[base].name, scene.camera.width, scene.camera.height);
+    println!("{:<12} {:>12} {:>14} {:>12} {:>10} {:>10}", "solver", "image rRMSE", "scatter rRMSE", "grid rRMSE", "image s", "grid s");
+    for r in &runs {
+        let rgb: Vec<glam::Vec3> = r.image.rgba.iter().map(|p| p.truncate()).collect();
+        let img_err = relative_rmse(&rgb, &base_rgb);
+        let scat_err = relative_rmse(&scattered(&r.image), &base_scat);
+        let grid_err = match (&r.grid, &base_grid) {
+            (Some(g), Some(b)) => Some(relative_rmse(&resample(g, &frame), b)),
+            _ => None,
+        };
+        println!(
+            "{:<12} {:>12.4} {:>14.4} {:>12} {:>10.3} {:>10.3}",
+            r.name,
+            img_err,
+            scat_err,
+            grid_err.map(|e| format!("{e:.4}")).unwrap_or_else(|| "-".into()),
+            r.image_seconds,
+            r.grid_seconds
+        );
+        let phases: serde_json::Map<String, serde_json::Value> = r.phases.0.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+        rows.push(json!({
+            "solver": r.name,
+            "settings": r.settings,
+            "image_relative_rmse": img_err,
+            "scattered_relative_rmse": scat_err,
+            "grid_relative_rmse": grid_err,
+            "image_seconds": r.image_seconds,
+            "grid_seconds": r.grid_seconds,
+            "phases_seconds": phases,
+            "image": r.image.stats(),
+        }));
+    }
+    if let Some(path) = &args.json {
+        let doc = json!({
+            "scene": args.scene.as_ref().map(|p| p.display().to_string()),
+            "baseline": runs[base].name,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "grid_dims": frame.dims,
+            "grid_spp": args.grid_spp,
+            "threads": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+            "runs": rows,
+        });
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+        std::fs::write(path, serde_json::to_string_pretty(&doc).unwrap()).map_err(|e| Error::io(path, e))?;
+    }
+    Ok(())
 }

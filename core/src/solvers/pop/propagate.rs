@@ -74,6 +74,10 @@ pub struct Propagation<'a> {
     /// Per cell: cosine between d and the direction from the cell to the camera.
     pub mu: &'a [f32],
     pub diffusion_correction: bool,
+    pub drift_matched: bool,
+    /// 1 / (escape length): keeps the isotropic path per step from vanishing in media thin in
+    /// transport terms, where light leaves before it diffuses.
+    pub inv_escape: f32,
     pub max_iterations: u32,
     pub residual_threshold: f32,
 }
@@ -85,10 +89,18 @@ impl Propagation<'_> {
         let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
         let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
         let kappa = if self.diffusion_correction {
-            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c];
+            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c] + Vec3::splat(self.inv_escape);
             let iso = (sigma_tr * (0.5 * grid.h)).min(Vec3::splat(64.0));
             let aa = a.abs().min(Vec3::ONE);
-            aa + (Vec3::ONE - aa) * iso
+            let ball = if self.drift_matched {
+                // Path per step that matches the lattice's drift (front - back) h to the
+                // lobe's a s: between 0.75 (a -> 0) and 1 (a -> 1).
+                let drift = front - back;
+                Vec3::select(aa.cmpgt(Vec3::splat(1e-3)), drift / a.abs().max(Vec3::splat(1e-3)), Vec3::splat(0.75))
+            } else {
+                Vec3::ONE
+            };
+            aa * ball + (Vec3::ONE - aa) * iso
         } else {
             Vec3::ONE
         };
