@@ -1,0 +1,435 @@
+"""USD host (issue 6/9): reading stages into volscatter's scene, with the unit conversions pinned.
+
+No native code runs here (pxr only): the Blender fixture, stages built with pxr holding each
+light type with exposure / normalize / colour / colour temperature, transforms, upAxis,
+metersPerUnit, medium attributes, field selection, and bad input.
+
+Conventions pinned (derivations in usd/volscatter/stage.py and usd/README.md):
+- DistantLight: E = intensity 2^exposure color, times pi sin^2(angle/2) unless normalize (or angle 0).
+- SphereLight: I = intensity 2^exposure color / 4 with normalize, else times pi r^2 (metres).
+- Blender-written stages: distant-light irradiance x4 and angle x2 (Blender writes strength / 4
+  and half the angular diameter); SphereLight unchanged (power / pi under UsdLux is P / 4pi W/sr).
+"""
+
+import math
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+FIXTURES = ROOT.parent / "shared" / "fixtures"
+BLENDER_STAGE = FIXTURES / "blender_noise_cube" / "scene.usda"
+
+pxr = pytest.importorskip("pxr", reason="pxr (usd-core) is not installed: pip install usd-core")
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdVol  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "usd"))
+from volscatter import VolscatterError  # noqa: E402
+from volscatter import stage as S  # noqa: E402
+from volscatter import render as R  # noqa: E402
+from volscatter import cli as C  # noqa: E402
+
+FOG = FIXTURES / "vdb" / "fog_blosc_full.vdb"
+MINI = FIXTURES / "vdb" / "mini_zip.vdb"
+TWO_GRIDS = FIXTURES / "vdb" / "vec3_and_density_blosc.vdb"
+
+
+def approx(a, b, rel=1e-6, abs_=1e-9):
+    return pytest.approx(b, rel=rel, abs=abs_) == a
+
+
+def make_stage(tmp_path, name="s.usda", up="Z", mpu=1.0, vdb=FOG, with_camera=True, with_volume=True):
+    """A stage with a volume (field density -> a copy of `vdb` beside the layer) and a camera."""
+    path = tmp_path / name
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, up)
+    UsdGeom.SetStageMetersPerUnit(stage, mpu)
+    if with_volume:
+        (tmp_path / "vol").mkdir(exist_ok=True)
+        shutil.copy(vdb, tmp_path / "vol" / "d.vdb")
+        vol = UsdVol.Volume.Define(stage, "/World/Smoke")
+        f = UsdVol.OpenVDBAsset.Define(stage, "/World/Smoke/density")
+        f.CreateFilePathAttr().Set(Sdf.AssetPath("./vol/d.vdb"))
+        f.CreateFieldNameAttr().Set("density")
+        vol.CreateFieldRelationship("density", f.GetPath())
+    if with_camera:
+        cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+        cam.CreateFocalLengthAttr().Set(50.0)
+        cam.CreateHorizontalApertureAttr().Set(36.0)
+        cam.CreateVerticalApertureAttr().Set(24.0)
+    return stage, path
+
+
+# ------------------------------------------------------------------------------------------------
+# the Blender fixture
+
+def test_blender_fixture_volume_field_transform():
+    sc = S.read_stage(BLENDER_STAGE)
+    assert sc.blender and sc.light_convention == "blender"
+    assert sc.up_axis == "Z" and sc.meters_per_unit == 1.0
+    assert len(sc.volumes) == 1
+    v = sc.volumes[0]
+    assert v.path == "/root/Volume/Volume" and v.field_path == "/root/Volume/Volume/density"
+    assert Path(v.vdb_path) == (BLENDER_STAGE.parent / "volumes" / "Volume.vdb").resolve()
+    assert v.field_name == "density"
+    assert v.object_to_world == [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
+    assert v.medium.source == {"density_scale": "default", "albedo": "default", "g": "default"}
+    assert sc.warnings == []
+
+
+def test_blender_fixture_sun_and_camera():
+    sc = S.read_stage(BLENDER_STAGE)
+    [sun] = sc.lights
+    assert sun.path == "/root/Sun/Sun" and sun.usd_type == "DistantLight"
+    assert sun.json["type"] == "distant"
+    assert approx(sun.json["direction"], [0.0, 0.0, -1.0])
+    # Blender's sun of strength 1 W/m^2 is written as intensity 0.25: irradiance 1 again.
+    assert approx(sun.json["irradiance"], [1.0, 1.0, 1.0])
+    # its default 0.526 degree disc is written as 0.263
+    assert sun.json["angle_deg"] == pytest.approx(0.526, abs=1e-6)
+    # enableColorTemperature = 1 at 6500 K: white under the spec's normalisation (no 1.043 tint)
+    assert sun.detail["blackbody"] == pytest.approx([1.0, 1.0, 1.0], abs=1e-7)
+    cam = sc.camera
+    assert cam.path == "/root/Camera/Camera"
+    assert approx(cam.position, [0.0, -6.0, 0.0], abs_=1e-5)
+    fwd = [cam.look_at[i] - cam.position[i] for i in range(3)]
+    assert approx(fwd, [0.0, 1.0, 0.0], abs_=1e-5)
+    assert approx(cam.up, [0.0, 0.0, 1.0], abs_=1e-5)
+    assert cam.fov_deg == pytest.approx(math.degrees(2 * math.atan(0.36 / (2 * 0.5))), rel=1e-6)
+    assert cam.fov_deg == pytest.approx(39.5978, abs=1e-3)
+    assert cam.aspect == pytest.approx(0.36 / 0.2025, rel=1e-6)
+    assert cam.clipping == pytest.approx((0.1, 1000.0), rel=1e-6)
+
+
+def test_blender_fixture_plain_usdlux_reading():
+    sc = S.read_stage(BLENDER_STAGE, light_convention="usdlux")
+    [sun] = sc.lights
+    # normalize = 1: E = intensity (what another UsdLux reader sees: 4x darker than Cycles)
+    assert approx(sun.json["irradiance"], [0.25, 0.25, 0.25])
+    assert sun.json["angle_deg"] == pytest.approx(0.263, abs=1e-6)
+
+
+def test_blender_fixture_scene_json_shape():
+    sc = S.read_stage(BLENDER_STAGE)
+    doc = sc.scene_json(width=64, height=48)
+    assert doc["format"] == 1 and doc["camera"]["width"] == 64 and doc["camera"]["height"] == 48
+    assert doc["medium"]["grid"] == "density" and os.path.isabs(doc["medium"]["vdb"])
+    # default height from the camera's aperture ratio (16:9)
+    assert sc.scene_json(width=320)["camera"]["height"] == 180
+
+
+# ------------------------------------------------------------------------------------------------
+# lights built with pxr
+
+def _light(stage, cls, path, **attrs):
+    l = cls.Define(stage, path)
+    api = UsdLux.LightAPI(l.GetPrim())
+    for k, v in attrs.items():
+        {"intensity": api.CreateIntensityAttr, "exposure": api.CreateExposureAttr, "color": api.CreateColorAttr,
+         "normalize": api.CreateNormalizeAttr, "ct": api.CreateColorTemperatureAttr,
+         "ct_on": api.CreateEnableColorTemperatureAttr}[k]().Set(v)
+    return l
+
+
+def _by_path(sc, path):
+    return next(l for l in sc.lights if l.path == path)
+
+
+def test_distant_light_units(tmp_path):
+    stage, path = make_stage(tmp_path)
+    col = Gf.Vec3f(1.0, 0.5, 0.25)
+    _light(stage, UsdLux.DistantLight, "/L/delta", intensity=3.0, exposure=1.0, color=col).CreateAngleAttr().Set(0.0)
+    _light(stage, UsdLux.DistantLight, "/L/wide", intensity=3.0, exposure=1.0, color=col).CreateAngleAttr().Set(10.0)
+    _light(stage, UsdLux.DistantLight, "/L/norm", intensity=3.0, exposure=1.0, color=col,
+           normalize=True).CreateAngleAttr().Set(10.0)
+    _light(stage, UsdLux.DistantLight, "/L/neg", intensity=2.0, exposure=-3.0).CreateAngleAttr().Set(0.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    assert not sc.blender and sc.light_convention == "usdlux"
+    base = [6.0, 3.0, 1.5]  # 3 * 2^1 * color
+    assert approx(_by_path(sc, "/L/delta").json["irradiance"], base)
+    k = math.pi * math.sin(math.radians(5.0)) ** 2
+    assert approx(_by_path(sc, "/L/wide").json["irradiance"], [c * k for c in base])
+    assert approx(_by_path(sc, "/L/norm").json["irradiance"], base)
+    assert _by_path(sc, "/L/norm").json["angle_deg"] == pytest.approx(10.0)
+    assert approx(_by_path(sc, "/L/neg").json["irradiance"], [0.25] * 3)
+    # the light travels along its -Z axis
+    assert approx(_by_path(sc, "/L/delta").json["direction"], [0.0, 0.0, -1.0])
+
+
+def test_distant_light_direction_from_transform(tmp_path):
+    stage, path = make_stage(tmp_path)
+    l = _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
+    UsdGeom.Xformable(l).AddRotateXOp().Set(90.0)    # -Z -> +Y
+    l2 = _light(stage, UsdLux.DistantLight, "/L/side", intensity=1.0)
+    UsdGeom.Xformable(l2).AddRotateYOp().Set(90.0)   # -Z -> -X
+    UsdGeom.Xformable(l2).AddTranslateOp().Set(Gf.Vec3d(100, 0, 0))  # position is irrelevant
+    stage.Save()
+    sc = S.read_stage(path)
+    assert approx(_by_path(sc, "/L/sun").json["direction"], [0.0, 1.0, 0.0], abs_=1e-6)
+    assert approx(_by_path(sc, "/L/side").json["direction"], [-1.0, 0.0, 0.0], abs_=1e-6)
+
+
+def test_sphere_light_units(tmp_path):
+    stage, path = make_stage(tmp_path)
+    a = _light(stage, UsdLux.SphereLight, "/L/norm", intensity=8.0, normalize=True)
+    a.CreateRadiusAttr().Set(0.5)
+    b = _light(stage, UsdLux.SphereLight, "/L/plain", intensity=8.0)
+    b.CreateRadiusAttr().Set(0.5)
+    c = _light(stage, UsdLux.SphereLight, "/L/point", intensity=8.0, normalize=True)
+    c.CreateRadiusAttr().Set(0.1)
+    c.CreateTreatAsPointAttr().Set(True)
+    d = _light(stage, UsdLux.SphereLight, "/L/scaled", intensity=8.0, exposure=1.0)
+    d.CreateRadiusAttr().Set(0.5)
+    UsdGeom.Xformable(d).AddTranslateOp().Set(Gf.Vec3d(1, 2, 3))
+    UsdGeom.Xformable(d).AddScaleOp().Set(Gf.Vec3f(2, 2, 2))
+    stage.Save()
+    sc = S.read_stage(path)
+    n = _by_path(sc, "/L/norm").json
+    assert n["type"] == "point" and approx(n["intensity"], [2.0] * 3) and n["radius"] == pytest.approx(0.5)
+    assert approx(_by_path(sc, "/L/plain").json["intensity"], [8.0 * math.pi * 0.25] * 3)
+    p = _by_path(sc, "/L/point").json
+    assert p["radius"] == 0.0 and approx(p["intensity"], [2.0] * 3)
+    s = _by_path(sc, "/L/scaled").json
+    assert approx(s["position"], [1.0, 2.0, 3.0]) and s["radius"] == pytest.approx(1.0)
+    assert approx(s["intensity"], [16.0 * math.pi * 1.0] * 3)
+
+
+def test_blender_point_light_is_power_over_4pi(tmp_path):
+    """Blender writes a point light of power P as intensity P/pi, normalize 1, treatAsPoint:
+    UsdLux then gives P/(4 pi) W/sr, Cycles' intensity. Both conventions agree."""
+    stage, path = make_stage(tmp_path)
+    stage.GetRootLayer().documentation = "Blender v5.0.1"
+    P = 100.0
+    l = _light(stage, UsdLux.SphereLight, "/L/lamp", intensity=P / math.pi, normalize=True, ct_on=True, ct=6500.0)
+    l.CreateRadiusAttr().Set(0.1)
+    l.CreateTreatAsPointAttr().Set(True)
+    stage.Save()
+    for conv in ("auto", "usdlux", "blender"):
+        sc = S.read_stage(path, light_convention=conv)
+        assert approx(_by_path(sc, "/L/lamp").json["intensity"], [P / (4 * math.pi)] * 3, rel=1e-6)
+    assert S.read_stage(path).light_convention == "blender"
+
+
+def test_dome_light_colour_and_texture(tmp_path):
+    stage, path = make_stage(tmp_path)
+    _light(stage, UsdLux.DomeLight, "/L/sky", intensity=0.5, exposure=2.0, color=Gf.Vec3f(0.2, 0.4, 1.0),
+           normalize=True)
+    stage.Save()
+    sc = S.read_stage(path)
+    d = _by_path(sc, "/L/sky").json
+    assert d == {"type": "dome", "color": pytest.approx([0.4, 0.8, 2.0])}  # normalize ignored for domes
+
+
+def test_colour_temperature(tmp_path):
+    stage, path = make_stage(tmp_path)
+    _light(stage, UsdLux.DistantLight, "/L/d65", intensity=1.0, ct_on=True, ct=6500.0).CreateAngleAttr().Set(0.0)
+    _light(stage, UsdLux.DistantLight, "/L/warm", intensity=1.0, ct_on=True, ct=3000.0).CreateAngleAttr().Set(0.0)
+    _light(stage, UsdLux.DistantLight, "/L/off", intensity=1.0, ct_on=False, ct=3000.0).CreateAngleAttr().Set(0.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    assert approx(_by_path(sc, "/L/d65").json["irradiance"], [1.0, 1.0, 1.0], rel=1e-6)
+    w = UsdLux.BlackbodyTemperatureAsRgb(3000.0)
+    ref = UsdLux.BlackbodyTemperatureAsRgb(6500.0)
+    warm = _by_path(sc, "/L/warm").json["irradiance"]
+    assert approx(warm, [w[i] / ref[i] for i in range(3)], rel=1e-6)
+    assert warm[0] > 1.0 > warm[2]
+    assert approx(_by_path(sc, "/L/off").json["irradiance"], [1.0, 1.0, 1.0])
+
+
+def test_unsupported_lights_warn_by_name(tmp_path):
+    stage, path = make_stage(tmp_path)
+    UsdLux.RectLight.Define(stage, "/L/rect")
+    UsdLux.DiskLight.Define(stage, "/L/disk")
+    UsdLux.CylinderLight.Define(stage, "/L/tube")
+    _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    assert [l.path for l in sc.lights] == ["/L/sun"]
+    for p, t in (("/L/rect", "RectLight"), ("/L/disk", "DiskLight"), ("/L/tube", "CylinderLight")):
+        assert any(p in w and t in w and "not supported" in w for w in sc.warnings), sc.warnings
+
+
+def test_pop_warns_about_point_and_dome(tmp_path):
+    stage, path = make_stage(tmp_path)
+    _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
+    _light(stage, UsdLux.SphereLight, "/L/lamp", intensity=1.0)
+    _light(stage, UsdLux.DomeLight, "/L/sky", intensity=1.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    ws = R.solver_warnings(sc, "pop")
+    assert len(ws) == 2 and any("/L/lamp" in w for w in ws) and any("/L/sky" in w for w in ws)
+    assert R.solver_warnings(sc, "reference") == []
+
+
+# ------------------------------------------------------------------------------------------------
+# world: transforms, metersPerUnit, upAxis
+
+def test_volume_transform_and_meters_per_unit(tmp_path):
+    stage, path = make_stage(tmp_path, mpu=0.01)
+    vol = stage.GetPrimAtPath("/World/Smoke")
+    UsdGeom.Xformable(vol).AddTranslateOp().Set(Gf.Vec3d(100, 200, 300))
+    UsdGeom.Xformable(vol).AddScaleOp().Set(Gf.Vec3f(2, 2, 2))
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World/Cam")).AddTranslateOp().Set(Gf.Vec3d(0, -600, 0))
+    l = _light(stage, UsdLux.SphereLight, "/L/lamp", intensity=4.0, normalize=True)
+    UsdGeom.Xformable(l).AddTranslateOp().Set(Gf.Vec3d(0, 0, 500))
+    l.CreateRadiusAttr().Set(10.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    assert sc.meters_per_unit == pytest.approx(0.01)
+    m = sc.volumes[0].object_to_world
+    assert m == pytest.approx([0.02, 0, 0, 1.0, 0, 0.02, 0, 2.0, 0, 0, 0.02, 3.0, 0, 0, 0, 1])
+    assert approx(sc.camera.position, [0.0, -6.0, 0.0])
+    lamp = _by_path(sc, "/L/lamp").json
+    assert approx(lamp["position"], [0.0, 0.0, 5.0]) and lamp["radius"] == pytest.approx(0.1)
+    assert approx(lamp["intensity"], [1.0] * 3)  # normalized: independent of size and units
+
+
+def test_y_up_stage_is_turned_to_z_up(tmp_path):
+    stage, path = make_stage(tmp_path, up="Y")
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World/Cam")).AddTranslateOp().Set(Gf.Vec3d(0, 0, 5))  # looks down -Z
+    sun = _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
+    UsdGeom.Xformable(sun).AddRotateXOp().Set(-90.0)  # -Z -> -Y: straight down in a Y-up world
+    stage.Save()
+    sc = S.read_stage(path)
+    assert sc.up_axis == "Y"
+    assert approx(sc.camera.position, [0.0, -5.0, 0.0], abs_=1e-9)
+    fwd = [sc.camera.look_at[i] - sc.camera.position[i] for i in range(3)]
+    assert approx(fwd, [0.0, 1.0, 0.0], abs_=1e-9)
+    assert approx(sc.camera.up, [0.0, 0.0, 1.0], abs_=1e-9)
+    assert approx(_by_path(sc, "/L/sun").json["direction"], [0.0, 0.0, -1.0], abs_=1e-6)
+    m = sc.volumes[0].object_to_world  # (x, y, z) -> (x, -z, y)
+    assert m == pytest.approx([1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1])
+
+
+def test_volume_transform_at_time_code(tmp_path):
+    stage, path = make_stage(tmp_path)
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Smoke")).AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 0), 1.0)
+    op.Set(Gf.Vec3d(10, 0, 0), 11.0)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(11)
+    stage.Save()
+    assert S.read_stage(path).volumes[0].object_to_world[3] == pytest.approx(0.0)  # start time code
+    assert S.read_stage(path, time=6).volumes[0].object_to_world[3] == pytest.approx(5.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# medium parameters, fields
+
+def test_medium_from_attributes_options_defaults(tmp_path):
+    stage, path = make_stage(tmp_path)
+    prim = stage.GetPrimAtPath("/World/Smoke")
+    prim.CreateAttribute("volscatter:densityScale", Sdf.ValueTypeNames.Float).Set(12.5)
+    prim.CreateAttribute("volscatter:albedo", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.9, 0.8, 0.7))
+    stage.Save()
+    sc = S.read_stage(path, medium_defaults={"density_scale": 3.0, "albedo": 0.5, "g": 0.4})
+    m = sc.volumes[0].medium
+    assert m.density_scale == [12.5] * 3 and m.albedo == pytest.approx([0.9, 0.8, 0.7]) and m.g == pytest.approx(0.4)
+    assert m.source == {"density_scale": "attribute volscatter:densityScale", "albedo": "attribute volscatter:albedo",
+                        "g": "option"}
+    prim.CreateAttribute("volscatter:g", Sdf.ValueTypeNames.Float).Set(1.5)
+    stage.Save()
+    with pytest.raises(VolscatterError, match="g = 1.5"):
+        S.read_stage(path)
+
+
+def test_field_selection_and_bad_fields(tmp_path):
+    stage, path = make_stage(tmp_path, vdb=TWO_GRIDS)
+    f = UsdVol.OpenVDBAsset(stage.GetPrimAtPath("/World/Smoke/density"))
+    f.CreateFieldIndexAttr().Set(0)
+    stage.Save()
+    assert S.read_stage(path).volumes[0].field_name == "density"
+    f.GetFieldIndexAttr().Set(1)
+    stage.Save()
+    with pytest.raises(VolscatterError, match="fieldIndex 1 out of range"):
+        S.read_stage(path)
+    f.GetFieldIndexAttr().Clear()
+    f.GetFieldNameAttr().Set("velocity")
+    stage.Save()
+    with pytest.raises(VolscatterError, match="float grid"):
+        S.read_stage(path)
+    f.GetFieldNameAttr().Set("temperature")
+    stage.Save()
+    with pytest.raises(VolscatterError, match=r"'temperature' is not a grid .*density \(Tree_float_5_4_3\), velocity"):
+        S.read_stage(path)
+
+
+def test_time_sampled_file_path(tmp_path):
+    stage, path = make_stage(tmp_path)
+    shutil.copy(MINI, tmp_path / "vol" / "e.vdb")
+    fp = UsdVol.OpenVDBAsset(stage.GetPrimAtPath("/World/Smoke/density")).GetFilePathAttr()
+    fp.Clear()
+    fp.Set(Sdf.AssetPath("./vol/d.vdb"), 1.0)
+    fp.Set(Sdf.AssetPath("./vol/e.vdb"), 2.0)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(2)
+    stage.Save()
+    assert Path(S.read_stage(path, time=1).volumes[0].vdb_path).name == "d.vdb"
+    assert Path(S.read_stage(path, time=2).volumes[0].vdb_path).name == "e.vdb"
+
+
+# ------------------------------------------------------------------------------------------------
+# bad input
+
+def test_missing_vdb(tmp_path):
+    stage, path = make_stage(tmp_path)
+    UsdVol.OpenVDBAsset(stage.GetPrimAtPath("/World/Smoke/density")).GetFilePathAttr().Set(Sdf.AssetPath("./gone.vdb"))
+    stage.Save()
+    with pytest.raises(VolscatterError, match=r"gone.vdb' not found"):
+        S.read_stage(path)
+
+
+def test_not_a_vdb(tmp_path):
+    stage, path = make_stage(tmp_path)
+    (tmp_path / "vol" / "d.vdb").write_bytes(b"this is not a vdb file")
+    with pytest.raises(VolscatterError, match="not an OpenVDB file"):
+        S.read_stage(path)
+
+
+def test_no_volume_no_camera(tmp_path):
+    stage, path = make_stage(tmp_path, with_volume=False, with_camera=False)
+    stage.Save()
+    sc = S.read_stage(path)
+    assert sc.volumes == [] and sc.camera is None
+    with pytest.raises(VolscatterError, match="no UsdVolVolume"):
+        sc.scene_json()
+
+
+def test_malformed_and_missing_stage(tmp_path):
+    bad = tmp_path / "bad.usda"
+    bad.write_text("#usda 1.0\ndef Xform \"x\" {\n  float a = \n")
+    with pytest.raises(VolscatterError, match="cannot open stage"):
+        S.read_stage(bad)
+    with pytest.raises(VolscatterError, match="stage not found"):
+        S.read_stage(tmp_path / "nope.usda")
+
+
+def test_camera_path_errors(tmp_path):
+    stage, path = make_stage(tmp_path)
+    stage.Save()
+    with pytest.raises(VolscatterError, match=r"camera /No/Such does not exist .*cameras: /World/Cam"):
+        S.read_stage(path, camera="/No/Such")
+    with pytest.raises(VolscatterError, match="not a Camera"):
+        S.read_stage(path, camera="/World/Smoke")
+    assert S.read_stage(path, camera="/World/Cam").camera.fov_deg == pytest.approx(
+        math.degrees(2 * math.atan(36.0 / 100.0)))
+
+
+# ------------------------------------------------------------------------------------------------
+# CLI helpers
+
+def test_frame_patterns():
+    assert R.frame_path("out.####.exr", 7) == "out.0007.exr"
+    assert R.frame_path("out_{frame}.exr", 12.0) == "out_12.exr"
+    assert R.frame_path("out_{frame:03d}.exr", 5) == "out_005.exr"
+    assert C.parse_frames("1-3") == [1.0, 2.0, 3.0]
+    assert C.parse_frames("-2--1") == [-2.0, -1.0]
+    assert C.parse_frames("0-10:5") == [0.0, 5.0, 10.0]
+    with pytest.raises(VolscatterError):
+        C.parse_frames("3-1")
+    with pytest.raises(VolscatterError):
+        C.parse_frames("abc")
