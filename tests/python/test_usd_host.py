@@ -1,0 +1,338 @@
+"""USD host (issue 6/9) through libvolscatter: the ctypes binding, renders, bake, the CLI.
+
+The library comes from VOLSCATTER_LIB (default <repo>/target/release/libvolscatter.so), the
+`volscatter` CLI (for vdb-info) from VOLSCATTER_BIN; tests that need them are skipped with the
+reason when they are not built. Renders are tiny (2 shared cores).
+"""
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+FIXTURES = ROOT.parent / "shared" / "fixtures"
+BLENDER_STAGE = FIXTURES / "blender_noise_cube" / "scene.usda"
+NOISE = BLENDER_STAGE.parent / "volumes" / "Volume.vdb"
+MINI = FIXTURES / "vdb" / "mini_zip.vdb"
+SYS_PY = "/usr/bin/python3"
+
+pytest.importorskip("pxr", reason="pxr (usd-core) is not installed: pip install usd-core")
+np = pytest.importorskip("numpy")
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdVol  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "usd"))
+LIB = Path(os.environ.get("VOLSCATTER_LIB", ROOT / "target" / "release" / "libvolscatter.so"))
+os.environ["VOLSCATTER_LIB"] = str(LIB)
+if not LIB.exists():
+    pytest.skip(f"libvolscatter not built at {LIB} (cargo build --release -p volscatter --lib, or set VOLSCATTER_LIB)",
+                allow_module_level=True)
+
+import volscatter  # noqa: E402
+from volscatter import Scene, VolscatterError  # noqa: E402
+from volscatter import render as R  # noqa: E402
+from volscatter import stage as S  # noqa: E402
+
+POP_FAST = {"grid_resolution": 12, "output_resolution": 24, "max_iterations": 60}
+REF_FAST = {"spp": 2, "seed": 3, "grid_resolution": 8, "grid_spp": 4}
+
+
+def volscatter_bin():
+    b = Path(os.environ.get("VOLSCATTER_BIN", ROOT / "target" / "release" / "volscatter"))
+    if not b.exists():
+        pytest.skip(f"volscatter binary not built at {b} (cargo build --release, or set VOLSCATTER_BIN)")
+    return b
+
+
+def cli(*args, cwd=None):
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "usd"), VOLSCATTER_LIB=str(LIB))
+    return subprocess.run([sys.executable, "-m", "volscatter", *map(str, args)], capture_output=True, text=True,
+                          env=env, cwd=cwd, timeout=600)
+
+
+def make_stage(tmp_path, name="s.usda", mpu=1.0, vdb=NOISE, sun_rotate=None, exposure=None, intensity=1.0):
+    """Blender's noise cube (40^3 voxels over [-1, 1]^3 m) under a sun, seen by a camera on -Y."""
+    path = tmp_path / name
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, "Z")
+    UsdGeom.SetStageMetersPerUnit(stage, mpu)
+    (tmp_path / "vol").mkdir(exist_ok=True)
+    shutil.copy(vdb, tmp_path / "vol" / "d.vdb")
+    vol = UsdVol.Volume.Define(stage, "/World/Smoke")
+    f = UsdVol.OpenVDBAsset.Define(stage, "/World/Smoke/density")
+    f.CreateFilePathAttr().Set(Sdf.AssetPath("./vol/d.vdb"))
+    f.CreateFieldNameAttr().Set("density")
+    vol.CreateFieldRelationship("density", f.GetPath())
+    vol.GetPrim().CreateAttribute("volscatter:densityScale", Sdf.ValueTypeNames.Float).Set(5.0)
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    cam.CreateFocalLengthAttr().Set(50.0)
+    cam.CreateHorizontalApertureAttr().Set(36.0)
+    cam.CreateVerticalApertureAttr().Set(27.0)
+    x = UsdGeom.Xformable(cam)
+    x.AddTranslateOp().Set(Gf.Vec3d(0.0, -6.0 / mpu, 0.0))
+    x.AddRotateXOp().Set(90.0)
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    sun.CreateIntensityAttr().Set(intensity)
+    sun.CreateAngleAttr().Set(0.0)
+    if exposure is not None:
+        sun.CreateExposureAttr().Set(exposure)
+    if sun_rotate is not None:
+        UsdGeom.Xformable(sun).AddRotateXYZOp().Set(Gf.Vec3f(*sun_rotate))
+    stage.Save()
+    return stage, path
+
+
+# ------------------------------------------------------------------------------------------------
+# the binding
+
+def test_abi_version_and_errors():
+    assert volscatter.abi_version() == volscatter.ABI_VERSION == 1
+    assert volscatter.version().count(".") == 2
+    with Scene() as s:
+        with pytest.raises(VolscatterError) as e:
+            s.load_json({"format": 1, "medium": {"procedural": "plume", "albedo": 2.0},
+                         "camera": {"position": [0, -3, 0], "look_at": [0, 0, 0], "width": 8, "height": 8}})
+        assert "albedo" in str(e.value) and e.value.status == 5
+        with pytest.raises(VolscatterError, match="solver nope"):
+            s.set_solver("nope")
+    assert s.closed
+    s.close()  # twice is fine
+    with pytest.raises(VolscatterError, match="closed"):
+        s.light_count()
+
+
+def test_wrong_library_is_refused(tmp_path):
+    code = ("import os, sys; sys.path.insert(0, %r); os.environ['VOLSCATTER_LIB'] = %r\n"
+            "import volscatter\n"
+            "try:\n    volscatter.version()\nexcept volscatter.VolscatterError as e:\n    print('ERR', e)\n")
+    bogus = tmp_path / "libnot.so"
+    bogus.write_bytes(b"not an ELF")
+    out = subprocess.run([sys.executable, "-c", code % (str(ROOT / "usd"), str(bogus))], capture_output=True, text=True)
+    assert "ERR cannot load libvolscatter" in out.stdout, out.stderr
+
+
+def test_progress_callback_can_cancel():
+    with Scene() as s:
+        s.load_default()
+        s.set_camera([0, -4, 0], [0, 0, 0], None, 40.0, 16, 16)
+        s.set_solver("reference", {"spp": 1, "grid_resolution": 8, "grid_spp": 4})
+        calls = []
+
+        def stop(stage, f):
+            calls.append((stage, f))
+            return False
+
+        with pytest.raises(VolscatterError) as e:
+            s.solve(stop)
+        assert e.value.cancelled and calls
+
+
+# ------------------------------------------------------------------------------------------------
+# the Blender fixture renders, and matches the same scene given as JSON
+
+@pytest.mark.parametrize("solver,settings", [("reference", REF_FAST), ("pop", POP_FAST)])
+def test_fixture_renders_and_matches_scene_json(tmp_path, solver, settings):
+    out = tmp_path / f"{solver}.exr"
+    res = R.render(BLENDER_STAGE, out, png=tmp_path / f"{solver}.png", solver=solver, settings=settings,
+                   width=64, height=48)
+    assert out.stat().st_size > 1000 and (tmp_path / f"{solver}.png").read_bytes()[:4] == b"\x89PNG"
+    assert res.width == 64 and res.height == 48
+    assert 0.05 < res.mean_alpha < 1.0, res
+    assert res.mean_rgb[0] > 0
+    # the equivalent scene, written by hand from the fixture (sun strength 1 W/m^2, 0.526 deg)
+    doc = {"format": 1,
+           "medium": {"vdb": str(BLENDER_STAGE.parent / "volumes" / "Volume.vdb"), "grid": "density"},
+           "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": 1.0, "angle_deg": 0.526}],
+           "camera": {"position": [0, -6, 0], "look_at": [0, 0, 0], "up": [0, 0, 1],
+                      "fov_deg": math.degrees(2 * math.atan(0.36)), "width": 64, "height": 48}}
+    with Scene.from_json(doc) as s:
+        s.set_solver(solver, settings)
+        if solver == "reference":
+            with s.render_reference() as img:
+                direct = img.rgba()
+        else:
+            with s.solve() as r, r.composite() as img:
+                direct = img.rgba()
+    mean = direct.reshape(-1, 4).mean(axis=0)
+    assert mean == pytest.approx(res.mean_rgb + [res.mean_alpha], rel=2e-3, abs=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------
+# physics through the stage: light side, exposure, metersPerUnit
+
+def _solve_grid(path, solver="pop", settings=POP_FAST):
+    sc = S.read_stage(path)
+    with R.native_scene(sc.scene_json(width=16, height=12), solver, settings) as s, s.solve() as r:
+        return r.rgb(), r.index_to_world()
+
+
+def test_light_transform_lights_the_right_side(tmp_path):
+    # a sun rotated -90 about Y travels along +X (lit from -X); +90 travels along -X (lit from +X)
+    _, from_minus_x = make_stage(tmp_path, "a.usda", sun_rotate=(0, -90, 0))
+    _, from_plus_x = make_stage(tmp_path, "b.usda", sun_rotate=(0, 90, 0))
+    sa = S.read_stage(from_minus_x)
+    assert sa.lights[0].json["direction"] == pytest.approx([1, 0, 0], abs=1e-6)
+    ga, _ = _solve_grid(from_minus_x)
+    gb, _ = _solve_grid(from_plus_x)
+    nx = ga.shape[2]
+    lum_a = ga.sum(axis=3)
+    lum_b = gb.sum(axis=3)
+    left_a, right_a = lum_a[:, :, : nx // 2].sum(), lum_a[:, :, nx // 2:].sum()
+    left_b, right_b = lum_b[:, :, : nx // 2].sum(), lum_b[:, :, nx // 2:].sum()
+    assert left_a > 0 and left_b > 0
+    # each light makes its own side brighter relative to the other light
+    assert left_a / max(right_a, 1e-30) > left_b / max(right_b, 1e-30)
+
+
+def test_exposure_scales_exactly(tmp_path):
+    _, p0 = make_stage(tmp_path, "e0.usda", intensity=0.75)
+    _, p2 = make_stage(tmp_path, "e2.usda", intensity=0.75, exposure=2.0)
+    g0, _ = _solve_grid(p0)
+    g2, _ = _solve_grid(p2)
+    assert g0.max() > 0
+    np.testing.assert_allclose(g2, 4.0 * g0, rtol=1e-5, atol=1e-12)
+
+
+def test_meters_per_unit_scales_the_medium(tmp_path):
+    # the same stage in centimetres: everything 100 units, mpu 0.01 -> the same world
+    _, pm = make_stage(tmp_path, "m.usda")
+    stage, pc = make_stage(tmp_path, "cm.usda", mpu=0.01)
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World/Smoke")).AddScaleOp().Set(Gf.Vec3f(100, 100, 100))
+    stage.Save()
+    gm, mm = _solve_grid(pm)
+    gc, mc = _solve_grid(pc)
+    assert mc == pytest.approx(mm, rel=1e-5, abs=1e-6)
+    np.testing.assert_allclose(gc, gm, rtol=1e-4, atol=1e-9)
+    # and without the scale, the medium is 100x smaller
+    stage.GetPrimAtPath("/World/Smoke").GetAttribute("xformOp:scale").Set(Gf.Vec3f(1, 1, 1))
+    stage.Save()
+    _, ms = _solve_grid(pc)
+    assert ms[0] == pytest.approx(mm[0] * 0.01, rel=1e-5)
+
+
+# ------------------------------------------------------------------------------------------------
+# CLI: render, frames, bad input
+
+def test_cli_render_fixture(tmp_path):
+    r = cli("render", BLENDER_STAGE, "--solver", "pop", "--width", 64, "--height", 48,
+            *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []),
+            "--out", tmp_path / "f.exr", "--png", tmp_path / "f.png")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "f.exr").exists() and (tmp_path / "f.png").exists()
+    assert "64x48 with pop" in r.stderr and "%" in r.stderr  # summary line and progress bar
+
+
+def test_cli_frames_time_sampled(tmp_path):
+    stage, path = make_stage(tmp_path)
+    shutil.copy(MINI, tmp_path / "vol" / "e.vdb")
+    fp = UsdVol.OpenVDBAsset(stage.GetPrimAtPath("/World/Smoke/density")).GetFilePathAttr()
+    fp.Clear()
+    fp.Set(Sdf.AssetPath("./vol/d.vdb"), 1.0)
+    fp.Set(Sdf.AssetPath("./vol/e.vdb"), 2.0)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(2)
+    stage.Save()
+    r = cli("render", path, "--frames", "1-2", "--solver", "pop", "--width", 24, "--height", 18, "-q",
+            *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []), "--out", tmp_path / "o.####.exr")
+    assert r.returncode == 0, r.stderr
+    a, b = (tmp_path / "o.0001.exr"), (tmp_path / "o.0002.exr")
+    assert a.exists() and b.exists() and a.read_bytes() != b.read_bytes()
+    r = cli("render", path, "--frames", "1-2", "--out", tmp_path / "o.exr")
+    assert r.returncode == 1 and "needs a frame pattern" in r.stderr
+
+
+@pytest.mark.parametrize("case", ["missing_vdb", "no_volume", "malformed", "bad_camera", "missing_stage", "bad_grid"])
+def test_cli_bad_input(tmp_path, case):
+    stage, path = make_stage(tmp_path)
+    extra = []
+    expect = {"missing_vdb": "not found", "no_volume": "no UsdVolVolume", "malformed": "cannot open stage",
+              "bad_camera": "camera /Nope does not exist", "missing_stage": "stage not found",
+              "bad_grid": "is not a grid"}[case]
+    if case == "missing_vdb":
+        os.remove(tmp_path / "vol" / "d.vdb")
+    elif case == "no_volume":
+        stage.RemovePrim("/World/Smoke")
+        stage.Save()
+    elif case == "malformed":
+        path.write_text(path.read_text()[:-40] + "\n{{{ nonsense\n")
+    elif case == "bad_camera":
+        extra = ["--camera", "/Nope"]
+    elif case == "missing_stage":
+        path = tmp_path / "gone.usda"
+    elif case == "bad_grid":
+        UsdVol.OpenVDBAsset(stage.GetPrimAtPath("/World/Smoke/density")).GetFieldNameAttr().Set("temperature")
+        stage.Save()
+    for cmd in (["render", path, "--out", tmp_path / "x.exr"], ["bake", path, "--out-layer", tmp_path / "x.usda"]):
+        r = cli(*cmd, *extra, "-q")
+        assert r.returncode == 1, (case, r.stdout, r.stderr)
+        assert expect in r.stderr and "Traceback" not in r.stderr, r.stderr
+        assert not (tmp_path / "x.exr").exists()
+
+
+def test_cli_unsupported_light_warns_but_renders(tmp_path):
+    stage, path = make_stage(tmp_path)
+    UsdLux.RectLight.Define(stage, "/World/Panel")
+    UsdLux.SphereLight.Define(stage, "/World/Bulb").CreateIntensityAttr().Set(10.0)
+    stage.Save()
+    r = cli("render", path, "--solver", "pop", "--width", 16, "--height", 12, "-q",
+            *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []), "--out", tmp_path / "w.exr")
+    assert r.returncode == 0, r.stderr
+    assert "/World/Panel (RectLight) is not supported" in r.stderr
+    assert "solver pop does not handle point lights yet: light /World/Bulb" in r.stderr
+
+
+# ------------------------------------------------------------------------------------------------
+# bake
+
+def test_bake_round_trip(tmp_path):
+    out = tmp_path / "baked" / "scatter.usda"
+    r = cli("bake", BLENDER_STAGE, "--out-layer", out, "--solver", "pop", "-q",
+            *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []))
+    assert r.returncode == 0, r.stderr
+    stage = Usd.Stage.Open(str(out))
+    assert stage is not None
+    root = stage.GetRootLayer()
+    assert len(root.subLayerPaths) == 1
+    assert (out.parent / root.subLayerPaths[0]).resolve() == BLENDER_STAGE.resolve()
+    assert UsdGeom.GetStageUpAxis(stage) == "Z" and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    vol = UsdVol.Volume(stage.GetPrimAtPath("/root/Volume/Volume"))
+    fields = vol.GetFieldPaths()
+    assert set(fields) >= {"density", "scatter_r", "scatter_g", "scatter_b"}
+    vdbs = set()
+    for c in "rgb":
+        asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(fields[f"scatter_{c}"]))
+        assert asset.GetFieldNameAttr().Get() == f"scattering_{c}"
+        ap = asset.GetFilePathAttr().Get()
+        assert ap.resolvedPath and Path(ap.resolvedPath).exists()
+        vdbs.add(ap.resolvedPath)
+    [vdb] = vdbs
+    assert Path(vdb).parent == out.parent
+    # the original density field still resolves against the fixture
+    dens = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(fields["density"])).GetFilePathAttr().Get()
+    assert Path(dens.resolvedPath).exists()
+    # the emission binding
+    mat, _ = UsdShade.MaterialBindingAPI(vol.GetPrim()).ComputeBoundMaterial()
+    assert mat and mat.GetOutput("volume").HasConnectedSource()
+    # volscatter's own reader
+    info = subprocess.run([str(volscatter_bin()), "vdb-info", vdb], capture_output=True, text=True, timeout=120)
+    assert info.returncode == 0, info.stderr
+    doc = json.loads(info.stdout)
+    text = json.dumps(doc)
+    for c in "rgb":
+        assert f"scattering_{c}" in text
+    # OpenVDB itself, when installed
+    if Path(SYS_PY).exists() and subprocess.run([SYS_PY, "-c", "import pyopenvdb"]).returncode == 0:
+        code = ("import pyopenvdb as v, sys, json\n"
+                "gs = v.readAll(sys.argv[1])[0]\n"
+                "print(json.dumps({g.name: [g.activeVoxelCount(), sum(x.value * x.count for x in g.citerOnValues())]"
+                " for g in gs}))")
+        o = subprocess.run([SYS_PY, "-c", code, vdb], capture_output=True, text=True, timeout=120)
+        assert o.returncode == 0, o.stderr
+        grids = json.loads(o.stdout)
+        assert set(grids) == {"scattering_r", "scattering_g", "scattering_b"}
+        assert grids["scattering_r"][0] > 0 and grids["scattering_r"][1] > 0
