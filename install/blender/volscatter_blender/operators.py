@@ -25,7 +25,7 @@ RESULT_TAG = "volscatter_source"
 def _out_dir(settings):
     path = settings.output_dir or "//volscatter/"
     if path.startswith("//") and not bpy.data.filepath:
-        return os.path.join(tempfile.gettempdir(), "volscatter", path[2:])
+        return os.path.join(tempfile.gettempdir(), path[2:] or "volscatter")
     return os.path.normpath(bpy.path.abspath(path))
 
 
@@ -409,11 +409,6 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
                 # file number = frame - frame_start + 1 + frame_offset == frame
                 vol.frame_offset = self._frames[0] - 1
                 vol.sequence_mode = 'CLIP'
-            vol.grids.load()
-            names = [g.name for g in vol.grids]
-            if "scattering_r" not in names:
-                raise ExportError("volscatter wrote %s but Blender reads no scattering grid from it (%s)"
-                                  % (paths[0], vol.grids.error_message or "no grids"))
             mat = build_emission_material(self._name, self._grid, self._density_scale)
             created.append((bpy.data.materials, mat))
             vol.materials.append(mat)
@@ -427,6 +422,11 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
             cols = list(self._obj.users_collection) or [context.scene.collection]
             for c in cols:
                 c.objects.link(ob)
+            ev = ob.evaluated_get(context.evaluated_depsgraph_get()).data
+            names = [g.name for g in ev.grids]
+            if "scattering_r" not in names:
+                raise ExportError("volscatter wrote %s but Blender reads no scattering grid from it (%s)"
+                                  % (paths[0], ev.grids.error_message or "no grids"))
         except Exception:
             for coll, idb in reversed(created):
                 try:
@@ -473,7 +473,8 @@ class VOLSCATTER_OT_render_preview(_JobOperator, bpy.types.Operator):
         w, h, rgba = values[-1]
         try:
             import numpy as np
-            px = np.ctypeslib.as_array(rgba).reshape(h, w, 4)[::-1].ravel()
+            flipped = np.ascontiguousarray(np.ctypeslib.as_array(rgba).reshape(h, w, 4)[::-1], dtype=np.float32)
+            px = memoryview(flipped).cast('B').cast('f')  # foreach_set wants the native 'f' format
         except ImportError:
             rows = [rgba[(h - 1 - y) * w * 4:(h - y) * w * 4] for y in range(h)]
             px = [v for r in rows for v in r]

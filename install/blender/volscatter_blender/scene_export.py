@@ -130,11 +130,12 @@ def _grid_expr(link, mat, depth):
     node = link.from_node
     if depth > 8:
         raise ExportError("material '%s': density expression too deep" % mat.name)
-    if node.type == 'ATTRIBUTE' and link.from_socket.name in ("Fac", "Color"):
+    out = link.from_socket.identifier
+    if node.type == 'ATTRIBUTE' and out in ("Fac", "Color"):
         if getattr(node, "attribute_type", "GEOMETRY") not in ("GEOMETRY",):
             raise ExportError("material '%s': attribute node '%s' must be of type Geometry" % (mat.name, node.name))
         return node.attribute_name, 1.0
-    if node.type == 'VOLUME_INFO' and link.from_socket.name == "Density":
+    if node.type == 'VOLUME_INFO' and out == "Density":
         return "density", 1.0
     if node.type == 'MATH' and node.operation == 'MULTIPLY':
         a, b = node.inputs[0], node.inputs[1]

@@ -1,0 +1,436 @@
+"""The Blender add-on (install/), driven through headless `bpy` (pip install bpy==5.0.1).
+
+The extension zip is packed by install/build_extension.py around the library at
+$VOLSCATTER_LIB (default <repo>/target/release/libvolscatter.so) and installed with
+`bpy.ops.extensions.package_install_files` into a throw-away user folder, the way a user
+installs it from disk. Skipped, with the reason, when bpy cannot be imported or the library is
+not built.
+"""
+
+import ctypes
+import math
+import os
+import sys
+import tempfile
+
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+LIB = os.environ.get("VOLSCATTER_LIB") or os.path.join(REPO, "target", "release", "libvolscatter.so")
+sys.path.insert(0, os.path.join(REPO, "install"))
+
+if not os.path.isfile(LIB):
+    pytest.skip("libvolscatter not built (%s); run cargo build --release -p volscatter --lib or set VOLSCATTER_LIB"
+                % LIB, allow_module_level=True)
+try:
+    _probe = ctypes.CDLL(LIB)
+    _probe.vs_version
+    _probe.vs_result_write_grid
+except (OSError, AttributeError) as e:
+    pytest.skip("%s is not a usable libvolscatter with the C ABI (%s); rebuild it" % (LIB, e),
+                allow_module_level=True)
+
+# Extensions install into the user resource folder: keep it out of $HOME. Must precede `import bpy`.
+_USER = tempfile.mkdtemp(prefix="volscatter-blender-user-")
+os.environ["BLENDER_USER_RESOURCES"] = _USER
+
+bpy = pytest.importorskip("bpy", reason="bpy (pip install bpy==5.0.1, Python 3.11) is not importable")
+import addon_utils  # noqa: E402  (part of bpy)
+
+import blender_scenes as bs  # noqa: E402
+import build_extension  # noqa: E402
+
+MODULE = "bl_ext.user_default.volscatter_blender"
+SCATTER_GRIDS = ("scattering_r", "scattering_g", "scattering_b")
+
+
+# ---------------------------------------------------------------------------------------------
+# fixtures
+
+
+@pytest.fixture(scope="module")
+def zip_path(tmp_path_factory):
+    return build_extension.pack(LIB, str(tmp_path_factory.mktemp("dist")))
+
+
+@pytest.fixture(scope="module")
+def installed(zip_path):
+    r = bpy.ops.extensions.package_install_files(filepath=zip_path, repo='user_default', enable_on_install=True)
+    assert r == {'FINISHED'}
+    assert MODULE in bpy.context.preferences.addons.keys(), "extension installed but not enabled"
+    root = os.path.join(_USER, "extensions", "user_default", "volscatter_blender")
+    assert os.path.isfile(os.path.join(root, "lib", build_extension.library_name()))
+    return root
+
+
+@pytest.fixture
+def fresh(installed, tmp_path):
+    """An empty scene (Cycles) with the installed add-on enabled and output in tmp_path."""
+    bs.reset()
+    # read_factory_settings resets the preferences, which disables the extension: enable it again
+    addon_utils.enable(MODULE, default_set=True)
+    assert hasattr(bpy.types.Object, "volscatter")
+    yield tmp_path
+    bs.reset()
+
+
+def _run(op, ob, **settings):
+    for k, v in settings.items():
+        setattr(ob.volscatter, k, v)
+    bpy.context.view_layer.objects.active = ob
+    with bpy.context.temp_override(object=ob, active_object=ob):
+        return op()
+
+
+def _tiny(ob, out, solver="reference"):
+    s = ob.volscatter
+    s.solver = solver
+    s.quality = 'CUSTOM'
+    s.grid_resolution = 10
+    s.samples = 24
+    s.iterations = 60
+    s.output_dir = str(out)
+
+
+def _datablocks():
+    return {k: set(getattr(bpy.data, k).keys()) for k in
+            ("objects", "volumes", "materials", "node_groups", "images", "meshes")}
+
+
+def _native():
+    return sys.modules[MODULE + ".native"]
+
+
+# ---------------------------------------------------------------------------------------------
+# packaging
+
+
+def test_zip_layout_and_manifest(zip_path):
+    import zipfile
+    with zipfile.ZipFile(zip_path) as z:
+        names = set(z.namelist())
+        man = z.read("blender_manifest.toml").decode()
+    for f in ("__init__.py", "operators.py", "panel.py", "scene_export.py", "native.py",
+              "lib/" + build_extension.library_name()):
+        assert f in names
+    assert not any("__pycache__" in n for n in names)
+    version = build_extension.workspace_version()
+    assert 'version = "%s"' % version in man
+    assert 'id = "volscatter_blender"' in man
+    assert 'platforms = ["%s"]' % build_extension.blender_platform() in man
+    assert 'blender_version_min = "4.2.0"' in man
+    assert os.path.basename(zip_path) == "volscatter-%s-%s.zip" % (version, build_extension.blender_platform())
+
+
+def test_library_loaded_lazily_from_the_extension(installed, fresh):
+    native = _native()
+    # registration alone does not load the library
+    bs.standard_scene()
+    assert os.path.dirname(native.library_candidates()[-1]) == os.path.join(installed, "lib")
+    assert native.version().count(".") == 2
+
+
+def test_native_cancel_and_errors(installed, fresh):
+    native = _native()
+    with pytest.raises(native.VolscatterError) as e:
+        native.Scene.from_json({"format": 1, "medium": {"vdb": "/nonexistent.vdb"}})
+    assert "nonexistent" in str(e.value) or e.value.status_name in ("IO", "INVALID_SCENE")
+    doc = {"format": 1, "medium": {"procedural": "plume", "dims": [8]},
+           "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": [1, 1, 1]}],
+           "camera": {"position": [0, -6, 0], "look_at": [0, 0, 0], "width": 8, "height": 8},
+           "solver": {"name": "reference", "grid_resolution": 6, "grid_spp": 4}}
+    calls = []
+    with native.Scene.from_json(doc) as sc:
+        with pytest.raises(native.Cancelled):
+            sc.solve(lambda stage, f: calls.append(stage) and False)
+        assert calls, "the progress callback was never called"
+        with sc.solve() as r:
+            assert all(d > 0 for d in r.dims())
+
+
+# ---------------------------------------------------------------------------------------------
+# scene export (units, camera)
+
+
+def test_export_lights_camera_material(fresh):
+    se = sys.modules[MODULE + ".scene_export"]
+    ob = bs.noise_volume(res=6)
+    bs.scatter_absorb_material(ob, density=4.0, albedo=(0.8, 0.6, 0.4), g=0.3)
+    s = bs.sun(strength=3.0, rotation=(0.0, 0.0, 0.0))
+    s.data.color = (1.0, 0.5, 0.25)
+    s.data.angle = math.radians(2.0)
+    p = bs.point(power=100.0, location=(1.0, 2.0, 3.0))
+    p.data.shadow_soft_size = 0.25
+    spot = bpy.data.lights.new("Spot", 'SPOT')
+    bs._link(bpy.data.objects.new("Spot", spot))
+    world = bpy.data.worlds.new("W")
+    bpy.context.scene.world = world
+    if not world.node_tree:
+        world.use_nodes = True
+    bg = world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (0.2, 0.3, 0.5, 1.0)
+    bg.inputs["Strength"].default_value = 2.0
+    cam = bs.camera(width=30, height=60)  # portrait
+    cam.data.sensor_fit = 'AUTO'
+    cam.data.lens = 50.0
+    cam.data.sensor_width = 36.0
+    doc, warnings, generated = se.export(bpy.context, ob, str(fresh), 1)
+    assert len(generated) == 1 and os.path.isfile(generated[0])
+    m = doc["medium"]
+    assert m["grid"] == "density"
+    assert m["density_scale"] == pytest.approx([4.0] * 3)
+    assert m["albedo"] == pytest.approx([0.8, 0.6, 0.4])
+    assert m["g"] == pytest.approx(0.3)
+    lights = {l["type"]: l for l in doc["lights"]}
+    assert lights["distant"]["direction"] == pytest.approx([0, 0, -1], abs=1e-6)
+    assert lights["distant"]["irradiance"] == pytest.approx([3.0, 1.5, 0.75])
+    assert lights["distant"]["angle_deg"] == pytest.approx(2.0)
+    assert lights["point"]["intensity"] == pytest.approx([100 / (4 * math.pi)] * 3)
+    assert lights["point"]["position"] == pytest.approx([1, 2, 3])
+    assert lights["point"]["radius"] == pytest.approx(0.25)
+    assert lights["dome"]["color"] == pytest.approx([0.4, 0.6, 1.0])
+    assert any("Spot" in w and "not supported" in w for w in warnings)
+    c = doc["camera"]
+    assert (c["width"], c["height"]) == (30, 60)
+    # AUTO fit on a portrait frame: the 36 mm sensor spans the height
+    vfov = 2 * math.atan(18.0 / 50.0)
+    assert c["fov_deg"] == pytest.approx(math.degrees(2 * math.atan(math.tan(vfov / 2) * 0.5)), rel=1e-5)
+    assert bs.angle_between([c["look_at"][i] - c["position"][i] for i in range(3)],
+                            [-c["position"][i] for i in range(3)]) < 1e-3
+    cam.data.sensor_fit = 'HORIZONTAL'
+    doc, _, _ = se.export(bpy.context, ob, str(fresh), 1)
+    assert doc["camera"]["fov_deg"] == pytest.approx(math.degrees(vfov), rel=1e-5)
+
+
+def test_export_principled_volume(fresh):
+    se = sys.modules[MODULE + ".scene_export"]
+    ob = bs.noise_volume(res=6)
+    mat = bs.principled_material(ob, density=2.0, color=(0.5, 0.5, 0.5))
+    mat.node_tree.nodes["Principled Volume"].inputs["Absorption Color"].default_value = (0.25, 0.25, 0.25, 1)
+    bs.sun()
+    bs.camera()
+    doc, _, _ = se.export(bpy.context, ob, str(fresh), 1)
+    # sigma_s = 0.5 * 2, sigma_a = (1 - 0.5) * (1 - sqrt(0.25)) * 2 = 0.5
+    assert doc["medium"]["density_scale"] == pytest.approx([1.5] * 3)
+    assert doc["medium"]["albedo"] == pytest.approx([1.0 / 1.5] * 3)
+
+
+# ---------------------------------------------------------------------------------------------
+# Compute Scattering
+
+
+def _check_result(res, source, grid="density", expect_density_grid=True):
+    assert res is not None and res.type == 'VOLUME'
+    assert res.get("volscatter_source") == source.name
+    dg = bpy.context.evaluated_depsgraph_get()
+    names = [g.name for g in res.evaluated_get(dg).data.grids]
+    for n in SCATTER_GRIDS:
+        assert n in names
+    if expect_density_grid:
+        assert grid in names, "the density grid for extinction was not copied onto the result"
+    # material: Output.Volume <- Add(Emission(Combine(scattering_r, _g, _b)), Absorption(density))
+    mat = res.active_material or res.data.materials[0]
+    nt = mat.node_tree
+    out = [n for n in nt.nodes if n.type == 'OUTPUT_MATERIAL'][0]
+    add = out.inputs["Volume"].links[0].from_node
+    assert add.type == 'ADD_SHADER'
+    kinds = {l.from_node.type: l.from_node for s in add.inputs for l in s.links}
+    em, ab = kinds['EMISSION'], kinds['VOLUME_ABSORPTION']
+    assert em.inputs["Strength"].default_value == pytest.approx(1.0)
+    comb = em.inputs["Color"].links[0].from_node
+    assert comb.type == 'COMBINE_COLOR'
+    assert [comb.inputs[i].links[0].from_node.attribute_name for i in range(3)] == list(SCATTER_GRIDS)
+    mul = ab.inputs["Density"].links[0].from_node
+    assert mul.inputs[0].links[0].from_node.attribute_name == grid
+    return names
+
+
+def test_compute_scattering_geometry_nodes_volume(fresh):
+    ob = bs.standard_scene(res=12)
+    _tiny(ob, fresh)
+    ob.volscatter.hide_original = False
+    before = _datablocks()
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    res = bpy.data.objects.get("Smoke_scattering")
+    _check_result(res, ob)
+    assert res.data.filepath == os.path.join(str(fresh), "Smoke_scattering_0001.vdb")
+    assert os.path.isfile(res.data.filepath)
+    assert _datablocks()["objects"] - before["objects"] == {"Smoke_scattering"}
+    # values, sampled through Blender's own reading of the written VDB
+    inside = bs.lattice((-0.8, -0.8, -0.8), (0.8, 0.8, 0.8), 5)
+    outside = [(3.0, 0.0, 0.0), (0.0, 0.0, 3.5), (-2.5, 2.5, 0.0)]
+    s = bs.sample_grids(res, list(SCATTER_GRIDS), inside + outside)
+    d = bs.sample_grids(ob, ["density"], inside + outside)["density"]
+    vals = [s[n] for n in SCATTER_GRIDS]
+    assert all(v is not None for v in vals)
+    for ch in vals:
+        assert all(math.isfinite(x) and x >= 0.0 for x in ch)
+    lum_in = [sum(ch[i] for ch in vals) for i in range(len(inside))]
+    dense = [i for i in range(len(inside)) if d[i] > 0.3]
+    assert len(dense) > 10, "test scene too thin"
+    lit = [i for i in dense if lum_in[i] > 0.0]
+    assert len(lit) >= 0.8 * len(dense), "scattering is zero at %d of %d dense points" % (len(dense) - len(lit), len(dense))
+    for i in range(len(inside), len(inside) + len(outside)):
+        assert sum(ch[i] for ch in vals) == 0.0 and d[i] == 0.0
+
+
+def test_cycles_renders_the_emission(fresh):
+    ob = bs.standard_scene(res=10)
+    _tiny(ob, fresh)
+    ob.volscatter.hide_original = True
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    assert ob.hide_render
+    res = bpy.data.objects["Smoke_scattering"]
+    # hiding the original must not take the density away from the result
+    _check_result(res, ob)
+    # no world, original hidden: only the scattering volume's emission can light pixels
+    for light in [o for o in bpy.data.objects if o.type == 'LIGHT']:
+        light.hide_render = True
+    w, h, px = bs.render_cycles(str(fresh / "with.exr"), samples=4)
+    rgb_with = sum(px[i] for i in range(len(px)) if i % 4 != 3)
+    res.hide_render = True
+    _, _, px0 = bs.render_cycles(str(fresh / "without.exr"), samples=4)
+    rgb_without = sum(px0[i] for i in range(len(px0)) if i % 4 != 3)
+    assert rgb_without == 0.0
+    assert rgb_with > 0.0 and math.isfinite(rgb_with), "the scattering emission is not visible in Cycles"
+
+
+def test_usd_exported_vdb(fresh):
+    gen = bs.noise_volume(name="Gen", res=10)
+    usd = str(fresh / "scene.usda")
+    bpy.ops.wm.usd_export(filepath=usd, export_volumes=True, selected_objects_only=False)
+    vdbs = [os.path.join(r, f) for r, _, fs in os.walk(str(fresh)) for f in fs if f.endswith(".vdb")]
+    assert vdbs, "USD export wrote no VDB"
+    bpy.data.objects.remove(gen)
+    ob = bs.file_volume("FromUSD", vdbs[0])
+    bs.scatter_absorb_material(ob, density=3.0)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh / "out")
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    res = bpy.data.objects["FromUSD_scattering"]
+    _check_result(res, ob)
+    # a file-backed volume is read in place, not written out again
+    assert not [f for f in os.listdir(str(fresh / "out")) if "_input_" in f]
+
+
+def test_frame_range_pop(fresh):
+    ob = bs.noise_volume(res=8)
+    bs.principled_material(ob)
+    bs.sun()
+    bs.camera()
+    # animate the volume so the frames differ
+    ob.location = (0, 0, 0)
+    ob.keyframe_insert("location", frame=1)
+    ob.location = (0.3, 0, 0)
+    ob.keyframe_insert("location", frame=2)
+    _tiny(ob, fresh, solver="pop")
+    s = ob.volscatter
+    s.use_frame_range, s.frame_start, s.frame_end = True, 1, 2
+    bpy.context.scene.frame_set(1)
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    assert bpy.context.scene.frame_current == 1
+    res = bpy.data.objects["Smoke_scattering"]
+    vol = res.data
+    files = sorted(f for f in os.listdir(str(fresh)) if f.startswith("Smoke_scattering_"))
+    assert files == ["Smoke_scattering_0001.vdb", "Smoke_scattering_0002.vdb"]
+    assert vol.is_sequence and vol.frame_duration == 2
+    for frame in (1, 2):
+        bpy.context.scene.frame_set(frame)
+        dg = bpy.context.evaluated_depsgraph_get()
+        ev = res.evaluated_get(dg).data
+        assert ev.grids.frame_filepath.endswith("Smoke_scattering_%04d.vdb" % frame)
+        assert "scattering_r" in [g.name for g in ev.grids]
+
+
+def test_render_preview(fresh):
+    ob = bs.standard_scene(res=10)
+    _tiny(ob, fresh)
+    assert _run(bpy.ops.volscatter.render_preview, ob) == {'FINISHED'}
+    img = bpy.data.images["volscatter Preview"]
+    assert tuple(img.size) == (32, 24)
+    px = list(img.pixels)
+    assert all(math.isfinite(v) for v in px)
+    alpha = px[3::4]
+    assert max(alpha) > 0.0 and min(v for v in px) >= 0.0
+    assert sum(px[0::4]) > 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# bad input: an error report, nothing created, no files left
+
+
+def _expect_error(ob, out, fragment):
+    before = _datablocks()
+    with pytest.raises(RuntimeError) as e:  # bpy.ops turns an ERROR report into RuntimeError
+        _run(bpy.ops.volscatter.compute_scattering, ob)
+    assert fragment in str(e.value), str(e.value)
+    assert _datablocks() == before
+    assert not os.path.isdir(str(out)) or not [f for f in os.listdir(str(out)) if f.endswith(".vdb")]
+    assert not ob.hide_render
+    return str(e.value)
+
+
+def test_error_volume_without_vdb(fresh):
+    vol = bpy.data.volumes.new("Empty")
+    ob = bs._link(bpy.data.objects.new("Empty", vol))
+    bs.principled_material(ob)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh)
+    _expect_error(ob, fresh, "no VDB file")
+
+
+def test_error_unreadable_vdb(fresh, tmp_path):
+    bad = tmp_path / "broken.vdb"
+    bad.write_bytes(b"this is not an OpenVDB file" * 10)
+    ob = bs.file_volume("Broken", str(bad))
+    bs.principled_material(ob)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh / "out")
+    _expect_error(ob, fresh / "out", "Broken")
+
+
+def test_error_missing_vdb_file(fresh):
+    ob = bs.file_volume("Missing", str(fresh / "nowhere.vdb"))
+    bs.principled_material(ob)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh / "out")
+    _expect_error(ob, fresh / "out", "does not exist")
+
+
+def test_error_uninterpretable_material(fresh):
+    ob = bs.noise_volume(res=6)
+    bs.textured_material(ob)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh)
+    msg = _expect_error(ob, fresh, "driven by a node")
+    assert "Noise Texture" in msg
+
+
+def test_error_no_material(fresh):
+    ob = bs.noise_volume(res=6)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh)
+    _expect_error(ob, fresh, "no material")
+
+
+def test_error_no_camera(fresh):
+    ob = bs.noise_volume(res=6)
+    bs.principled_material(ob)
+    bs.sun()
+    _tiny(ob, fresh)
+    _expect_error(ob, fresh, "no active camera")
+
+
+def test_error_pop_without_sun(fresh):
+    ob = bs.noise_volume(res=6)
+    bs.principled_material(ob)
+    bs.point()
+    bs.camera()
+    _tiny(ob, fresh, solver="pop")
+    _expect_error(ob, fresh, "sun lights only")
