@@ -433,3 +433,39 @@ def test_frame_patterns():
         C.parse_frames("3-1")
     with pytest.raises(VolscatterError):
         C.parse_frames("abc")
+
+
+def _fake_exr_header(path, w, h):
+    """An OpenEXR header with just a data window (exr_size reads no more; no pixels are read)."""
+    import struct
+    attr = b"dataWindow\0box2i\0" + struct.pack("<i", 16) + struct.pack("<4i", 0, 0, w - 1, h - 1)
+    path.write_bytes(b"\x76\x2f\x31\x01" + struct.pack("<I", 2) + attr + b"\0")
+
+
+def test_dome_texture_orientation(tmp_path):
+    stage, path = make_stage(tmp_path)
+    _fake_exr_header(tmp_path / "sky.exr", 8, 4)
+    _fake_exr_header(tmp_path / "flat.exr", 1, 1)
+    assert S.exr_size(tmp_path / "sky.exr") == (8, 4)
+    ok = UsdLux.DomeLight.Define(stage, "/L/aligned")
+    ok.CreateTextureFileAttr().Set(Sdf.AssetPath("./sky.exr"))
+    UsdGeom.Xformable(ok).AddRotateXYZOp().Set(Gf.Vec3f(90, 0, 90))  # USD lat-long -> volscatter's
+    bad = UsdLux.DomeLight.Define(stage, "/L/unrotated")
+    bad.CreateTextureFileAttr().Set(Sdf.AssetPath("./sky.exr"))
+    bad.CreateIntensityAttr().Set(2.0)
+    bad.CreateColorAttr().Set(Gf.Vec3f(1.0, 0.5, 1.0))
+    flat = UsdLux.DomeLight.Define(stage, "/L/flat")
+    flat.CreateTextureFileAttr().Set(Sdf.AssetPath("./flat.exr"))
+    stage.Save()
+    sc = S.read_stage(path)
+    orient = [w for w in sc.warnings if "orientation" in w]
+    assert len(orient) == 1 and "/L/unrotated" in orient[0]
+    j = _by_path(sc, "/L/unrotated").json
+    assert j["intensity"] == pytest.approx(2.0) and j["color"] == pytest.approx([1.0, 0.5, 1.0])
+    assert Path(j["texture"]) == (tmp_path / "sky.exr").resolve()
+    # Blender's convention: its unrotated dome holds a map in Blender's (= volscatter's) layout
+    assert not [w for w in S.read_stage(path, light_convention="blender").warnings if "orientation" in w]
+    UsdLux.DomeLight.Define(stage, "/L/missing").CreateTextureFileAttr().Set(Sdf.AssetPath("./nope.exr"))
+    stage.Save()
+    with pytest.raises(VolscatterError, match="nope.exr' not found"):
+        S.read_stage(path)

@@ -623,7 +623,9 @@ class _Reader:
                 self.warnings.append(f"dome light {prim.GetPath()}: texture format {fmt} is read as lat-long")
             tint = [rgb[i] / intensity if intensity else 0.0 for i in range(3)]
             size = exr_size(resolved)
-            if size != (1, 1) and not self._dome_matches_latlong(prim):
+            # Blender writes its world texture (in Blender's equirectangular layout, which is
+            # volscatter's) on an unrotated DomeLight: taken as is under Blender's convention.
+            if size != (1, 1) and self.light_convention != "blender" and not self._dome_matches_latlong(prim):
                 self.warnings.append(
                     f"dome light {prim.GetPath()}: its orientation differs from volscatter's lat-long convention "
                     "(Z up, u = 0.5 - atan2(y, x) / 2pi); the map is used unrotated")
