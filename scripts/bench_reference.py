@@ -22,6 +22,7 @@ import datetime
 import json
 import os
 import platform
+import resource
 import subprocess
 import sys
 import tempfile
@@ -45,8 +46,14 @@ def render_default(workdir: Path, spp: int, seed: int) -> tuple[np.ndarray, dict
     out, report = workdir / f"default_{spp}_{seed}.exr", workdir / f"default_{spp}_{seed}.json"
     cmd = [str(ms.volscatter_bin()), "render", "--solver", "reference", "--out", str(out),
            "--spp", str(spp), "--seed", str(seed), "--report", str(report), "-q"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True)
-    return ms.read_exr_rgb(out), json.loads(report.read_text())
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    rep = json.loads(report.read_text())
+    # CPU seconds of the whole process (load, path tracing, write): with other work on the
+    # machine, wall-clock times stretch but CPU time does not (much).
+    rep["cpu_seconds"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return ms.read_exr_rgb(out), rep
 
 
 def machine_info() -> str:
@@ -67,8 +74,9 @@ def machine_info() -> str:
     mi = ms.import_mitsuba()
     mver = mi.__version__ if mi else "not installed"
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    load = "/".join(f"{x:.1f}" for x in os.getloadavg())
     return (f"{date}; {cores} cores ({cpu}); {platform.system()} {platform.machine()}; "
-            f"commit {commit}; Mitsuba {mver}")
+            f"commit {commit}; Mitsuba {mver}; load average at start {load}")
 
 
 def bench_throughput(workdir: Path, spp: int) -> dict:
@@ -76,8 +84,11 @@ def bench_throughput(workdir: Path, spp: int) -> dict:
     _, rep = render_default(workdir, spp, seed=100)
     w, h = rep["width"], rep["height"]
     secs = rep["phases_seconds"]["path tracing"]
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {"width": w, "height": h, "spp": spp, "seconds": secs, "threads": rep.get("threads"),
-            "paths_per_s": w * h * spp / secs, "total_seconds": rep["total_seconds"]}
+            "paths_per_s": w * h * spp / secs, "total_seconds": rep["total_seconds"],
+            "cpu_seconds": rep["cpu_seconds"], "cores": cores,
+            "paths_per_cpu_s": w * h * spp / rep["cpu_seconds"]}
 
 
 def bench_convergence(workdir: Path, ref_spp: int, spps: list[int]) -> dict:
@@ -87,6 +98,9 @@ def bench_convergence(workdir: Path, ref_spp: int, spps: list[int]) -> dict:
     norm = np.linalg.norm(ref)
     ref_noise = np.linalg.norm(r1 - r2) / (2 * norm)
     sec_per_spp = (rep1["phases_seconds"]["path tracing"] + rep2["phases_seconds"]["path tracing"]) / (2 * ref_spp)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    # Seconds per spp on otherwise idle cores: process CPU time spread over all cores.
+    free_sec_per_spp = (rep1["cpu_seconds"] + rep2["cpu_seconds"]) / (2 * ref_spp) / cores
     rows = []
     for i, spp in enumerate(spps):
         log(f"convergence: {spp} spp")
@@ -105,7 +119,14 @@ def bench_convergence(workdir: Path, ref_spp: int, spps: list[int]) -> dict:
     spp_1pct = float(np.exp(2 * (log_c - np.log(0.01))))
     return {"ref_spp": 2 * ref_spp, "ref_noise": float(ref_noise), "rows": rows,
             "slope": float(slope), "c": float(np.exp(log_c)), "spp_1pct": spp_1pct,
-            "sec_per_spp": sec_per_spp, "seconds_1pct": spp_1pct * sec_per_spp}
+            "sec_per_spp": sec_per_spp, "seconds_1pct": spp_1pct * sec_per_spp,
+            "free_sec_per_spp": free_sec_per_spp, "free_seconds_1pct": spp_1pct * free_sec_per_spp,
+            "cores": cores}
+
+
+def cpu_seconds(who) -> float:
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
 
 
 def bench_mitsuba(workdir: Path, spp_scale: float) -> list[dict] | str:
@@ -116,15 +137,16 @@ def bench_mitsuba(workdir: Path, spp_scale: float) -> list[dict] | str:
         spp_o = max(1, int(spec.spp_ours * spp_scale))
         spp_m = max(1, int(spec.spp_mitsuba * spp_scale))
         log(f"mitsuba agreement: {name}, {spp_o}/{spp_m} spp per seed")
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu_seconds(resource.RUSAGE_CHILDREN)
         ours = [ms.render_ours(spec, workdir, s, spp=spp_o)[0] for s in spec.seeds]
-        t_ours = time.perf_counter() - t
-        t = time.perf_counter()
+        t_ours, c_ours = time.perf_counter() - t, cpu_seconds(resource.RUSAGE_CHILDREN) - c
+        t, c = time.perf_counter(), cpu_seconds(resource.RUSAGE_SELF)
         theirs = [ms.render_mitsuba(spec, s, spp=spp_m) for s in spec.seeds]
-        t_mi = time.perf_counter() - t
+        t_mi, c_mi = time.perf_counter() - t, cpu_seconds(resource.RUSAGE_SELF) - c
         c1, c8 = ms.compare(ours, theirs, 1), ms.compare(ours, theirs, 8)
         out.append({"name": name, "size": f"{spec.camera['width']}x{spec.camera['height']}",
                     "spp_ours": spp_o, "spp_mitsuba": spp_m, "t_ours": t_ours, "t_mitsuba": t_mi,
+                    "cpu_ours": c_ours, "cpu_mitsuba": c_mi,
                     "full": c1, "block8": c8})
     return out
 
@@ -137,14 +159,18 @@ def markdown(info, thr, conv, agree) -> str:
     L.append("")
     L.append("### Throughput, default scene")
     L.append("")
-    L.append("| image | spp | path tracing (s) | paths/s | threads |")
-    L.append("|---|---:|---:|---:|---:|")
-    L.append(f"| {thr['width']}x{thr['height']} | {thr['spp']} | {thr['seconds']:.2f} | "
-             f"{thr['paths_per_s']:,.0f} | {thr['threads']} |")
+    L.append("| image | spp | threads | path tracing (s, wall) | **paths/s** | process CPU (s) | "
+             "paths per CPU-second | x cores |")
+    L.append("|---|---:|---:|---:|---:|---:|---:|---:|")
+    L.append(f"| {thr['width']}x{thr['height']} | {thr['spp']} | {thr['threads']} | {thr['seconds']:.2f} | "
+             f"**{thr['paths_per_s']:,.0f}** | {thr['cpu_seconds']:.2f} | {thr['paths_per_cpu_s']:,.0f} | "
+             f"{thr['paths_per_cpu_s'] * thr['cores']:,.0f} |")
     L.append("")
-    L.append("paths/s = width x height x spp / the `path tracing` phase of `--report`; a path is one "
-             "camera path (delta tracking, next-event estimation at every vertex, Russian roulette "
-             "after 8 bounces) plus the transmittance ray for alpha.")
+    L.append("paths/s = width x height x spp / the `path tracing` phase of `--report` (wall clock); a "
+             "path is one camera path (delta tracking, next-event estimation at every vertex, Russian "
+             "roulette after 8 bounces) plus the transmittance ray for alpha. Paths per CPU-second "
+             "(whole process) x cores is what the machine gives when nothing else runs on it; the "
+             "two differ when other work shares the cores (see the load average above).")
     L.append("")
     L.append("### Time to 1% relative RMSE, default scene")
     L.append("")
@@ -159,7 +185,9 @@ def markdown(info, thr, conv, agree) -> str:
              f"(sky background included).")
     L.append(f"Fitted log-log slope {conv['slope']:.3f} (theory -0.5); with the slope fixed at -0.5, "
              f"rel. RMSE = {conv['c']:.3f} / sqrt(spp), so 1% needs **{conv['spp_1pct']:,.0f} spp = "
-             f"{conv['seconds_1pct']:,.0f} s** ({conv['sec_per_spp']:.3f} s per spp) — "
+             f"{conv['seconds_1pct']:,.0f} s** wall clock as measured here ({conv['sec_per_spp']:.3f} s "
+             f"per spp in the reference renders), or **{conv['free_seconds_1pct']:,.0f} s** on "
+             f"{conv['cores']} otherwise idle cores (process CPU time / cores) — "
              f"**extrapolated** from the rows above, not measured directly.")
     L.append("")
     L.append("### Agreement with Mitsuba 3 (`scalar_rgb`, `volpath`)")
@@ -169,21 +197,23 @@ def markdown(info, thr, conv, agree) -> str:
     else:
         L.append("| scene | image | spp/seed (ours, Mitsuba) | rel. RMSE | noise | tolerance | "
                  "rel. RMSE 8x8 blocks | noise 8x8 | tolerance 8x8 | mean ours/Mitsuba | "
-                 "time ours (s) | time Mitsuba (s) | result |")
-        L.append("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+                 "time ours (s) | time Mitsuba (s) | CPU ours (s) | CPU Mitsuba (s) | result |")
+        L.append("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
         for a in agree:
             c1, c8 = a["full"], a["block8"]
             ok = "pass" if c1.ok and c8.ok else "**FAIL**"
             L.append(f"| {a['name']} | {a['size']} | {a['spp_ours']}, {a['spp_mitsuba']} | "
                      f"{c1.rel_rmse:.4f} | {c1.noise:.4f} | {c1.tolerance:.4f} | "
                      f"{c8.rel_rmse:.4f} | {c8.noise:.4f} | {c8.tolerance:.4f} | {c8.mean_ratio:.4f} | "
-                     f"{a['t_ours']:.1f} | {a['t_mitsuba']:.1f} | {ok} |")
+                     f"{a['t_ours']:.1f} | {a['t_mitsuba']:.1f} | {a['cpu_ours']:.1f} | "
+                     f"{a['cpu_mitsuba']:.1f} | {ok} |")
         L.append("")
         L.append("Each renderer renders each scene with two seeds; A, B are the averages. "
                  "rel. RMSE = ||A - B|| / ||B||; noise = sqrt(||a1 - a2||^2 + ||b1 - b2||^2) / (2 ||B||), "
                  f"the rel. RMSE that noise alone gives; tolerance = {ms.K_NOISE} x noise + {ms.FLOOR} "
-                 "(tests/mitsuba/test_agreement.py). Times are wall clock for both seeds, "
-                 "including scene loading.")
+                 "(tests/mitsuba/test_agreement.py). Times are for both seeds together, scene "
+                 "loading included: wall clock, and CPU time (all threads; ours: the CLI process, "
+                 "Mitsuba: in-process `scalar_rgb`).")
     return "\n".join(L)
 
 
