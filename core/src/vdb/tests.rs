@@ -393,3 +393,37 @@ fn blender_vdb_scene_renders_with_the_reference_solver() {
     assert!(s.mean_alpha > 0.1 && s.mean_alpha < 1.0, "{s:?}");
     assert!(s.mean_rgb[0] > 0.0, "{s:?}");
 }
+
+/// Read throughput of `load_density` and `inspect` on the file named by VOLSCATTER_VDB_BENCH
+/// (run with `--ignored --nocapture`, in release).
+#[test]
+#[ignore]
+fn bench_read_file() {
+    let Ok(path) = std::env::var("VOLSCATTER_VDB_BENCH") else {
+        eprintln!("set VOLSCATTER_VDB_BENCH=FILE.vdb");
+        return;
+    };
+    let path = PathBuf::from(path);
+    let bytes = std::fs::metadata(&path).unwrap().len() as f64;
+    type Reader = fn(&Path) -> Result<u64>;
+    let readers: [(&str, Reader); 2] = [
+        ("load_density", |p| load_density(p, None, GridLimits::default()).map(|(g, _)| g.sum_and_count_nonzero().1)),
+        ("inspect", |p| inspect(p).map(|i| i.grids[0].active_voxels.unwrap_or(0))),
+    ];
+    for (what, f) in readers {
+        let mut best = f64::MAX;
+        let mut voxels = 0;
+        for _ in 0..5 {
+            let t = std::time::Instant::now();
+            voxels = f(&path).unwrap();
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        eprintln!(
+            "{what}: {:.1} ms, {:.0} MB/s, {:.1} Mvoxels/s ({voxels} voxels, {:.1} MB)",
+            best * 1e3,
+            bytes / best / 1e6,
+            voxels as f64 / best / 1e6,
+            bytes / 1e6
+        );
+    }
+}

@@ -159,23 +159,29 @@ impl Codec {
         } else {
             r.bytes(nbytes, "values")?
         };
-        // Decode the stored values.
-        let mut vals = vec![0.0f64; stored * comps];
-        if self.half {
-            for (o, h) in vals.iter_mut().zip(raw.chunks_exact(2)) {
-                *o = half::f16::from_le_bytes([h[0], h[1]]).to_f64();
+        // Decode the stored values straight into `out` when nothing was left out, else into
+        // a temporary that the mask then spreads.
+        let decode = |dst: &mut Vec<f64>| {
+            dst.clear();
+            if self.half {
+                dst.extend(raw.chunks_exact(2).map(|h| half::f16::from_le_bytes([h[0], h[1]]).to_f64()));
+            } else if self.kind == ValueKind::FLOAT {
+                dst.extend(raw.chunks_exact(4).map(|x| f32::from_le_bytes([x[0], x[1], x[2], x[3]]) as f64));
+            } else {
+                let s = self.kind.full_size();
+                dst.resize(stored * comps, 0.0);
+                for (i, v) in raw.chunks_exact(s).enumerate() {
+                    self.kind.decode_full(v, &mut dst[i * comps..(i + 1) * comps]);
+                }
             }
-        } else {
-            let s = self.kind.full_size();
-            for (i, v) in raw.chunks_exact(s).enumerate() {
-                self.kind.decode_full(v, &mut vals[i * comps..(i + 1) * comps]);
-            }
-        }
-        out.clear();
+        };
         if stored == count {
-            *out = vals;
+            decode(out);
             return Ok(());
         }
+        let mut vals = Vec::with_capacity(stored * comps);
+        decode(&mut vals);
+        out.clear();
         out.reserve(count * comps);
         let mut j = 0;
         for i in 0..count {
