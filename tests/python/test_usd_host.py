@@ -159,7 +159,10 @@ def test_fixture_renders_and_matches_scene_json(tmp_path, solver, settings):
             with s.solve() as r, r.composite() as img:
                 direct = img.rgba()
     mean = direct.reshape(-1, 4).mean(axis=0)
-    assert mean == pytest.approx(res.mean_rgb + [res.mean_alpha], rel=2e-3, abs=1e-6)
+    # Blender wrote the camera rotated 90.0002 degrees: the hand-written camera differs by 3.5e-6
+    # rad, which moves the reference's Monte Carlo samples (2 spp) but hardly pop's grid.
+    tol = 1e-2 if solver == "reference" else 1e-3
+    assert mean == pytest.approx(res.mean_rgb + [res.mean_alpha], rel=tol, abs=1e-6)
 
 
 # ------------------------------------------------------------------------------------------------
