@@ -339,3 +339,36 @@ def test_bake_round_trip(tmp_path):
         grids = json.loads(o.stdout)
         assert set(grids) == {"scattering_r", "scattering_g", "scattering_b"}
         assert grids["scattering_r"][0] > 0 and grids["scattering_r"][1] > 0
+
+
+def test_bake_frames_time_samples_file_path(tmp_path):
+    stage, path = make_stage(tmp_path)
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Sun")).AddRotateYOp()
+    op.Set(-60.0, 1.0)
+    op.Set(60.0, 2.0)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(2)
+    stage.Save()
+    out = tmp_path / "b" / "scatter.usda"
+    r = cli("bake", path, "--frames", "1-2", "--solver", "pop", "--out-layer", out, "-q",
+            *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []))
+    assert r.returncode == 0, r.stderr
+    st = Usd.Stage.Open(str(out))
+    assert (st.GetStartTimeCode(), st.GetEndTimeCode()) == (1.0, 2.0)
+    fp = st.GetPrimAtPath("/World/Smoke/scatter_g").GetAttribute("filePath")
+    assert fp.GetTimeSamples() == [1.0, 2.0]
+    a, b = (Path(fp.Get(t).resolvedPath) for t in (1.0, 2.0))
+    assert a.name == "scatter.World_Smoke.1.vdb" and b.name == "scatter.World_Smoke.2.vdb"
+    assert a.exists() and b.exists() and a.read_bytes() != b.read_bytes()
+
+
+def test_cli_info_and_transparent(tmp_path):
+    r = cli("info", BLENDER_STAGE, "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["lights"][0]["irradiance"] == [1.0, 1.0, 1.0] and doc["camera"]["height"] == 180
+    r = cli("render", BLENDER_STAGE, "--solver", "pop", "--width", 24, "--height", 18, "--transparent", "-q",
+            *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []),
+            "--out", tmp_path / "t.exr", "--png", tmp_path / "t.png")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "t.png").exists()

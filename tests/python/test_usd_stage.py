@@ -469,3 +469,31 @@ def test_dome_texture_orientation(tmp_path):
     stage.Save()
     with pytest.raises(VolscatterError, match="nope.exr' not found"):
         S.read_stage(path)
+
+
+def test_medium_from_bound_material(tmp_path):
+    from pxr import UsdShade
+    stage, path = make_stage(tmp_path)
+    mat = UsdShade.Material.Define(stage, "/Looks/Smoke")
+    sh = UsdShade.Shader.Define(stage, "/Looks/Smoke/vdf")
+    sh.CreateIdAttr("ND_anisotropic_vdf")
+    sh.CreateInput("absorption", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(1.0, 2.0, 3.0))
+    sh.CreateInput("scattering", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(3.0, 2.0, 1.0))
+    sh.CreateInput("anisotropy", Sdf.ValueTypeNames.Float).Set(0.3)
+    mat.CreateOutput("volume", Sdf.ValueTypeNames.Token).ConnectToSource(sh.CreateOutput("out", Sdf.ValueTypeNames.Token))
+    vol = stage.GetPrimAtPath("/World/Smoke")
+    UsdShade.MaterialBindingAPI.Apply(vol).Bind(mat)
+    vol.CreateAttribute("volscatter:g", Sdf.ValueTypeNames.Float).Set(-0.2)  # attributes win
+    stage.Save()
+    m = S.read_stage(path, medium_defaults={"density_scale": 9.0}).volumes[0].medium
+    assert m.density_scale == pytest.approx([4.0, 4.0, 4.0])
+    assert m.albedo == pytest.approx([0.75, 0.5, 0.25])
+    assert m.g == pytest.approx(-0.2)
+    assert m.source == {"density_scale": "material /Looks/Smoke", "albedo": "material /Looks/Smoke",
+                        "g": "attribute volscatter:g"}
+    # a material volscatter cannot read is reported, and the options apply
+    sh.GetPrim().RemoveProperty("inputs:scattering")
+    stage.Save()
+    sc = S.read_stage(path, medium_defaults={"density_scale": 9.0})
+    assert sc.volumes[0].medium.density_scale == [9.0] * 3
+    assert any("/Looks/Smoke is not a network volscatter reads" in w for w in sc.warnings)

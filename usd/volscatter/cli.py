@@ -147,6 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="EXR output; with --frames a pattern: out.####.exr or out.{frame:04d}.exr")
     r.add_argument("--png", metavar="FILE.png", help="also write an sRGB PNG preview (same pattern rules)")
     r.add_argument("--exposure", type=float, default=1.0, help="multiplier for the PNG only")
+    r.add_argument("--transparent", action="store_true",
+                   help="leave the directly seen environment out (alpha from the medium only; PNG with alpha)")
     r.add_argument("--volume", metavar="PATH", help="which Volume to render when the stage has several")
     b = sub.add_parser("bake", help="solve and write the scattering grid into a USD layer + VDB")
     _common(b, "bake")
@@ -194,7 +196,8 @@ def cmd_render(args) -> int:
             res = R.render(args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver,
                            settings=settings, width=args.width, height=args.height, volume=args.volume,
                            light_convention=args.light_convention, medium_defaults=_medium_defaults(args),
-                           progress=bar, png_exposure=args.exposure, stage=stage, warn=warn)
+                           progress=bar, png_exposure=args.exposure, stage=stage, warn=warn,
+                           transparent=args.transparent)
         finally:
             bar.finish()
         if not args.quiet:

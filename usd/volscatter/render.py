@@ -91,8 +91,9 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
            solver: str = "reference", settings: Optional[dict] = None, width: int = 320, height: Optional[int] = None,
            volume: Optional[str] = None, light_convention: str = "auto", medium_defaults: Optional[dict] = None,
            progress: Progress = None, png_exposure: float = 1.0, stage=None,
-           warn: Optional[Callable[[str], None]] = None) -> FrameResult:
-    """Renders one frame of a stage into ``out`` (EXR: RGBA + AOVs) and optionally ``png``."""
+           warn: Optional[Callable[[str], None]] = None, transparent: bool = False) -> FrameResult:
+    """Renders one frame of a stage into ``out`` (EXR: RGBA + AOVs) and optionally ``png``.
+    ``transparent`` leaves the directly seen environment out (alpha from the medium only)."""
     sc = stage_mod.read_stage(stage_path, time=time, camera=camera, light_convention=light_convention,
                               medium_defaults=medium_defaults, stage=stage)
     warnings = list(sc.warnings) + solver_warnings(sc, solver)
@@ -101,12 +102,14 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
     if warn:
         for w in warnings:
             warn(w)
+    if transparent and solver == "reference":
+        settings = dict(settings or {}, transparent=True)
     with native_scene(doc, solver, settings) as scene:
         if solver == "reference":
             image = scene.render_reference(progress)
         else:
             with scene.solve(progress) as result:
-                image = result.composite()
+                image = result.composite(transparent=transparent)
         with image:
             _ensure_parent(out)
             image.write_exr(out)
@@ -114,7 +117,7 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
             w, h = image.size()
             if png:
                 _ensure_parent(png)
-                write_png(png, rgba, w, h, png_exposure)
+                write_png(png, rgba, w, h, png_exposure, transparent)
     mean = _mean_rgba(rgba, w, h)
     return FrameResult(time=sc.time, out=str(out), width=w, height=h, mean_rgb=mean[:3], mean_alpha=mean[3],
                        warnings=warnings)
@@ -154,8 +157,10 @@ def _srgb(c: float) -> int:
     return int(round(v * 255.0))
 
 
-def write_png(path, rgba, width: int, height: int, exposure: float = 1.0):
-    """Writes linear RGBA (rows top to bottom) as an sRGB PNG; colour times ``exposure``."""
+def write_png(path, rgba, width: int, height: int, exposure: float = 1.0, transparent: bool = False):
+    """Writes linear RGBA (rows top to bottom) as an sRGB PNG; colour times ``exposure``. The
+    colour already holds the background (the seen environment), so the PNG is opaque unless
+    ``transparent`` (then alpha = 1 - transmittance)."""
     try:
         import numpy as np
         a = np.asarray(rgba, dtype=np.float32).reshape(height, width, 4)
@@ -163,7 +168,7 @@ def write_png(path, rgba, width: int, height: int, exposure: float = 1.0):
         srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.power(rgb, 1 / 2.4) - 0.055)
         out = np.empty((height, width, 4), dtype=np.uint8)
         out[..., :3] = np.round(srgb * 255.0)
-        out[..., 3] = np.round(np.clip(np.nan_to_num(a[..., 3]), 0.0, 1.0) * 255.0)
+        out[..., 3] = np.round(np.clip(np.nan_to_num(a[..., 3]), 0.0, 1.0) * 255.0) if transparent else 255
         rows = b"".join(b"\0" + out[y].tobytes() for y in range(height))
     except ImportError:
         flat = list(rgba)
@@ -172,8 +177,9 @@ def write_png(path, rgba, width: int, height: int, exposure: float = 1.0):
             rows.append(0)
             for x in range(width):
                 i = (y * width + x) * 4
+                alpha = int(round(min(max(flat[i + 3], 0.0), 1.0) * 255)) if transparent else 255
                 rows.extend([_srgb(flat[i] * exposure), _srgb(flat[i + 1] * exposure), _srgb(flat[i + 2] * exposure),
-                             int(round(min(max(flat[i + 3], 0.0), 1.0) * 255))])
+                             alpha])
         rows = bytes(rows)
 
     def chunk(tag, data):
