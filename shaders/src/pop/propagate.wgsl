@@ -1,0 +1,149 @@
+// POP propagation in one light's grid (volscatter-core solvers/pop/propagate.rs, Eq. 1-8).
+// Two kernels per iteration, ping-pong between P/A buffers:
+//   emit_accumulate: for each cell, the fractions of P sent front/side/back (HG CDF over the
+//     solid angles, Eq. 1-3) and the path one step stands for; adds the view-dependent
+//     in-scattered radiance P s/h f_hg(mu, a g) to J (Eq. 7-8) and the energy leaving the grid.
+//   gather: each cell collects from its six neighbours with absorption-only transmittance and
+//     anisotropy decay (Eq. 2-6).
+// Cells: x (u) fastest, d (light direction) slowest. RGB in .xyz of each vec4.
+
+struct Params {
+    dims: vec4<u32>,
+    consts: vec4<f32>,  // h, g, ln|g|, 1/escape length
+    flags: vec4<u32>,   // diffusion_correction, drift_matched
+    weight: vec4<f32>,  // J weight of this emission (0.5 for the packets' birth cells), -, -, -
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> sigma_a: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> mu: array<f32>;
+@group(0) @binding(4) var<storage, read> p_in: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> a_in: array<vec4<f32>>;
+// Four vec4 per cell: front, side, back fractions and path length.
+@group(0) @binding(6) var<storage, read_write> emit: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> j_acc: array<vec4<f32>>;
+// Two vec4 per cell: escapes realised so far, escapes of the current emission.
+@group(0) @binding(8) var<storage, read_write> esc: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> p_out: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> a_out: array<vec4<f32>>;
+
+const PI: f32 = 3.14159265358979;
+const COS_45: f32 = 0.70710678118654752;
+
+fn clamp_a(a: vec3<f32>) -> vec3<f32> {
+    return clamp(a, vec3<f32>(-0.9995), vec3<f32>(0.9995));
+}
+
+// phase::hg_cone_fraction: HG energy in the cone cos >= c.
+fn cone_fraction1(c: f32, g: f32) -> f32 {
+    if (abs(g) < 1e-4) {
+        return (1.0 - c) * 0.5;
+    }
+    let a = 1.0 + g * g;
+    let f1 = 1.0 / sqrt(max(a - 2.0 * g, 1e-12));
+    let fc = 1.0 / sqrt(max(a - 2.0 * g * c, 1e-12));
+    return clamp((1.0 - g * g) / (2.0 * g) * (f1 - fc), 0.0, 1.0);
+}
+
+fn cone_fraction(c: f32, g: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(cone_fraction1(c, g.x), cone_fraction1(c, g.y), cone_fraction1(c, g.z));
+}
+
+fn hg(mu_: f32, g: vec3<f32>) -> vec3<f32> {
+    let d = vec3<f32>(1.0) + g * g - 2.0 * g * mu_;
+    return (vec3<f32>(1.0) - g * g) / (4.0 * PI * d * sqrt(max(d, vec3<f32>(1e-12))));
+}
+
+fn cell_of(gid: vec3<u32>) -> u32 {
+    return gid.x + params.dims.x * (gid.y + params.dims.y * gid.z);
+}
+
+@compute @workgroup_size(4, 4, 4)
+fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (any(gid >= params.dims.xyz)) {
+        return;
+    }
+    let c = cell_of(gid);
+    let h = params.consts.x;
+    let g = params.consts.y;
+    let a = a_in[c].xyz;
+    let ca = clamp_a(a);
+    let front = cone_fraction(COS_45, ca);
+    let back = vec3<f32>(1.0) - cone_fraction(-COS_45, ca);
+    let side = max((vec3<f32>(1.0) - front - back) * 0.25, vec3<f32>(0.0));
+    var kappa = vec3<f32>(1.0);
+    if (params.flags.x != 0u) {
+        let sigma_tr = sigma_s[c].xyz * (1.0 - abs(g)) + sigma_a[c].xyz + vec3<f32>(params.consts.w);
+        let iso = min(sigma_tr * (0.5 * h), vec3<f32>(64.0));
+        let aa = min(abs(a), vec3<f32>(1.0));
+        var ball = vec3<f32>(1.0);
+        if (params.flags.y != 0u) {
+            ball = select(vec3<f32>(0.75), (front - back) / max(abs(a), vec3<f32>(1e-3)), aa > vec3<f32>(1e-3));
+        }
+        kappa = aa * ball + (vec3<f32>(1.0) - aa) * iso;
+    }
+    let path = kappa * h;
+    emit[4u * c] = vec4<f32>(front, 0.0);
+    emit[4u * c + 1u] = vec4<f32>(side, 0.0);
+    emit[4u * c + 2u] = vec4<f32>(back, 0.0);
+    emit[4u * c + 3u] = vec4<f32>(path, 0.0);
+    let p = p_in[c].xyz;
+    let w = p * path / h * params.weight.x;
+    j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg(mu[c], clamp_a(ca * g)), 0.0);
+    // The previous emission's escapes have happened; record this emission's.
+    let sides = f32(u32(gid.x == 0u) + u32(gid.x == params.dims.x - 1u) + u32(gid.y == 0u) + u32(gid.y == params.dims.y - 1u));
+    var out = side * sides;
+    if (gid.z == params.dims.z - 1u) {
+        out += front;
+    }
+    if (gid.z == 0u) {
+        out += back;
+    }
+    esc[2u * c] = vec4<f32>(esc[2u * c].xyz + esc[2u * c + 1u].xyz, 0.0);
+    esc[2u * c + 1u] = vec4<f32>(p * out, 0.0);
+}
+
+struct Gathered {
+    l: vec3<f32>,
+    la: vec3<f32>,
+};
+
+fn add_from(acc: ptr<function, Gathered>, src: u32, slot: u32, sa_d: vec3<f32>, ss_d: vec3<f32>) {
+    let ps = p_in[src].xyz;
+    if (all(ps == vec3<f32>(0.0))) {
+        return;
+    }
+    let frac = emit[4u * src + slot].xyz;
+    let path = emit[4u * src + 3u].xyz;
+    let sa = 0.5 * (sigma_a[src].xyz + sa_d);
+    let ss = 0.5 * (sigma_s[src].xyz + ss_d);
+    let dl = ps * frac * exp(-sa * path);
+    let da = a_in[src].xyz * exp(ss * path * params.consts.z);
+    (*acc).l += dl;
+    (*acc).la += dl * da;
+}
+
+@compute @workgroup_size(4, 4, 4)
+fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (any(gid >= params.dims.xyz)) {
+        return;
+    }
+    let nx = params.dims.x;
+    let slab = params.dims.x * params.dims.y;
+    let dst = cell_of(gid);
+    let sa_d = sigma_a[dst].xyz;
+    let ss_d = sigma_s[dst].xyz;
+    var acc: Gathered;
+    acc.l = vec3<f32>(0.0);
+    acc.la = vec3<f32>(0.0);
+    // Same neighbour order as the CPU, so the sums round alike.
+    if (gid.z > 0u) { add_from(&acc, dst - slab, 0u, sa_d, ss_d); }
+    if (gid.z + 1u < params.dims.z) { add_from(&acc, dst + slab, 2u, sa_d, ss_d); }
+    if (gid.x > 0u) { add_from(&acc, dst - 1u, 1u, sa_d, ss_d); }
+    if (gid.x + 1u < nx) { add_from(&acc, dst + 1u, 1u, sa_d, ss_d); }
+    if (gid.y > 0u) { add_from(&acc, dst - nx, 1u, sa_d, ss_d); }
+    if (gid.y + 1u < params.dims.y) { add_from(&acc, dst + nx, 1u, sa_d, ss_d); }
+    p_out[dst] = vec4<f32>(acc.l, 0.0);
+    a_out[dst] = vec4<f32>(select(vec3<f32>(0.0), acc.la / max(acc.l, vec3<f32>(1e-30)), acc.l > vec3<f32>(1e-30)), 0.0);
+}
