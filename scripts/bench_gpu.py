@@ -1,0 +1,90 @@
+"""GPU benchmark of POP (issue 5/9): one command, writes the "gpu" section of BENCHMARKS.md.
+
+    python scripts/bench_gpu.py [--sizes 64,128,256,512] [--grids 16,32,64] [--iterations 32]
+
+Runs shaders/examples/bench_pop.rs on the adapter wgpu picks (a real GPU when present, else
+Mesa's lavapipe), and reports per-stage times for one distant light, the CPU propagation for
+comparison, and how far each GPU propagation is from its memory-traffic floor.
+"""
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from benchmarks_md import write_section  # noqa: E402
+
+# Bytes one propagation iteration must move per cell if every buffer is read or written once
+# per kernel (ideal caching of the six neighbours), from shaders/src/pop/propagate.wgsl:
+#   gather:          read P, A (2 x 16), emission (4 x 16), sigma_s, sigma_a (2 x 16); write P, A (2 x 16)
+#   emit_accumulate: read P, A, sigma_s, sigma_a (4 x 16), mu (4), J (16), escapes (2 x 16);
+#                    write emission (4 x 16), J (16), escapes (2 x 16)
+BYTES_PER_CELL_ITERATION = (2 * 16 + 4 * 16 + 2 * 16 + 2 * 16) + (4 * 16 + 4 + 16 + 2 * 16 + 4 * 16 + 16 + 2 * 16)
+
+# Peak memory bandwidth by adapter name (bytes/s), for the floor. Unknown adapters get none.
+BANDWIDTH = {
+    "H100 80GB HBM3": 3.35e12,  # SXM5
+    "H100 PCIe": 2.0e12,
+    "H100": 3.35e12,
+    "H200": 4.8e12,
+}
+
+
+def bandwidth_of(adapter):
+    for name, bw in sorted(BANDWIDTH.items(), key=lambda kv: -len(kv[0])):
+        if name in adapter:
+            return bw
+    return None
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sizes", default="64,128,256")
+    ap.add_argument("--grids", default="16,32,64")
+    ap.add_argument("--iterations", default="32")
+    ap.add_argument("--no-write", action="store_true")
+    a = ap.parse_args()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    cmd = ["cargo", "run", "--release", "-q", "-p", "volscatter-gpu", "--example", "bench_pop", "--",
+           "--sizes", a.sizes, "--grids", a.grids, "--iterations", a.iterations]
+    out = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
+    if out.returncode != 0:
+        sys.exit(f"bench_pop failed ({out.returncode}):\n{out.stderr}")
+    rows = [json.loads(l) for l in out.stdout.splitlines() if l.startswith("{")]
+    adapter = rows[0]["adapter"] if rows else "none"
+    bw = bandwidth_of(adapter)
+    lines = [
+        f"Adapter: **{adapter}**; {rows[0]['threads'] if rows else '?'} CPU threads; "
+        f"{datetime.date.today().isoformat()}; one distant light, diffusion correction on, "
+        f"{a.iterations} iterations (residual threshold 0). Command: `python scripts/bench_gpu.py --sizes {a.sizes} --grids {a.grids}`.",
+        "",
+        "Times in milliseconds. CPU stages: mip pyramid, light-grid sampling, transmittance sweep. "
+        "GPU propagation: upload, iterations (first dispatch to idle), readback. "
+        f"Floor: {BYTES_PER_CELL_ITERATION} B per cell per iteration at the adapter's peak bandwidth"
+        + (f" ({bw / 1e12:.2f} TB/s)." if bw else " (unknown for this adapter: no floor)."),
+        "",
+        "| medium | grid | cells | mip | light grid | init | GPU upload | GPU iterations | GPU readback | GPU total | CPU propagation | GPU speed-up | floor | iterations / floor |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    ms = lambda s: "—" if s is None else f"{s * 1e3:.2f}"
+    for r in rows:
+        floor = r["cells"] * BYTES_PER_CELL_ITERATION * r["iterations"] / bw if bw else None
+        cpu = r["cpu_propagation_s"]
+        speedup = f"{cpu / r['gpu_propagation_total_s']:.1f}x" if cpu else "—"
+        ratio = f"{r['gpu_iterations_s'] / floor:.0f}x" if floor else "—"
+        d = r["grid_dims"]
+        lines.append(
+            f"| {r['medium']}^3 | {d[0]}x{d[1]}x{d[2]} | {r['cells']} | {ms(r['cpu_mip_s'])} | {ms(r['cpu_light_grid_s'])} | "
+            f"{ms(r['cpu_init_s'])} | {ms(r['gpu_upload_s'])} | {ms(r['gpu_iterations_s'])} | {ms(r['gpu_readback_s'])} | "
+            f"{ms(r['gpu_propagation_total_s'])} | {ms(cpu)} | {speedup} | {ms(floor)} | {ratio} |"
+        )
+    text = "\n".join(lines)
+    print(text)
+    if not a.no_write:
+        write_section("gpu", "## POP on the GPU (issue 5/9)\n\n" + text, path=os.path.join(root, "BENCHMARKS.md"))
+
+
+if __name__ == "__main__":
+    main()
