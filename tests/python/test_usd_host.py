@@ -372,3 +372,40 @@ def test_cli_info_and_transparent(tmp_path):
             "--out", tmp_path / "t.exr", "--png", tmp_path / "t.png")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "t.png").exists()
+
+
+def test_point_light_position_lights_the_right_side(tmp_path):
+    """A SphereLight moved to +X vs -X (reference solver: pop has no point lights yet)."""
+    grids = []
+    for name, x in (("l.usda", -3.0), ("r.usda", 3.0)):
+        stage, path = make_stage(tmp_path, name, intensity=0.0)
+        lamp = UsdLux.SphereLight.Define(stage, "/World/Lamp")
+        lamp.CreateIntensityAttr().Set(400.0)
+        lamp.CreateNormalizeAttr().Set(True)
+        lamp.CreateTreatAsPointAttr().Set(True)
+        UsdGeom.Xformable(lamp).AddTranslateOp().Set(Gf.Vec3d(x, 0, 0))
+        stage.Save()
+        g, _ = _solve_grid(path, "reference", {"seed": 1, "grid_resolution": 8, "grid_spp": 16})
+        grids.append(g.sum(axis=3))
+    left, right = grids
+    h = left.shape[2] // 2
+    assert left[:, :, :h].sum() > 1.5 * left[:, :, h:].sum()
+    assert right[:, :, h:].sum() > 1.5 * right[:, :, :h].sum()
+
+
+def test_ctrl_c_cancels_the_native_work(tmp_path):
+    """SIGINT during a solve: the progress callback stops the library, exit code 130, no crash."""
+    import signal
+    import time
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "usd"), VOLSCATTER_LIB=str(LIB))
+    p = subprocess.Popen([sys.executable, "-m", "volscatter", "render", str(BLENDER_STAGE), "--width", "320",
+                          "--spp", "4096", "--out", str(tmp_path / "c.exr")], stderr=subprocess.PIPE, text=True,
+                         env=env)
+    deadline = time.time() + 60
+    seen = ""
+    while time.time() < deadline and "%" not in seen:
+        seen += p.stderr.read(1)
+    p.send_signal(signal.SIGINT)
+    rest = p.communicate(timeout=120)[1]
+    assert p.returncode == 130, seen + rest
+    assert "interrupted" in rest and "Traceback" not in rest and not (tmp_path / "c.exr").exists()

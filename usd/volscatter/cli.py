@@ -38,8 +38,12 @@ class ProgressBar:
         self._last = 0.0
         self._lock = threading.Lock()
         self._drawn = False
+        #: set (by Ctrl-C in the main thread) to make the next callback cancel the native work
+        self.cancelled = False
 
     def __call__(self, stage: str, fraction: float):
+        if self.cancelled:
+            return False
         if not self.enabled:
             return True
         now = _time.monotonic()
@@ -61,6 +65,31 @@ class ProgressBar:
                 self.stream.write("\n")
                 self.stream.flush()
             self._drawn = False
+
+
+def run_cancellable(fn, bar: ProgressBar):
+    """Runs ``fn()`` in a worker thread so that Ctrl-C reaches Python while the library works:
+    the progress callback then answers "stop" and the library returns VS_STATUS_CANCELLED."""
+    box = {}
+
+    def work():
+        try:
+            box["value"] = fn()
+        except BaseException as e:  # noqa: BLE001 - handed to the main thread
+            box["error"] = e
+
+    t = threading.Thread(target=work, name="volscatter-usd", daemon=True)
+    t.start()
+    try:
+        while t.is_alive():
+            t.join(0.2)
+    except KeyboardInterrupt:
+        bar.cancelled = True
+        t.join()
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box.get("value")
 
 
 def _rgb_arg(text: str):
@@ -193,11 +222,11 @@ def cmd_render(args) -> int:
         png = (R.frame_path(args.png, t) if t is not None else args.png) if args.png else None
         bar.prefix = f"frame {t:g} ({k + 1}/{len(frames)}) " if len(frames) > 1 else ""
         try:
-            res = R.render(args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver,
-                           settings=settings, width=args.width, height=args.height, volume=args.volume,
-                           light_convention=args.light_convention, medium_defaults=_medium_defaults(args),
-                           progress=bar, png_exposure=args.exposure, stage=stage, warn=warn,
-                           transparent=args.transparent)
+            res = run_cancellable(lambda: R.render(
+                args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver, settings=settings,
+                width=args.width, height=args.height, volume=args.volume, light_convention=args.light_convention,
+                medium_defaults=_medium_defaults(args), progress=bar, png_exposure=args.exposure, stage=stage,
+                warn=warn, transparent=args.transparent), bar)
         finally:
             bar.finish()
         if not args.quiet:
@@ -214,9 +243,10 @@ def cmd_bake(args) -> int:
     times = parse_frames(args.frames) if args.frames else [args.time]
     bar = ProgressBar(enabled=not args.quiet)
     try:
-        res = R.bake(args.stage, args.out_layer, times=times, camera=args.camera, solver=args.solver,
-                     settings=settings, width=args.width, height=args.height, light_convention=args.light_convention,
-                     medium_defaults=_medium_defaults(args), progress=bar, warn=_warn)
+        res = run_cancellable(lambda: R.bake(
+            args.stage, args.out_layer, times=times, camera=args.camera, solver=args.solver, settings=settings,
+            width=args.width, height=args.height, light_convention=args.light_convention,
+            medium_defaults=_medium_defaults(args), progress=bar, warn=_warn), bar)
     finally:
         bar.finish()
     if not args.quiet:
