@@ -82,6 +82,9 @@ class _JobOperator:
 
     def _setup(self, context):
         self._obj = context.object
+        src = self._obj.get(RESULT_TAG)
+        if src and src in bpy.data.objects and bpy.data.objects[src].type == 'VOLUME':
+            self._obj = bpy.data.objects[src]  # asked on a result volume: work on its source
         self._settings = self._obj.volscatter
         self._frames = self.frames(context)
         self._index = 0
@@ -291,7 +294,7 @@ def build_emission_material(name, density_grid, density_scale):
     density grid: emission = (scattering_r, scattering_g, scattering_b) per metre, absorption
     sigma_a = density_scale * density (a black Volume Absorption; RGB scale through its colour)."""
     mat = bpy.data.materials.new(name)
-    if hasattr(mat, "use_nodes") and not mat.use_nodes:
+    if mat.node_tree is None:  # Blender < 5.0: materials start without nodes
         mat.use_nodes = True
     tree = mat.node_tree
     tree.nodes.clear()
@@ -369,7 +372,7 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def frames(self, context):
-        s = context.object.volscatter
+        s = self._obj.volscatter
         if s.use_frame_range:
             if s.frame_end < s.frame_start:
                 raise ExportError("frame range %d..%d is empty" % (s.frame_start, s.frame_end))
