@@ -497,3 +497,34 @@ def test_medium_from_bound_material(tmp_path):
     sc = S.read_stage(path, medium_defaults={"density_scale": 9.0})
     assert sc.volumes[0].medium.density_scale == [9.0] * 3
     assert any("/Looks/Smoke is not a network volscatter reads" in w for w in sc.warnings)
+
+
+def test_camera_settings_volscatter_cannot_honour(tmp_path):
+    stage, path = make_stage(tmp_path)
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+    UsdGeom.Xformable(cam).AddTranslateOp().Set(Gf.Vec3d(0, -6, 0))
+    UsdGeom.Xformable(cam).AddRotateXOp().Set(90.0)
+    cam.CreateClippingRangeAttr().Set(Gf.Vec2f(0.1, 5.0))  # the fog reaches ~100 m away
+    UsdGeom.Boundable(stage.GetPrimAtPath("/World/Smoke")).CreateExtentAttr().Set(
+        [Gf.Vec3f(0, 0, 0), Gf.Vec3f(103, 1, 1)])
+    cam.CreateHorizontalApertureOffsetAttr().Set(2.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    assert any("clipping range" in w and "/World/Smoke" in w for w in sc.warnings), sc.warnings
+    assert any("horizontalApertureOffset" in w for w in sc.warnings)
+    cam.CreateProjectionAttr().Set("orthographic")
+    stage.Save()
+    with pytest.raises(VolscatterError, match="orthographic"):
+        S.read_stage(path)
+
+
+def test_invisible_volume_and_light_left_out(tmp_path):
+    stage, path = make_stage(tmp_path)
+    sun = _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
+    UsdGeom.Imageable(sun).MakeInvisible()
+    UsdGeom.Imageable(stage.GetPrimAtPath("/World/Smoke")).MakeInvisible()
+    stage.Save()
+    sc = S.read_stage(path)
+    assert sc.volumes == [] and sc.lights == []
+    assert any("/World/Smoke is invisible" in w for w in sc.warnings)
+    assert any("/L/sun is invisible" in w for w in sc.warnings)

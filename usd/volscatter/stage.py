@@ -364,8 +364,12 @@ class _Reader:
     def volumes(self) -> List[VolumeInfo]:
         from pxr import Usd, UsdVol
         out = []
+        from pxr import UsdGeom
         for prim in self.stage.Traverse(Usd.TraverseInstanceProxies()):
             if prim.IsA(UsdVol.Volume):
+                if UsdGeom.Imageable(prim).ComputeVisibility(self.t) == UsdGeom.Tokens.invisible:
+                    self.warnings.append(f"volume {prim.GetPath()} is invisible: left out")
+                    continue
                 out.append(self.volume(prim))
         return out
 
