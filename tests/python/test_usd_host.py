@@ -305,7 +305,7 @@ def test_bake_round_trip(tmp_path):
     assert UsdGeom.GetStageUpAxis(stage) == "Z" and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
     vol = UsdVol.Volume(stage.GetPrimAtPath("/root/Volume/Volume"))
     fields = vol.GetFieldPaths()
-    assert set(fields) >= {"density", "scatter_r", "scatter_g", "scatter_b"}
+    assert set(fields) == {"density", "scatter", "scatter_r", "scatter_g", "scatter_b"}
     vdbs = set()
     for c in "rgb":
         asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(fields[f"scatter_{c}"]))
@@ -314,7 +314,11 @@ def test_bake_round_trip(tmp_path):
         assert ap.resolvedPath and Path(ap.resolvedPath).exists()
         vdbs.add(ap.resolvedPath)
     [vdb] = vdbs
-    assert Path(vdb).parent == out.parent
+    assert Path(vdb).parent == out.parent and Path(vdb).name == "scatter.root_Volume_Volume.rgb.vdb"
+    sc_asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(fields["scatter"]))
+    assert sc_asset.GetFieldNameAttr().Get() == "scatter" and sc_asset.GetFieldDataTypeAttr().Get() == "float3"
+    vec_vdb = sc_asset.GetFilePathAttr().Get().resolvedPath
+    assert Path(vec_vdb).name == "scatter.root_Volume_Volume.vdb"
     # the original density field still resolves against the fixture
     dens = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(fields["density"])).GetFilePathAttr().Get()
     assert Path(dens.resolvedPath).exists()
@@ -328,6 +332,9 @@ def test_bake_round_trip(tmp_path):
     text = json.dumps(doc)
     for c in "rgb":
         assert f"scattering_{c}" in text
+    info = subprocess.run([str(volscatter_bin()), "vdb-info", vec_vdb], capture_output=True, text=True, timeout=120)
+    assert info.returncode == 0, info.stderr
+    assert '"vec3s"' in info.stdout and '"scatter"' in info.stdout
     # OpenVDB itself, when installed
     if Path(SYS_PY).exists() and subprocess.run([SYS_PY, "-c", "import pyopenvdb"]).returncode == 0:
         code = ("import pyopenvdb as v, sys, json\n"
@@ -339,6 +346,19 @@ def test_bake_round_trip(tmp_path):
         grids = json.loads(o.stdout)
         assert set(grids) == {"scattering_r", "scattering_g", "scattering_b"}
         assert grids["scattering_r"][0] > 0 and grids["scattering_r"][1] > 0
+        # the vec3s grid holds the same values: same sums per channel, active where any is
+        code = ("import pyopenvdb as v, sys, json\n"
+                "g = v.read(sys.argv[1], 'scatter')\n"
+                "s = [0.0, 0.0, 0.0]\n"
+                "for x in g.citerOnValues():\n"
+                "    s = [s[i] + x.value[i] * x.count for i in range(3)]\n"
+                "print(json.dumps([g.valueTypeName, g.activeVoxelCount(), s]))")
+        o = subprocess.run([SYS_PY, "-c", code, vec_vdb], capture_output=True, text=True, timeout=120)
+        assert o.returncode == 0, o.stderr
+        vt, count, sums = json.loads(o.stdout)
+        assert vt == "vec3s" and count >= grids["scattering_r"][0]
+        for i, c in enumerate("rgb"):
+            assert sums[i] == pytest.approx(grids[f"scattering_{c}"][1], rel=1e-5)
 
 
 def test_bake_frames_time_samples_file_path(tmp_path):
@@ -358,7 +378,9 @@ def test_bake_frames_time_samples_file_path(tmp_path):
     fp = st.GetPrimAtPath("/World/Smoke/scatter_g").GetAttribute("filePath")
     assert fp.GetTimeSamples() == [1.0, 2.0]
     a, b = (Path(fp.Get(t).resolvedPath) for t in (1.0, 2.0))
-    assert a.name == "scatter.World_Smoke.1.vdb" and b.name == "scatter.World_Smoke.2.vdb"
+    assert a.name == "scatter.World_Smoke.1.rgb.vdb" and b.name == "scatter.World_Smoke.2.rgb.vdb"
+    v = st.GetPrimAtPath("/World/Smoke/scatter").GetAttribute("filePath")
+    assert Path(v.Get(2.0).resolvedPath).name == "scatter.World_Smoke.2.vdb"
     assert a.exists() and b.exists() and a.read_bytes() != b.read_bytes()
 
 

@@ -3,10 +3,11 @@
 - :func:`render` -- one frame: stage -> scene JSON -> native scene -> image (EXR, optional PNG).
   Solver "reference" path-traces the image (``vs_scene_render_reference``); any other solver
   computes the scattering grid (``vs_scene_solve``) and ray-marches it (``vs_result_composite``).
-- :func:`bake` -- solves each volume and writes its scattering grid S as a VDB beside a new USD
-  layer that sublayers the stage and adds, per Volume, OpenVDBAsset fields ``scatter_r``,
-  ``scatter_g``, ``scatter_b`` (the VDB's grids ``scattering_r/g/b``) and a material binding
-  whose volume shader names those fields as emission (see usd/README.md).
+- :func:`bake` -- solves each volume and writes its scattering grid S as VDBs beside a new USD
+  layer that sublayers the stage and adds, per Volume, the OpenVDBAsset field ``scatter`` (one
+  vec3s grid) and ``scatter_r``, ``scatter_g``, ``scatter_b`` (the library's float grids
+  ``scattering_r/g/b``), and a material binding whose volume shader names them as emission
+  (see usd/README.md).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 from . import stage as stage_mod
 from ._native import GRID_FORMAT_VDB, Scene, VolscatterError
+from .vdbwrite import write_vec3_grid
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
 
@@ -252,13 +254,16 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
                                                  up=[0.0, 0.0, 1.0], fov_deg=39.6, aspect=1.0, clipping=(0.0, 1e30))
             doc = sc.scene_json(volume=vi, width=width, height=height)
             name = f"{stem}.{_safe_name(v.path)}"
-            fname = f"{name}.{int(t) if t is not None and float(t).is_integer() else t}.vdb" if animated and t is not None \
-                else f"{name}.vdb"
-            vdb = os.path.join(out_dir, fname)
+            if animated and t is not None:
+                name += f".{int(t) if float(t).is_integer() else t}"
+            fname, fname_rgb = f"{name}.vdb", f"{name}.rgb.vdb"
             with native_scene(doc, solver, settings) as scene, scene.solve(progress) as result:
-                result.write_grid(vdb, GRID_FORMAT_VDB)
-            written.setdefault(v.path, []).append(vdb)
-            per_volume.setdefault(v.path, []).append((t, fname, v))
+                # one vec3s grid `scatter` (this package's writer) and the library's three float
+                # grids scattering_r/g/b
+                write_vec3_grid(os.path.join(out_dir, fname), "scatter", result.rgb(), result.index_to_world())
+                result.write_grid(os.path.join(out_dir, fname_rgb), GRID_FORMAT_VDB)
+            written.setdefault(v.path, []).extend([os.path.join(out_dir, fname), os.path.join(out_dir, fname_rgb)])
+            per_volume.setdefault(v.path, []).append((t, (fname, fname_rgb), v))
 
     # the layer
     if os.path.exists(out_layer):
@@ -280,25 +285,32 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         if not vprim:
             vprim = layer_stage.OverridePrim(vpath)
         vol = UsdVol.Volume(vprim)
-        for c, grid in (("r", "scattering_r"), ("g", "scattering_g"), ("b", "scattering_b")):
-            fpath = Sdf.Path(vpath).AppendChild(f"scatter_{c}")
+        for field_name, grid, dtype, which in (("scatter", "scatter", "float3", 0),
+                                               ("scatter_r", "scattering_r", "float", 1),
+                                               ("scatter_g", "scattering_g", "float", 1),
+                                               ("scatter_b", "scattering_b", "float", 1)):
+            fpath = Sdf.Path(vpath).AppendChild(field_name)
             asset = UsdVol.OpenVDBAsset.Define(layer_stage, fpath)
             asset.CreateFieldNameAttr().Set(grid)
-            asset.CreateFieldDataTypeAttr().Set("float")
+            asset.CreateFieldDataTypeAttr().Set(dtype)
+            if dtype == "float3":
+                asset.CreateVectorDataRoleHintAttr().Set("Color")
             fp = asset.CreateFilePathAttr()
-            for t, fname, _v in entries:
+            for t, fnames, _v in entries:
                 if animated and t is not None:
-                    fp.Set(Sdf.AssetPath("./" + fname), Usd.TimeCode(t))
+                    fp.Set(Sdf.AssetPath("./" + fnames[which]), Usd.TimeCode(t))
                 else:
-                    fp.Set(Sdf.AssetPath("./" + fname))
-            vol.CreateFieldRelationship(f"scatter_{c}", fpath)
+                    fp.Set(Sdf.AssetPath("./" + fnames[which]))
+            vol.CreateFieldRelationship(field_name, fpath)
         # a material binding: the volume's emission is S per channel (W/m^3/sr), extinction is
         # density_scale * density, as volscatter computed it
         v = entries[0][2]
-        mpath = Sdf.Path(vpath).AppendChild("VolscatterScatter")
+        # beside the Volume (a gprim's children are its fields), inside the same model
+        mpath = Sdf.Path(vpath).GetParentPath().AppendChild(f"{Sdf.Path(vpath).name}_volscatterScatter")
         mat = UsdShade.Material.Define(layer_stage, mpath)
         sh = UsdShade.Shader.Define(layer_stage, mpath.AppendChild("ScatterEmission"))
         sh.CreateIdAttr("volscatter:ScatterEmission")
+        sh.CreateInput("emission_field", Sdf.ValueTypeNames.Token).Set("scatter")
         sh.CreateInput("emission_r_field", Sdf.ValueTypeNames.Token).Set("scatter_r")
         sh.CreateInput("emission_g_field", Sdf.ValueTypeNames.Token).Set("scatter_g")
         sh.CreateInput("emission_b_field", Sdf.ValueTypeNames.Token).Set("scatter_b")
@@ -310,7 +322,7 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         out = sh.CreateOutput("volume", Sdf.ValueTypeNames.Token)
         mat.CreateOutput("volume", Sdf.ValueTypeNames.Token).ConnectToSource(out)
         mat.GetPrim().SetDocumentation(
-            "volscatter multiple scattering as emission: radiance per metre S = fields scatter_r/g/b "
+            "volscatter multiple scattering as emission: radiance per metre S = field scatter (RGB; or scatter_r/g/b) "
             "(W/m^3/sr, towards the camera it was solved for); extinction = density_scale * density")
         UsdShade.MaterialBindingAPI.Apply(vprim).Bind(mat)
         vprim.CreateAttribute("volscatter:bakedSolver", Sdf.ValueTypeNames.String, custom=True).Set(solver)
