@@ -23,9 +23,9 @@ impl Stats {
     }
     fn extend(&mut self, lo: IVec3, size: i64) {
         let lo = [lo.x as i64, lo.y as i64, lo.z as i64];
-        for a in 0..3 {
-            self.bbox_min[a] = self.bbox_min[a].min(lo[a]);
-            self.bbox_max[a] = self.bbox_max[a].max(lo[a] + size - 1);
+        for (a, l) in lo.into_iter().enumerate() {
+            self.bbox_min[a] = self.bbox_min[a].min(l);
+            self.bbox_max[a] = self.bbox_max[a].max(l + size - 1);
         }
     }
 }

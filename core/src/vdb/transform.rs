@@ -79,7 +79,7 @@ pub(crate) fn read_transform(r: &mut Reader) -> Result<GridTransform> {
                 return Err(r.err(format!("{map_type} is not affine (projective column {} {} {} {})", a[3], a[7], a[11], a[15])));
             }
             let det = m.determinant();
-            if !(det.abs() > 1e-300) || !det.is_finite() {
+            if !det.is_finite() || det.abs() <= 1e-300 {
                 return Err(r.err(format!("{map_type} is singular (determinant {det})")));
             }
             DAffine3::from_mat4(m)

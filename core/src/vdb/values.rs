@@ -123,7 +123,7 @@ impl Codec {
                 inactive1 = self.read_full(r, "second inactive value")?;
             }
         }
-        let selection = if matches!(metadata, 3 | 4 | 5) { Some(r.mask(count / 64, "selection mask")?) } else { None };
+        let selection = if matches!(metadata, 3..=5) { Some(r.mask(count / 64, "selection mask")?) } else { None };
         let stored = if self.compression & COMPRESS_ACTIVE_MASK != 0 && metadata != 6 { count_on(mask) } else { count };
         let nbytes = stored * self.stored_size();
         let mut raw_owned;
