@@ -31,7 +31,11 @@ def noise_volume(name="Smoke", res=12, location=(0.0, 0.0, 0.0), size=1.0):
     noise.inputs["Scale"].default_value = 1.5
     out = ng.nodes.new('NodeGroupOutput')
     ng.links.new(noise.outputs['Fac'], vc.inputs['Density'])
-    ng.links.new(vc.outputs[0], out.inputs[0])
+    # a volume made by Geometry Nodes renders with the material its Set Material gives it
+    setm = ng.nodes.new('GeometryNodeSetMaterial')
+    setm.name = "Set Material"
+    ng.links.new(vc.outputs[0], setm.inputs['Geometry'])
+    ng.links.new(setm.outputs[0], out.inputs[0])
     for a in 'XYZ':
         vc.inputs['Resolution ' + a].default_value = res
     vc.inputs['Min'].default_value = (-size, -size, -size)
@@ -44,6 +48,15 @@ def file_volume(name, path):
     vol = bpy.data.volumes.new(name)
     vol.filepath = path
     return _link(bpy.data.objects.new(name, vol))
+
+
+def assign(ob, mat):
+    """Puts `mat` on the volume and on its Geometry Nodes' Set Material node, if any."""
+    ob.data.materials.append(mat)
+    for m in ob.modifiers:
+        if m.type == 'NODES' and m.node_group and "Set Material" in m.node_group.nodes:
+            m.node_group.nodes["Set Material"].inputs["Material"].default_value = mat
+    return mat
 
 
 def _material(name):
@@ -62,8 +75,7 @@ def principled_material(ob, density=4.0, color=(0.9, 0.9, 0.9), anisotropy=0.0):
     pv.inputs['Color'].default_value = tuple(color) + (1.0,)
     pv.inputs['Anisotropy'].default_value = anisotropy
     nt.links.new(pv.outputs[0], out.inputs['Volume'])
-    ob.data.materials.append(mat)
-    return mat
+    return assign(ob, mat)
 
 
 def scatter_absorb_material(ob, density=4.0, albedo=(0.8, 0.8, 0.8), g=0.3, grid="density"):
@@ -88,8 +100,7 @@ def scatter_absorb_material(ob, density=4.0, albedo=(0.8, 0.8, 0.8), g=0.3, grid
     nt.links.new(sc.outputs[0], add.inputs[0])
     nt.links.new(ab.outputs[0], add.inputs[1])
     nt.links.new(add.outputs[0], out.inputs['Volume'])
-    ob.data.materials.append(mat)
-    return mat
+    return assign(ob, mat)
 
 
 def textured_material(ob):
@@ -103,8 +114,7 @@ def textured_material(ob):
     nt.links.new(attr.outputs['Fac'], sc.inputs['Density'])
     nt.links.new(tex.outputs['Color'], sc.inputs['Color'])
     nt.links.new(sc.outputs[0], out.inputs['Volume'])
-    ob.data.materials.append(mat)
-    return mat
+    return assign(ob, mat)
 
 
 def sun(strength=3.0, rotation=(0.6, 0.3, 0.0), name="Sun"):

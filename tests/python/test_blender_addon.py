@@ -507,3 +507,20 @@ def test_file_backed_sequence(fresh):
     assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
     assert sorted(os.listdir(str(fresh / "out"))) == ["Cache_scattering_0001.vdb", "Cache_scattering_0002.vdb"]
     assert bpy.data.objects["Cache_scattering"].data.is_sequence
+    se = sys.modules[MODULE + ".scene_export"]
+    for frame in (1, 2):
+        bpy.context.scene.frame_set(frame)
+        path, names, generated = se.volume_vdb(ob, bpy.context.evaluated_depsgraph_get(), str(fresh / "x"), frame)
+        assert path == str(seq / ("cache_%04d.vdb" % frame)) and not generated and "density" in names
+
+
+def test_error_generated_volume_without_its_material(fresh):
+    """Blender renders a Geometry Nodes volume with the material its nodes set, not the object's
+    slot: refusing beats computing with a material Blender does not render."""
+    ob = bs.noise_volume(res=6)
+    ob.modifiers[0].node_group.nodes["Set Material"].mute = True
+    bs.principled_material(ob)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh)
+    _expect_error(ob, fresh, "Set Material")

@@ -140,3 +140,37 @@ def test_blender_export_renders_like_the_hand_written_scene(blender_stage):
     # same radiance): Monte Carlo noise at 16 spp
     np.testing.assert_allclose(stage_mean, hand_mean, rtol=0.05)
     del R
+
+
+def test_baked_layer_imports_into_blender(tmp_path):
+    """Blender's USD importer reads one VDB per Volume: the bake puts density and scatter in one
+    file, so the imported Volume object has both grids (scatter as a vector grid)."""
+    ok, why = _have_bpy()
+    if not ok:
+        pytest.skip(f"bpy is not importable ({why})")
+    lib = Path(os.environ.get("VOLSCATTER_LIB", ROOT / "target" / "release" / "libvolscatter.so"))
+    if not lib.exists():
+        pytest.skip(f"libvolscatter not built at {lib}")
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "usd"), VOLSCATTER_LIB=str(lib))
+    stage = ROOT.parent / "shared" / "fixtures" / "blender_noise_cube" / "scene.usda"
+    out = tmp_path / "scatter.usda"
+    r = subprocess.run([sys.executable, "-m", "volscatter", "bake", str(stage), "--out-layer", str(out), "--solver", "pop",
+                        "--set", "grid_resolution=12", "--set", "output_resolution=24", "-q"],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    script = tmp_path / "import_stage.py"
+    script.write_text(textwrap.dedent(f"""
+        import bpy, json
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.ops.wm.usd_import(filepath={str(out)!r})
+        vols = [o for o in bpy.data.objects if o.type == "VOLUME"]
+        for o in vols:
+            o.data.grids.load()
+        print("GRIDS", json.dumps([[o.name, sorted((g.name, g.data_type) for g in o.data.grids)] for o in vols]))
+    """))
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    import json
+    line = next(l for l in r.stdout.splitlines() if l.startswith("GRIDS "))
+    [[_name, grids]] = json.loads(line[6:])
+    assert ["density", "FLOAT"] in grids and ["scatter", "VECTOR_FLOAT"] in grids, grids

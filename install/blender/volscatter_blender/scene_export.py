@@ -258,6 +258,20 @@ def _finish(mat, grid, sig_s, sig_a, g, grid_names):
     return {"grid": grid, "density_scale": sig_t, "albedo": albedo, "g": g}
 
 
+def render_material(obj, depsgraph):
+    """The material Blender renders the volume with: the evaluated object's (a volume made by
+    Geometry Nodes carries only what its Set Material nodes give it, not the object's slots)."""
+    ev = obj.evaluated_get(depsgraph)
+    mat = ev.active_material or next((s.material for s in ev.material_slots if s.material), None)
+    if mat is not None:
+        return mat
+    if any(s.material for s in obj.material_slots):
+        raise ExportError("the volume that the modifiers of '%s' produce has no material, so Blender renders it "
+                          "with the default volume shader, not '%s': add a Set Material node at the end of its "
+                          "Geometry Nodes" % (obj.name, next(s.material for s in obj.material_slots if s.material).name))
+    return None
+
+
 # ---------------------------------------------------------------------------------------------
 # Lights, world, camera
 
@@ -418,9 +432,7 @@ def export(context, obj, out_dir, frame, solver=None, size=None):
     cam = camera(scene, warnings, size)  # checked first: cheapest and most common mistake
     if obj is None or obj.type != 'VOLUME':
         raise ExportError("select a Volume object (active object: %s)" % (obj.name if obj else "none"))
-    mat = obj.active_material
-    if mat is None and len(obj.data.materials):
-        mat = obj.data.materials[0]
+    mat = render_material(obj, depsgraph)
     vdb, names, generated = volume_vdb(obj, depsgraph, out_dir, frame)
     try:
         med = material_params(mat, names, warnings)
