@@ -6,6 +6,9 @@
 //! binary (so `CARGO_TARGET_DIR`, `--target-dir` and `--cargo-profile release` are all
 //! honoured), once per test process. Cargo's own lock serialises concurrent callers; when the
 //! library is up to date the build is a no-op.
+//!
+//! `VOLSCATTER_LIB`, when set to an existing file, is used as is and nothing is built (CI's
+//! scripts/test.sh builds the release library first and exports it for the Python tests too).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -44,6 +47,9 @@ pub const LIB_NAME: &str = if cfg!(target_os = "windows") {
 pub fn cdylib() -> &'static Path {
     static PATH: OnceLock<PathBuf> = OnceLock::new();
     PATH.get_or_init(|| {
+        if let Some(lib) = std::env::var_os("VOLSCATTER_LIB").map(PathBuf::from).filter(|p| p.is_file()) {
+            return lib;
+        }
         let dir = profile_dir();
         let target_dir = dir.parent().expect("profile dir has a parent");
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
