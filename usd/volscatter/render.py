@@ -21,9 +21,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence
 
+import numpy as np
+
 from . import stage as stage_mod
-from ._native import GRID_FORMAT_VDB, Scene, VolscatterError
-from .vdbwrite import write_vec3_grid
+from ._native import Scene, VolscatterError
+from .vdbwrite import write_grids
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
 
@@ -256,14 +258,28 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             name = f"{stem}.{_safe_name(v.path)}"
             if animated and t is not None:
                 name += f".{int(t) if float(t).is_integer() else t}"
-            fname, fname_rgb = f"{name}.vdb", f"{name}.rgb.vdb"
+            fname = f"{name}.vdb"
             with native_scene(doc, solver, settings) as scene, scene.solve(progress) as result:
-                # one vec3s grid `scatter` (this package's writer) and the library's three float
-                # grids scattering_r/g/b
-                write_vec3_grid(os.path.join(out_dir, fname), "scatter", result.rgb(), result.index_to_world())
-                result.write_grid(os.path.join(out_dir, fname_rgb), GRID_FORMAT_VDB)
-            written.setdefault(v.path, []).extend([os.path.join(out_dir, fname), os.path.join(out_dir, fname_rgb)])
-            per_volume.setdefault(v.path, []).append((t, (fname, fname_rgb), v))
+                rgb = result.rgb()
+                i2w = np.asarray(result.index_to_world(), dtype=np.float64).reshape(4, 4)
+            # the grid in the Volume prim's local space (USD applies the prim's transform to
+            # its fields), with the density copied in: one file per Volume and frame
+            o2w = np.asarray(v.object_to_world, dtype=np.float64).reshape(4, 4)
+            i2l = np.linalg.solve(o2w, i2w)
+            copied = write_grids(os.path.join(out_dir, fname),
+                                 [("scatter", rgb), ("scattering_r", rgb[..., 0]), ("scattering_g", rgb[..., 1]),
+                                  ("scattering_b", rgb[..., 2])],
+                                 i2l.reshape(-1).tolist(),
+                                 copy=[("density", v.vdb_path, v.field_name or "density")])
+            if not copied:
+                msg = (f"volume {v.path}: its density grid ({v.vdb_path}) could not be copied into the bake's VDB "
+                       "(not an OpenVDB 224 file); field:density keeps its own file (Blender's importer reads one "
+                       "file per Volume)")
+                all_warnings.append(msg)
+                if warn:
+                    warn(msg)
+            written.setdefault(v.path, []).append(os.path.join(out_dir, fname))
+            per_volume.setdefault(v.path, []).append((t, fname, v, bool(copied)))
 
     # the layer
     if os.path.exists(out_layer):
@@ -285,23 +301,32 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         if not vprim:
             vprim = layer_stage.OverridePrim(vpath)
         vol = UsdVol.Volume(vprim)
-        for field_name, grid, dtype, which in (("scatter", "scatter", "float3", 0),
-                                               ("scatter_r", "scattering_r", "float", 1),
-                                               ("scatter_g", "scattering_g", "float", 1),
-                                               ("scatter_b", "scattering_b", "float", 1)):
+
+        def set_files(asset):
+            fp = asset.CreateFilePathAttr()
+            for t, fname, _v, _c in entries:
+                if animated and t is not None:
+                    fp.Set(Sdf.AssetPath("./" + fname), Usd.TimeCode(t))
+                else:
+                    fp.Set(Sdf.AssetPath("./" + fname))
+
+        for field_name, grid, dtype in (("scatter", "scatter", "float3"), ("scatter_r", "scattering_r", "float"),
+                                        ("scatter_g", "scattering_g", "float"), ("scatter_b", "scattering_b", "float")):
             fpath = Sdf.Path(vpath).AppendChild(field_name)
             asset = UsdVol.OpenVDBAsset.Define(layer_stage, fpath)
             asset.CreateFieldNameAttr().Set(grid)
             asset.CreateFieldDataTypeAttr().Set(dtype)
             if dtype == "float3":
                 asset.CreateVectorDataRoleHintAttr().Set("Color")
-            fp = asset.CreateFilePathAttr()
-            for t, fnames, _v in entries:
-                if animated and t is not None:
-                    fp.Set(Sdf.AssetPath("./" + fnames[which]), Usd.TimeCode(t))
-                else:
-                    fp.Set(Sdf.AssetPath("./" + fnames[which]))
+            set_files(asset)
             vol.CreateFieldRelationship(field_name, fpath)
+        if all(c for _t, _f, _v, c in entries):
+            # the density, copied byte for byte into the same file: every field in one file
+            dens = UsdVol.OpenVDBAsset(layer_stage.OverridePrim(entries[0][2].field_path))
+            dens.CreateFieldNameAttr().Set("density")
+            if dens.GetFieldIndexAttr().HasAuthoredValue():
+                dens.GetFieldIndexAttr().Set(0)
+            set_files(dens)
         # a material binding: the volume's emission is S per channel (W/m^3/sr), extinction is
         # density_scale * density, as volscatter computed it
         v = entries[0][2]
@@ -318,14 +343,15 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         sh.CreateInput("density_scale", Sdf.ValueTypeNames.Color3f).Set(tuple(v.medium.density_scale))
         sh.CreateInput("albedo", Sdf.ValueTypeNames.Color3f).Set(tuple(v.medium.albedo))
         sh.CreateInput("anisotropy", Sdf.ValueTypeNames.Float).Set(v.medium.g)
-        sh.CreateInput("emission_scale", Sdf.ValueTypeNames.Float).Set(1.0)
+        # S is per metre; per stage unit it is S * metersPerUnit
+        sh.CreateInput("emission_scale", Sdf.ValueTypeNames.Float).Set(float(UsdGeom.GetStageMetersPerUnit(src_stage)))
         out = sh.CreateOutput("volume", Sdf.ValueTypeNames.Token)
         mat.CreateOutput("volume", Sdf.ValueTypeNames.Token).ConnectToSource(out)
         mat.GetPrim().SetDocumentation(
-            "volscatter multiple scattering as emission: radiance per metre S = field scatter (RGB; or scatter_r/g/b) "
-            "(W/m^3/sr, towards the camera it was solved for); extinction = density_scale * density")
+            "volscatter multiple scattering as emission: S = field scatter (RGB; or scatter_r/g/b) is in-scattered "
+            "radiance per metre (W/m^3/sr, towards the camera it was solved for), S * emission_scale per stage unit; "
+            "extinction = density_scale * density per metre")
         UsdShade.MaterialBindingAPI.Apply(vprim).Bind(mat)
         vprim.CreateAttribute("volscatter:bakedSolver", Sdf.ValueTypeNames.String, custom=True).Set(solver)
     layer_stage.GetRootLayer().Save()
-    del UsdGeom
     return BakeResult(layer=out_layer, vdbs=written, warnings=all_warnings)
