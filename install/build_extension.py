@@ -82,7 +82,6 @@ name = "volscatter"
 tagline = "Multiple scattering for VDB volumes in EEVEE and Cycles"
 maintainer = "volscatter developers"
 type = "add-on"
-website = "https://github.com/volscatter/volscatter"
 tags = ["Render", "Lighting"]
 
 blender_version_min = "4.2.0"
@@ -114,7 +113,23 @@ def default_lib():
     return os.path.join(target, "release", library_name())
 
 
-def pack(lib_path, out_dir, version=None, plat=None):
+def _library_bytes(lib_path, strip):
+    """The library's bytes; with `strip`, of a copy without debug info (release builds carry
+    it: the profile keeps debuginfo for profiling)."""
+    if strip and shutil.which("strip") and not sys.platform.startswith("win"):
+        import tempfile
+        with tempfile.TemporaryDirectory() as d:
+            tmp = os.path.join(d, os.path.basename(lib_path))
+            shutil.copy2(lib_path, tmp)
+            args = ["strip", "-S", tmp] if sys.platform == "darwin" else ["strip", "--strip-debug", tmp]
+            if subprocess.run(args).returncode == 0:
+                with open(tmp, "rb") as f:
+                    return f.read()
+    with open(lib_path, "rb") as f:
+        return f.read()
+
+
+def pack(lib_path, out_dir, version=None, plat=None, strip=True):
     """Writes the extension zip; returns its path."""
     if not os.path.isfile(lib_path):
         raise SystemExit("library %s not found (build it, or pass --lib)" % lib_path)
@@ -135,8 +150,7 @@ def pack(lib_path, out_dir, version=None, plat=None):
         info = zipfile.ZipInfo("lib/" + library_name(), date_time=(2026, 1, 1, 0, 0, 0))
         info.external_attr = 0o755 << 16
         info.compress_type = zipfile.ZIP_DEFLATED
-        with open(lib_path, "rb") as f:
-            z.writestr(info, f.read())
+        z.writestr(info, _library_bytes(lib_path, strip))
     os.replace(tmp, zpath)
     return zpath
 
@@ -146,6 +160,7 @@ def main(argv=None):
     ap.add_argument("--no-build", action="store_true", help="do not run cargo; pack the library already built")
     ap.add_argument("--lib", help="library file to pack (default: $CARGO_TARGET_DIR or target/, release)")
     ap.add_argument("--out", default=os.path.join(REPO, "dist"), help="output folder (default: dist/)")
+    ap.add_argument("--no-strip", action="store_true", help="pack the library with its debug info")
     ap.add_argument("--print-manifest", action="store_true", help="print the generated manifest and exit")
     args = ap.parse_args(argv)
     if args.print_manifest:
@@ -153,7 +168,7 @@ def main(argv=None):
         return 0
     if not args.lib and not args.no_build:
         cargo_build()
-    z = pack(args.lib or default_lib(), args.out)
+    z = pack(args.lib or default_lib(), args.out, strip=not args.no_strip)
     print(z)
     return 0
 

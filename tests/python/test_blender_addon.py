@@ -524,3 +524,31 @@ def test_error_generated_volume_without_its_material(fresh):
     bs.camera()
     _tiny(ob, fresh)
     _expect_error(ob, fresh, "Set Material")
+
+
+def test_principled_absorption_pinned_against_cycles(fresh):
+    """The exported extinction of a Principled Volume is what Cycles renders: a pure absorber
+    (Color black, Absorption Color 0.25) of uniform grid density 1 across 2 m in front of a white
+    world transmits exp(-density_scale * 2). Blender's sqrt on the absorption colour makes that
+    exp(-0.5) = 0.61 here; without it, exp(-0.75) = 0.47."""
+    se = sys.modules[MODULE + ".scene_export"]
+    ob = bs.noise_volume(res=24)
+    ng = ob.modifiers[0].node_group
+    ng.nodes.remove(ng.nodes["Noise Texture"])
+    ng.nodes["Volume Cube"].inputs["Density"].default_value = 1.0
+    mat = bs.principled_material(ob, density=0.5, color=(0.0, 0.0, 0.0))
+    mat.node_tree.nodes["Principled Volume"].inputs["Absorption Color"].default_value = (0.25, 0.25, 0.25, 1.0)
+    cam = bs.camera(location=(0.0, -6.0, 0.0), width=4, height=4)
+    cam.data.lens = 200.0  # every pixel crosses the middle of the cube
+    world = bpy.data.worlds.new("white")
+    bpy.context.scene.world = world
+    if world.node_tree is None:
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    doc, _, _ = se.export(bpy.context, ob, str(fresh), 1)
+    assert doc["medium"]["albedo"] == pytest.approx([0.0] * 3)
+    expected = math.exp(-doc["medium"]["density_scale"][0] * 2.0)
+    bpy.context.scene.cycles.volume_step_rate = 0.5
+    w, h, px = bs.render_cycles(str(fresh / "slab.exr"), samples=16)
+    t = sum(px[0::4]) / (w * h)
+    assert t == pytest.approx(expected, rel=0.06), "Cycles transmits %.3f, the export implies %.3f" % (t, expected)
