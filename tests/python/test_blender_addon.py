@@ -552,3 +552,41 @@ def test_principled_absorption_pinned_against_cycles(fresh):
     w, h, px = bs.render_cycles(str(fresh / "slab.exr"), samples=16)
     t = sum(px[0::4]) / (w * h)
     assert t == pytest.approx(expected, rel=0.06), "Cycles transmits %.3f, the export implies %.3f" % (t, expected)
+
+
+def test_panel_draws_existing_properties_and_operators(fresh):
+    """The panel's draw() against a recording layout: every property and operator it names exists."""
+    from types import SimpleNamespace
+    panel = sys.modules[MODULE + ".panel"]
+    seen = {"props": [], "ops": []}
+
+    class Layout:
+        use_property_split = False
+        active = True
+
+        def column(self, **kw):
+            return Layout()
+
+        row = column
+
+        def separator(self, **kw):
+            pass
+
+        def prop(self, data, name, **kw):
+            assert name in data.bl_rna.properties, name
+            seen["props"].append(name)
+
+        def operator(self, idname, **kw):
+            cat, name = idname.split(".")
+            assert hasattr(getattr(bpy.ops, cat), name), idname
+            seen["ops"].append(idname)
+
+    ob = bs.noise_volume(res=4)
+    assert panel.VOLSCATTER_PT_volume.poll(SimpleNamespace(object=ob))
+    for solver in ("pop", "reference"):
+        ob.volscatter.solver = solver
+        panel.VOLSCATTER_PT_volume.draw(SimpleNamespace(layout=Layout()), SimpleNamespace(object=ob))
+    assert {"solver", "quality", "grid_resolution", "iterations", "samples", "device", "use_frame_range"} <= set(seen["props"])
+    assert set(seen["ops"]) == {"volscatter.compute_scattering", "volscatter.render_preview"}
+    cam = bs.camera()
+    assert not panel.VOLSCATTER_PT_volume.poll(SimpleNamespace(object=cam))

@@ -333,7 +333,9 @@ def world_lights(scene, warnings):
     world = scene.world
     if world is None:
         return []
-    tree = world.node_tree if getattr(world, "use_nodes", True) else None
+    # Blender 5 always uses the node tree (use_nodes is deprecated there); 4.x may not
+    use_nodes = world.use_nodes if bpy.app.version < (5, 0, 0) else True
+    tree = world.node_tree if use_nodes else None
     if tree is None:
         c = [float(v) for v in world.color]
         return [{"type": "dome", "color": c}] if max(c) > 0 else []
