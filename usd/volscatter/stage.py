@@ -200,7 +200,6 @@ class VolumeInfo:
     authored_path: str
     object_to_world: List[float]   # 16, row-major, metres, Z up (after the VDB's own map)
     medium: MediumParams
-    notes: List[str] = field(default_factory=list)
 
     def medium_json(self) -> dict:
         m = {"vdb": self.vdb_path, "density_scale": self.medium.density_scale, "albedo": self.medium.albedo,
@@ -267,7 +266,7 @@ class StageScene:
 
 def open_stage(path):
     """Opens a stage; a missing or malformed file gives VolscatterError."""
-    px = _pxr()
+    _pxr()
     from pxr import Tf, Usd
     p = Path(path)
     if not p.exists():
@@ -279,7 +278,6 @@ def open_stage(path):
         raise VolscatterError(f"cannot open stage {path}: {msg}", 7) from e
     if stage is None:
         raise VolscatterError(f"cannot open stage {path}", 7)
-    del px
     return stage
 
 
@@ -437,7 +435,6 @@ class _Reader:
             grid = stored
         else:
             grid = None
-        notes = []
         if fprim.GetPath().GetParentPath() == prim.GetPath():
             from pxr import UsdGeom
             if UsdGeom.Xformable(fprim).GetOrderedXformOps():
@@ -446,7 +443,7 @@ class _Reader:
         flat = [m4[i][j] for i in range(4) for j in range(4)]
         return VolumeInfo(path=str(prim.GetPath()), field_path=str(fprim.GetPath()), field_name=grid,
                           vdb_path=os.path.abspath(resolved), authored_path=ap.path, object_to_world=flat,
-                          medium=self.medium(prim), notes=notes)
+                          medium=self.medium(prim))
 
     def _tstr(self):
         return "default" if self.t.IsDefault() else f"{self.t.GetValue():g}"
@@ -718,7 +715,7 @@ def read_stage(path, time=None, camera: Optional[str] = None, light_convention: 
 
 def _check_clipping(r: _Reader, cam: CameraInfo, volumes: Sequence[VolumeInfo]):
     """volscatter's pinhole has no clipping planes: say so when they would cut the volume."""
-    from pxr import Usd, UsdGeom
+    from pxr import UsdGeom
     cache = UsdGeom.BBoxCache(r.t, [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], useExtentsHint=True)
     for v in volumes:
         prim = r.stage.GetPrimAtPath(v.path)
@@ -735,7 +732,6 @@ def _check_clipping(r: _Reader, cam: CameraInfo, volumes: Sequence[VolumeInfo]):
         if min(depths) < near or max(depths) > far:
             r.warnings.append(f"camera {cam.path}: clipping range [{near:g}, {far:g}] m cuts volume {v.path} "
                               f"(depth {min(depths):.3g}..{max(depths):.3g} m); volscatter does not clip")
-    del Usd
 
 
 def time_range(stage) -> Tuple[float, float]:
