@@ -279,6 +279,10 @@ def test_cycles_renders_the_emission_like_the_composite(fresh):
     same image as volscatter's own compositor ray-marching S: the units and the placement of
     the written grids are what Blender reads."""
     ob = bs.noise_volume(res=12)
+    # a transform of its own: misplaced grids (the medium's or the scattering's) change the image
+    ob.location = (0.3, 0.2, -0.1)
+    ob.rotation_euler = (0.2, 0.1, 0.5)
+    ob.scale = (0.8, 0.9, 1.0)
     bs.principled_material(ob, density=3.0)
     bs.sun(strength=3.0)
     bs.camera(width=16, height=12)
