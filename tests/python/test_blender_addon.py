@@ -122,11 +122,21 @@ def test_zip_layout_and_manifest(zip_path):
     assert os.path.basename(zip_path) == "volscatter-%s-%s.zip" % (version, build_extension.blender_platform())
 
 
-def test_library_loaded_lazily_from_the_extension(installed, fresh):
+def test_library_loaded_lazily_from_the_extension(installed, fresh, monkeypatch):
+    monkeypatch.delenv("VOLSCATTER_LIB", raising=False)  # the copy inside the extension, not the build's
+    # a fresh import of the add-on: registering it does not load the library
+    addon_utils.disable(MODULE, default_set=True)
+    for name in [m for m in sys.modules if m == MODULE or m.startswith(MODULE + ".")]:
+        del sys.modules[name]
+    addon_utils.enable(MODULE, default_set=True)
     native = _native()
-    # registration alone does not load the library
-    bs.standard_scene()
+    assert native._lib is None, "the library was loaded at registration"
     assert os.path.dirname(native.library_candidates()[-1]) == os.path.join(installed, "lib")
+    ob = bs.standard_scene(res=6)
+    _tiny(ob, fresh)
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    assert native._lib is not None
+    assert native.library_path() == os.path.join(installed, "lib", build_extension.library_name())
     assert native.version().count(".") == 2
 
 
