@@ -276,6 +276,43 @@ mod tests {
     }
 
     #[test]
+    fn inactive_values_are_restored_per_metadata() {
+        // 512 values, voxels 0..8 active; background 2.0 (as in a level set).
+        let mut mask = vec![0u64; 8];
+        mask[0] = 0xff;
+        let mut sel = vec![0u64; 8];
+        sel[1] = 1; // voxel 64 picks the second inactive value
+        let c = Codec { kind: ValueKind::FLOAT, half: false, compression: COMPRESS_ACTIVE_MASK, background: vec![2.0] };
+        // (metadata, inactive values written, selection mask written, expect at 9, expect at 64)
+        let cases: [(u8, &[f32], bool, f64, f64); 6] = [
+            (0, &[], false, 2.0, 2.0),
+            (1, &[], false, -2.0, -2.0),
+            (2, &[7.0], false, 7.0, 7.0),
+            (3, &[], true, -2.0, 2.0),
+            (4, &[7.0], true, 7.0, 2.0),
+            (5, &[7.0, 9.0], true, 7.0, 9.0),
+        ];
+        for (meta, inactive, with_sel, at9, at64) in cases {
+            let mut w = Writer::default();
+            w.u8(meta);
+            for v in inactive {
+                w.f32(*v);
+            }
+            if with_sel {
+                w.mask(&sel);
+            }
+            for i in 0..8 {
+                w.f32(i as f32 + 0.5);
+            }
+            let mut out = Vec::new();
+            c.read_block(&mut Reader::new(&w.buf, Path::new("b")), 512, &mask, &mut out).unwrap();
+            assert_eq!(out.len(), 512);
+            assert_eq!(out[3], 3.5, "metadata {meta}");
+            assert_eq!((out[9], out[64]), (at9, at64), "metadata {meta}");
+        }
+    }
+
+    #[test]
     fn lying_sizes_are_errors() {
         let mask = vec![u64::MAX; 8];
         for n in [i64::MIN, -1, 1 << 40, i64::MAX, 3] {
