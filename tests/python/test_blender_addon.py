@@ -266,6 +266,7 @@ def test_compute_scattering_geometry_nodes_volume(fresh):
     assert res.data.filepath == os.path.join(str(fresh), "Smoke_scattering_0001.vdb")
     assert os.path.isfile(res.data.filepath)
     assert _datablocks()["objects"] - before["objects"] == {"Smoke_scattering"}
+    assert sorted(os.listdir(str(fresh))) == ["Smoke_scattering_0001.vdb"], "generated input VDB left behind"
     # values, sampled through Blender's own reading of the written VDB
     inside = bs.lattice((-0.8, -0.8, -0.8), (0.8, 0.8, 0.8), 5)
     outside = [(3.0, 0.0, 0.0), (0.0, 0.0, 3.5), (-2.5, 2.5, 0.0)]

@@ -90,6 +90,7 @@ class _JobOperator:
         self._index = 0
         self._values = []
         self._files = []
+        self._inputs = []  # generated input VDBs: only the solver reads them
         self._warned = set()
         self._frame0 = context.scene.frame_current
         self._out = _out_dir(self._settings)
@@ -115,6 +116,7 @@ class _JobOperator:
         doc, warnings, generated = scene_export.export(context, self._obj, self._out, frame, self._solver,
                                                        size=self.image_size(context))
         self._files.extend(generated)
+        self._inputs.extend(generated)
         for w in warnings:
             self._warn(w)
         if self._solver["name"] == "pop":
@@ -175,6 +177,11 @@ class _JobOperator:
             self.finish(context, self._values)
         except Exception as e:
             return self._fail(context, e)
+        for p in self._inputs:
+            try:
+                os.remove(p)
+            except OSError:
+                pass
         return {'FINISHED'}
 
     # -- blocking (scripts, tests) ----------------------------------------------------------
@@ -437,7 +444,7 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
                 except Exception:
                     pass
             raise
-        self._files = []  # they belong to the new volume now
+        self._files = [p for p in self._files if p in self._inputs]  # the results belong to the new volume now
         if self._settings.hide_original:
             self._obj.hide_render = True
             if self._obj.name in context.view_layer.objects:
