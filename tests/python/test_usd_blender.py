@@ -5,7 +5,9 @@ Geometry Nodes tree is a Volume Cube fed by a Noise Texture, a sun (strength 3, 
 a point light (200 W) and a world colour (C, strength 0.5), exported with
 `wm.usd_export(export_volumes=True)`. volscatter-usd must read it as the scene written by hand from
 Blender's own units: sun irradiance = strength x colour, point intensity = P / (4 pi) W/sr, dome
-radiance = C x strength; and the two render alike.
+radiance = C x strength; and the two render alike. Then each light alone against Cycles' own
+render of the same Blender scene (the conversions pinned by the host's renderer, DESIGN.md), and
+the baked layer imported back into Blender.
 """
 
 import math
