@@ -424,10 +424,15 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
             vol.materials.append(mat)
             ob = bpy.data.objects.new(self._name, vol)
             created.append((bpy.data.objects, ob))
-            ng = build_density_nodes(self._name + "_density", self._obj, self._grid)
-            created.append((bpy.data.node_groups, ng))
-            mod = ob.modifiers.new("volscatter density", 'NODES')
-            mod.node_group = ng
+            has_density = True
+            try:
+                ng = build_density_nodes(self._name + "_density", self._obj, self._grid)
+            except RuntimeError:  # Blender < 5.0: grid nodes are experimental or missing
+                has_density = False
+            else:
+                created.append((bpy.data.node_groups, ng))
+                mod = ob.modifiers.new("volscatter density", 'NODES')
+                mod.node_group = ng
             ob[RESULT_TAG] = self._obj.name
             cols = list(self._obj.users_collection) or [context.scene.collection]
             for c in cols:
@@ -445,7 +450,11 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
                     pass
             raise
         self._files = [p for p in self._files if p in self._inputs]  # the results belong to the new volume now
-        if self._settings.hide_original:
+        if not has_density:
+            self.report({'WARNING'}, "volscatter: this Blender cannot copy the density grid onto '%s' (Geometry Nodes "
+                        "grid nodes need Blender 5.0), so it has emission only; '%s' stays visible: give it an "
+                        "absorption-only material for the extinction" % (ob.name, self._obj.name))
+        elif self._settings.hide_original:
             self._obj.hide_render = True
             if self._obj.name in context.view_layer.objects:
                 self._obj.hide_set(True)
