@@ -133,8 +133,6 @@ impl Pop {
                 g,
                 mu: &mu,
                 diffusion_correction: s.diffusion_correction,
-                drift_matched: std::env::var("POP_DRIFT").is_ok(),
-                inv_escape: std::env::var("POP_ESC").ok().and_then(|v| v.parse::<f32>().ok()).map(|l| 1.0 / (l * grid.h * grid.dims.max_element() as f32)).unwrap_or(0.0),
                 max_iterations: s.max_iterations,
                 residual_threshold: s.residual_threshold,
             };

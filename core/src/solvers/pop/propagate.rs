@@ -17,9 +17,12 @@
 //! physical diffusion gives 2 l* per unit path (l* = 1 / sigma_tr, sigma_tr = sigma_s (1 - g) +
 //! sigma_a). Taking t = h as path length makes the fluence of diffuse light depend on the grid
 //! (at 16 cells per metre and sigma_tr = 4 it is 8x too high). With `diffusion_correction` an
-//! iteration stands for the path s = h kappa with kappa = |a| + (1 - |a|) h sigma_tr / 2:
-//! one cell for directional light, the diffusion-matched h^2 sigma_tr / 2 for isotropic
-//! light. The fluence a packet leaves in a cell is P s / h (fluence = energy x path length
+//! iteration stands for the path s = h kappa with kappa = |a| k_d + (1 - |a|) h sigma_tr / 2,
+//! blending by the lobe's mean cosine: for directional light k_d = (front - back) / a, the path
+//! that makes the lattice's drift per step equal the lobe's mean cosine times the path (about
+//! one cell); for isotropic light the diffusion-matched h sigma_tr / 2. (Measured against the
+//! reference on the cube, without the correction the g = 0 and g = 0.7 cases are 2.6-3.3x
+//! too bright; with it they are within 10%.) The fluence a packet leaves in a cell is P s / h (fluence = energy x path length
 //! per volume), and absorption and the decay of a use the same s. Energy accounting is
 //! unchanged: the fractions still sum to one.
 
@@ -74,10 +77,6 @@ pub struct Propagation<'a> {
     /// Per cell: cosine between d and the direction from the cell to the camera.
     pub mu: &'a [f32],
     pub diffusion_correction: bool,
-    pub drift_matched: bool,
-    /// 1 / (escape length): keeps the isotropic path per step from vanishing in media thin in
-    /// transport terms, where light leaves before it diffuses.
-    pub inv_escape: f32,
     pub max_iterations: u32,
     pub residual_threshold: f32,
 }
@@ -89,17 +88,13 @@ impl Propagation<'_> {
         let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
         let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
         let kappa = if self.diffusion_correction {
-            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c] + Vec3::splat(self.inv_escape);
+            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c];
             let iso = (sigma_tr * (0.5 * grid.h)).min(Vec3::splat(64.0));
             let aa = a.abs().min(Vec3::ONE);
-            let ball = if self.drift_matched {
-                // Path per step that matches the lattice's drift (front - back) h to the
-                // lobe's a s: between 0.75 (a -> 0) and 1 (a -> 1).
-                let drift = front - back;
-                Vec3::select(aa.cmpgt(Vec3::splat(1e-3)), drift / a.abs().max(Vec3::splat(1e-3)), Vec3::splat(0.75))
-            } else {
-                Vec3::ONE
-            };
+            // Directional part: the path per step that matches the lattice's drift
+            // (front - back) h to the lobe's a s, between 0.75 (a -> 0) and 1 (a -> 1).
+            let drift = front - back;
+            let ball = Vec3::select(aa.cmpgt(Vec3::splat(1e-3)), drift / aa.max(Vec3::splat(1e-3)), Vec3::splat(0.75));
             aa * ball + (Vec3::ONE - aa) * iso
         } else {
             Vec3::ONE
