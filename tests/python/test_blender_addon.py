@@ -58,7 +58,9 @@ def installed(zip_path):
     r = bpy.ops.extensions.package_install_files(filepath=zip_path, repo='user_default', enable_on_install=True)
     assert r == {'FINISHED'}
     assert MODULE in bpy.context.preferences.addons.keys(), "extension installed but not enabled"
-    root = os.path.join(_USER, "extensions", "user_default", "volscatter_blender")
+    repo = [r for r in bpy.context.preferences.extensions.repos if r.module == "user_default"][0]
+    # normally inside the throw-away _USER folder (unless bpy was imported before this module)
+    root = os.path.join(repo.directory, "volscatter_blender")
     assert os.path.isfile(os.path.join(root, "lib", build_extension.library_name()))
     return root
 
@@ -120,6 +122,17 @@ def test_zip_layout_and_manifest(zip_path):
     assert 'platforms = ["%s"]' % build_extension.blender_platform() in man
     assert 'blender_version_min = "4.2.0"' in man
     assert os.path.basename(zip_path) == "volscatter-%s-%s.zip" % (version, build_extension.blender_platform())
+
+
+def test_zip_passes_blenders_extension_validator(zip_path):
+    """Blender's own `extension validate` (bl_pkg's blender_ext.py, shipped inside bpy)."""
+    import glob
+    import subprocess
+    tools = glob.glob(os.path.join(bpy.utils.system_resource('SCRIPTS'), "addons_core", "bl_pkg", "cli",
+                                   "blender_ext.py"))
+    assert tools, "bpy ships no blender_ext.py"
+    r = subprocess.run([sys.executable, tools[0], "validate", zip_path], capture_output=True, text=True)
+    assert r.returncode == 0 and "Success" in r.stdout, r.stdout + r.stderr
 
 
 def test_library_loaded_lazily_from_the_extension(installed, fresh, monkeypatch):
