@@ -214,6 +214,18 @@ fn writer_dense_rgb_and_affine() {
     assert!(gxf.abs_diff_eq(xf, 1e-6));
     assert_eq!(gg.voxel(IVec3::new(5, 2, 7)), 1.0);
     assert_eq!(gg.voxel(IVec3::new(0, 0, 0)), 0.0);
+    // An empty grid is a valid file with no voxels.
+    let empty = tmp("empty.vdb");
+    write_float_grid(&empty, "density", &DensityGrid::empty(), xf, &WriteOptions::default()).unwrap();
+    let info = inspect(&empty).unwrap();
+    assert_eq!(info.grids[0].active_voxels, Some(0));
+    assert!(load_density(&empty, None, GridLimits::default()).unwrap().0.is_empty());
+    // Half precision saturates instead of writing inf.
+    let big = [1.0e6f32; 8];
+    let hp = tmp("big_half.vdb");
+    let opts = WriteOptions { half: true, ..Default::default() };
+    write_dense_float_grids(&hp, &[DenseFloat { name: "d", dims: [2, 2, 2], values: &big }], xf, &opts).unwrap();
+    assert_eq!(scalar(&inspect(&hp).unwrap().grids[0].sum), 8.0 * 65504.0);
     // Bad input to the writer.
     assert!(write_rgb_grids(&path, "s", [2, 2, 2], &data[..7], xf, &WriteOptions::default()).is_err());
     let bad = vec![f32::NAN; 8];

@@ -216,7 +216,8 @@ pub(crate) fn write_float_block(w: &mut Writer, values: &[f32], mask: &[u64], ha
         return;
     }
     let bytes: Vec<u8> = if half {
-        data.iter().flat_map(|v| half::f16::from_f32(*v).to_le_bytes()).collect()
+        // Clamped to the largest finite half: a value over 65504 would otherwise become inf.
+        data.iter().flat_map(|v| half::f16::from_f32(v.clamp(-65504.0, 65504.0)).to_le_bytes()).collect()
     } else {
         data.iter().flat_map(|v| v.to_le_bytes()).collect()
     };
