@@ -34,8 +34,8 @@ def main():
 
     bs.reset()
     volscatter_blender.register()
-    ob = bs.noise_volume(res=40, size=1.0)
-    bs.principled_material(ob, density=12.0, color=(0.97, 0.97, 0.97), anisotropy=0.3)
+    ob = bs.noise_volume(res=32, size=1.0)
+    bs.principled_material(ob, density=6.0, color=(0.97, 0.97, 0.97), anisotropy=0.3)
     bs.sun(strength=4.0, rotation=(0.9, 0.0, 0.8))
     bs.camera(location=(0.0, -5.5, 1.0), width=w, height=h)
     world = bpy.data.worlds.new("sky")
@@ -53,7 +53,7 @@ def main():
 
     s = ob.volscatter
     s.solver, s.quality = 'reference', 'CUSTOM'
-    s.grid_resolution, s.samples = 40, 128
+    s.grid_resolution, s.samples = 24, 32
     s.output_dir = tmp
     bpy.context.view_layer.objects.active = ob
     with bpy.context.temp_override(object=ob, active_object=ob):

@@ -618,3 +618,11 @@ def test_panel_draws_existing_properties_and_operators(fresh):
     assert set(seen["ops"]) == {"volscatter.compute_scattering", "volscatter.render_preview"}
     cam = bs.camera()
     assert not panel.VOLSCATTER_PT_volume.poll(SimpleNamespace(object=cam))
+
+
+def test_error_empty_frame_range(fresh):
+    ob = bs.standard_scene(res=6)
+    _tiny(ob, fresh)
+    s = ob.volscatter
+    s.use_frame_range, s.frame_start, s.frame_end = True, 5, 3
+    _expect_error(ob, fresh, "frame range 5..3 is empty")

@@ -81,6 +81,10 @@ class _JobOperator:
         return ob is not None and ob.type == 'VOLUME'
 
     def _setup(self, context):
+        # first what _fail needs, so that a failure anywhere below is reported cleanly
+        self._files = []
+        self._inputs = []  # generated input VDBs: only the solver reads them
+        self._frame0 = context.scene.frame_current
         self._obj = context.object
         src = self._obj.get(RESULT_TAG)
         if src and src in bpy.data.objects and bpy.data.objects[src].type == 'VOLUME':
@@ -89,10 +93,7 @@ class _JobOperator:
         self._frames = self.frames(context)
         self._index = 0
         self._values = []
-        self._files = []
-        self._inputs = []  # generated input VDBs: only the solver reads them
         self._warned = set()
-        self._frame0 = context.scene.frame_current
         self._out = _out_dir(self._settings)
         self._solver = {"name": self._settings.solver}
         self._solver.update(self._settings.solver_settings())
@@ -158,8 +159,11 @@ class _JobOperator:
         return "volscatter: unexpected error: %s: %s" % (type(e).__name__, e)
 
     def _fail(self, context, e):
-        self.cleanup_files()
-        self._restore_frame(context)
+        try:
+            self.cleanup_files()
+            self._restore_frame(context)
+        except Exception as cleanup_error:  # never let the report itself fail
+            print("volscatter: cleanup after an error failed: %s" % cleanup_error)
         msg = self._message(e)
         if msg is None:
             self.report({'WARNING'}, "volscatter: cancelled; nothing was created")
