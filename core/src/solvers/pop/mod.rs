@@ -8,9 +8,11 @@
 //! into one medium-aligned grid (merge.rs) and upsampled to the output grid by a joint
 //! bilateral filter guided by the density (upsample.rs), which gives the scattering grid S.
 //!
-//! Not here yet (later issues): point lights (radial grids, Sec. 6) and environment lighting
-//! (ordinates, prefiltering, importance, isotropic residuum, Sec. 5). A dome or point light
-//! in the scene is left out with a warning on stderr; S then holds the distant lights only.
+//! Not here yet (later issues): point lights (radial grids, Sec. 6; left out with a warning on
+//! stderr) and proper environment lighting (importance-sampled ordinates, importance
+//! propagation, isotropic residuum, Sec. 5). A dome is handled crudely but honestly: a fixed
+//! set of `dome_ordinates` distant ordinates, each with its cell's mean radiance and the
+//! prefiltered anisotropy of Sec. 5.1; energy is right, the angular detail of a map is not.
 
 pub mod accumulate;
 pub mod init;
@@ -83,15 +85,29 @@ impl Pop {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = PopReport::default();
-        let mut distant = Vec::new();
+        // Every light becomes ordinates: (direction of travel, fluence, initial anisotropy,
+        // grid resolution).
+        let mut distant: Vec<(Vec3, Vec3, f32, u32)> = Vec::new();
         for (i, light) in scene.lights.iter().enumerate() {
             match light {
-                Light::Distant { direction, irradiance, half_angle } => distant.push((*direction, *irradiance, *half_angle)),
+                Light::Distant { direction, irradiance, half_angle } => {
+                    // A disc of angular radius theta and irradiance E (perpendicular): fluence
+                    // E * 2 / (1 + cos theta), mean cosine (1 + cos theta) / 2 = initial
+                    // anisotropy.
+                    let one_minus_cos = 2.0 * (0.5 * half_angle).sin().powi(2);
+                    let fluence = *irradiance * (2.0 / (2.0 - one_minus_cos));
+                    distant.push((*direction, fluence, 1.0 - 0.5 * one_minus_cos, s.grid_resolution));
+                }
+                Light::Dome(env) if s.dome_ordinates > 0 => {
+                    for (d, fluence, a0) in dome_ordinates(env, s.dome_ordinates) {
+                        distant.push((d, fluence, a0, s.dome_grid_resolution()));
+                    }
+                }
                 Light::Point { .. } => report.warnings.push(format!(
                     "pop: lights[{i}] is a point light, which pop does not handle yet (radial grids, paper Sec. 6): left out of the result"
                 )),
                 Light::Dome(_) => report.warnings.push(format!(
-                    "pop: lights[{i}] is a dome, which pop does not handle yet (ordinates, paper Sec. 5): its light is left out of the scattering (the compositor still shows it behind the medium)"
+                    "pop: lights[{i}] is a dome and dome_ordinates = 0: its light is left out of the scattering (the compositor still shows it behind the medium)"
                 )),
             }
         }
@@ -99,7 +115,7 @@ impl Pop {
             eprintln!("warning: {w}");
         }
         if distant.is_empty() {
-            return Err(Error::InvalidArgument("pop: the scene has no distant light; pop handles distant lights only so far".into()));
+            return Err(Error::InvalidArgument("pop: the scene has no distant light (or dome); pop handles only those so far".into()));
         }
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);
@@ -116,14 +132,11 @@ impl Pop {
 
         let g = medium.g;
         let mut lights = Vec::with_capacity(distant.len());
-        for (direction, irradiance, half_angle) in distant {
-            let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, s.grid_resolution))?;
-            // A disc of angular radius theta and irradiance E (perpendicular): fluence
-            // E * 2 / (1 + cos theta), mean cosine (1 + cos theta) / 2 = initial anisotropy.
-            let one_minus_cos = 2.0 * (0.5 * half_angle).sin().powi(2);
-            let cos_t = 1.0 - one_minus_cos;
-            let fluence = irradiance * (2.0 / (1.0 + cos_t));
-            let a0 = 1.0 - 0.5 * one_minus_cos;
+        for (direction, fluence, a0, resolution) in distant {
+            if fluence.max_element() <= 0.0 {
+                continue;
+            }
+            let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
             let init = timings.time("pop init", || init::sweep(&grid, fluence));
             let mut j_acc = vec![Vec3::ZERO; grid.len()];
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
@@ -157,6 +170,37 @@ impl Pop {
         progress.update("pop upsample", 1.0);
         Ok((SolveOutput { scattering, timings: merge_timings(timings) }, report))
     }
+}
+
+/// Directions of `n` points spread evenly over the sphere (Fibonacci lattice).
+fn fibonacci_sphere(n: u32) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = golden * i as f32;
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+/// A dome as `n` ordinates: (direction of travel, fluence, initial anisotropy). Each ordinate
+/// owns the directions nearest to it (solid angle ~ 4 pi / n); its fluence is the mean radiance
+/// over them (2048 probe directions) times the solid angle, so the total equals the dome's
+/// fluence exactly for a uniform colour. Anisotropy: the mean cosine of a cone of that solid
+/// angle, 1 - 1/n (Sec. 5.1's prefiltering).
+fn dome_ordinates(env: &crate::scene::Environment, n: u32) -> Vec<(Vec3, Vec3, f32)> {
+    let dirs = fibonacci_sphere(n);
+    let probes = fibonacci_sphere(2048);
+    let mut sum = vec![Vec3::ZERO; dirs.len()];
+    for p in &probes {
+        let k = (0..dirs.len()).max_by(|&a, &b| dirs[a].dot(*p).total_cmp(&dirs[b].dot(*p))).unwrap();
+        sum[k] += env.radiance(*p);
+    }
+    let omega = 4.0 * std::f32::consts::PI / probes.len() as f32;
+    // Light arriving from direction w (towards the sky) travels along -w.
+    dirs.iter().zip(sum).map(|(w, s)| (-*w, s * omega, 1.0 - 1.0 / n as f32)).collect()
 }
 
 /// Sums repeated phases (one entry per light) into one entry each, keeping the order.

@@ -34,6 +34,14 @@ pub struct PopSettings {
     /// isotropic (see propagate.rs). Off: every iteration is one cell of light path, as in the
     /// paper.
     pub diffusion_correction: bool,
+    /// A dome is approximated by this many distant ordinates (Fibonacci directions, each
+    /// carrying its cell's mean radiance times its solid angle, with the cone's mean cosine
+    /// as initial anisotropy: the prefiltering of Sec. 5.1 without importance sampling). 0: the
+    /// dome is left out of the scattering, with a warning.
+    pub dome_ordinates: u32,
+    /// Propagation grid resolution of each dome ordinate; 0 = half of `grid_resolution`
+    /// (sky light is smooth, and there are many ordinates).
+    pub dome_grid_resolution: u32,
 }
 
 impl Default for PopSettings {
@@ -48,6 +56,8 @@ impl Default for PopSettings {
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             diffusion_correction: true,
+            dome_ordinates: 6,
+            dome_grid_resolution: 0,
         }
     }
 }
@@ -75,7 +85,17 @@ impl PopSettings {
         if !(self.spatial_sigma.is_finite() && self.spatial_sigma > 0.0 && self.spatial_sigma <= 4.0) {
             return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {}", self.spatial_sigma)));
         }
+        if self.dome_ordinates > 64 {
+            return Err(Error::scene("solver.dome_ordinates", format!("must be in 0..=64, got {}", self.dome_ordinates)));
+        }
+        if self.dome_grid_resolution != 0 && !(2..=512).contains(&self.dome_grid_resolution) {
+            return Err(Error::scene("solver.dome_grid_resolution", format!("must be 0 or in 2..=512, got {}", self.dome_grid_resolution)));
+        }
         Ok(())
+    }
+
+    pub fn dome_grid_resolution(&self) -> u32 {
+        if self.dome_grid_resolution == 0 { (self.grid_resolution / 2).max(8) } else { self.dome_grid_resolution }
     }
 
     pub fn merge_resolution(&self) -> u32 {
