@@ -19,6 +19,8 @@ pub struct CompareArgs {
     /// Scene JSON. Without it: the embedded default scene.
     pub scene: Option<PathBuf>,
     /// Comma-separated solver names; the baseline is `reference` if listed, else the last.
+    /// `reference@N` is the reference at N paths per pixel with its own seed (for error versus
+    /// time curves against a converged baseline); it gets no scattering grid.
     #[arg(long, default_value = "pop,reference")]
     pub solvers: String,
     /// Setting for one solver, SOLVER.KEY=VALUE (JSON value), repeatable:
@@ -119,7 +121,12 @@ pub fn run(args: CompareArgs) -> Result<()> {
         return Err(Error::InvalidArgument("--solvers needs at least two names".into()));
     }
     for n in &names {
-        if !solvers::SOLVER_NAMES.contains(&n.as_str()) {
+        let base_name = n.split('@').next().unwrap_or("");
+        if let Some(spp) = n.strip_prefix("reference@") {
+            if spp.parse::<u32>().map_or(true, |v| v == 0) {
+                return Err(Error::InvalidArgument(format!("`{n}`: expected reference@SPP with SPP > 0")));
+            }
+        } else if !solvers::SOLVER_NAMES.contains(&base_name) || n.contains('@') {
             return Err(Error::InvalidArgument(format!("unknown solver `{n}` (known: {})", solvers::SOLVER_NAMES.join(", "))));
         }
     }
@@ -127,10 +134,21 @@ pub fn run(args: CompareArgs) -> Result<()> {
     let frame = ScatteringGrid::over_medium(&scene.medium, args.grid_resolution)?;
     let progress = StderrProgress::new(args.quiet);
     let mut runs = Vec::new();
-    for name in &names {
-        let settings = settings_for(&scene, name, &args)?;
+    for (index, name) in names.iter().enumerate() {
+        let sweep_spp = name.strip_prefix("reference@").and_then(|v| v.parse::<u32>().ok());
+        let solver_name = if sweep_spp.is_some() { "reference" } else { name.as_str() };
+        let mut settings = settings_for(&scene, solver_name, &args)?;
+        if let Some(spp) = sweep_spp {
+            settings.insert("spp".into(), json!(spp));
+            settings.insert("seed".into(), json!(1000 + index as u64));
+        }
         let mut phases = Timings::default();
-        let (image, grid, image_seconds, grid_seconds) = if name == "reference" {
+        let (image, grid, image_seconds, grid_seconds) = if sweep_spp.is_some() {
+            let r = Reference::from_settings(&settings)?;
+            let t = Instant::now();
+            let image = r.render_image(&scene, &progress, &mut phases)?;
+            (image, None, t.elapsed().as_secs_f64(), 0.0)
+        } else if name == "reference" {
             let r = Reference::from_settings(&settings)?;
             let t = Instant::now();
             let image = r.render_image(&scene, &progress, &mut phases)?;
