@@ -18,6 +18,31 @@ sys.path.insert(0, os.path.join(HERE, "blender"))
 sys.path.insert(0, os.path.join(REPO, "tests", "python"))
 
 
+def _cloud_shape(ob):
+    """Turns the test helper's noise cube into a cloud: noise, sharpened, times a radial falloff."""
+    ng = ob.modifiers[0].node_group
+    n, link = ng.nodes, ng.links.new
+    noise, cube = n["Noise Texture"], n["Volume Cube"]
+    noise.inputs["Scale"].default_value = 2.5
+    noise.inputs["Detail"].default_value = 4.0
+    pos = n.new('GeometryNodeInputPosition')
+    length = n.new('ShaderNodeVectorMath')
+    length.operation = 'LENGTH'
+    link(pos.outputs[0], length.inputs[0])
+    fall = n.new('ShaderNodeMapRange')
+    fall.inputs["From Min"].default_value, fall.inputs["From Max"].default_value = 0.35, 0.95
+    fall.inputs["To Min"].default_value, fall.inputs["To Max"].default_value = 1.0, 0.0
+    link(length.outputs["Value"], fall.inputs["Value"])
+    sharp = n.new('ShaderNodeMapRange')
+    sharp.inputs["From Min"].default_value, sharp.inputs["From Max"].default_value = 0.42, 0.62
+    link(noise.outputs["Fac"], sharp.inputs["Value"])
+    mul = n.new('ShaderNodeMath')
+    mul.operation = 'MULTIPLY'
+    link(fall.outputs["Result"], mul.inputs[0])
+    link(sharp.outputs["Result"], mul.inputs[1])
+    link(mul.outputs[0], cube.inputs["Density"])
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="160x120")
@@ -35,6 +60,7 @@ def main():
     bs.reset()
     volscatter_blender.register()
     ob = bs.noise_volume(res=32, size=1.0)
+    _cloud_shape(ob)
     bs.principled_material(ob, density=6.0, color=(0.97, 0.97, 0.97), anisotropy=0.3)
     bs.sun(strength=4.0, rotation=(0.9, 0.0, 0.8))
     bs.camera(location=(0.0, -5.5, 1.0), width=w, height=h)

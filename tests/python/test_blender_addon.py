@@ -626,3 +626,113 @@ def test_error_empty_frame_range(fresh):
     s = ob.volscatter
     s.use_frame_range, s.frame_start, s.frame_end = True, 5, 3
     _expect_error(ob, fresh, "frame range 5..3 is empty")
+
+
+class _FakeWM:
+    def __init__(self):
+        self.progress = []
+        self.timers = 0
+
+    def event_timer_add(self, dt, window=None):
+        self.timers += 1
+        return object()
+
+    def event_timer_remove(self, timer):
+        self.timers -= 1
+
+    def modal_handler_add(self, op):
+        pass
+
+    def progress_begin(self, a, b):
+        self.progress.append(("begin", a, b))
+
+    def progress_update(self, v):
+        self.progress.append(("update", v))
+
+    def progress_end(self):
+        self.progress.append(("end",))
+
+
+class _FakeText:
+    def __init__(self):
+        self.texts = []
+
+    def status_text_set(self, t):
+        self.texts.append(t)
+
+    header_text_set = status_text_set
+
+
+class _UIContext:
+    """bpy.context with a window: what the modal path (timer, status bar, Esc) talks to."""
+
+    def __init__(self, ob):
+        self.window = object()
+        self.window_manager = _FakeWM()
+        self.workspace = _FakeText()
+        self.area = _FakeText()
+        self.object = ob
+
+    def __getattr__(self, name):
+        return getattr(bpy.context, name)
+
+
+def _modal_harness():
+    """The Compute Scattering operator's methods on a plain class, so the modal path (worker
+    thread, timer events, Esc) runs without Blender's window event loop."""
+    ops = sys.modules[MODULE + ".operators"]
+    names = ("frames", "_setup", "_export", "per_frame", "finish")
+    body = {n: ops.VOLSCATTER_OT_compute_scattering.__dict__[n] for n in names}
+    body["reports"] = None
+
+    def report(self, kind, msg):
+        self.reports.append((set(kind), msg))
+    body["report"] = report
+    return type("ModalHarness", (ops._JobOperator,), body)
+
+
+def _drive(op, ctx, esc=False):
+    import time
+    from types import SimpleNamespace
+    r = op.invoke(ctx, SimpleNamespace(type='LEFTMOUSE', value='PRESS'))
+    assert r == {'RUNNING_MODAL'}, (r, op.reports)
+    if esc:
+        assert op.modal(ctx, SimpleNamespace(type='ESC', value='PRESS')) == {'RUNNING_MODAL'}
+    assert op.modal(ctx, SimpleNamespace(type='MOUSEMOVE', value='NOTHING')) == {'PASS_THROUGH'}
+    t0 = time.monotonic()
+    while r == {'RUNNING_MODAL'}:
+        assert time.monotonic() - t0 < 300, "modal job never finished"
+        time.sleep(0.05)
+        r = op.modal(ctx, SimpleNamespace(type='TIMER', value='NOTHING'))
+    return r
+
+
+def test_modal_path_with_progress_and_esc(fresh):
+    ob = bs.standard_scene(res=8)
+    _tiny(ob, fresh)
+    ob.volscatter.use_frame_range, ob.volscatter.frame_start, ob.volscatter.frame_end = True, 1, 2
+    H = _modal_harness()
+    op, ctx = H(), _UIContext(ob)
+    op.reports = []
+    assert _drive(op, ctx) == {'FINISHED'}, op.reports
+    assert "Smoke_scattering" in bpy.data.objects
+    assert sorted(f for f in os.listdir(str(fresh)) if f.endswith(".vdb")) == \
+        ["Smoke_scattering_0001.vdb", "Smoke_scattering_0002.vdb"]
+    wm = ctx.window_manager
+    assert wm.progress[0][0] == "begin" and wm.progress[-1] == ("end",) and wm.timers == 0
+    shown = [t for t in ctx.workspace.texts if t]
+    assert shown and all("Esc to cancel" in t for t in shown)
+    assert ctx.workspace.texts[-1] is None and ctx.area.texts[-1] is None  # cleared at the end
+
+    # Esc while solving: the library is told to stop, nothing is created, files are removed
+    ob.volscatter.use_frame_range = False
+    ob.volscatter.samples = 20000  # long enough that Esc arrives while it runs (progress comes in 10% steps)
+    before = _datablocks()
+    op, ctx = H(), _UIContext(ob)
+    op.reports = []
+    assert _drive(op, ctx, esc=True) == {'CANCELLED'}
+    assert _datablocks() == before
+    assert any("cancelled" in m for k, m in op.reports), op.reports
+    assert ctx.window_manager.timers == 0 and ctx.workspace.texts[-1] is None
+    assert sorted(f for f in os.listdir(str(fresh)) if f.endswith(".vdb")) == \
+        ["Smoke_scattering_0001.vdb", "Smoke_scattering_0002.vdb"]  # the first run's, nothing new

@@ -55,6 +55,7 @@ class _JobOperator:
     result, returns a value) and `finish` (main thread, gets the values)."""
 
     _timer = None
+    _area = None
 
     # -- what subclasses provide ----------------------------------------------------------
     def frames(self, context):
@@ -219,6 +220,7 @@ class _JobOperator:
         except Exception as e:
             return self._fail(context, e)
         wm = context.window_manager
+        self._area = context.area  # the header we write to (modal events may come with another area)
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.progress_begin(0, 1000)
         wm.modal_handler_add(self)
@@ -244,8 +246,8 @@ class _JobOperator:
             self._frames[self._index], self._index + 1, n, stage, 100.0 * frac)
         if context.workspace is not None:
             context.workspace.status_text_set(text)
-        if context.area is not None:
-            context.area.header_text_set(text)
+        if self._area is not None:
+            self._area.header_text_set(text)
 
     def _end_modal(self, context):
         wm = context.window_manager
@@ -255,8 +257,8 @@ class _JobOperator:
         wm.progress_end()
         if context.workspace is not None:
             context.workspace.status_text_set(None)
-        if context.area is not None:
-            context.area.header_text_set(None)
+        if self._area is not None:
+            self._area.header_text_set(None)
 
     def modal(self, context, event):
         if event.type == 'ESC' and event.value == 'PRESS':
@@ -391,13 +393,13 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         return [context.scene.frame_current]
 
     def _setup(self, context):
-        super()._setup(context)
+        _JobOperator._setup(self, context)  # explicit: the job methods are also driven outside bpy in tests
         self._name = _unique_name(self._obj.name + "_scattering")
         self._grid = None
         self._density_scale = None
 
     def _export(self, context, frame):
-        doc = super()._export(context, frame)
+        doc = _JobOperator._export(self, context, frame)
         if self._grid is None:
             self._grid = doc["medium"]["grid"]
             self._density_scale = doc["medium"]["density_scale"]
