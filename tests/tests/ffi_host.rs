@@ -159,7 +159,7 @@ fn destroyed_foreign_and_made_up_handles_are_detected() {
         assert_eq!((a.vs_result_destroy)(s), INVALID_HANDLE);
 
         // Made-up values are never dereferenced.
-        for fake in [1usize, 0x10, 0xdead_beef_0, usize::MAX, usize::MAX & !15] {
+        for fake in [1usize, 0x10, 0xd_eadb_eef0, usize::MAX, usize::MAX & !15] {
             let p = fake as *mut c_void;
             assert_eq!((a.vs_scene_load_default)(p), INVALID_HANDLE, "{fake:#x}");
             assert_eq!((a.vs_scene_destroy)(p), INVALID_HANDLE, "{fake:#x}");
@@ -273,7 +273,7 @@ fn invalid_enum_values_and_flags_are_refused() {
         }
         assert!(!dir.join("grid.bin").exists(), "nothing written for a bad format");
         for bad in [2u32, 4, 0x8000_0000, u32::MAX] {
-            let mut img = 1usize as *mut c_void;
+            let mut img = std::ptr::dangling_mut::<c_void>();
             expect_result(r, (a.vs_result_composite)(r, bad, 0, 0.0, &mut img), INVALID_ARGUMENT, &["flags", "unknown bits"]);
             assert!(img.is_null(), "output handle set to NULL on failure");
         }
@@ -357,6 +357,13 @@ fn bad_text_files_and_solver_settings_give_messages() {
         expect_scene(s, (a.vs_scene_load_json)(s, cstr(&small_json(1).replace("\"g\": 0.5", "\"g\": 7")).as_ptr(), null()), INVALID_SCENE, &["medium.g"]);
         expect_scene(s, (a.vs_scene_load_file)(s, cstr("/nonexistent/scene.json").as_ptr()), IO, &["/nonexistent/scene.json"]);
         expect_scene(s, (a.vs_scene_load_file)(s, cstr("").as_ptr()), INVALID_ARGUMENT, &["empty"]);
+        // Not regular files: reading them whole would never end (or exhaust memory).
+        if std::path::Path::new("/dev/zero").exists() {
+            expect_scene(s, (a.vs_scene_load_file)(s, cstr("/dev/zero").as_ptr()), IO, &["not a regular file"]);
+            expect_scene(s, (a.vs_scene_set_medium_vdb)(s, cstr("/dev/zero").as_ptr(), null(), null()), IO, &["not a regular file"]);
+            expect_scene(s, (a.vs_scene_add_dome_texture)(s, cstr("/dev/zero").as_ptr(), 1.0), IO, &["not a regular file"]);
+        }
+        expect_scene(s, (a.vs_scene_load_file)(s, cstr("/").as_ptr()), IO, &["not a regular file"]);
         let dir = scratch_dir("ffi-files");
         let junk = dir.join("junk.vdb");
         std::fs::write(&junk, b"this is not a VDB file at all, just text").unwrap();
@@ -391,7 +398,7 @@ fn bad_text_files_and_solver_settings_give_messages() {
 
         // An incomplete scene.
         let e = a.new_scene();
-        let mut out = 1usize as *mut c_void;
+        let mut out = std::ptr::dangling_mut::<c_void>();
         expect_scene(e, (a.vs_scene_solve)(e, None, null_mut(), &mut out), INVALID_SCENE, &["no medium"]);
         assert!(out.is_null());
         let id: [f32; 16] = [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.];
@@ -422,7 +429,7 @@ fn a_cancelling_callback_stops_the_solve_and_the_scene_stays_usable() {
         let s = small_scene();
         for cancel_at in [1usize, 3] {
             let state = CancelAfter { calls: AtomicUsize::new(0), cancel_at };
-            let mut r = 1usize as *mut c_void;
+            let mut r = std::ptr::dangling_mut::<c_void>();
             let st = (a.vs_scene_solve)(s, Some(cancel_after), &state as *const _ as *mut c_void, &mut r);
             expect_scene(s, st, CANCELLED, &["cancelled"]);
             assert!(r.is_null(), "no result after cancelling");
@@ -432,7 +439,7 @@ fn a_cancelling_callback_stops_the_solve_and_the_scene_stays_usable() {
             assert!(calls <= cancel_at + 1, "callback called {calls} times after cancelling at {cancel_at}");
 
             let state = CancelAfter { calls: AtomicUsize::new(0), cancel_at };
-            let mut img = 1usize as *mut c_void;
+            let mut img = std::ptr::dangling_mut::<c_void>();
             let st = (a.vs_scene_render_reference)(s, Some(cancel_after), &state as *const _ as *mut c_void, &mut img);
             expect_scene(s, st, CANCELLED, &["cancelled"]);
             assert!(img.is_null());

@@ -113,6 +113,23 @@ pub(crate) unsafe fn path_arg(p: *const c_char, what: &str) -> FfiResult<PathBuf
     }
 }
 
+/// A path that must name an existing regular file of at most `max_bytes` (so that reading it
+/// whole cannot exhaust memory: `/dev/zero` and FIFOs are refused).
+pub(crate) unsafe fn input_file_arg(p: *const c_char, what: &str, max_bytes: u64) -> FfiResult<PathBuf> {
+    let path = path_arg(p, what)?;
+    let meta = std::fs::metadata(&path).map_err(|e| FfiError::new(VsStatus::Io, format!("{}: {e}", path.display())))?;
+    if !meta.is_file() {
+        return Err(FfiError::new(VsStatus::Io, format!("{}: not a regular file", path.display())));
+    }
+    if meta.len() > max_bytes {
+        return Err(FfiError::new(
+            VsStatus::TooLarge,
+            format!("{}: {} MiB is over the limit of {} MiB", path.display(), meta.len() >> 20, max_bytes >> 20),
+        ));
+    }
+    Ok(path)
+}
+
 /// `N` floats read from `p`, each finite.
 pub(crate) unsafe fn floats_arg<const N: usize>(p: *const f32, what: &str) -> FfiResult<[f32; N]> {
     if p.is_null() {
@@ -145,7 +162,7 @@ pub(crate) unsafe fn out_slice<'a, T>(p: *mut T, len: usize, needed: usize, what
     if len != needed {
         return Err(FfiError::buffer(format!("{what} holds {len} values; this call needs exactly {needed}")));
     }
-    if (p as usize) % std::mem::align_of::<T>() != 0 {
+    if !p.is_aligned() {
         return Err(FfiError::buffer(format!("{what} at {p:p} is not aligned to {} bytes", std::mem::align_of::<T>())));
     }
     if needed.checked_mul(std::mem::size_of::<T>()).is_none_or(|b| b > isize::MAX as usize) {
@@ -162,7 +179,7 @@ pub(crate) unsafe fn in_slice<'a, T>(p: *const T, len: usize, what: &str) -> Ffi
     if len == 0 {
         return Err(FfiError::buffer(format!("{what} is empty (length 0)")));
     }
-    if (p as usize) % std::mem::align_of::<T>() != 0 {
+    if !p.is_aligned() {
         return Err(FfiError::buffer(format!("{what} at {p:p} is not aligned to {} bytes", std::mem::align_of::<T>())));
     }
     if len.checked_mul(std::mem::size_of::<T>()).is_none_or(|b| b > isize::MAX as usize) {
@@ -187,4 +204,56 @@ pub(crate) unsafe fn clear_out<T>(out: *mut *mut T, what: &str) -> FfiResult {
     }
     out.write_unaligned(std::ptr::null_mut());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::handle::Registry;
+    use super::*;
+
+    struct Opaque;
+
+    #[test]
+    fn a_panic_becomes_an_internal_status_with_its_message_on_the_handle() {
+        static REG: Registry<u32, Opaque> = Registry::new("Test");
+        let h = REG.insert(7).unwrap();
+        let st = on_handle(&REG, h, |_| panic!("boom {}", 42));
+        assert_eq!(st, VsStatus::Internal);
+        let handle = REG.get(h).unwrap();
+        let msg = unsafe { CStr::from_ptr(handle.error.as_ptr()) }.to_str().unwrap().to_string();
+        assert!(msg.contains("boom 42") && msg.contains("internal error"), "{msg}");
+        // A panic while the state is locked poisons the mutex; the handle stays usable.
+        let st = on_handle(&REG, h, |hd| {
+            let _g = hd.state.lock();
+            panic!("while locked")
+        });
+        assert_eq!(st, VsStatus::Internal);
+        assert_eq!(on_handle(&REG, h, |hd| { *super::super::handle::lock(&hd.state) += 1; Ok(()) }), VsStatus::Ok);
+        assert_eq!(*super::super::handle::lock(&REG.get(h).unwrap().state), 8);
+        assert_eq!(unsafe { CStr::from_ptr(REG.get(h).unwrap().error.as_ptr()) }.to_bytes(), b"", "success clears");
+        assert_eq!(call(|| panic!("no handle")), VsStatus::Internal);
+        assert_eq!(value(5, || panic!("value")), 5);
+        REG.remove(h).unwrap();
+        assert_eq!(REG.live_count(), 0);
+        assert_eq!(on_handle(&REG, h, |_| Ok(())), VsStatus::InvalidHandle);
+        assert_eq!(on_handle(&REG, std::ptr::null(), |_| Ok(())), VsStatus::NullArgument);
+    }
+
+    #[test]
+    fn buffers_are_checked_before_use() {
+        let mut v = [0f32; 4];
+        unsafe {
+            assert_eq!(out_slice(v.as_mut_ptr(), 4, 4, "v").unwrap().len(), 4);
+            assert_eq!(out_slice(v.as_mut_ptr(), 3, 4, "v").unwrap_err().status, VsStatus::BufferSize);
+            assert_eq!(out_slice::<f32>(std::ptr::null_mut(), 4, 4, "v").unwrap_err().status, VsStatus::NullArgument);
+            let odd = (v.as_mut_ptr() as *mut u8).add(1) as *mut f32;
+            assert_eq!(out_slice(odd, 2, 2, "v").unwrap_err().status, VsStatus::BufferSize);
+            assert_eq!(in_slice(v.as_ptr(), usize::MAX / 2, "v").unwrap_err().status, VsStatus::TooLarge);
+            assert_eq!(in_slice(v.as_ptr(), 0, "v").unwrap_err().status, VsStatus::BufferSize);
+            let nan = [1.0f32, f32::NAN, 0.0];
+            let e = floats_arg::<3>(nan.as_ptr(), "x").unwrap_err();
+            assert!(e.message.contains("x[1]"), "{}", e.message);
+            assert_eq!(input_file_arg(c"/dev/zero".as_ptr(), "p", 1 << 20).unwrap_err().status, VsStatus::Io);
+        }
+    }
 }

@@ -13,7 +13,7 @@ use volscatter_core::scene::{self, Camera};
 use volscatter_core::solvers::{self, reference::Reference, Timings};
 use volscatter_core::{Medium, Scene};
 
-use super::guard::{self, clear_out, finite_arg, floats_arg, in_slice, on_handle, opt_str_arg, path_arg, str_arg, write_out};
+use super::guard::{self, clear_out, finite_arg, floats_arg, in_slice, input_file_arg, on_handle, opt_str_arg, path_arg, str_arg, write_out};
 use super::handle::{lock, Handle, Registry};
 use super::image::{ImageState, IMAGES};
 use super::progress::{CProgress, VsProgressCallback};
@@ -33,6 +33,9 @@ pub(crate) struct SceneState {
 }
 
 pub(crate) static SCENES: Registry<SceneState, VsScene> = Registry::new("VsScene");
+
+/// Largest scene JSON file read by `vs_scene_load_file`.
+const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
 
 /// Largest voxel count per axis of a caller's dense buffer (keeps index arithmetic in i32).
 const MAX_DENSE_SIDE: u32 = 1 << 16;
@@ -154,7 +157,7 @@ pub unsafe extern "C" fn vs_scene_load_json(scene: *mut VsScene, json: *const c_
 #[no_mangle]
 pub unsafe extern "C" fn vs_scene_load_file(scene: *mut VsScene, path: *const c_char) -> VsStatus {
     with_scene(scene, |h| {
-        let path = path_arg(path, "path")?;
+        let path = input_file_arg(path, "path", MAX_SCENE_FILE_BYTES)?;
         let parsed = Scene::load(&path)?;
         *lock(&h.state) = SceneState::loaded(parsed);
         Ok(())
@@ -190,7 +193,7 @@ pub unsafe extern "C" fn vs_scene_set_medium_vdb(
     object_to_world: *const f32,
 ) -> VsStatus {
     with_scene(scene, |h| {
-        let path = path_arg(path, "path")?;
+        let path = input_file_arg(path, "path", GridLimits::default().max_bytes)?;
         let grid_name = opt_str_arg(grid_name, "grid_name")?;
         let o2w = if object_to_world.is_null() { Affine3A::IDENTITY } else { affine_arg(object_to_world, "object_to_world")? };
         let (grid, index_to_object) = volscatter_core::vdb::load_density(&path, grid_name, GridLimits::default())?;
@@ -222,7 +225,7 @@ pub unsafe extern "C" fn vs_scene_set_medium_dense(
 ) -> VsStatus {
     with_scene(scene, |h| {
         let dims = [nx, ny, nz];
-        if dims.iter().any(|&d| d == 0) {
+        if dims.contains(&0) {
             return Err(FfiError::invalid(format!("dimensions {nx}x{ny}x{nz}: each must be at least 1")));
         }
         if dims.iter().any(|&d| d > MAX_DENSE_SIDE) {
@@ -350,11 +353,10 @@ pub unsafe extern "C" fn vs_scene_add_dome_light(scene: *mut VsScene, color: *co
 #[no_mangle]
 pub unsafe extern "C" fn vs_scene_add_dome_texture(scene: *mut VsScene, path: *const c_char, intensity: f32) -> VsStatus {
     add_light(scene, || {
+        let intensity = finite_arg(intensity, "intensity")?;
+        input_file_arg(path, "path", GridLimits::default().max_bytes)?;
         let path = str_arg(path, "path")?;
-        if path.is_empty() {
-            return Err(FfiError::invalid("path is empty"));
-        }
-        Ok(LightJson::Dome { color: None, texture: Some(path.to_string()), intensity: finite_arg(intensity, "intensity")? })
+        Ok(LightJson::Dome { color: None, texture: Some(path.to_string()), intensity })
     })
 }
 

@@ -1,7 +1,7 @@
 //! The status every export returns, and the error type the C layer carries until it becomes a
 //! status plus a message stored on the handle.
 
-use std::ffi::c_char;
+use std::ffi::{c_char, CStr};
 
 use volscatter_core::Error;
 
@@ -62,20 +62,20 @@ impl VsStatus {
     }
 
     /// A static, NUL-terminated description of the status.
-    pub(crate) fn description(self) -> &'static [u8] {
+    pub(crate) fn description(self) -> &'static CStr {
         match self {
-            VsStatus::Ok => b"ok\0",
-            VsStatus::NullArgument => b"a required pointer argument was NULL\0",
-            VsStatus::InvalidArgument => b"invalid argument\0",
-            VsStatus::InvalidHandle => b"invalid handle (destroyed, never created, or of another type)\0",
-            VsStatus::BufferSize => b"buffer length does not match\0",
-            VsStatus::InvalidScene => b"invalid or incomplete scene\0",
-            VsStatus::Io => b"file could not be read or written\0",
-            VsStatus::Format => b"file could not be decoded\0",
-            VsStatus::TooLarge => b"request too large\0",
-            VsStatus::Unsupported => b"not supported by this build\0",
-            VsStatus::Cancelled => b"cancelled\0",
-            VsStatus::Internal => b"internal error\0",
+            VsStatus::Ok => c"ok",
+            VsStatus::NullArgument => c"a required pointer argument was NULL",
+            VsStatus::InvalidArgument => c"invalid argument",
+            VsStatus::InvalidHandle => c"invalid handle (destroyed, never created, or of another type)",
+            VsStatus::BufferSize => c"buffer length does not match",
+            VsStatus::InvalidScene => c"invalid or incomplete scene",
+            VsStatus::Io => c"file could not be read or written",
+            VsStatus::Format => c"file could not be decoded",
+            VsStatus::TooLarge => c"request too large",
+            VsStatus::Unsupported => c"not supported by this build",
+            VsStatus::Cancelled => c"cancelled",
+            VsStatus::Internal => c"internal error",
         }
     }
 }
@@ -128,8 +128,8 @@ impl From<Error> for FfiError {
 /// Thread safety: may be called from any thread at any time.
 #[no_mangle]
 pub extern "C" fn vs_status_message(status: i32) -> *const c_char {
-    super::guard::value(b"internal error\0".as_ptr().cast(), || match VsStatus::from_i32(status) {
+    super::guard::value(c"internal error".as_ptr().cast(), || match VsStatus::from_i32(status) {
         Some(s) => s.description().as_ptr().cast(),
-        None => b"unknown status\0".as_ptr().cast(),
+        None => c"unknown status".as_ptr().cast(),
     })
 }

@@ -19,7 +19,7 @@ const VERSION_C: &str = concat!(env!("CARGO_PKG_VERSION"), "\0");
 /// Thread safety: may be called from any thread at any time.
 #[no_mangle]
 pub extern "C" fn vs_version() -> *const c_char {
-    super::guard::value(b"unknown\0".as_ptr().cast(), || VERSION_C.as_ptr().cast())
+    super::guard::value(c"unknown".as_ptr().cast(), || VERSION_C.as_ptr().cast())
 }
 
 /// The ABI version the library was built with; compare with `VS_ABI_VERSION`.
