@@ -345,18 +345,21 @@ impl DensityGridBuilder {
         if (origin & (BRICK - 1)) != IVec3::ZERO {
             return Err(Error::InvalidArgument(format!("brick at {origin} is not brick-aligned")));
         }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            let local = IVec3::new(i as i32 & (BRICK - 1), (i as i32 >> BRICK_LOG2) & (BRICK - 1), i as i32 >> (2 * BRICK_LOG2));
+            Self::check_value(values[i], origin + local)?;
+        }
+        let negatives = values.iter().filter(|v| **v < 0.0).count() as u64;
+        // Bounding box of the positive voxels, a row of 8 along x at a time.
         let mut lo = IVec3::splat(BRICK);
         let mut hi = IVec3::splat(-1);
-        let mut negatives = 0u64;
-        for (i, &v) in values.iter().enumerate() {
-            let local = IVec3::new(i as i32 & (BRICK - 1), (i as i32 >> BRICK_LOG2) & (BRICK - 1), i as i32 >> (2 * BRICK_LOG2));
-            Self::check_value(v, origin + local)?;
-            if v < 0.0 {
-                negatives += 1;
-            } else if v > 0.0 {
-                lo = lo.min(local);
-                hi = hi.max(local);
-            }
+        for (r, row) in values.chunks_exact(BRICK as usize).enumerate() {
+            let (Some(x0), Some(x1)) = (row.iter().position(|v| *v > 0.0), row.iter().rposition(|v| *v > 0.0)) else {
+                continue;
+            };
+            let (y, z) = (r as i32 & (BRICK - 1), r as i32 >> BRICK_LOG2);
+            lo = lo.min(IVec3::new(x0 as i32, y, z));
+            hi = hi.max(IVec3::new(x1 as i32, y, z));
         }
         self.clamped_negative += negatives;
         let key = origin >> BRICK_LOG2;
@@ -499,6 +502,32 @@ mod tests {
         let mut b = DensityGridBuilder::new(GridLimits::default());
         let err = b.fill_tile(IVec3::splat(0), 4096, 1.0).unwrap_err();
         assert!(err.to_string().contains("over the limit"), "{err}");
+    }
+
+    #[test]
+    fn set_leaf_is_tight_and_checked() {
+        let mut b = DensityGridBuilder::new(GridLimits::default());
+        let mut v = [0.0f32; BRICK_VOXELS];
+        v[voxel_offset(IVec3::new(2, 3, 4))] = 1.5;
+        v[voxel_offset(IVec3::new(5, 1, 6))] = 0.5;
+        v[voxel_offset(IVec3::new(7, 7, 7))] = -1.0;
+        b.set_leaf(IVec3::new(16, -8, 0), &v).unwrap();
+        assert_eq!(b.clamped_negative(), 1);
+        assert!(b.set_leaf(IVec3::new(3, 0, 0), &v).is_err());
+        let mut bad = v;
+        bad[9] = f32::INFINITY;
+        assert!(b.set_leaf(IVec3::new(0, 0, 0), &bad).is_err());
+        let g = b.build().unwrap();
+        assert_eq!(g.bbox(), (IVec3::new(18, -7, 4), IVec3::new(21, -5, 6)));
+        assert_eq!(g.voxel(IVec3::new(18, -5, 4)), 1.5);
+        assert_eq!(g.voxel(IVec3::new(23, -1, 7)), 0.0);
+        let mut n = 0;
+        g.for_each_brick(|o, r| {
+            n += 1;
+            assert_eq!(o, IVec3::new(16, -8, 0));
+            assert!(matches!(r, BrickRef::Dense(_)));
+        });
+        assert_eq!(n, 1);
     }
 
     #[test]

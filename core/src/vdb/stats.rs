@@ -22,10 +22,12 @@ impl Stats {
         self.active_voxels == 0
     }
     fn extend(&mut self, lo: IVec3, size: i64) {
-        let lo = [lo.x as i64, lo.y as i64, lo.z as i64];
-        for (a, l) in lo.into_iter().enumerate() {
-            self.bbox_min[a] = self.bbox_min[a].min(l);
-            self.bbox_max[a] = self.bbox_max[a].max(l + size - 1);
+        self.extend_box(lo, lo + IVec3::splat((size - 1) as i32));
+    }
+    fn extend_box(&mut self, lo: IVec3, hi: IVec3) {
+        for (a, (l, h)) in lo.to_array().into_iter().zip(hi.to_array()).enumerate() {
+            self.bbox_min[a] = self.bbox_min[a].min(l as i64);
+            self.bbox_max[a] = self.bbox_max[a].max(h as i64);
         }
     }
 }
@@ -46,13 +48,23 @@ impl Visitor for Stats {
 
     fn leaf(&mut self, origin: IVec3, mask: &[u64; 8], values: &[f64]) -> Result<()> {
         let comps = self.sum.len();
+        let (mut lo, mut hi) = ([7usize; 3], [0usize; 3]);
+        let mut n = 0u64;
         for i in super::bytes::ones(mask) {
-            self.active_voxels = self.active_voxels.saturating_add(1);
+            n += 1;
             for c in 0..comps {
                 self.sum[c] += values[i * comps + c];
             }
-            let p = origin + IVec3::new((i >> 6) as i32, ((i >> 3) & 7) as i32, (i & 7) as i32);
-            self.extend(p, 1);
+            let p = [i >> 6, (i >> 3) & 7, i & 7];
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        if n > 0 {
+            self.active_voxels = self.active_voxels.saturating_add(n);
+            let v = |p: [usize; 3]| IVec3::new(p[0] as i32, p[1] as i32, p[2] as i32);
+            self.extend_box(origin + v(lo), origin + v(hi));
         }
         Ok(())
     }

@@ -42,9 +42,16 @@ pub struct VdbInfoArgs {
     /// to its minimum corner and the transform adjusted to match).
     #[arg(long, hide = true)]
     pub dense: bool,
+    /// Instead of the listing, time N full reads (vdb-info statistics, and loading the density
+    /// grid as a medium) and print the fastest of each as JSON (scripts/bench_vdb.py).
+    #[arg(long, hide = true, default_value_t = 0)]
+    pub bench: u32,
 }
 
 pub fn run(args: VdbInfoArgs) -> Result<()> {
+    if args.bench > 0 {
+        return bench(&args);
+    }
     let info = vdb::inspect(&args.file)?;
     let text = if args.compact { serde_json::to_string(&info) } else { serde_json::to_string_pretty(&info) }
         .map_err(|e| Error::format(&args.file, format!("cannot print as JSON: {e}")))?;
@@ -79,4 +86,37 @@ fn rewrite(args: &VdbInfoArgs, out: &std::path::Path) -> Result<()> {
     } else {
         vdb::write_float_grid(out, &name, &grid, xf, &options)
     }
+}
+
+fn bench(args: &VdbInfoArgs) -> Result<()> {
+    let time = |f: &dyn Fn() -> Result<u64>| -> Result<(f64, u64)> {
+        let mut best = f64::MAX;
+        let mut n = 0;
+        for _ in 0..args.bench {
+            let t = std::time::Instant::now();
+            n = f()?;
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        Ok((best, n))
+    };
+    let (inspect_s, active) = time(&|| {
+        let info = vdb::inspect(&args.file)?;
+        Ok(info.grids.iter().filter_map(|g| g.active_voxels).sum())
+    })?;
+    let (load_s, stored) = time(&|| {
+        let (g, _) = vdb::load_density(&args.file, args.grid.as_deref(), GridLimits::default())?;
+        Ok(g.sum_and_count_nonzero().1)
+    })?;
+    let bytes = std::fs::metadata(&args.file).map_err(|e| Error::io(&args.file, e))?.len();
+    let out = serde_json::json!({
+        "file": args.file.display().to_string(),
+        "bytes": bytes,
+        "active_voxels": active,
+        "nonzero_voxels_loaded": stored,
+        "runs": args.bench,
+        "inspect_s": inspect_s,
+        "load_density_s": load_s,
+    });
+    println!("{out}");
+    Ok(())
 }
