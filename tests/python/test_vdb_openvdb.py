@@ -120,6 +120,19 @@ def make_level_set(path, half):
         acc.setValueOn((i, -i, 2 * i), (0.5 * i, 1.0, -0.25 * i))
     vdb.write(path, grids=[g, v])
 
+def make_instanced(path):
+    """Two grids sharing one tree: OpenVDB writes the second as an instance (no topology)."""
+    g = vdb.FloatGrid()
+    g.name = "density"
+    acc = g.getAccessor()
+    for i in range(20):
+        acc.setValueOn((i, 2 * i, 3), 0.5 + i)
+    h = g.copy()
+    h.name = "density_copy"
+    h.transform = vdb.createLinearTransform(0.5)
+    assert g.sharesWith(h)
+    vdb.write(path, grids=[g, h])
+
 fn = globals()[sys.argv[1]]
 print(json.dumps(fn(*json.loads(sys.argv[2]))))
 '''
@@ -227,6 +240,19 @@ def test_level_set_and_vec3_stats_match_openvdb(tmp_path, half):
     r = subprocess.run([str(volscatter_bin()), "vdb-info", str(p), "--rewrite", str(tmp_path / "x.vdb"),
                         "--grid", "surface"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and "background" in r.stderr, r.stderr
+
+
+def test_instanced_grid(tmp_path):
+    p = tmp_path / "inst.vdb"
+    openvdb("make_instanced", str(p))
+    ours = vdb_info(p)
+    assert ours["density_copy"]["instance_parent"] == "density"
+    assert ours["density_copy"]["index_to_world"][0][0] == 0.5
+    assert_same_stats(ours, openvdb("stats", str(p)), p.name)
+    out = tmp_path / "copy_ours.vdb"
+    vdb_info(p, "--rewrite", out, "--grid", "density_copy")
+    res = openvdb("compare", str(p), str(out), "density_copy", False)
+    assert res["n_bad"] == 0 and res["ours_active"] == 20, res
 
 
 def test_vdb_info_refuses_bad_files(tmp_path):

@@ -217,7 +217,10 @@ pub(crate) fn read_descriptor(r: &mut Reader) -> Result<GridDescriptor> {
     let block_pos = r.i64("block offset")?;
     let end_pos = r.i64("end offset")?;
     let len = r.len() as i64;
-    if !(0 <= grid_pos && grid_pos <= block_pos && block_pos <= end_pos && end_pos <= len) {
+    // The block offset is 0 for instance grids (no buffers of their own); it is not needed
+    // to read (OpenVDB reads the buffers right after the topology), only checked for range.
+    let block_ok = block_pos == 0 || (grid_pos <= block_pos && block_pos <= end_pos);
+    if !(0 <= grid_pos && grid_pos <= end_pos && end_pos <= len && block_ok) {
         return Err(r.err(format!(
             "grid `{unique_name}` has offsets grid {grid_pos}, blocks {block_pos}, end {end_pos} \
              that are out of order or past the end of the file ({len} bytes)"
