@@ -214,8 +214,16 @@ impl VdbFile {
             Err(Error::InvalidArgument(m)) => return Err(Error::format(&self.path, format!("grid `{name}`: {m}"))),
             Err(e) => return Err(e),
         }
+        let xf = head.transform.to_affine3a();
+        let det = glam::Mat3::from(xf.matrix3).determinant();
+        if !xf.is_finite() || !det.is_finite() || det == 0.0 {
+            return Err(Error::format(
+                &self.path,
+                format!("grid `{name}`: transform {} is out of single-precision range", head.transform.map_type),
+            ));
+        }
         let grid = v.builder.build()?;
-        Ok((grid, head.transform.to_affine3a()))
+        Ok((grid, xf))
     }
 
     /// Everything `vdb-info` prints about grid `i`.
