@@ -62,6 +62,7 @@ _SIGNATURES = {
     "vs_image_last_error": (ctypes.c_char_p, [_vp]),
     "vs_image_size": (_st, [_vp, _u32p, _u32p]),
     "vs_image_copy_rgba": (_st, [_vp, _f32p, ctypes.c_size_t]),
+    "vs_image_copy_aov": (_st, [_vp, ctypes.c_char_p, _f32p, ctypes.c_size_t]),
 }
 
 
@@ -301,4 +302,11 @@ class Image(_Handle):
         w, h = self.size()
         buf = _floats(w * h * 4)
         self._call("vs_image_copy_rgba", buf, w * h * 4)
+        return buf
+
+    def aov(self, name):
+        """AOV layer `name` ("single", "multiple", "background") as RGB floats, rows top to bottom."""
+        w, h = self.size()
+        buf = _floats(w * h * 3)
+        self._call("vs_image_copy_aov", name.encode(), buf, w * h * 3)
         return buf
