@@ -300,6 +300,9 @@ def lights(scene, depsgraph, warnings):
         orig = ob.original
         if orig.hide_render:
             continue
+        if not getattr(orig, "visible_volume_scatter", True):  # Cycles: light not seen by volumes
+            warnings.append("light '%s' has volume scattering visibility off and was left out" % orig.name)
+            continue
         light = ob.data
         m = inst.matrix_world
         col = _light_color(light, warnings)
