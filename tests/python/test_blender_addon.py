@@ -774,3 +774,15 @@ def test_single_scattering_matches_cycles(fresh, light):
     for c in range(3):
         assert cyc[c] == pytest.approx(ours[c], rel=0.1), "Cycles %s, volscatter %s" % (cyc, ours)
     assert cyc[3] == pytest.approx(ours[3], rel=0.05), "alpha: Cycles %s, volscatter %s" % (cyc, ours)
+
+
+def test_saved_blend_keeps_relative_paths(fresh):
+    ob = bs.standard_scene(res=6)
+    _tiny(ob, fresh)
+    ob.volscatter.output_dir = "//volscatter/"
+    bpy.ops.wm.save_as_mainfile(filepath=str(fresh / "scene.blend"))
+    ob = bpy.data.objects["Smoke"]
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    vol = bpy.data.objects["Smoke_scattering"].data
+    assert vol.filepath == "//volscatter/Smoke_scattering_0001.vdb"
+    assert os.path.isfile(str(fresh / "volscatter" / "Smoke_scattering_0001.vdb"))

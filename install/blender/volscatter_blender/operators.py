@@ -417,7 +417,8 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         try:
             vol = bpy.data.volumes.new(self._name)
             created.append((bpy.data.volumes, vol))
-            vol.filepath = paths[0]
+            # relative to the .blend when it is saved, so the project folder can move
+            vol.filepath = bpy.path.relpath(paths[0]) if bpy.data.filepath else paths[0]
             if len(paths) > 1:
                 vol.is_sequence = True
                 vol.frame_start = self._frames[0]

@@ -3,6 +3,10 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
 
+# Blender 5 warns about "//" paths in properties that do not declare support for them (the
+# option does not exist in older versions).
+_BLEND_RELATIVE = {'PATH_SUPPORTS_BLEND_RELATIVE'} if bpy.app.version >= (5, 0, 0) else set()
+
 # quality preset -> (solver settings for "pop", for "reference")
 PRESETS = {
     'DRAFT': ({"grid_resolution": 16, "max_iterations": 100, "output_resolution": 64},
@@ -50,7 +54,7 @@ class VolscatterSettings(bpy.types.PropertyGroup):
                                   description="Compute one scattering VDB per frame of the range")
     frame_start: IntProperty(name="Start", default=1)
     frame_end: IntProperty(name="End", default=1)
-    output_dir: StringProperty(name="Output", subtype='DIR_PATH', default="//volscatter/",
+    output_dir: StringProperty(name="Output", subtype='DIR_PATH', default="//volscatter/", options=_BLEND_RELATIVE,
                                description="Folder for the scattering VDB files (unsaved files: the temp folder)")
     hide_original: BoolProperty(name="Hide Original", default=True,
                                 description="Hide the source volume in renders once its scattering volume exists "
