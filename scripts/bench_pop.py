@@ -126,6 +126,7 @@ def main() -> None:
                 "reference_seconds_at_pop_error": t_eq,
                 "speedup": t_eq / pop["image_seconds"],
                 "baseline_noise": c / base_spp ** 0.5,
+                "grid_mean_ratio": statistics.mean(pop["grid_mean"]) / max(statistics.mean(runs["reference"]["grid_mean"]), 1e-30),
             })
             log(rows[-1])
         for res in (16, 32, 48):
@@ -147,13 +148,13 @@ def main() -> None:
         "background (the light the solvers compute), *grid* = scattering grid S. *Reference at POP's error*: spp where the",
         "reference's own error c/sqrt(spp) (fitted at 4/16/64 spp) equals POP's scattered error, times its seconds per spp.",
         "",
-        "| scene | POP s (solve + composite) | POP solve s | image rRMSE | scattered rRMSE | grid rRMSE | reference spp at POP's error | reference s at POP's error | speed-up | baseline noise |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| scene | POP s (solve + composite) | POP solve s | image rRMSE | scattered rRMSE | grid rRMSE | grid mean POP/ref | reference spp at POP's error | reference s at POP's error | speed-up | baseline noise |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['scene']} | {r['pop_seconds']:.2f} | {r['pop_solve_seconds']:.2f} | {r['pop_image_rmse']:.3f} | {r['pop_scattered_rmse']:.3f} | "
-            f"{r['pop_grid_rmse']:.3f} | {r['reference_spp_at_pop_error']:.1f} | {r['reference_seconds_at_pop_error']:.2f} | {r['speedup']:.2f}x | {r['baseline_noise']:.3f} |"
+            f"{r['pop_grid_rmse']:.3f} | {r['grid_mean_ratio']:.2f} | {r['reference_spp_at_pop_error']:.1f} | {r['reference_seconds_at_pop_error']:.2f} | {r['speedup']:.2f}x | {r['baseline_noise']:.3f} |"
         )
     phases = ["pop mip", "pop light grid", "pop init", "pop propagation", "pop merge", "pop upsample", "composite"]
     lines += [
@@ -165,13 +166,21 @@ def main() -> None:
     ]
     for res, ph, total in phase_rows:
         lines.append(f"| {res} | " + " | ".join(f"{ph.get(p, 0.0):.3f}" for p in phases) + f" | {total:.3f} |")
+    met = [r for r in rows if r["pop_scattered_rmse"] < 0.10 and r["speedup"] > 50]
+    errs = [r["pop_scattered_rmse"] for r in rows]
+    speed = [r["speedup"] for r in rows]
     lines += [
         "",
-        "Against the issue's aim (under 10% error at over 50x the reference's speed at that error): not met on these",
-        "scenes. POP's error is 0.2-0.5 (it is biased: one HG lobe about the light per cell cannot hold light that",
-        "turned far from the light and kept going, which is what a camera at 60-90 degrees from the light sees in",
-        "forward-scattering media), and the reference reaches that error in a few samples per pixel. Energy",
-        "conservation and the tests' measured errors: see core/src/solvers/pop/tests.rs.",
+        f"Against the issue's aim (under 10% error at over 50x the reference's speed at that error): met on {len(met)} of"
+        f" {len(rows)} scenes. POP's scattered-light error is {min(errs):.2f}-{max(errs):.2f} and its speed-up at equal error"
+        f" {min(speed):.2f}x-{max(speed):.2f}x here. Why: POP is biased (one HG lobe about the light per cell cannot hold",
+        "light that turned far from the light and kept its new direction, which is what a camera at 60-90 degrees from the",
+        "light sees in forward-scattering media; see the tests), so the reference reaches POP's error after tens to hundreds",
+        "of samples per pixel, which on these small images costs well under a second; POP's cost, dominated by up to 400",
+        "propagation iterations on the CPU, does not shrink with the image (the reference's grows with the pixel count).",
+        "The grid error of the default scene is larger than its image error: POP overestimates S deep inside the dense plume",
+        "(mean ratio above), where the camera does not see (optically thick); the image error counts what is visible.",
+        "Energy conservation and the per-case errors on the test scenes: core/src/solvers/pop/tests.rs.",
     ]
     write_section("pop", "\n".join(lines))
     log("wrote BENCHMARKS.md section `pop`")

@@ -193,10 +193,13 @@ pub fn run(args: CompareArgs) -> Result<()> {
         let rgb: Vec<glam::Vec3> = r.image.rgba.iter().map(|p| p.truncate()).collect();
         let img_err = relative_rmse(&rgb, &base_rgb);
         let scat_err = relative_rmse(&scattered(&r.image), &base_scat);
-        let grid_err = match (&r.grid, &base_grid) {
-            (Some(g), Some(b)) => Some(relative_rmse(&resample(g, &frame), b)),
+        let resampled = r.grid.as_ref().map(|g| resample(g, &frame));
+        let grid_err = match (&resampled, &base_grid) {
+            (Some(g), Some(b)) => Some(relative_rmse(g, b)),
             _ => None,
         };
+        // Mean of S over the comparison frame (RGB), to tell bias from noise.
+        let grid_mean = resampled.as_ref().map(|g| (g.iter().copied().sum::<glam::Vec3>() / g.len().max(1) as f32).to_array());
         println!(
             "{:<12} {:>12.4} {:>14.4} {:>12} {:>10.3} {:>10.3}",
             r.name,
@@ -213,6 +216,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
             "image_relative_rmse": img_err,
             "scattered_relative_rmse": scat_err,
             "grid_relative_rmse": grid_err,
+            "grid_mean": grid_mean,
             "image_seconds": r.image_seconds,
             "grid_seconds": r.grid_seconds,
             "phases_seconds": phases,
