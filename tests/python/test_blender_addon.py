@@ -7,9 +7,11 @@ installs it from disk. Skipped, with the reason, when bpy cannot be imported or 
 not built.
 """
 
+import atexit
 import ctypes
 import math
 import os
+import shutil
 import sys
 import tempfile
 
@@ -33,6 +35,7 @@ except (OSError, AttributeError) as e:
 # Extensions install into the user resource folder: keep it out of $HOME. Must precede `import bpy`.
 _USER = tempfile.mkdtemp(prefix="volscatter-blender-user-")
 os.environ["BLENDER_USER_RESOURCES"] = _USER
+atexit.register(shutil.rmtree, _USER, True)
 
 bpy = pytest.importorskip("bpy", reason="bpy (pip install bpy==5.0.1, Python 3.11) is not importable")
 import addon_utils  # noqa: E402  (part of bpy)
