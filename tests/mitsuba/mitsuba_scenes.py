@@ -2,7 +2,7 @@
 
 Each scene is described once (`SceneSpec`) and built twice: as volscatter scene JSON (format 1,
 raw float32 density) and as a Mitsuba 3 scene dict (`scalar_rgb`, `volpath`). The conventions
-follow ../../../shared/notes/mitsuba-reference.md (copied into the docstrings below where they
+follow the project notes on Mitsuba 3 as a reference (mitsuba-reference.md; summarised here where they
 matter):
 
 - Density: numpy array indexed [z][y][x], voxel (i,j,k) centred at `origin + (i,j,k) * voxel`,
