@@ -161,7 +161,7 @@ def read_exr_layers(path: Path) -> dict:
     mi = import_mitsuba()
     bmp = mi.Bitmap(str(path))
     names = [f.name for f in bmp.struct_()]
-    data = np.array(bmp, copy=False)
+    data = np.asarray(bmp)
     layers = {}
     for prefix in sorted({n.rsplit(".", 1)[0] if "." in n else "" for n in names}):
         chans = [f"{prefix}.{c}" if prefix else c for c in "RGB"]
