@@ -8,6 +8,20 @@
 //! into one medium-aligned grid (merge.rs) and upsampled to the output grid by a joint
 //! bilateral filter guided by the density (upsample.rs), which gives the scattering grid S.
 //!
+//! Departures from the paper, each explained where it is made:
+//! - init.rs: the unscattered light is computed exactly (sweep with full extinction) and only
+//!   the energy it loses to scattering is propagated; the paper's literal "initialise every
+//!   cell with L_in T_i, move it all, accumulate every iteration" counts the beam once per
+//!   upstream cell.
+//! - accumulate.rs: the accumulation holds the light scattered towards the camera,
+//!   f_hg(mu, a g) (HG self-convolution), not the radiance travelling towards it, f_hg(mu, a).
+//! - propagate.rs: an iteration stands for a light path matched to the lattice's drift
+//!   (directional light) and to physical diffusion (isotropic light) instead of one cell edge;
+//!   without it diffuse light is 2.6-3.3x too bright on the paper's own Fig. 12 cube.
+//! - light_grid.rs: cubic cells (Eq. 3's 45-degree cones assume them), so a grid is
+//!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
+//! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).
+//!
 //! Not here yet (later issues): point lights (radial grids, Sec. 6; left out with a warning on
 //! stderr) and proper environment lighting (importance-sampled ordinates, importance
 //! propagation, isotropic residuum, Sec. 5). A dome is handled crudely but honestly: a fixed
