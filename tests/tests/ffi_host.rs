@@ -158,8 +158,8 @@ fn destroyed_foreign_and_made_up_handles_are_detected() {
         assert_eq!((a.vs_image_destroy)(r), INVALID_HANDLE);
         assert_eq!((a.vs_result_destroy)(s), INVALID_HANDLE);
 
-        // Made-up values are never dereferenced.
-        for fake in [1usize, 0x10, 0xd_eadb_eef0, usize::MAX, usize::MAX & !15] {
+        // Made-up values (handles are multiples of 16 counted from 16) are never dereferenced.
+        for fake in [1usize, 0x18, 0xd_eadb_eef8, usize::MAX, usize::MAX & !15] {
             let p = fake as *mut c_void;
             assert_eq!((a.vs_scene_load_default)(p), INVALID_HANDLE, "{fake:#x}");
             assert_eq!((a.vs_scene_destroy)(p), INVALID_HANDLE, "{fake:#x}");
