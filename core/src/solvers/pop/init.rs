@@ -13,6 +13,7 @@
 //!   (1 - exp(-sigma_t h)), is injected into the propagation grid as a packet with the
 //!   anisotropy of once-scattered light, a = a0 * g (HG self-convolution), and only this
 //!   energy is propagated by Eq. 1-6.
+//!
 //! Energy is then accounted for exactly: what enters a column either leaves it unscattered,
 //! or is absorbed in the beam, or becomes a packet.
 

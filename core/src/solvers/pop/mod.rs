@@ -68,12 +68,10 @@ impl LightReport {
     /// (light leaving the medium + light absorbed) / light entering, per channel. 1 means
     /// energy is conserved; the dropped residual counts as lost.
     pub fn energy_balance(&self) -> [f32; 3] {
-        let mut r = [0.0; 3];
-        for c in 0..3 {
+        std::array::from_fn(|c| {
             let out = self.transmitted[c] + self.absorbed_direct[c] + self.propagation.escaped[c] + self.propagation.absorbed[c];
-            r[c] = if self.entering[c] > 0.0 { out / self.entering[c] } else { 1.0 };
-        }
-        r
+            if self.entering[c] > 0.0 { out / self.entering[c] } else { 1.0 }
+        })
     }
 }
 
