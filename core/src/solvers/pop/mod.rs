@@ -162,7 +162,8 @@ impl Pop {
                 residual_threshold: s.residual_threshold,
             };
             let t0 = std::time::Instant::now();
-            let stats = prop.run(&init, a0 * g, &mut j_acc, progress)?;
+            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape };
+            let stats = prop.run_with(opts, &init, a0 * g, &mut j_acc, progress)?;
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
             report.lights.push(LightReport {
                 dims: grid.dims.to_array(),

@@ -70,6 +70,12 @@ fn clamp_a(a: f32) -> f32 {
     a.clamp(-0.9995, 0.9995)
 }
 
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Let the isotropic part of light that has left the medium escape (see run_with).
+    pub vacuum_escape: bool,
+}
+
 pub struct Propagation<'a> {
     pub grid: &'a LightGrid,
     /// Medium phase anisotropy.
@@ -107,6 +113,11 @@ impl Propagation<'_> {
     /// Eq. 7-8, with the phase function applied: see accumulate.rs) and returns energy
     /// statistics.
     pub fn run(&self, init: &Initial, a_scattered: f32, j_acc: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
+        self.run_with(RunOptions::default(), init, a_scattered, j_acc, progress)
+    }
+
+    /// `run` with options that the GPU port (shaders/src/pop) does not have yet.
+    pub fn run_with(&self, opts: RunOptions, init: &Initial, a_scattered: f32, j_acc: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
         let grid = self.grid;
         let n = grid.len();
         let (nx, ny, nz) = (grid.dims.x as usize, grid.dims.y as usize, grid.dims.z as usize);
@@ -197,27 +208,39 @@ impl Propagation<'_> {
             std::mem::swap(&mut p, &mut p_next);
             std::mem::swap(&mut a, &mut a_next);
             // Accumulate (Eq. 7-8) and prepare the next emission.
-            let (p_ref, a_ref) = (&p, &a);
-            let (sum, esc) = emit
+            let a_ref = &a;
+            let (arrived, esc, vac) = emit
                 .par_iter_mut()
                 .zip(j_acc.par_iter_mut())
+                .zip(p.par_iter_mut())
                 .enumerate()
-                .map(|(c, (e, jc))| {
-                    let pc = p_ref[c];
-                    if pc == Vec3::ZERO {
+                .map(|(c, ((e, jc), pc))| {
+                    let arrived = *pc;
+                    if arrived == Vec3::ZERO {
                         *e = Emit::default();
-                        return (Vec3::ZERO, Vec3::ZERO);
+                        return (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+                    }
+                    let mut vac = Vec3::ZERO;
+                    if opts.vacuum_escape && grid.sigma_s[c] == Vec3::ZERO && grid.sigma_a[c] == Vec3::ZERO {
+                        // Outside the medium light does not scatter: its isotropic part streams
+                        // away instead of random-walking back in, as the lattice would let it.
+                        // The directional part (|a|) keeps travelling along d and may meet the
+                        // medium again downstream.
+                        let keep = a_ref[c].abs().min(Vec3::ONE);
+                        vac = *pc * (Vec3::ONE - keep);
+                        *pc *= keep;
                     }
                     *e = self.emit(c, a_ref[c]);
-                    let w = pc * e.path / h;
+                    let w = *pc * e.path / h;
                     *jc += w * per_channel(a_ref[c], |ac| hg(self.mu[c], clamp_a(ac * g)));
-                    (pc, escaped_at(c, e, pc))
+                    (arrived, escaped_at(c, e, *pc), vac)
                 })
-                .reduce(|| (Vec3::ZERO, Vec3::ZERO), |x, y| (x.0 + y.0, x.1 + y.1));
+                .reduce(|| (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
             // What left `before` and neither arrived in a cell nor left the grid was absorbed.
-            absorbed += (before - esc_next - sum).max(Vec3::ZERO);
-            escaped += esc_next;
+            absorbed += (before - esc_next - arrived).max(Vec3::ZERO);
+            escaped += esc_next + vac;
             esc_next = esc;
+            let sum = arrived - vac;
             before = sum;
             remaining = sum;
             // Progress: iterations, or orders of magnitude of the residual, whichever is ahead.

@@ -34,6 +34,14 @@ pub struct PopSettings {
     /// isotropic (see propagate.rs). Off: every iteration is one cell of light path, as in the
     /// paper.
     pub diffusion_correction: bool,
+    /// Outside the medium (empty cells), the isotropic part of the light escapes instead of
+    /// random-walking back into the medium (the lattice cannot stream it outwards). Off by
+    /// default: measured, it helps dense clouds in empty space (default scene without sky: grid
+    /// rel. RMSE 0.81 -> 0.64, grid mean 1.58x -> 1.39x the reference) but over-darkens a
+    /// diffusive cube (g 0: image 0.18 -> 0.23, mean 1.10x -> 0.79x), because an empty cell
+    /// one step outside acts as a perfect absorber, closer than the physical extrapolated
+    /// boundary (0.71 / sigma_tr).
+    pub vacuum_escape: bool,
     /// A dome is approximated by this many distant ordinates (Fibonacci directions, each
     /// carrying its cell's mean radiance times its solid angle, with the cone's mean cosine
     /// as initial anisotropy: the prefiltering of Sec. 5.1 without importance sampling). 0: the
@@ -56,6 +64,7 @@ impl Default for PopSettings {
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             diffusion_correction: true,
+            vacuum_escape: false,
             dome_ordinates: 6,
             dome_grid_resolution: 0,
         }
