@@ -22,8 +22,9 @@
 //! that makes the lattice's drift per step equal the lobe's mean cosine times the path (about
 //! one cell); for isotropic light the diffusion-matched h sigma_tr / 2. (Measured against the
 //! reference on the cube, without the correction the g = 0 and g = 0.7 cases have image rel. RMSE
-//! 3.3 and 2.6, several times too bright; with it 0.18 and 0.27, mean brightness within 10%.) The fluence a packet leaves in a cell is P s / h (fluence = energy x path length
-//! per volume), and absorption and the decay of a use the same s. Energy accounting is
+//! 3.3 and 2.6, several times too bright; with it 0.18 and 0.27, mean brightness within 10%.)
+//! The fluence a packet leaves in a cell is P s / h (fluence = energy x path length per
+//! volume), and absorption and the decay of a use the same s. Energy accounting is
 //! unchanged: the fractions still sum to one.
 
 use glam::Vec3;
