@@ -176,8 +176,11 @@ impl Propagation<'_> {
                             let e = &e_ref[src];
                             let sa = 0.5 * (grid.sigma_a[src] + sa_d);
                             let ss = 0.5 * (grid.sigma_s[src] + ss_d);
-                            let dl = ps * frac * (-sa * e.path).exp();
-                            let da = a_ref[src] * (ss * e.path * ln_g).exp();
+                            // exp(0) = 1 exactly: skipping it in empty or non-absorbing
+                            // cells changes nothing but the time.
+                            let t = if sa == Vec3::ZERO { Vec3::ONE } else { (-sa * e.path).exp() };
+                            let dl = ps * frac * t;
+                            let da = if ss == Vec3::ZERO { a_ref[src] } else { a_ref[src] * (ss * e.path * ln_g).exp() };
                             l += dl;
                             la += dl * da;
                         };
