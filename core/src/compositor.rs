@@ -184,7 +184,7 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
     let env = scene.environment();
     let (w, h) = (cam.width as usize, cam.height as usize);
-    let k = opts.subpixels.clamp(1, 8);
+    let k = opts.subpixels.clamp(1, 16);
     let inv = 1.0 / (k * k) as f32;
     let pixels: Vec<(Vec4, Vec3, Vec3)> = (0..w * h)
         .into_par_iter()

@@ -48,6 +48,21 @@
 #define VS_COMPOSITE_TRANSPARENT 1
 
 /**
+ * `vs_scene_set_device`: run on the CPU (the default).
+ */
+#define VS_DEVICE_CPU 0
+
+/**
+ * `vs_scene_set_device`: run on a GPU adapter; fail when none works.
+ */
+#define VS_DEVICE_GPU 1
+
+/**
+ * `vs_scene_set_device`: a GPU adapter when one works, else the CPU.
+ */
+#define VS_DEVICE_AUTO 2
+
+/**
  * Outcome of a call. `VS_STATUS_OK` is 0; every other value is a failure whose message is
  * available from the handle's `vs_*_last_error` (or, for calls without a handle, from
  * `vs_status_message`). New values may be added in later versions with the same ABI version:
@@ -342,6 +357,17 @@ VsStatus vs_scene_set_camera(VsScene *scene,
                              float fov_deg,
                              uint32_t width,
                              uint32_t height);
+
+/**
+ * Chooses where GPU-capable stages run for this scene and the results solved from it:
+ * `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: fail with `VS_STATUS_UNSUPPORTED` when
+ * no GPU adapter works) or `VS_DEVICE_AUTO` (2: a GPU adapter when one works, else the CPU).
+ * A GPU that is lost or runs out of memory mid-way falls back to the CPU under AUTO. Today
+ * the compositor (`vs_result_composite`) runs on the GPU; other values are refused.
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_scene_set_device(VsScene *scene, uint32_t device);
 
 /**
  * Chooses the solver by `name` ("reference", "pop", ...) with its settings as a JSON object

@@ -97,6 +97,7 @@ api! {
     vs_scene_light_count: fn(Scene, *mut usize) -> S;
     vs_scene_set_camera: fn(Scene, F, F, F, f32, u32, u32) -> S;
     vs_scene_set_solver: fn(Scene, Cs, Cs) -> S;
+    vs_scene_set_device: fn(Scene, u32) -> S;
     vs_scene_solve: fn(Scene, Progress, *mut c_void, *mut Res) -> S;
     vs_scene_render_reference: fn(Scene, Progress, *mut c_void, *mut Img) -> S;
     vs_result_destroy: fn(Res) -> S;

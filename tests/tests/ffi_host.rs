@@ -277,6 +277,9 @@ fn invalid_enum_values_and_flags_are_refused() {
             expect_result(r, (a.vs_result_composite)(r, bad, 0, 0.0, &mut img), INVALID_ARGUMENT, &["flags", "unknown bits"]);
             assert!(img.is_null(), "output handle set to NULL on failure");
         }
+        for bad in [3u32, 7, u32::MAX] {
+            expect_scene(s, (a.vs_scene_set_device)(s, bad), INVALID_ARGUMENT, &["device", &bad.to_string()]);
+        }
         // The valid values work.
         let exr = cstr(dir.join("grid.exr").to_str().unwrap());
         let vdb = cstr(dir.join("grid.vdb").to_str().unwrap());
@@ -516,5 +519,35 @@ fn scenes_solve_on_several_threads_at_once_with_identical_results() {
         assert_eq!(text((a.vs_version)()), env!("CARGO_PKG_VERSION"));
         let s2 = a.scene_from_json(&small_json(1));
         assert_eq!((a.vs_scene_destroy)(s2), OK);
+    }
+}
+
+/// `vs_scene_set_device(AUTO)`: the composite runs on a GPU adapter when one works (lavapipe in
+/// CI), else on the CPU; either way it agrees with the CPU composite (the GPU kernel matches the
+/// CPU to ~2e-7 relative RMSE: tolerance 1e-5).
+#[test]
+fn device_auto_composites_like_the_cpu() {
+    let a = api();
+    unsafe {
+        let s = small_scene();
+        let composite = |device: u32| {
+            assert_eq!((a.vs_scene_set_device)(s, device), OK, "{}", a.scene_error(s));
+            let r = a.solve(s);
+            let mut img = std::ptr::null_mut::<c_void>();
+            assert_eq!((a.vs_result_composite)(r, 0, 0, 0.0, &mut img), OK, "{}", a.result_error(r));
+            let (mut w, mut h) = (0u32, 0u32);
+            assert_eq!((a.vs_image_size)(img, &mut w, &mut h), OK);
+            let mut px = vec![0f32; (w * h * 4) as usize];
+            assert_eq!((a.vs_image_copy_rgba)(img, px.as_mut_ptr(), px.len()), OK);
+            assert_eq!((a.vs_image_destroy)(img), OK);
+            assert_eq!((a.vs_result_destroy)(r), OK);
+            px
+        };
+        let cpu = composite(0);
+        let auto = composite(2);
+        let num: f64 = cpu.iter().zip(&auto).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
+        let den: f64 = cpu.iter().map(|x| (*x as f64).powi(2)).sum();
+        assert!((num / den).sqrt() < 1e-5, "relative RMSE {}", (num / den).sqrt());
+        assert_eq!((a.vs_scene_destroy)(s), OK);
     }
 }

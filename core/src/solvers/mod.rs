@@ -12,6 +12,9 @@ use crate::error::{Error, Result};
 use crate::medium::Medium;
 use crate::scene::Scene;
 
+/// Largest scattering grid a solver may allocate (512^3 points, 1.5 GiB of RGB floats).
+pub const MAX_SCATTERING_GRID_POINTS: u64 = 1 << 27;
+
 /// A dense RGB grid with its own index-to-world map (voxel centres at integer indices),
 /// x fastest. Trilinear between voxel centres, zero outside.
 #[derive(Clone, Debug)]
@@ -36,8 +39,13 @@ impl ScatteringGrid {
         let k = (extent.max_element() / max_dim.max(2) as f32).max(1.0);
         let dims = (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2));
         let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
-        if count > 1 << 30 {
-            return Err(Error::TooLarge(format!("scattering grid {}x{}x{}", dims.x, dims.y, dims.z)));
+        // Checked before allocating (an allocation failure aborts the host): 2^27 points is
+        // 1.5 GiB of RGB, a 512^3 grid, beyond anything a preview needs.
+        if count > MAX_SCATTERING_GRID_POINTS {
+            return Err(Error::TooLarge(format!(
+                "scattering grid {}x{}x{} = {count} points is over the limit of {MAX_SCATTERING_GRID_POINTS}",
+                dims.x, dims.y, dims.z
+            )));
         }
         // Grid point i sits at medium index lo + i * step, spanning [lo, hi] exactly.
         let step = (hi - lo).as_vec3() / (dims.as_vec3() - Vec3::ONE);

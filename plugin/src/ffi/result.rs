@@ -7,6 +7,7 @@ use std::sync::Arc;
 use volscatter_core::compositor::{self, CompositeOptions};
 use volscatter_core::solvers::{ScatteringGrid, SolveOutput, Timings};
 use volscatter_core::{vdb, Scene};
+use volscatter_gpu::DeviceChoice;
 
 use super::guard::{self, clear_out, finite_arg, on_handle, out_slice, path_arg, write_out};
 use super::handle::{lock, Handle, Registry};
@@ -47,12 +48,14 @@ impl VsGridFormat {
 pub(crate) struct ResultState {
     pub grid: ScatteringGrid,
     pub scene: Arc<Scene>,
+    /// The scene's device choice when it was solved (used by `vs_result_composite`).
+    pub device: DeviceChoice,
     #[allow(dead_code)]
     pub timings: Timings,
 }
 
 impl ResultState {
-    pub fn new(output: SolveOutput, scene: Arc<Scene>) -> FfiResult<Self> {
+    pub fn new(output: SolveOutput, scene: Arc<Scene>, device: DeviceChoice) -> FfiResult<Self> {
         let g = &output.scattering;
         let count = g.dims.iter().map(|&d| d as u64).product::<u64>();
         if count != g.data.len() as u64 {
@@ -61,7 +64,7 @@ impl ResultState {
                 format!("solver returned a {:?} grid with {} values", g.dims, g.data.len()),
             ));
         }
-        Ok(ResultState { grid: output.scattering, scene, timings: output.timings })
+        Ok(ResultState { grid: output.scattering, scene, device, timings: output.timings })
     }
     fn float_count(&self) -> usize {
         self.grid.data.len() * 3
@@ -190,7 +193,13 @@ pub unsafe extern "C" fn vs_result_composite(result: *const VsResult, flags: u32
             }
             opts.step_voxels = step;
         }
-        let image = compositor::composite(&r.scene, &r.grid, &opts)?;
+        let (image, _used) = volscatter_gpu::run_on(
+            r.device,
+            |ctx| volscatter_gpu::composite::composite(ctx, &r.scene, &r.grid, &opts).map(Ok),
+            || compositor::composite(&r.scene, &r.grid, &opts),
+        )
+        .map_err(|e| FfiError::new(VsStatus::Unsupported, format!("device GPU: {e}")))?;
+        let image = image?;
         write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
     })
 }

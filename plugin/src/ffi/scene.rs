@@ -19,6 +19,8 @@ use super::image::{ImageState, IMAGES};
 use super::progress::{CProgress, VsProgressCallback};
 use super::result::{ResultState, VsResult, RESULTS};
 use super::status::{FfiError, FfiResult, VsStatus};
+use super::version::{VS_DEVICE_AUTO, VS_DEVICE_CPU, VS_DEVICE_GPU};
+use volscatter_gpu::DeviceChoice;
 use super::VsImage;
 
 /// Opaque scene handle. Create with `vs_scene_new`, destroy with `vs_scene_destroy`.
@@ -30,6 +32,8 @@ pub(crate) struct SceneState {
     scene: Arc<Scene>,
     has_medium: bool,
     has_camera: bool,
+    /// Where GPU-capable stages run (`vs_scene_set_device`); the CPU unless the host asks.
+    device: DeviceChoice,
 }
 
 pub(crate) static SCENES: Registry<SceneState, VsScene> = Registry::new("VsScene");
@@ -48,10 +52,12 @@ impl SceneState {
             scene: Arc::new(Scene { medium, lights: Vec::new(), camera, solver: Default::default() }),
             has_medium: false,
             has_camera: false,
+            device: DeviceChoice::Cpu,
         }
     }
-    fn loaded(scene: Scene) -> Self {
-        SceneState { scene: Arc::new(scene), has_medium: true, has_camera: true }
+    /// A whole new scene (loaded JSON or the default); the host's device choice stays.
+    fn replace_scene(&mut self, scene: Scene) {
+        *self = SceneState { scene: Arc::new(scene), has_medium: true, has_camera: true, device: self.device };
     }
     fn edit(&mut self) -> &mut Scene {
         Arc::make_mut(&mut self.scene)
@@ -145,7 +151,7 @@ pub unsafe extern "C" fn vs_scene_load_json(scene: *mut VsScene, json: *const c_
         let text = str_arg(json, "json")?;
         let base = if base_dir.is_null() { Path::new(".").to_path_buf() } else { path_arg(base_dir, "base_dir")? };
         let parsed = Scene::from_json_str(text, &base)?;
-        *lock(&h.state) = SceneState::loaded(parsed);
+        lock(&h.state).replace_scene(parsed);
         Ok(())
     })
 }
@@ -159,7 +165,7 @@ pub unsafe extern "C" fn vs_scene_load_file(scene: *mut VsScene, path: *const c_
     with_scene(scene, |h| {
         let path = input_file_arg(path, "path", MAX_SCENE_FILE_BYTES)?;
         let parsed = Scene::load(&path)?;
-        *lock(&h.state) = SceneState::loaded(parsed);
+        lock(&h.state).replace_scene(parsed);
         Ok(())
     })
 }
@@ -171,7 +177,7 @@ pub unsafe extern "C" fn vs_scene_load_file(scene: *mut VsScene, path: *const c_
 #[no_mangle]
 pub unsafe extern "C" fn vs_scene_load_default(scene: *mut VsScene) -> VsStatus {
     with_scene(scene, |h| {
-        *lock(&h.state) = SceneState::loaded(Scene::default_scene());
+        lock(&h.state).replace_scene(Scene::default_scene());
         Ok(())
     })
 }
@@ -401,6 +407,29 @@ pub unsafe extern "C" fn vs_scene_set_camera(
     })
 }
 
+/// Chooses where GPU-capable stages run for this scene and the results solved from it:
+/// `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: fail with `VS_STATUS_UNSUPPORTED` when
+/// no GPU adapter works) or `VS_DEVICE_AUTO` (2: a GPU adapter when one works, else the CPU).
+/// A GPU that is lost or runs out of memory mid-way falls back to the CPU under AUTO. Today
+/// the compositor (`vs_result_composite`) runs on the GPU; other values are refused.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_set_device(scene: *mut VsScene, device: u32) -> VsStatus {
+    let choice = match device {
+        VS_DEVICE_CPU => DeviceChoice::Cpu,
+        VS_DEVICE_GPU => DeviceChoice::Gpu,
+        VS_DEVICE_AUTO => DeviceChoice::Auto,
+        other => {
+            return with_scene(scene, |_| Err(FfiError::invalid(format!("device {other} is not a VS_DEVICE_* value (0 cpu, 1 gpu, 2 auto)"))))
+        }
+    };
+    with_scene(scene, |h| {
+        lock(&h.state).device = choice;
+        Ok(())
+    })
+}
+
 /// Chooses the solver by `name` ("reference", "pop", ...) with its settings as a JSON object
 /// (`settings_json` NULL or "": defaults), e.g. `{"grid_resolution": 32, "seed": 1}`. The
 /// settings are validated now: unknown solvers and keys are refused and the scene unchanged.
@@ -441,7 +470,10 @@ pub unsafe extern "C" fn vs_scene_set_solver(scene: *mut VsScene, name: *const c
 pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgressCallback, user: *mut c_void, out: *mut *mut VsResult) -> VsStatus {
     with_scene(scene, |h| {
         clear_out(out, "out")?;
-        let snapshot = lock(&h.state).snapshot()?;
+        let (snapshot, device) = {
+            let st = lock(&h.state);
+            (st.snapshot()?, st.device)
+        };
         let name = snapshot.solver_name().unwrap_or("reference").to_string();
         let solver = solvers::by_name(&name, &snapshot.solver)?;
         let progress = CProgress::new(progress, user);
@@ -449,7 +481,7 @@ pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgres
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
-        let state = ResultState::new(output, snapshot)?;
+        let state = ResultState::new(output, snapshot, device)?;
         write_out(out, RESULTS.insert(state)?, "out")
     })
 }

@@ -29,3 +29,10 @@ pub extern "C" fn vs_version() -> *const c_char {
 pub extern "C" fn vs_abi_version() -> u32 {
     super::guard::value(VS_ABI_VERSION, || VS_ABI_VERSION)
 }
+
+/// `vs_scene_set_device`: run on the CPU (the default).
+pub const VS_DEVICE_CPU: u32 = 0;
+/// `vs_scene_set_device`: run on a GPU adapter; fail when none works.
+pub const VS_DEVICE_GPU: u32 = 1;
+/// `vs_scene_set_device`: a GPU adapter when one works, else the CPU.
+pub const VS_DEVICE_AUTO: u32 = 2;

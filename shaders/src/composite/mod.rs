@@ -82,7 +82,7 @@ pub fn composite_with_single(
     };
     let (lo, hi) = medium.world_bounds();
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
-    let k = opts.subpixels.clamp(1, 8);
+    let k = opts.subpixels.clamp(1, 16);
     let params = CompositeParams {
         density_w2i: affine_rows(&medium.world_to_index),
         s_w2i: affine_rows(&s.index_to_world.inverse()),

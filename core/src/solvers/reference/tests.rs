@@ -178,3 +178,14 @@ fn same_seed_same_image() {
     assert_eq!(a.rgba, b.rgba);
 }
 
+
+/// A settings block asking for a 1024^3 scattering grid is refused before allocating (it would
+/// be 12 GiB: an allocation failure aborts the host process).
+#[test]
+fn huge_scattering_grid_is_refused_before_allocating() {
+    let mut scene = Scene::default_scene();
+    scene.medium = homogeneous_box(1024, 0.001, 1.0, 0.5, 0.0);
+    let r = Reference::new(ReferenceSettings { grid_resolution: 1024, ..Default::default() }).unwrap();
+    let e = r.scattering_grid(&scene, &NoProgress, &mut Timings::default()).unwrap_err().to_string();
+    assert!(e.contains("over the limit"), "{e}");
+}
