@@ -14,6 +14,7 @@ pub mod composite;
 pub mod context;
 pub mod device;
 pub mod pop;
+pub mod solve;
 pub mod upload;
 
 #[cfg(test)]
@@ -21,3 +22,4 @@ mod test_support;
 
 pub use context::{GpuContext, GpuError};
 pub use device::{run_on, DeviceChoice, DeviceUsed};
+pub use solve::solve;

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::progress::StderrProgress;
-use volscatter_core::solvers::{self, reference::Reference, Timings};
+use volscatter_core::solvers::{reference::Reference, Timings};
 use volscatter_core::{compositor, io, Error, Result, Scene};
 
 #[derive(Args)]
@@ -37,8 +37,8 @@ pub struct RenderArgs {
     /// Solver setting KEY=VALUE (JSON value), repeatable: --set grid_resolution=48.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub settings: Vec<String>,
-    /// Where GPU-capable stages run (today: the compositor): gpu, cpu, or auto (a GPU adapter
-    /// when one exists, else the CPU with a message).
+    /// Where GPU-capable stages run (pop's propagation, the compositor): gpu, cpu, or auto (a
+    /// GPU adapter when one exists, else the CPU with a message).
     #[arg(long, default_value = "auto")]
     pub device: volscatter_gpu::DeviceChoice,
     #[arg(long, short)]
@@ -91,14 +91,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let settings = solver_settings(&scene, &name, &args)?;
     let progress = StderrProgress::new(args.quiet);
     let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
+    let mut solve_device = volscatter_gpu::DeviceUsed::Cpu;
     let image = if name == "reference" {
         let r = Reference::from_settings(&settings)?;
         let img = r.render_image(&scene, &progress, &mut timings)?;
         progress.finish();
         img
     } else {
-        let solver = solvers::by_name(&name, &settings)?;
-        let out = solver.solve(&scene, &progress)?;
+        let (out, solved_on) = volscatter_gpu::solve(args.device, &scene, &name, &settings, &progress)?;
+        solve_device = solved_on;
         progress.finish();
         timings.0.extend(out.timings.0);
         let opts = compositor::CompositeOptions { transparent: args.transparent, ..Default::default() };
@@ -141,7 +142,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         let doc = json!({
             "scene": args.scene.as_ref().map(|p| p.display().to_string()),
             "solver": name,
-            "device": device_used.to_string(),
+            "device": {"solve": solve_device.to_string(), "composite": device_used.to_string()},
             "settings": settings,
             "width": image.width,
             "height": image.height,

@@ -48,6 +48,12 @@ use mip::MediumMip;
 pub use propagate::PropagationStats;
 pub use settings::PopSettings;
 
+/// One light's propagation: adds the accumulated in-scattered radiance into `j_acc` and
+/// returns the energy figures, as `propagate::Propagation::run_with` does.
+pub type PropagateFn<'a> = dyn Fn(&propagate::Propagation, propagate::RunOptions, &init::Initial, f32, &mut [Vec3], &dyn Progress) -> Result<PropagationStats>
+    + Sync
+    + 'a;
+
 pub struct Pop {
     pub settings: PopSettings,
 }
@@ -94,6 +100,12 @@ impl Pop {
 
     /// Solves and returns the per-light energy report along with S and the timings.
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PopReport)> {
+        self.solve_with(scene, progress, &|prop, opts, init, a, j, progress| prop.run_with(opts, init, a, j, progress))
+    }
+
+    /// As `solve_detailed`, with each light's propagation (the costly stage) run by
+    /// `propagate`: the CPU's `Propagation::run_with`, or a GPU port (volscatter-gpu).
+    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, propagate: &PropagateFn) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -164,7 +176,7 @@ impl Pop {
             };
             let t0 = std::time::Instant::now();
             let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape };
-            let stats = prop.run_with(opts, &init, a0 * g, &mut j_acc, progress)?;
+            let stats = propagate(&prop, opts, &init, a0 * g, &mut j_acc, progress)?;
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
             report.lights.push(LightReport {
                 dims: grid.dims.to_array(),
