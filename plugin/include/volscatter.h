@@ -362,8 +362,9 @@ VsStatus vs_scene_set_camera(VsScene *scene,
  * Chooses where GPU-capable stages run for this scene and the results solved from it:
  * `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: fail with `VS_STATUS_UNSUPPORTED` when
  * no GPU adapter works) or `VS_DEVICE_AUTO` (2: a GPU adapter when one works, else the CPU).
- * A GPU that is lost or runs out of memory mid-way falls back to the CPU under AUTO. Today
- * the compositor (`vs_result_composite`) runs on the GPU; other values are refused.
+ * A GPU that is lost or runs out of memory mid-way falls back to the CPU under AUTO. On the
+ * GPU run: pop's propagation (`vs_scene_solve`) and the compositor (`vs_result_composite`).
+ * Other values are refused.
  *
  * Thread safety: any thread; calls on one scene are serialised.
  */

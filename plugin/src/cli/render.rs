@@ -138,7 +138,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
         );
     }
     if let Some(report) = &args.report {
-        let phases: serde_json::Map<String, serde_json::Value> = timings.0.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+        // A phase that runs once per light (pop's grids) is reported as its total.
+        let mut phases = serde_json::Map::new();
+        for (k, v) in &timings.0 {
+            let total = phases.get(k).and_then(|x| x.as_f64()).unwrap_or(0.0) + v;
+            phases.insert(k.clone(), json!(total));
+        }
         let doc = json!({
             "scene": args.scene.as_ref().map(|p| p.display().to_string()),
             "solver": name,
