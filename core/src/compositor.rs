@@ -209,19 +209,27 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
             (rgb.extend(alpha.clamp(0.0, 1.0)), l1, bg)
         })
         .collect();
-    let mut img = Image::new(cam.width, cam.height);
-    let mut single_aov = Vec::with_capacity(w * h);
-    let mut multiple_aov = Vec::with_capacity(w * h);
-    let mut bg_aov = Vec::with_capacity(w * h);
-    for (i, (rgba, l1, bg)) in pixels.into_iter().enumerate() {
+    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent))
+}
+
+/// The image and its AOVs from per-pixel (RGBA, single scattering, background) in row order:
+/// `multiple` is what was scattered minus its single part. Shared by the CPU and GPU
+/// compositors so that both define the AOVs the same way.
+pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = (Vec4, Vec3, Vec3)>, transparent: bool) -> Image {
+    let n = width as usize * height as usize;
+    let mut img = Image::new(width, height);
+    let mut single_aov = Vec::with_capacity(n);
+    let mut multiple_aov = Vec::with_capacity(n);
+    let mut bg_aov = Vec::with_capacity(n);
+    for (i, (rgba, l1, bg)) in pixels.into_iter().take(n).enumerate() {
         img.rgba[i] = rgba;
-        let scattered = rgba.truncate() - if opts.transparent { Vec3::ZERO } else { bg };
+        let scattered = rgba.truncate() - if transparent { Vec3::ZERO } else { bg };
         single_aov.push(l1);
         multiple_aov.push(scattered - l1);
         bg_aov.push(bg);
     }
     img.aovs = vec![("single".into(), single_aov), ("multiple".into(), multiple_aov), ("background".into(), bg_aov)];
-    Ok(img)
+    img
 }
 
 #[cfg(test)]

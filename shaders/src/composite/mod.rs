@@ -9,7 +9,7 @@ use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, dense_density, dense_density_bytes, grid_dims, rgb_as_vec4};
-use volscatter_core::compositor::{single_scattering_grid, CompositeOptions};
+use volscatter_core::compositor::{assemble_image, single_scattering_grid, CompositeOptions};
 use volscatter_core::{Image, ScatteringGrid, Scene};
 
 pub const WGSL: &str = include_str!("composite.wgsl");
@@ -154,23 +154,8 @@ pub fn composite_with_single(
     ctx.check()?;
     let bytes = ctx.read_buffer(&out, out_bytes)?;
     let px: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-    let mut img = Image::new(cam.width, cam.height);
-    let n = pixels as usize;
-    let mut single_aov = Vec::with_capacity(n);
-    let mut multiple_aov = Vec::with_capacity(n);
-    let mut bg_aov = Vec::with_capacity(n);
-    for i in 0..n {
-        let rgba = Vec4::from(px[3 * i]);
-        let l1 = Vec4::from(px[3 * i + 1]).truncate();
-        let bg = Vec4::from(px[3 * i + 2]).truncate();
-        img.rgba[i] = rgba;
-        let scattered = rgba.truncate() - if opts.transparent { Vec3::ZERO } else { bg };
-        single_aov.push(l1);
-        multiple_aov.push(scattered - l1);
-        bg_aov.push(bg);
-    }
-    img.aovs = vec![("single".into(), single_aov), ("multiple".into(), multiple_aov), ("background".into(), bg_aov)];
-    Ok(img)
+    let pixels = px.chunks_exact(3).map(|p| (Vec4::from(p[0]), Vec4::from(p[1]).truncate(), Vec4::from(p[2]).truncate()));
+    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent))
 }
 
 #[cfg(test)]
