@@ -80,6 +80,24 @@ def plume_scene(workdir: Path) -> Path:
     return path
 
 
+def blender_vdb_scene(workdir: Path) -> Path:
+    """The VDB Blender 5.0.1 wrote for shared/fixtures/blender_noise_cube (Volume Cube + Noise,
+    40^3 voxels over [-1, 1]^3), as smoke: density scale 8, albedo 0.95, g 0.6."""
+    vdb = REPO_ROOT / ".." / "shared" / "fixtures" / "blender_noise_cube" / "volumes" / "Volume.vdb"
+    if not vdb.exists():
+        sys.exit(f"{vdb} not found: shared/ must sit beside the repository")
+    scene = {
+        "format": 1,
+        "medium": {"vdb": str(vdb.resolve()), "grid": "density", "density_scale": 8.0, "albedo": [0.95, 0.95, 0.95], "g": 0.6},
+        "lights": [LIGHT],
+        "camera": {"position": [0, -6, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 30.0, "width": 48, "height": 48},
+        "solver": {"name": "pop"},
+    }
+    path = workdir / "blender_vdb.json"
+    path.write_text(json.dumps(scene))
+    return path
+
+
 def compare(scene: Path | None, out: Path, solvers: str, extra: list[str]) -> dict:
     cmd = [str(volscatter_bin()), "compare"] + ([str(scene)] if scene else []) + ["--solvers", solvers, "--json", str(out), "-q"] + extra
     log("$", " ".join(cmd))
@@ -102,6 +120,7 @@ def main() -> None:
             ("default scene (plume, sun + sky), 64x64", None, ["--width", "64", "--height", "64"]),
             ("cube sigma_s 4, albedo 1, g 0.7, 48x48", cube_scene(work, 0.7), []),
             ("plume g 0.9, albedo 0.99, 48x48", plume_scene(work), []),
+            ("Blender-exported VDB (noise cube), g 0.6, albedo 0.95, 48x48", blender_vdb_scene(work), []),
         ]
         solvers = ",".join(["pop"] + [f"reference@{s}" for s in SWEEP] + ["reference"])
         for label, scene, extra in scenes:
