@@ -72,6 +72,21 @@ fn van_der_corput(mut i: u32) -> f32 {
     i as f32 * (1.0 / 4_294_967_296.0)
 }
 
+/// The dome as `n` fixed directions (towards the sky) with their weights L / (pdf n):
+/// importance-sampled on a Hammersley set, so deterministic (no noise, no flicker).
+pub fn dome_directions_of(scene: &Scene, n: u32) -> Vec<(Vec3, Vec3)> {
+    match scene.environment() {
+        Some(env) => (0..n)
+            .filter_map(|i| {
+                let u = [(i as f32 + 0.5) / n as f32, van_der_corput(i)];
+                let (w, pdf) = env.sample(u);
+                (pdf > 0.0).then(|| (w, env.radiance(w) / (pdf * n as f32)))
+            })
+            .collect(),
+        None => Vec::new(),
+    }
+}
+
 /// Single scattering S1(x) = sigma_s(x) * sum over lights of p * L * T(x -> light), on a grid
 /// over the medium, with the view direction from the camera. Transmittance by deterministic
 /// ray marching; the dome by a fixed importance-sampled set of directions.
@@ -82,16 +97,7 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
     let frame = grid.index_to_world;
     let [nx, ny, _] = grid.dims;
     let g = medium.g;
-    let dome_dirs: Vec<(Vec3, Vec3)> = match scene.environment() {
-        Some(env) => (0..dome_directions)
-            .filter_map(|i| {
-                let u = [(i as f32 + 0.5) / dome_directions as f32, van_der_corput(i)];
-                let (w, pdf) = env.sample(u);
-                (pdf > 0.0).then(|| (w, env.radiance(w) / (pdf * dome_directions as f32)))
-            })
-            .collect(),
-        None => Vec::new(),
-    };
+    let dome_dirs = dome_directions_of(scene, dome_directions);
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {

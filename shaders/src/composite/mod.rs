@@ -1,7 +1,6 @@
 //! The compositor's ray march on the GPU: same inputs and output as
 //! `volscatter_core::compositor::composite` (tested against it in `tests.rs`).
-//! The single-scattering grid S1 is computed on the CPU (`single_scattering_grid`) and
-//! uploaded; only the per-pixel march runs here.
+//! The single-scattering grid S1 is computed on the GPU too (`single.rs`).
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec3, Vec4};
@@ -9,8 +8,10 @@ use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, dense_density, dense_density_bytes, grid_dims, rgb_as_vec4};
-use volscatter_core::compositor::{assemble_image, single_scattering_grid, CompositeOptions};
+use volscatter_core::compositor::{assemble_image, CompositeOptions};
 use volscatter_core::{Image, ScatteringGrid, Scene};
+
+pub mod single;
 
 pub const WGSL: &str = include_str!("composite.wgsl");
 
@@ -56,8 +57,7 @@ fn v4(v: Vec3, w: f32) -> [f32; 4] {
 
 /// Renders `s` like the CPU compositor, on the GPU.
 pub fn composite(ctx: &GpuContext, scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> Result<Image, GpuError> {
-    let single = single_scattering_grid(scene, opts.single_resolution, opts.dome_directions)
-        .map_err(|e| GpuError::Internal(e.to_string()))?;
+    let single = single::single_scattering_grid(ctx, scene, opts.single_resolution, opts.dome_directions)?;
     composite_with_single(ctx, scene, s, &single, opts)
 }
 

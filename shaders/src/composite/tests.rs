@@ -40,3 +40,31 @@ fn gpu_composite_matches_cpu() {
         assert!(da < 1e-5, "max alpha difference {da}");
     }
 }
+
+#[test]
+fn single_wgsl_validates_and_params_layout_matches() {
+    assert_eq!(naga_struct_size(single::WGSL, "Params") as usize, size_of::<single::SingleParams>());
+    assert_eq!(naga_struct_size(single::WGSL, "Light") as usize, size_of::<single::GpuLight>());
+}
+
+/// The single-scattering grid on the GPU against the CPU's: default scene (sun + 64 dome
+/// directions) and a point light inside the plume. Same march positions and light order;
+/// float32 sums of up to 512 samples differ only in exp/sqrt rounding. Tolerance 1e-5.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn gpu_single_scattering_grid_matches_cpu() {
+    let ctx = gpu_or_skip();
+    let mut scene = Scene::default_scene();
+    let check = |scene: &Scene, what: &str| {
+        let cpu = compositor::single_scattering_grid(scene, 24, 64).unwrap();
+        let gpu = single::single_scattering_grid(&ctx, scene, 24, 64).unwrap();
+        assert_eq!(cpu.dims, gpu.dims);
+        let e = relative_rmse(&gpu.data, &cpu.data);
+        eprintln!("{what}: single-scattering grid relative RMSE {e:e}");
+        assert!(e < 1e-5, "{what}: {e}");
+        assert!(cpu.data.iter().any(|v| v.x > 0.0));
+    };
+    check(&scene, "sun + dome");
+    scene.lights = vec![volscatter_core::scene::Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0 }];
+    check(&scene, "point light");
+}

@@ -1,0 +1,137 @@
+//! The compositor's single-scattering grid on the GPU (`single.wgsl`): same inputs, steps and
+//! output as `volscatter_core::compositor::single_scattering_grid`.
+
+use bytemuck::{Pod, Zeroable};
+use std::mem::{offset_of, size_of};
+
+use crate::context::{GpuContext, GpuError};
+use crate::upload::{affine_rows, dense_density, dense_density_bytes};
+use volscatter_core::compositor::dome_directions_of;
+use volscatter_core::scene::Light;
+use volscatter_core::{ScatteringGrid, Scene};
+
+pub const WGSL: &str = include_str!("single.wgsl");
+
+/// Mirrors `struct Params` in single.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub struct SingleParams {
+    pub density_w2i: [[f32; 4]; 3],
+    pub grid_i2w: [[f32; 4]; 3],
+    pub density_origin: [i32; 4],
+    pub density_dims: [u32; 4],
+    pub grid_dims: [u32; 4],
+    pub density_scale: [f32; 4],
+    pub albedo: [f32; 4],
+    pub bounds_lo: [f32; 4],
+    pub bounds_hi: [f32; 4],
+    pub cam_pos: [f32; 4],
+    pub misc: [f32; 4],
+}
+
+const _: () = {
+    assert!(size_of::<SingleParams>() == 240);
+    assert!(offset_of!(SingleParams, density_origin) == 96);
+    assert!(offset_of!(SingleParams, density_scale) == 144);
+    assert!(offset_of!(SingleParams, misc) == 224);
+};
+
+/// Mirrors `struct Light` in single.wgsl: w of the first vec4 is the kind (0 distant, 1 point).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub struct GpuLight {
+    pub pos_or_dir: [f32; 4],
+    pub power: [f32; 4],
+}
+
+/// The scene's lights in the CPU's order; the dome as its fixed importance-sampled directions.
+fn light_list(scene: &Scene, dome_directions: u32) -> Vec<GpuLight> {
+    let mut out = Vec::new();
+    for light in &scene.lights {
+        match light {
+            Light::Distant { direction, irradiance, .. } => {
+                let w = -*direction;
+                out.push(GpuLight { pos_or_dir: [w.x, w.y, w.z, 0.0], power: irradiance.extend(0.0).to_array() });
+            }
+            Light::Point { position, intensity, .. } => {
+                out.push(GpuLight { pos_or_dir: position.extend(1.0).to_array(), power: intensity.extend(0.0).to_array() });
+            }
+            Light::Dome(_) => {
+                for (w, weight) in dome_directions_of(scene, dome_directions) {
+                    out.push(GpuLight { pos_or_dir: [w.x, w.y, w.z, 0.0], power: weight.extend(0.0).to_array() });
+                }
+            }
+        }
+    }
+    out
+}
+
+pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid, GpuError> {
+    let medium = &scene.medium;
+    let mut grid = ScatteringGrid::over_medium(medium, max_dim).map_err(|e| GpuError::TooLarge(e.to_string()))?;
+    ctx.check_storage_size("density", dense_density_bytes(medium))?;
+    ctx.check_storage_size("single scattering grid", grid.data.len() as u64 * 16)?;
+    let (origin, dims, values) = dense_density(medium);
+    let lights = light_list(scene, dome_directions);
+    let (lo, hi) = medium.world_bounds();
+    let params = SingleParams {
+        density_w2i: affine_rows(&medium.world_to_index),
+        grid_i2w: affine_rows(&grid.index_to_world),
+        density_origin: [origin.x, origin.y, origin.z, 0],
+        density_dims: [dims.x as u32, dims.y as u32, dims.z as u32, 0],
+        grid_dims: [grid.dims[0], grid.dims[1], grid.dims[2], lights.len() as u32],
+        density_scale: medium.density_scale.extend(0.0).to_array(),
+        albedo: medium.albedo.extend(0.0).to_array(),
+        bounds_lo: lo.extend(0.0).to_array(),
+        bounds_hi: hi.extend(0.0).to_array(),
+        cam_pos: scene.camera.position.extend(0.0).to_array(),
+        misc: [medium.g, medium.voxel_size_world().min_element(), 0.0, 0.0],
+    };
+    let device = &ctx.device;
+    let uniform = wgpu::util::DeviceExt::create_buffer_init(
+        device,
+        &wgpu::util::BufferInitDescriptor { label: Some("single params"), contents: bytemuck::bytes_of(&params), usage: wgpu::BufferUsages::UNIFORM },
+    );
+    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&values))?;
+    let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;
+    let out_bytes = grid.data.len() as u64 * 16;
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("single out"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("single.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("single scattering"),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("single scattering"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: density.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: light_buf.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 3, resource: out.as_entire_binding() },
+        ],
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(grid.dims[0].div_ceil(4), grid.dims[1].div_ceil(4), grid.dims[2].div_ceil(4));
+    }
+    ctx.queue.submit([enc.finish()]);
+    ctx.check()?;
+    let bytes = ctx.read_buffer(&out, out_bytes)?;
+    for (dst, v) in grid.data.iter_mut().zip(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes)) {
+        *dst = glam::Vec3::new(v[0], v[1], v[2]);
+    }
+    Ok(grid)
+}

@@ -1,0 +1,119 @@
+// Single scattering on a grid (volscatter-core `compositor::single_scattering_grid`), one
+// invocation per grid point: S1(x) = sigma_s(x) * sum over lights of p * L * T(x -> light),
+// T by midpoint ray marching through the medium's bounds. Lights come as a list: kind 0 =
+// distant (direction towards the light, irradiance; the dome arrives as such directions with
+// their weights), kind 1 = point (position, intensity). Same order and steps as the CPU.
+// The density lookup repeats composite.wgsl's (WGSL has no includes).
+
+struct Params {
+    density_w2i: array<vec4<f32>, 3>,
+    grid_i2w: array<vec4<f32>, 3>,     // S1 grid index -> world
+    density_origin: vec4<i32>,
+    density_dims: vec4<u32>,
+    grid_dims: vec4<u32>,              // xyz, w = number of lights
+    density_scale: vec4<f32>,
+    albedo: vec4<f32>,
+    bounds_lo: vec4<f32>,
+    bounds_hi: vec4<f32>,
+    cam_pos: vec4<f32>,
+    misc: vec4<f32>,                   // g, minimum march step, -, -
+};
+
+struct Light {
+    pos_or_dir: vec4<f32>,             // w = kind
+    power: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> density: array<f32>;
+@group(0) @binding(2) var<storage, read> lights: array<Light>;
+@group(0) @binding(3) var<storage, read_write> out_grid: array<vec4<f32>>;
+
+const PI: f32 = 3.14159265358979;
+
+fn affine(m: array<vec4<f32>, 3>, p: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(m[0].xyz, p) + m[0].w, dot(m[1].xyz, p) + m[1].w, dot(m[2].xyz, p) + m[2].w);
+}
+
+fn voxel(i: vec3<i32>) -> f32 {
+    let d = vec3<i32>(params.density_dims.xyz);
+    if (any(i < vec3<i32>(0)) || any(i >= d)) {
+        return 0.0;
+    }
+    return density[u32(i.x + d.x * (i.y + d.y * i.z))];
+}
+
+fn density_at(x: vec3<f32>) -> f32 {
+    let p = affine(params.density_w2i, x) - vec3<f32>(params.density_origin.xyz);
+    let f = floor(p);
+    let i = vec3<i32>(f);
+    let t = p - f;
+    let c00 = mix(voxel(i), voxel(i + vec3<i32>(1, 0, 0)), t.x);
+    let c10 = mix(voxel(i + vec3<i32>(0, 1, 0)), voxel(i + vec3<i32>(1, 1, 0)), t.x);
+    let c01 = mix(voxel(i + vec3<i32>(0, 0, 1)), voxel(i + vec3<i32>(1, 0, 1)), t.x);
+    let c11 = mix(voxel(i + vec3<i32>(0, 1, 1)), voxel(i + vec3<i32>(1, 1, 1)), t.x);
+    return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
+}
+
+fn hg(c: f32, g: f32) -> f32 {
+    let d = 1.0 + g * g - 2.0 * g * c;
+    return (1.0 - g * g) / (4.0 * PI * d * sqrt(max(d, 1e-12)));
+}
+
+// compositor::optical_depth: midpoint quadrature, at most 512 steps of at least min_step.
+fn transmittance(x: vec3<f32>, d: vec3<f32>, t_max: f32) -> vec3<f32> {
+    let inv = 1.0 / d;
+    let a = (params.bounds_lo.xyz - x) * inv;
+    let b = (params.bounds_hi.xyz - x) * inv;
+    let tmin = min(a, b);
+    let tmax = max(a, b);
+    let t0 = max(max(max(tmin.x, tmin.y), tmin.z), 0.0);
+    let t1 = min(min(min(tmax.x, tmax.y), tmax.z), t_max);
+    if (!(t0 < t1)) {
+        return vec3<f32>(1.0);
+    }
+    let n = clamp(u32(ceil((t1 - t0) / params.misc.y)), 1u, 512u);
+    let h = (t1 - t0) / f32(n);
+    var tau = 0.0;
+    for (var i = 0u; i < n; i++) {
+        tau += density_at(x + d * (t0 + (f32(i) + 0.5) * h));
+    }
+    return exp(-params.density_scale.xyz * tau * h);
+}
+
+@compute @workgroup_size(4, 4, 4)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (any(gid >= params.grid_dims.xyz)) {
+        return;
+    }
+    let idx = gid.x + params.grid_dims.x * (gid.y + params.grid_dims.y * gid.z);
+    let x = affine(params.grid_i2w, vec3<f32>(gid));
+    let dens = density_at(x);
+    if (dens <= 0.0) {
+        out_grid[idx] = vec4<f32>(0.0);
+        return;
+    }
+    var view = x - params.cam_pos.xyz;
+    if (dot(view, view) > 0.0) {
+        view = normalize(view);
+    } else {
+        view = vec3<f32>(0.0, 0.0, 1.0);
+    }
+    let g = params.misc.x;
+    var sum = vec3<f32>(0.0);
+    for (var l = 0u; l < params.grid_dims.w; l++) {
+        let light = lights[l];
+        if (light.pos_or_dir.w == 0.0) {
+            let w = light.pos_or_dir.xyz;
+            sum += light.power.xyz * hg(dot(w, view), g) * transmittance(x, w, 3.4e38);
+        } else {
+            let to = light.pos_or_dir.xyz - x;
+            let dist = length(to);
+            if (dist > 1e-6) {
+                let w = to / dist;
+                sum += light.power.xyz / (dist * dist) * hg(dot(w, view), g) * transmittance(x, w, dist);
+            }
+        }
+    }
+    out_grid[idx] = vec4<f32>(params.albedo.xyz * params.density_scale.xyz * dens * sum, 0.0);
+}
