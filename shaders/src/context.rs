@@ -165,4 +165,53 @@ impl GpuContext {
         staging.unmap();
         Ok(out)
     }
+
+    /// One compute pass of a kernel whose bind group 0 is: binding 0 the uniform `params`,
+    /// then `inputs` (read-only storage) in order, then one read-write output buffer of
+    /// `out_bytes`. Dispatches `groups` workgroups of `entry` in `wgsl` and reads the output back.
+    pub fn run_single_pass(
+        &self,
+        label: &str,
+        wgsl: &str,
+        params: &[u8],
+        inputs: &[&wgpu::Buffer],
+        out_bytes: u64,
+        groups: [u32; 3],
+    ) -> Result<Vec<u8>, GpuError> {
+        let device = &self.device;
+        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: params,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let out = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: out_bytes.max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(wgsl.into()) });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let buffers: Vec<&wgpu::Buffer> = std::iter::once(&uniform).chain(inputs.iter().copied()).chain(std::iter::once(&out)).collect();
+        let entries: Vec<wgpu::BindGroupEntry> =
+            buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
+        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout: &pipeline.get_bind_group_layout(0), entries: &entries });
+        let mut enc = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        }
+        self.queue.submit([enc.finish()]);
+        self.check()?;
+        self.read_buffer(&out, out_bytes)
+    }
 }

@@ -2,6 +2,7 @@
 // L = sum over steps of T * S(x) * (1 - exp(-sigma_t h)) / sigma_t, T *= exp(-sigma_t h),
 // plus the same for the single-scattering grid S1, and the environment through T.
 // Layout of `Params` is mirrored by `CompositeParams` in mod.rs (checked there).
+// `density_at` comes from medium.wgsl.
 
 struct Params {
     density_w2i: array<vec4<f32>, 3>,  // world -> density index, rows of a 3x4 affine
@@ -33,31 +34,6 @@ struct Params {
 @group(0) @binding(5) var<storage, read_write> out_pixels: array<vec4<f32>>;
 
 const PI: f32 = 3.14159265358979;
-
-fn affine(m: array<vec4<f32>, 3>, p: vec3<f32>) -> vec3<f32> {
-    return vec3<f32>(dot(m[0].xyz, p) + m[0].w, dot(m[1].xyz, p) + m[1].w, dot(m[2].xyz, p) + m[2].w);
-}
-
-fn voxel(i: vec3<i32>) -> f32 {
-    let d = vec3<i32>(params.density_dims.xyz);
-    if (any(i < vec3<i32>(0)) || any(i >= d)) {
-        return 0.0;
-    }
-    return density[u32(i.x + d.x * (i.y + d.y * i.z))];
-}
-
-// Trilinear density at a world point, zero outside (DensityGrid::sample).
-fn density_at(x: vec3<f32>) -> f32 {
-    let p = affine(params.density_w2i, x) - vec3<f32>(params.density_origin.xyz);
-    let f = floor(p);
-    let i = vec3<i32>(f);
-    let t = p - f;
-    let c00 = mix(voxel(i), voxel(i + vec3<i32>(1, 0, 0)), t.x);
-    let c10 = mix(voxel(i + vec3<i32>(0, 1, 0)), voxel(i + vec3<i32>(1, 1, 0)), t.x);
-    let c01 = mix(voxel(i + vec3<i32>(0, 0, 1)), voxel(i + vec3<i32>(1, 0, 1)), t.x);
-    let c11 = mix(voxel(i + vec3<i32>(0, 1, 1)), voxel(i + vec3<i32>(1, 1, 1)), t.x);
-    return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
-}
 
 fn grid_at(which: u32, x: vec3<f32>) -> vec3<f32> {
     var p: vec3<f32>;

@@ -13,7 +13,8 @@ use volscatter_core::{Image, ScatteringGrid, Scene};
 
 pub mod single;
 
-pub const WGSL: &str = include_str!("composite.wgsl");
+/// The kernel with the shared density lookup (medium.wgsl) in front.
+pub const WGSL: &str = concat!(include_str!("medium.wgsl"), include_str!("composite.wgsl"));
 
 /// Mirrors `struct Params` in composite.wgsl (uniform address space: every member 16-byte
 /// aligned, which vec4/array-of-vec4 members give us).
@@ -106,53 +107,18 @@ pub fn composite_with_single(
         env_dims,
         misc: [(0.5 * cam.fov_deg.to_radians()).tan(), step, 0.0, 0.0],
     };
-    let device = &ctx.device;
-    let uniform = wgpu::util::DeviceExt::create_buffer_init(
-        device,
-        &wgpu::util::BufferInitDescriptor { label: Some("composite params"), contents: bytemuck::bytes_of(&params), usage: wgpu::BufferUsages::UNIFORM },
-    );
     let density = ctx.storage_buffer("density", bytemuck::cast_slice(&values))?;
     let s_buf = ctx.storage_buffer("scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&s.data)))?;
     let s1_buf = ctx.storage_buffer("single scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&single.data)))?;
     let env_buf = ctx.storage_buffer("environment", bytemuck::cast_slice(&env_pixels))?;
-    let out_bytes = pixels * 48;
-    let out = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("composite out"),
-        size: out_bytes,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("composite.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("composite"),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("composite"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[
-            wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: density.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 2, resource: s_buf.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 3, resource: s1_buf.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 4, resource: env_buf.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 5, resource: out.as_entire_binding() },
-        ],
-    });
-    let mut enc = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(cam.width.div_ceil(8), cam.height.div_ceil(8), 1);
-    }
-    ctx.queue.submit([enc.finish()]);
-    ctx.check()?;
-    let bytes = ctx.read_buffer(&out, out_bytes)?;
+    let bytes = ctx.run_single_pass(
+        "composite",
+        WGSL,
+        bytemuck::bytes_of(&params),
+        &[&density, &s_buf, &s1_buf, &env_buf],
+        pixels * 48,
+        [cam.width.div_ceil(8), cam.height.div_ceil(8), 1],
+    )?;
     let px: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     let pixels = px.chunks_exact(3).map(|p| (Vec4::from(p[0]), Vec4::from(p[1]).truncate(), Vec4::from(p[2]).truncate()));
     Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent))

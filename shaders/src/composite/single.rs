@@ -10,7 +10,8 @@ use volscatter_core::compositor::dome_directions_of;
 use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
-pub const WGSL: &str = include_str!("single.wgsl");
+/// The kernel with the shared density lookup (medium.wgsl) in front.
+pub const WGSL: &str = concat!(include_str!("medium.wgsl"), include_str!("single.wgsl"));
 
 /// Mirrors `struct Params` in single.wgsl.
 #[repr(C)]
@@ -87,49 +88,16 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         cam_pos: scene.camera.position.extend(0.0).to_array(),
         misc: [medium.g, medium.voxel_size_world().min_element(), 0.0, 0.0],
     };
-    let device = &ctx.device;
-    let uniform = wgpu::util::DeviceExt::create_buffer_init(
-        device,
-        &wgpu::util::BufferInitDescriptor { label: Some("single params"), contents: bytemuck::bytes_of(&params), usage: wgpu::BufferUsages::UNIFORM },
-    );
     let density = ctx.storage_buffer("density", bytemuck::cast_slice(&values))?;
     let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;
-    let out_bytes = grid.data.len() as u64 * 16;
-    let out = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("single out"),
-        size: out_bytes,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("single.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("single scattering"),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("single scattering"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[
-            wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: density.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 2, resource: light_buf.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 3, resource: out.as_entire_binding() },
-        ],
-    });
-    let mut enc = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(grid.dims[0].div_ceil(4), grid.dims[1].div_ceil(4), grid.dims[2].div_ceil(4));
-    }
-    ctx.queue.submit([enc.finish()]);
-    ctx.check()?;
-    let bytes = ctx.read_buffer(&out, out_bytes)?;
+    let bytes = ctx.run_single_pass(
+        "single scattering",
+        WGSL,
+        bytemuck::bytes_of(&params),
+        &[&density, &light_buf],
+        grid.data.len() as u64 * 16,
+        [grid.dims[0].div_ceil(4), grid.dims[1].div_ceil(4), grid.dims[2].div_ceil(4)],
+    )?;
     for (dst, v) in grid.data.iter_mut().zip(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes)) {
         *dst = glam::Vec3::new(v[0], v[1], v[2]);
     }
