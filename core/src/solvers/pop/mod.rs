@@ -30,6 +30,7 @@
 //! prefiltered anisotropy of Sec. 5.1; energy is right, the angular detail of a map is not.
 
 pub mod accumulate;
+pub mod dome;
 pub mod init;
 pub mod light_grid;
 pub mod merge;
@@ -124,8 +125,8 @@ impl Pop {
                     distant.push((*direction, fluence, 1.0 - 0.5 * one_minus_cos, s.grid_resolution));
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
-                    for (d, fluence, a0) in dome_ordinates(env, s.dome_ordinates) {
-                        distant.push((d, fluence, a0, s.dome_grid_resolution()));
+                    for o in dome::select_ordinates(env, s.dome_ordinates, None) {
+                        distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
                 Light::Point { .. } => report.warnings.push(format!(
@@ -196,37 +197,6 @@ impl Pop {
         progress.update("pop upsample", 1.0);
         Ok((SolveOutput { scattering, timings: merge_timings(timings) }, report))
     }
-}
-
-/// Directions of `n` points spread evenly over the sphere (Fibonacci lattice).
-fn fibonacci_sphere(n: u32) -> Vec<Vec3> {
-    let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
-    (0..n)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = golden * i as f32;
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect()
-}
-
-/// A dome as `n` ordinates: (direction of travel, fluence, initial anisotropy). Each ordinate
-/// owns the directions nearest to it (solid angle ~ 4 pi / n); its fluence is the mean radiance
-/// over them (2048 probe directions) times the solid angle, so the total equals the dome's
-/// fluence exactly for a uniform colour. Anisotropy: the mean cosine of a cone of that solid
-/// angle, 1 - 1/n (Sec. 5.1's prefiltering).
-fn dome_ordinates(env: &crate::scene::Environment, n: u32) -> Vec<(Vec3, Vec3, f32)> {
-    let dirs = fibonacci_sphere(n);
-    let probes = fibonacci_sphere(2048);
-    let mut sum = vec![Vec3::ZERO; dirs.len()];
-    for p in &probes {
-        let k = (0..dirs.len()).max_by(|&a, &b| dirs[a].dot(*p).total_cmp(&dirs[b].dot(*p))).unwrap();
-        sum[k] += env.radiance(*p);
-    }
-    let omega = 4.0 * std::f32::consts::PI / probes.len() as f32;
-    // Light arriving from direction w (towards the sky) travels along -w.
-    dirs.iter().zip(sum).map(|(w, s)| (-*w, s * omega, 1.0 - 1.0 / n as f32)).collect()
 }
 
 /// Sums repeated phases (one entry per light) into one entry each, keeping the order.

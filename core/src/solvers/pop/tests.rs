@@ -475,8 +475,8 @@ fn unsupported_lights_warn_or_fail() {
 #[test]
 fn dome_ordinates_carry_the_dome() {
     let env = crate::scene::Environment { color: Vec3::new(0.2, 0.5, 1.0), map: None };
-    let ords = dome_ordinates(&env, 6);
-    let total: Vec3 = ords.iter().map(|o| o.1).sum();
+    let ords = dome::select_ordinates(&env, 6, None);
+    let total: Vec3 = ords.iter().map(|o| o.fluence).sum();
     let expected = env.color * 4.0 * std::f32::consts::PI;
     assert!((total - expected).abs().max_element() < 1e-3 * expected.max_element(), "{total} vs {expected}");
     let mut sc = scene(cube(12, 3.0, 1.0, 0.6), 8, 4.0, 22.0);
