@@ -63,10 +63,10 @@ fn main() {
             };
             // Warm-up (shader compilation, allocation), then the timed run.
             let mut j = vec![Vec3::ZERO; lg.len()];
-            let _ = pop::propagate(&ctx, &prop, &initial, medium.g, &mut j, iterations);
+            let _ = pop::propagate(&ctx, &prop, &initial, medium.g, &mut j, iterations, false);
             let mut j = vec![Vec3::ZERO; lg.len()];
             let t = Instant::now();
-            let (stats, times) = pop::propagate(&ctx, &prop, &initial, medium.g, &mut j, iterations).expect("gpu propagation");
+            let (stats, times) = pop::propagate(&ctx, &prop, &initial, medium.g, &mut j, iterations, false).expect("gpu propagation");
             let t_gpu_total = t.elapsed().as_secs_f64();
             let t_cpu = if lg.len() <= cpu_max_cells {
                 let mut jc = vec![Vec3::ZERO; lg.len()];

@@ -23,7 +23,7 @@ fn pop_on_gpu(ctx: &GpuContext, pop_solver: &Pop, scene: &Scene, progress: &dyn 
         if opts.vacuum_escape {
             return prop.run_with(opts, init, a, j, progress);
         }
-        let (stats, _times) = pop::propagate(ctx, prop, init, a, j, CHECK_EVERY).map_err(gpu_error)?;
+        let (stats, _times) = pop::propagate(ctx, prop, init, a, j, CHECK_EVERY, opts.keep_remaining).map_err(gpu_error)?;
         if !progress.update("pop propagation", 1.0) {
             return Err(Error::Cancelled);
         }

@@ -41,7 +41,9 @@ fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
 
 /// Runs the propagation on the GPU and adds the accumulated in-scattered radiance into `j_acc`
 /// like the CPU version. The residual is checked every `check_every` iterations (a readback),
-/// so the GPU may run up to `check_every - 1` iterations more than the CPU would.
+/// so the GPU may run up to `check_every - 1` iterations more than the CPU would. With
+/// `keep_remaining` (`RunOptions::keep_remaining`), the packets still travelling at the end
+/// come back in `PropagationStats::remaining` (for the isotropic residuum).
 pub fn propagate(
     ctx: &GpuContext,
     prop: &Propagation,
@@ -49,6 +51,7 @@ pub fn propagate(
     a_scattered: f32,
     j_acc: &mut [Vec3],
     check_every: u32,
+    keep_remaining: bool,
 ) -> Result<(PropagationStats, GpuPropagationTimes), GpuError> {
     let t_start = Instant::now();
     let grid = prop.grid;
@@ -165,11 +168,15 @@ pub fn propagate(
     let t_read = Instant::now();
     let j = ctx.read_buffer(&j_buf, cell_bytes)?;
     let p = ctx.read_buffer(if in_p1 { &p1 } else { &p0 }, cell_bytes)?;
+    let a = ctx.read_buffer(if in_p1 { &a1 } else { &a0 }, cell_bytes)?;
     let e = ctx.read_buffer(&esc, cell_bytes * 2)?;
     for (dst, v) in j_acc.iter_mut().zip(bytemuck::cast_slice::<u8, [f32; 4]>(&j)) {
         *dst = Vec3::new(v[0], v[1], v[2]);
     }
-    let residual: Vec3 = bytemuck::cast_slice::<u8, [f32; 4]>(&p).iter().map(|v| Vec3::new(v[0], v[1], v[2])).sum();
+    let vec3s = |bytes: &[u8]| bytemuck::cast_slice::<u8, [f32; 4]>(bytes).iter().map(|v| Vec3::new(v[0], v[1], v[2])).collect::<Vec<_>>();
+    let remaining = vec3s(&p);
+    let residual: Vec3 = remaining.iter().copied().sum();
+    let residual_anisotropy = volscatter_core::solvers::pop::propagate::mean_anisotropy(&remaining, &vec3s(&a));
     let escaped: Vec3 = bytemuck::cast_slice::<u8, [f32; 4]>(&e).chunks(2).map(|v| Vec3::new(v[0][0], v[0][1], v[0][2])).sum();
     let absorbed = (injected - escaped - residual).max(Vec3::ZERO);
     let times = GpuPropagationTimes { upload, iterations: iterations_s, readback: t_read.elapsed().as_secs_f64() };
@@ -180,6 +187,8 @@ pub fn propagate(
             escaped: escaped.to_array(),
             absorbed: absorbed.to_array(),
             residual: residual.to_array(),
+            residual_anisotropy: residual_anisotropy.to_array(),
+            remaining: if keep_remaining { remaining } else { Vec::new() },
         },
         times,
     ))

@@ -31,11 +31,13 @@
 
 pub mod accumulate;
 pub mod dome;
+pub mod importance;
 pub mod init;
 pub mod light_grid;
 pub mod merge;
 pub mod mip;
 pub mod propagate;
+pub mod residuum;
 pub mod settings;
 pub mod upsample;
 
@@ -83,10 +85,50 @@ impl LightReport {
     }
 }
 
+/// The isotropic residuum's figures (residuum.rs), per unit cell cross-section of its grid.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ResiduumReport {
+    pub dims: [u32; 3],
+    pub cell_size: f32,
+    /// The lights' energy still travelling when they switched, gathered here
+    /// (= `propagation.injected`).
+    pub gathered: [f32; 3],
+    pub propagation: PropagationStats,
+}
+
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct PopReport {
     pub lights: Vec<LightReport>,
+    /// Present when the isotropic residuum ran.
+    pub residuum: Option<ResiduumReport>,
     pub warnings: Vec<String>,
+}
+
+impl PopReport {
+    /// Energy balance of the whole solve in watts (each grid's figures times its cell
+    /// cross-section): (light leaving + absorbed) / light entering, per channel. With the
+    /// residuum, what the lights hand over is counted where it finally goes.
+    pub fn energy_balance(&self) -> [f32; 3] {
+        let (mut entering, mut out) = (Vec3::ZERO, Vec3::ZERO);
+        for l in &self.lights {
+            let area = l.cell_size * l.cell_size;
+            entering += Vec3::from(l.entering) * area;
+            let p = &l.propagation;
+            out += (Vec3::from(l.transmitted) + Vec3::from(l.absorbed_direct) + Vec3::from(p.escaped) + Vec3::from(p.absorbed)) * area;
+        }
+        if let Some(r) = &self.residuum {
+            out += (Vec3::from(r.propagation.escaped) + Vec3::from(r.propagation.absorbed)) * r.cell_size * r.cell_size;
+        }
+        std::array::from_fn(|c| if entering[c] > 0.0 { out[c] / entering[c] } else { 1.0 })
+    }
+
+    /// Propagation work: cell updates summed over every grid (cells x iterations), the
+    /// measure of cost the residuum saves.
+    pub fn cell_updates(&self) -> u64 {
+        let cells = |d: [u32; 3]| d[0] as u64 * d[1] as u64 * d[2] as u64;
+        self.lights.iter().map(|l| cells(l.dims) * l.propagation.iterations as u64).sum::<u64>()
+            + self.residuum.as_ref().map_or(0, |r| cells(r.dims) * r.propagation.iterations as u64)
+    }
 }
 
 impl Pop {
@@ -111,6 +153,15 @@ impl Pop {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = PopReport::default();
+        // The finest footprint asked of the mip: the output grid's spacing or the light grids'
+        // cells, whichever is smaller.
+        let out_probe = ScatteringGrid::over_medium(medium, s.output_resolution)?;
+        let merge_probe = ScatteringGrid::over_medium(medium, s.merge_resolution())?;
+        let (wlo, whi) = medium.world_bounds();
+        let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
+        let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
+        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
+
         // Every light becomes ordinates: (direction of travel, fluence, initial anisotropy,
         // grid resolution).
         let mut distant: Vec<(Vec3, Vec3, f32, u32)> = Vec::new();
@@ -125,7 +176,12 @@ impl Pop {
                     distant.push((*direction, fluence, 1.0 - 0.5 * one_minus_cos, s.grid_resolution));
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
-                    for o in dome::select_ordinates(env, s.dome_ordinates, None) {
+                    let weights = if s.dome_importance {
+                        Some(timings.time("pop importance", || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction))?)
+                    } else {
+                        None
+                    };
+                    for o in dome::select_ordinates(env, s.dome_ordinates, weights.as_ref()) {
                         distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
@@ -147,17 +203,9 @@ impl Pop {
             return Err(Error::Cancelled);
         }
 
-        // The finest footprint asked of the mip: the output grid's spacing or the light grids'
-        // cells, whichever is smaller.
-        let out_probe = ScatteringGrid::over_medium(medium, s.output_resolution)?;
-        let merge_probe = ScatteringGrid::over_medium(medium, s.merge_resolution())?;
-        let (wlo, whi) = medium.world_bounds();
-        let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
-        let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
-        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
-
         let g = medium.g;
-        let mut lights = Vec::with_capacity(distant.len());
+        let mut lights = Vec::with_capacity(distant.len() + 1);
+        let mut residuum = if s.isotropic_residuum { Some(residuum::Residuum::new(medium, &mip, s.residuum_grid_resolution())?) } else { None };
         for (direction, fluence, a0, resolution) in distant {
             if fluence.max_element() <= 0.0 {
                 continue;
@@ -167,17 +215,26 @@ impl Pop {
             let mut j_acc = vec![Vec3::ZERO; grid.len()];
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
             accumulate::add_direct(&init.direct, &mu, a0, g, &mut j_acc);
+            // With the residuum, each light stops at its switch iteration m' (Eq. 10).
+            let max_iterations = match &residuum {
+                Some(_) if s.residuum_iterations > 0 => s.residuum_iterations.min(s.max_iterations),
+                Some(_) => residuum::switch_iteration(a0 * g, g, residuum::mean_sigma_s(&grid), grid.h, s.residuum_anisotropy, grid.dims.z, s.max_iterations),
+                None => s.max_iterations,
+            };
             let prop = propagate::Propagation {
                 grid: &grid,
                 g,
                 mu: &mu,
                 diffusion_correction: s.diffusion_correction,
-                max_iterations: s.max_iterations,
+                max_iterations,
                 residual_threshold: s.residual_threshold,
             };
             let t0 = std::time::Instant::now();
-            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape };
-            let stats = propagate(&prop, opts, &init, a0 * g, &mut j_acc, progress)?;
+            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
+            let mut stats = propagate(&prop, opts, &init, a0 * g, &mut j_acc, progress)?;
+            if let Some(r) = residuum.as_mut() {
+                r.gather(&grid, &std::mem::take(&mut stats.remaining));
+            }
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
             report.lights.push(LightReport {
                 dims: grid.dims.to_array(),
@@ -189,6 +246,19 @@ impl Pop {
             });
             lights.push((grid, j_acc));
         }
+        // The residuum runs only when the lights handed over more than the residual threshold
+        // of all the energy they scattered, and iterates until what is left falls below that
+        // same absolute amount (the paper's epsilon_L over all grids): a light that converged
+        // before its switch hands over a negligible rest that needs no grid of its own.
+        let scattered = report.lights.iter().map(|l| Vec3::from(l.propagation.injected) * l.cell_size * l.cell_size).sum::<Vec3>();
+        if let Some(r) = residuum.filter(|r| (r.gathered() * r.grid.h * r.grid.h).cmpgt(scattered * s.residual_threshold).any()) {
+            let t0 = std::time::Instant::now();
+            let threshold = (scattered * s.residual_threshold / (r.gathered() * r.grid.h * r.grid.h).max(Vec3::splat(1e-30))).max_element().min(1.0);
+            let (grid, j_acc, rep) = run_residuum(r, scene, s, threshold, progress, propagate)?;
+            timings.0.push(("pop residuum".into(), t0.elapsed().as_secs_f64()));
+            report.residuum = Some(rep);
+            lights.push((grid, j_acc));
+        }
         let merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
         if !progress.update("pop upsample", 0.0) {
             return Err(Error::Cancelled);
@@ -197,6 +267,35 @@ impl Pop {
         progress.update("pop upsample", 1.0);
         Ok((SolveOutput { scattering, timings: merge_timings(timings) }, report))
     }
+}
+
+/// Propagates the gathered residuum isotropically (a = 0) through the same hook as the lights,
+/// to convergence; returns its grid and accumulation for merging.
+fn run_residuum(
+    r: residuum::Residuum,
+    scene: &Scene,
+    s: &PopSettings,
+    residual_threshold: f32,
+    progress: &dyn Progress,
+    propagate: &PropagateFn,
+) -> Result<(LightGrid, Vec<Vec3>, ResiduumReport)> {
+    let grid = r.grid;
+    let gathered = r.packets.iter().copied().sum::<Vec3>();
+    let init = init::Initial { direct: vec![Vec3::ZERO; grid.len()], packets: r.packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
+    let mu = accumulate::view_cosines(&grid, scene.camera.position);
+    let prop = propagate::Propagation {
+        grid: &grid,
+        g: scene.medium.g,
+        mu: &mu,
+        diffusion_correction: s.diffusion_correction,
+        max_iterations: s.max_iterations,
+        residual_threshold,
+    };
+    let mut j_acc = vec![Vec3::ZERO; grid.len()];
+    let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false };
+    let stats = propagate(&prop, opts, &init, 0.0, &mut j_acc, progress)?;
+    let rep = ResiduumReport { dims: grid.dims.to_array(), cell_size: grid.h, gathered: gathered.to_array(), propagation: stats };
+    Ok((grid, j_acc, rep))
 }
 
 /// Sums repeated phases (one entry per light) into one entry each, keeping the order.

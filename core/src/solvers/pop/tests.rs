@@ -91,40 +91,44 @@ fn regenerate_fixtures() {
     let (spp, grid_spp) = (env("FIXTURE_SPP", 65536), env("FIXTURE_GRID_SPP", 32768));
     let only = std::env::var("POP_CASE").unwrap_or_default();
     for name in CASES.iter().filter(|n| only.is_empty() || n.contains(only.as_str())) {
-        let t = std::time::Instant::now();
-        let sc = case(name);
-        let half = |seed: u64| {
-            let r = Reference::new(ReferenceSettings {
-                spp: spp / 2,
-                seed,
-                grid_resolution: FIXTURE_GRID,
-                grid_spp: grid_spp / 2,
-                transparent: true,
-                ..Default::default()
-            })
-            .unwrap();
-            let img = r.render_image(&sc, &NoProgress, &mut Timings::default()).unwrap();
-            let grid = r.scattering_grid(&sc, &NoProgress, &mut Timings::default()).unwrap();
-            (img, grid)
-        };
-        let (a, ga) = half(1);
-        let (b, gb) = half(2);
-        let rgb = |i: &crate::Image| i.rgba.iter().map(|p| p.truncate()).collect::<Vec<_>>();
-        let avg = |x: &[Vec3], y: &[Vec3]| x.iter().zip(y).map(|(p, q)| ((*p + *q) * 0.5).to_array()).collect::<Vec<_>>();
-        let fx = Fixture {
-            spp,
-            grid_spp,
-            image: avg(&rgb(&a), &rgb(&b)),
-            multiple: avg(a.aov("multiple").unwrap(), b.aov("multiple").unwrap()),
-            grid_dims: ga.dims,
-            grid: avg(&ga.data, &gb.data),
-            noise_image: 0.5 * relative_rmse(&rgb(&a), &rgb(&b)),
-            noise_grid: 0.5 * relative_rmse(&ga.data, &gb.data),
-        };
-        std::fs::create_dir_all(fixture_path(name).parent().unwrap()).unwrap();
-        std::fs::write(fixture_path(name), serde_json::to_string(&fx).unwrap()).unwrap();
-        eprintln!("{name}: noise image {:.4} grid {:.4} ({:.0} s)", fx.noise_image, fx.noise_grid, t.elapsed().as_secs_f64());
+        regenerate_fixture(name, &case(name), spp, grid_spp);
     }
+}
+
+/// Renders `sc` with the reference in two independent halves and stores the fixture `name`.
+fn regenerate_fixture(name: &str, sc: &Scene, spp: u32, grid_spp: u32) {
+    let t = std::time::Instant::now();
+    let half = |seed: u64| {
+        let r = Reference::new(ReferenceSettings {
+            spp: spp / 2,
+            seed,
+            grid_resolution: FIXTURE_GRID,
+            grid_spp: grid_spp / 2,
+            transparent: true,
+            ..Default::default()
+        })
+        .unwrap();
+        let img = r.render_image(sc, &NoProgress, &mut Timings::default()).unwrap();
+        let grid = r.scattering_grid(sc, &NoProgress, &mut Timings::default()).unwrap();
+        (img, grid)
+    };
+    let (a, ga) = half(1);
+    let (b, gb) = half(2);
+    let rgb = |i: &crate::Image| i.rgba.iter().map(|p| p.truncate()).collect::<Vec<_>>();
+    let avg = |x: &[Vec3], y: &[Vec3]| x.iter().zip(y).map(|(p, q)| ((*p + *q) * 0.5).to_array()).collect::<Vec<_>>();
+    let fx = Fixture {
+        spp,
+        grid_spp,
+        image: avg(&rgb(&a), &rgb(&b)),
+        multiple: avg(a.aov("multiple").unwrap(), b.aov("multiple").unwrap()),
+        grid_dims: ga.dims,
+        grid: avg(&ga.data, &gb.data),
+        noise_image: 0.5 * relative_rmse(&rgb(&a), &rgb(&b)),
+        noise_grid: 0.5 * relative_rmse(&ga.data, &gb.data),
+    };
+    std::fs::create_dir_all(fixture_path(name).parent().unwrap()).unwrap();
+    std::fs::write(fixture_path(name), serde_json::to_string(&fx).unwrap()).unwrap();
+    eprintln!("{name}: noise image {:.4} grid {:.4} ({:.0} s)", fx.noise_image, fx.noise_grid, t.elapsed().as_secs_f64());
 }
 
 struct Errors {
@@ -149,10 +153,14 @@ fn vecs(v: &[[f32; 3]]) -> Vec<Vec3> {
 
 /// POP (solve + composite) on a case against its reference fixture.
 fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
-    let sc = case(name);
+    pop_vs_fixture_scene(name, &case(name), settings)
+}
+
+/// POP on scene `sc` against the reference fixture `name`.
+fn pop_vs_fixture_scene(name: &str, sc: &Scene, settings: &PopSettings) -> (Errors, PopReport) {
     let fx = load_fixture(name);
-    let (out, report) = Pop::new(settings.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
-    let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
+    let (out, report) = Pop::new(settings.clone()).unwrap().solve_detailed(sc, &NoProgress).unwrap();
+    let img = composite(sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
     let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
     let frame = ScatteringGrid::over_medium(&sc.medium, FIXTURE_GRID).unwrap();
     assert_eq!(frame.dims, fx.grid_dims);
@@ -503,3 +511,5 @@ fn dome_ordinates_carry_the_dome() {
     eprintln!("white furnace with 6 ordinates: S / sigma_s mean {m:.3}, range {lo:.3}..{hi:.3} (exact: 1)");
     assert!((m - 1.0).abs() < 0.15 && lo > 0.6 && hi < 1.15, "mean {m}, range {lo}..{hi}");
 }
+
+mod dome_cases;
