@@ -39,9 +39,9 @@ use crate::solvers::NoProgress;
 pub const GRID_RESOLUTION: u32 = 16;
 pub const MAP_WIDTH: usize = 32;
 pub const MAP_HEIGHT: usize = 16;
-const SWEEP_RESOLUTION: u32 = 10;
-const MAX_ITERATIONS: u32 = 100;
-const MU_NODES: [f32; 8] = [-1.0, -0.5, 0.0, 0.4, 0.7, 0.85, 0.95, 1.0];
+const SWEEP_RESOLUTION: u32 = 8;
+const MAX_ITERATIONS: u32 = 64;
+const MU_NODES: [f32; 6] = [-1.0, -0.3, 0.3, 0.7, 0.9, 1.0];
 
 /// The directional importance map of the medium seen from `camera`, normalised to mean 1
 /// over the sphere. `diffusion_correction` as in `PopSettings`.

@@ -1,4 +1,4 @@
-//! `pop`: principal-ordinates propagation (paper 01, Sec. 4) for distant lights.
+//! `pop`: principal-ordinates propagation (paper 01, Sec. 4-5) for distant lights and domes.
 //!
 //! Pipeline per distant light: a propagation grid aligned with the light (light_grid.rs) over
 //! a mip-prefiltered copy of the medium (mip.rs); a transmittance sweep that gives the exact
@@ -23,11 +23,17 @@
 //!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
 //! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).
 //!
-//! Not here yet (later issues): point lights (radial grids, Sec. 6; left out with a warning on
-//! stderr) and proper environment lighting (importance-sampled ordinates, importance
-//! propagation, isotropic residuum, Sec. 5). A dome is handled crudely but honestly: a fixed
-//! set of `dome_ordinates` distant ordinates, each with its cell's mean radiance and the
-//! prefiltered anisotropy of Sec. 5.1; energy is right, the angular detail of a map is not.
+//! Environment lighting (Sec. 5): a dome becomes `dome_ordinates` distant ordinates, the
+//! sphere cut into regions of equal importance, each ordinate carrying exactly its region's
+//! light with its radiance-weighted mean cosine as initial anisotropy (dome.rs, Sec. 5.1);
+//! the importance is the dome's luminance times a directional importance map propagated from
+//! the camera (importance.rs, Sec. 5.2). With `isotropic_residuum`, every light (distant or
+//! dome ordinate) stops at its switch iteration m' (Eq. 10) and the energy still travelling in
+//! all of them is propagated isotropically in one medium-aligned grid (residuum.rs, Sec. 5.4),
+//! through the same propagation hook (CPU or GPU).
+//!
+//! Not here yet (a later issue): point lights (radial grids, Sec. 6; left out with a warning
+//! on stderr).
 
 pub mod accumulate;
 pub mod dome;

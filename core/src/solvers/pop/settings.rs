@@ -65,7 +65,10 @@ pub struct PopSettings {
     /// Iterations per light before switching to the residuum, m'; 0 = Eq. 10 per light (at
     /// least the grid's depth along the light).
     pub residuum_iterations: u32,
-    /// Cells along the longest side of the residuum grid; 0 = `grid_resolution`.
+    /// Cells along the longest side of the residuum grid; 0 = the dome ordinates' resolution
+    /// (`dome_grid_resolution`): isotropic light is smooth, and the lattice's isotropic
+    /// diffusion needs iterations in proportion to the square of the resolution, so a grid
+    /// twice as fine costs about 32 times as much.
     pub residuum_grid_resolution: u32,
     /// Propagation grid resolution of each dome ordinate; 0 = half of `grid_resolution`
     /// (sky light is smooth, and there are many ordinates).
@@ -139,7 +142,7 @@ impl PopSettings {
     }
 
     pub fn residuum_grid_resolution(&self) -> u32 {
-        if self.residuum_grid_resolution == 0 { self.grid_resolution } else { self.residuum_grid_resolution }
+        if self.residuum_grid_resolution == 0 { self.dome_grid_resolution() } else { self.residuum_grid_resolution }
     }
 
     pub fn merge_resolution(&self) -> u32 {

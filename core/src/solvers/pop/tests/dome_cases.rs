@@ -64,18 +64,29 @@ fn regenerate_dome_fixtures() {
     }
 }
 
+/// Settings of the dome tests: 12-cell ordinate grids, so that 125 ordinates solve in seconds.
+fn dome_settings(n: u32) -> PopSettings {
+    PopSettings { grid_resolution: 16, dome_grid_resolution: 12, output_resolution: 32, dome_ordinates: n, ..Default::default() }
+}
+
+/// Prints errors for the dome cases over N, importance and residuum (`cargo nextest run -p
+/// volscatter-core --cargo-profile release explore_domes --run-ignored only --no-capture`).
 #[test]
 #[ignore]
-fn scratch_residuum() {
-    for name in ["cube_g0", "cube_g09", "plume"] {
-        for (lab, st) in [
-            ("off", PopSettings { isotropic_residuum: false, ..test_settings() }),
-            ("on", PopSettings { isotropic_residuum: true, ..test_settings() }),
-            ("on m'=100", PopSettings { isotropic_residuum: true, residuum_iterations: 100, ..test_settings() }),
-            ("on res32", PopSettings { isotropic_residuum: true, residuum_grid_resolution: 32, ..test_settings() }),
-        ] {
-            let (e, rep) = pop_vs_fixture(name, &st);
-            eprintln!("{name} {lab}: image {:.4} x{:.3} grid {:.4} x{:.3} balance {:?} updates {} res {:?}", e.image, e.image_ratio, e.grid, e.grid_ratio, rep.energy_balance(), rep.cell_updates(), rep.residuum.as_ref().map(|r| (r.propagation.iterations, r.gathered[0], r.dims)));
+fn explore_domes() {
+    let only = std::env::var("POP_CASE").unwrap_or_default();
+    for name in DOME_CASES.iter().filter(|n| only.is_empty() || n.contains(only.as_str())) {
+        let sc = dome_case(name);
+        for n in [16u32, 64, 125] {
+            for (imp, res) in [(true, true), (false, true), (true, false)] {
+                let st = PopSettings { dome_importance: imp, isotropic_residuum: res, ..dome_settings(n) };
+                let t = std::time::Instant::now();
+                let (e, rep) = pop_vs_fixture_scene(name, &sc, &st);
+                eprintln!(
+                    "{name:12} N {n:3} importance {imp:5} residuum {res:5}: image {:.4} (x{:.3}) grid {:.4} (x{:.3}) multiple {:.4} updates {:>10} balance {:.4} {:.2}s",
+                    e.image, e.image_ratio, e.grid, e.grid_ratio, e.multiple, rep.cell_updates(), rep.energy_balance()[0], t.elapsed().as_secs_f64()
+                );
+            }
         }
     }
 }
