@@ -11,6 +11,7 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod solvers;
+pub mod translate;
 pub mod vdb;
 
 pub use error::{Error, Result};

@@ -91,6 +91,36 @@ pub enum LightJson {
         #[serde(default)]
         radius: f32,
     },
+    /// A point light aimed along `direction`: `intensity` (W/sr) on the axis, zero outside the
+    /// cone of half-angle `cone_half_angle_deg`, blended over the outer `blend` fraction of
+    /// the cone (in the cosine, Blender's spot blend).
+    Spot {
+        position: [f32; 3],
+        direction: [f32; 3],
+        intensity: Rgb,
+        cone_half_angle_deg: f32,
+        #[serde(default)]
+        blend: f32,
+        #[serde(default)]
+        radius: f32,
+    },
+    /// A one-sided rectangle of uniform `radiance` (W/m^2/sr) emitting towards `normal`;
+    /// `size` = [width along `tangent`, height along normal x tangent].
+    Rect {
+        position: [f32; 3],
+        normal: [f32; 3],
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tangent: Option<[f32; 3]>,
+        size: [f32; 2],
+        radiance: Rgb,
+    },
+    /// A one-sided disc of uniform `radiance` (W/m^2/sr) emitting towards `normal`.
+    Disk {
+        position: [f32; 3],
+        normal: [f32; 3],
+        radius: f32,
+        radiance: Rgb,
+    },
     /// Uniform `color` radiance (W/m^2/sr), or a lat-long `texture` times `intensity`.
     Dome {
         #[serde(default, skip_serializing_if = "Option::is_none")]

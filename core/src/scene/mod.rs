@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 pub use camera::Camera;
 pub use environment::{Environment, LatLongMap};
 pub use json::SceneJson;
-pub use light::Light;
+pub use light::{AreaLight, AreaShape, Light, Spot};
 
 use crate::error::{Error, Result};
 use crate::medium::{procedural, raw, GridLimits, Medium};
@@ -145,15 +145,12 @@ pub fn build_camera(c: &json::CameraJson) -> Result<Camera> {
 pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<Light> {
     Ok(match l {
         json::LightJson::Distant { direction, irradiance, angle_deg } => {
-            let d = finite3(&format!("{field}.direction"), *direction)?;
-            if d.length() < 1e-6 {
-                return Err(Error::scene(format!("{field}.direction"), "must not be zero"));
-            }
+            let d = unit(&format!("{field}.direction"), *direction)?;
             if !(angle_deg.is_finite() && (0.0..180.0).contains(angle_deg)) {
                 return Err(Error::scene(format!("{field}.angle_deg"), format!("must be in [0, 180), got {angle_deg}")));
             }
             Light::Distant {
-                direction: d.normalize(),
+                direction: d,
                 irradiance: non_negative(&format!("{field}.irradiance"), *irradiance)?,
                 half_angle: 0.5 * angle_deg.to_radians(),
             }
@@ -167,6 +164,40 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
                 intensity: non_negative(&format!("{field}.intensity"), *intensity)?,
                 radius: *radius,
             }
+        }
+        json::LightJson::Spot { position, direction, intensity, cone_half_angle_deg, blend, radius } => {
+            let axis = unit(&format!("{field}.direction"), *direction)?;
+            if !(cone_half_angle_deg.is_finite() && *cone_half_angle_deg > 0.0 && *cone_half_angle_deg <= 180.0) {
+                return Err(Error::scene(format!("{field}.cone_half_angle_deg"), format!("must be in (0, 180], got {cone_half_angle_deg}")));
+            }
+            if !(blend.is_finite() && (0.0..=1.0).contains(blend)) {
+                return Err(Error::scene(format!("{field}.blend"), format!("must be in [0, 1], got {blend}")));
+            }
+            if !(radius.is_finite() && *radius >= 0.0) {
+                return Err(Error::scene(format!("{field}.radius"), format!("must be finite and >= 0, got {radius}")));
+            }
+            let cos_outer = cone_half_angle_deg.to_radians().cos();
+            Light::Spot(light::Spot {
+                position: finite3(&format!("{field}.position"), *position)?,
+                axis,
+                intensity: non_negative(&format!("{field}.intensity"), *intensity)?,
+                radius: *radius,
+                cos_outer,
+                cos_inner: cos_outer + (1.0 - cos_outer) * blend,
+            })
+        }
+        json::LightJson::Rect { position, normal, tangent, size, radiance } => {
+            if !size.iter().all(|s| s.is_finite() && *s > 0.0) {
+                return Err(Error::scene(format!("{field}.size"), format!("must be two sizes > 0, got {size:?}")));
+            }
+            let shape = light::AreaShape::Rect { width: size[0], height: size[1] };
+            area_light(field, *position, *normal, *tangent, shape, *radiance)?
+        }
+        json::LightJson::Disk { position, normal, radius, radiance } => {
+            if !(radius.is_finite() && *radius > 0.0) {
+                return Err(Error::scene(format!("{field}.radius"), format!("must be > 0, got {radius}")));
+            }
+            area_light(field, *position, *normal, None, light::AreaShape::Disk { radius: *radius }, *radiance)?
         }
         json::LightJson::Dome { color, texture, intensity } => {
             if !(intensity.is_finite() && *intensity >= 0.0) {
@@ -184,6 +215,30 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
             Light::Dome(Environment { color: colour * *intensity, map })
         }
     })
+}
+
+/// A finite, non-zero vector, normalised.
+fn unit(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    let d = finite3(field, v)?;
+    if d.length() < 1e-6 {
+        return Err(Error::scene(field, "must not be zero"));
+    }
+    Ok(d.normalize())
+}
+
+fn area_light(field: &str, position: [f32; 3], normal: [f32; 3], tangent: Option<[f32; 3]>, shape: light::AreaShape, radiance: json::Rgb) -> Result<Light> {
+    let normal = unit(&format!("{field}.normal"), normal)?;
+    let hint = match tangent {
+        Some(t) => Some(unit(&format!("{field}.tangent"), t)?),
+        None => None,
+    };
+    Ok(Light::Area(light::AreaLight {
+        center: finite3(&format!("{field}.position"), position)?,
+        normal,
+        tangent: light::tangent_for(normal, hint),
+        shape,
+        radiance: non_negative(&format!("{field}.radiance"), radiance)?,
+    }))
 }
 
 fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
@@ -258,6 +313,44 @@ mod tests {
 
     fn err_of(json: &str) -> String {
         Scene::from_json_str(json, Path::new(".")).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn local_lights_parse_and_validate() {
+        let with = |lights: &str| DEFAULT_SCENE_JSON.replace(r#"{"type": "dome", "color": [0.12, 0.17, 0.28]}"#, lights);
+        let ok = Scene::from_json_str(
+            &with(r#"{"type": "spot", "position": [0, 0, 2], "direction": [0, 0, -3], "intensity": 5, "cone_half_angle_deg": 30, "blend": 0.5},
+                     {"type": "rect", "position": [1, 0, 0], "normal": [-1, 0, 0], "tangent": [0, 1, 1], "size": [2, 1], "radiance": [1, 2, 3]},
+                     {"type": "disk", "position": [0, 1, 0], "normal": [0, -2, 0], "radius": 0.5, "radiance": 4}"#),
+            Path::new("."),
+        )
+        .unwrap();
+        match &ok.lights[1] {
+            Light::Spot(s) => {
+                assert_eq!(s.axis, -Vec3::Z);
+                let c = 30f32.to_radians().cos();
+                assert!((s.cos_outer - c).abs() < 1e-6 && (s.cos_inner - (c + 0.5 * (1.0 - c))).abs() < 1e-6);
+            }
+            other => panic!("{other:?}"),
+        }
+        match &ok.lights[2] {
+            Light::Area(a) => {
+                // The tangent hint is made perpendicular to the normal.
+                assert!(a.tangent.dot(a.normal).abs() < 1e-6 && (a.tangent - Vec3::new(0.0, 1.0, 1.0).normalize()).length() < 1e-6);
+                assert_eq!(a.area(), 2.0);
+            }
+            other => panic!("{other:?}"),
+        }
+        for (bad, field) in [
+            (r#"{"type": "spot", "position": [0, 0, 2], "direction": [0, 0, 0], "intensity": 5, "cone_half_angle_deg": 30}"#, "lights[1].direction"),
+            (r#"{"type": "spot", "position": [0, 0, 2], "direction": [0, 0, -1], "intensity": 5, "cone_half_angle_deg": 30, "blend": 2}"#, "lights[1].blend"),
+            (r#"{"type": "rect", "position": [0, 0, 2], "normal": [0, 0, -1], "size": [1, -1], "radiance": 1}"#, "lights[1].size"),
+            (r#"{"type": "disk", "position": [0, 0, 2], "normal": [0, 0, -1], "radius": 0, "radiance": 1}"#, "lights[1].radius"),
+            (r#"{"type": "disk", "position": [0, 0, 2], "normal": [0, 0, -1], "radius": 1, "radiance": -1}"#, "lights[1].radiance"),
+        ] {
+            let e = err_of(&with(bad));
+            assert!(e.contains(field), "{field}: {e}");
+        }
     }
 
     #[test]

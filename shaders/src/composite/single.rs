@@ -6,7 +6,9 @@ use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, dense_density, dense_density_bytes};
-use volscatter_core::compositor::dome_directions_of;
+use glam::Vec3;
+use volscatter_core::compositor::{dome_directions_of, AREA_VPLS_PER_SIDE};
+use volscatter_core::translate::{local_emitters, PointEmitter, Profile};
 use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
@@ -37,33 +39,55 @@ const _: () = {
     assert!(offset_of!(SingleParams, misc) == 224);
 };
 
-/// Mirrors `struct Light` in single.wgsl: w of the first vec4 is the kind (0 distant, 1 point).
+/// Mirrors `struct Light` in single.wgsl: w of the first vec4 is the kind (0 distant, 1 point
+/// emitter), w of `power` the emitter's profile (0 isotropic, 1 cone, 2 cosine).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub struct GpuLight {
     pub pos_or_dir: [f32; 4],
     pub power: [f32; 4],
+    pub axis: [f32; 4],
+    pub extra: [f32; 4],
 }
 
-/// The scene's lights in the CPU's order; the dome as its fixed importance-sampled directions.
+const _: () = assert!(size_of::<GpuLight>() == 64);
+
+impl GpuLight {
+    fn directional(towards_light: Vec3, irradiance: Vec3) -> Self {
+        GpuLight { pos_or_dir: towards_light.extend(0.0).to_array(), power: irradiance.extend(0.0).to_array(), ..Zeroable::zeroed() }
+    }
+
+    fn emitter(e: &PointEmitter) -> Self {
+        let (kind, axis, cos_outer, cos_inner) = match e.profile {
+            Profile::Isotropic => (0.0, Vec3::Z, 0.0, 0.0),
+            Profile::Cone { axis, cos_outer, cos_inner } => (1.0, axis, cos_outer, cos_inner),
+            Profile::Cosine { normal } => (2.0, normal, 0.0, 0.0),
+        };
+        GpuLight {
+            pos_or_dir: e.position.extend(1.0).to_array(),
+            power: e.intensity.extend(kind).to_array(),
+            axis: axis.extend(cos_outer).to_array(),
+            extra: [cos_inner, 0.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// The scene's lights in the CPU's order: distant lights and the dome (as its fixed
+/// importance-sampled directions) in scene order, then the point emitters of the local lights.
 fn light_list(scene: &Scene, dome_directions: u32) -> Vec<GpuLight> {
     let mut out = Vec::new();
     for light in &scene.lights {
         match light {
-            Light::Distant { direction, irradiance, .. } => {
-                let w = -*direction;
-                out.push(GpuLight { pos_or_dir: [w.x, w.y, w.z, 0.0], power: irradiance.extend(0.0).to_array() });
-            }
-            Light::Point { position, intensity, .. } => {
-                out.push(GpuLight { pos_or_dir: position.extend(1.0).to_array(), power: intensity.extend(0.0).to_array() });
-            }
+            Light::Distant { direction, irradiance, .. } => out.push(GpuLight::directional(-*direction, *irradiance)),
             Light::Dome(_) => {
                 for (w, weight) in dome_directions_of(scene, dome_directions) {
-                    out.push(GpuLight { pos_or_dir: [w.x, w.y, w.z, 0.0], power: weight.extend(0.0).to_array() });
+                    out.push(GpuLight::directional(w, weight));
                 }
             }
+            Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
         }
     }
+    out.extend(local_emitters(&scene.lights, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
     out
 }
 

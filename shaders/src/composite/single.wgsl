@@ -2,7 +2,9 @@
 // invocation per grid point: S1(x) = sigma_s(x) * sum over lights of p * L * T(x -> light),
 // T by midpoint ray marching through the medium's bounds. Lights come as a list: kind 0 =
 // distant (direction towards the light, irradiance; the dome arrives as such directions with
-// their weights), kind 1 = point (position, intensity). Same order and steps as the CPU.
+// their weights), kind 1 = point emitter (position, peak intensity, angular profile: volscatter-
+// core `translate::Profile`; spots and area-light VPLs arrive as such). Same order and steps as
+// the CPU.
 // `density_at` comes from medium.wgsl.
 
 struct Params {
@@ -21,8 +23,28 @@ struct Params {
 
 struct Light {
     pos_or_dir: vec4<f32>,             // w = kind
-    power: vec4<f32>,
+    power: vec4<f32>,                  // w = profile: 0 isotropic, 1 cone, 2 cosine
+    axis: vec4<f32>,                   // profile axis, w = cos_outer (cone)
+    extra: vec4<f32>,                  // x = cos_inner (cone)
 };
+
+// translate::Profile::factor for the direction w away from the emitter.
+fn profile_factor(light: Light, w: vec3<f32>) -> f32 {
+    let c = dot(w, light.axis.xyz);
+    if (light.power.w == 1.0) {
+        let e0 = light.axis.w;
+        let e1 = light.extra.x;
+        if (e1 <= e0) {
+            return select(0.0, 1.0, c > e0);
+        }
+        let t = clamp((c - e0) / (e1 - e0), 0.0, 1.0);
+        return t * t * (3.0 - 2.0 * t);
+    }
+    if (light.power.w == 2.0) {
+        return max(c, 0.0);
+    }
+    return 1.0;
+}
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> density: array<f32>;
@@ -87,7 +109,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let dist = length(to);
             if (dist > 1e-6) {
                 let w = to / dist;
-                sum += light.power.xyz / (dist * dist) * hg(dot(w, view), g) * transmittance(x, w, dist);
+                let intensity = light.power.xyz * profile_factor(light, -w);
+                if (max(intensity.x, max(intensity.y, intensity.z)) > 0.0) {
+                    sum += intensity / (dist * dist) * hg(dot(w, view), g) * transmittance(x, w, dist);
+                }
             }
         }
     }

@@ -48,7 +48,7 @@ fn single_wgsl_validates_and_params_layout_matches() {
 }
 
 /// The single-scattering grid on the GPU against the CPU's: default scene (sun + 64 dome
-/// directions) and a point light inside the plume. Same march positions and light order;
+/// directions), a point light inside the plume, a spot and a disc light. Same march positions and light order;
 /// float32 sums of up to 512 samples differ only in exp/sqrt rounding. Tolerance 1e-5.
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
@@ -67,4 +67,11 @@ fn gpu_single_scattering_grid_matches_cpu() {
     check(&scene, "sun + dome");
     scene.lights = vec![volscatter_core::scene::Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0 }];
     check(&scene, "point light");
+    // A spot with a blended cone and a disc light (8x8 VPLs with the cosine profile).
+    use volscatter_core::scene::{AreaLight, AreaShape, Light, Spot};
+    scene.lights = vec![
+        Light::Spot(Spot { position: Vec3::new(-1.0, -1.0, 1.0), axis: Vec3::new(1.0, 1.0, -1.0).normalize(), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0, cos_outer: 0.9, cos_inner: 0.95 }),
+        Light::Area(AreaLight { center: Vec3::new(1.2, 0.0, 0.0), normal: -Vec3::X, tangent: Vec3::Y, shape: AreaShape::Disk { radius: 0.4 }, radiance: Vec3::ONE }),
+    ];
+    check(&scene, "spot + disc");
 }

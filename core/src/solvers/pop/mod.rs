@@ -191,8 +191,8 @@ impl Pop {
                         distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
-                Light::Point { .. } => report.warnings.push(format!(
-                    "pop: lights[{i}] is a point light, which pop does not handle yet (radial grids, paper Sec. 6): left out of the result"
+                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => report.warnings.push(format!(
+                    "pop: lights[{i}] is a local (point, spot or area) light, which pop does not handle yet (radial grids, paper Sec. 6): left out of the result"
                 )),
                 Light::Dome(_) => report.warnings.push(format!(
                     "pop: lights[{i}] is a dome and dome_ordinates = 0: its light is left out of the scattering (the compositor still shows it behind the medium)"

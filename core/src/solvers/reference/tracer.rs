@@ -163,28 +163,26 @@ impl<'a> Tracer<'a> {
                     let ph = hg(wi.dot(d), self.phase.g);
                     sum += *irradiance * weight * ph * self.transmittance(x, wi, f32::INFINITY, rng);
                 }
-                Light::Point { position, intensity, radius } => {
-                    let to = *position - x;
+                Light::Point { position, intensity, radius } => sum += self.point_light(x, d, *position, *intensity, *radius, rng),
+                Light::Spot(spot) => {
+                    let from = x - spot.position;
+                    let falloff = spot.falloff(from.normalize_or(spot.axis));
+                    if falloff > 0.0 {
+                        sum += falloff * self.point_light(x, d, spot.position, spot.intensity, spot.radius, rng);
+                    }
+                }
+                Light::Area(area) => {
+                    // A point uniform in area (pdf 1/A): radiance x cos at the light / dist^2 x A.
+                    let p = area.point(rng.pair());
+                    let to = p - x;
                     let dist2 = to.length_squared();
-                    let dist = dist2.sqrt();
-                    if *radius > 0.0 && dist > *radius * 1.0001 {
-                        // Sphere of radiance I / (pi r^2) sampled uniformly in the cone it subtends.
-                        let sin2 = (radius * radius / dist2).min(1.0);
-                        let cos_max = (1.0 - sin2).max(0.0).sqrt();
-                        let one_minus_cos = if sin2 < 1e-4 { 0.5 * sin2 + 0.125 * sin2 * sin2 } else { 1.0 - cos_max };
-                        let axis = to / dist;
-                        let wi = uniform_cone(axis, one_minus_cos, rng.pair());
-                        let solid_angle = 2.0 * PI * one_minus_cos;
-                        // Distance to the sphere's near surface along wi.
-                        let b = wi.dot(to);
-                        let t_hit = b - (b * b - dist2 + radius * radius).max(0.0).sqrt();
-                        let radiance = *intensity / (PI * radius * radius);
-                        let ph = hg(wi.dot(d), self.phase.g);
-                        sum += radiance * solid_angle * ph * self.transmittance(x, wi, t_hit.max(0.0), rng);
-                    } else if dist > 1e-6 {
+                    let cos_l = -area.normal.dot(to);
+                    if dist2 > 1e-12 && cos_l > 0.0 {
+                        let dist = dist2.sqrt();
                         let wi = to / dist;
                         let ph = hg(wi.dot(d), self.phase.g);
-                        sum += *intensity / dist2 * ph * self.transmittance(x, wi, dist, rng);
+                        let geometry = (cos_l / dist) * area.area() / dist2;
+                        sum += area.radiance * geometry * ph * self.transmittance(x, wi, dist, rng);
                     }
                 }
                 Light::Dome(env) => {
@@ -198,6 +196,34 @@ impl<'a> Tracer<'a> {
             }
         }
         sum
+    }
+
+    /// Next-event estimate of a point (radius 0) or sphere light of intensity `intensity`.
+    fn point_light(&self, x: Vec3, d: Vec3, position: Vec3, intensity: Vec3, radius: f32, rng: &mut Rng) -> Vec3 {
+        let to = position - x;
+        let dist2 = to.length_squared();
+        let dist = dist2.sqrt();
+        if radius > 0.0 && dist > radius * 1.0001 {
+            // Sphere of radiance I / (pi r^2) sampled uniformly in the cone it subtends.
+            let sin2 = (radius * radius / dist2).min(1.0);
+            let cos_max = (1.0 - sin2).max(0.0).sqrt();
+            let one_minus_cos = if sin2 < 1e-4 { 0.5 * sin2 + 0.125 * sin2 * sin2 } else { 1.0 - cos_max };
+            let axis = to / dist;
+            let wi = uniform_cone(axis, one_minus_cos, rng.pair());
+            let solid_angle = 2.0 * PI * one_minus_cos;
+            // Distance to the sphere's near surface along wi.
+            let b = wi.dot(to);
+            let t_hit = b - (b * b - dist2 + radius * radius).max(0.0).sqrt();
+            let radiance = intensity / (PI * radius * radius);
+            let ph = hg(wi.dot(d), self.phase.g);
+            radiance * solid_angle * ph * self.transmittance(x, wi, t_hit.max(0.0), rng)
+        } else if dist > 1e-6 {
+            let wi = to / dist;
+            let ph = hg(wi.dot(d), self.phase.g);
+            intensity / dist2 * ph * self.transmittance(x, wi, dist, rng)
+        } else {
+            Vec3::ZERO
+        }
     }
 
     /// Radiance escaping to the environment along a phase-sampled direction, MIS-weighted
