@@ -125,20 +125,20 @@ impl SphereGrid {
         SphereGrid { width, height, radiance, density: q, s_edges }
     }
 
-    /// Importance mass of row r between s values a > b (within the row), per unit u: the
-    /// mass of column x is density * 2 pi * (a - b) / width.
+    /// Importance mass of row r per unit s (its mass between s values a > b inside the row is
+    /// this times a - b).
     fn row_mass(&self, r: usize) -> f64 {
         let w = self.width;
         self.density[r * w..(r + 1) * w].iter().map(|&d| d as f64).sum::<f64>() * 2.0 * std::f64::consts::PI / w as f64
     }
 
-    /// Cuts [s_lo, s_hi] (top to bottom) so that the mass above the cut, from s = 1, equals
-    /// `target`. Mass is linear in s within a row.
+    /// The s at which the mass above, from s = 1, equals `target` (`row_masses`: per unit s,
+    /// top to bottom). Mass is linear in s within a row.
     fn s_at_mass(&self, row_masses: &[f64], target: f64) -> f32 {
         let mut acc = 0.0f64;
-        for r in 0..self.height {
+        for (r, row_mass) in row_masses.iter().enumerate() {
             let ds = (self.s_edges[r] - self.s_edges[r + 1]) as f64;
-            let m = row_masses[r] * ds;
+            let m = row_mass * ds;
             if acc + m >= target && m > 0.0 {
                 let t = ((target - acc) / m).clamp(0.0, 1.0);
                 return (self.s_edges[r] as f64 - t * ds) as f32;

@@ -185,7 +185,7 @@ fn pop_vs_fixture_scene(name: &str, sc: &Scene, settings: &PopSettings) -> (Erro
     };
     if std::env::var("POP_ROWS").is_ok() {
         let [nx, ny, nz] = frame.dims;
-        let s1 = crate::compositor::single_scattering_grid(&sc, FIXTURE_GRID, 64).unwrap();
+        let s1 = crate::compositor::single_scattering_grid(sc, FIXTURE_GRID, 64).unwrap();
         for (n, v) in [("pop grid", &pop_grid), ("ref grid", &ref_grid), ("single", &s1.data)] {
             for (lab, jj) in [("y=front", 1u32), ("y=mid", ny / 2), ("y=back", ny - 2)] {
                 let col: Vec<String> = (0..nz).rev().map(|k| format!("{:.3}", v[(nx / 2 + nx * (jj + ny * k)) as usize].x)).collect();
