@@ -154,7 +154,7 @@ fn moved_camera_picks_neighbouring_ordinates() {
 
 // Accuracy under domes against the converged reference (fixtures: 262144 paths per pixel,
 // 65536 per grid point; their own noise, image / grid: dome_uniform 0.0012 / 0.0012, dome_sun
-// 0.0063 / 0.0113). Bounds: measured with `dome_settings` when written, plus 10% and 0.01 (a
+// 0.0063 / 0.0113, dome_milk 0.0078 / 0.0181). Bounds: measured with `dome_settings` when written, plus 10% and 0.01 (a
 // ratchet against regressions, as in tests.rs). POP's error at a given N is mostly its bias
 // (one HG lobe per cell about each ordinate, see tests.rs); it falls as N grows because each
 // ordinate then stands for a smaller region of the sky.
@@ -222,8 +222,8 @@ fn pop_image(sc: &Scene, st: &PopSettings) -> (Vec<Vec3>, PopReport) {
 ///   iteration; light in the cube's thin edge cells and in the empty cells around it (just
 ///   leaving) decays less, so the paper's criterion holds for the bulk, not for every packet.
 ///   Their anisotropy is dropped, which the 0.23% change of the image bounds in effect;
-/// - against the reference (fixture noise: see the assertion message) both stay within the
-///   ratchet bound, and their errors differ by less than 0.01.
+/// - against the reference both stay within the ratchet bound (`MILK_MAX_*`), and their
+///   errors differ by less than 0.01 (measured 0.001).
 #[test]
 fn residuum_saves_work_on_high_albedo() {
     let sc = dome_case("dome_milk");
@@ -257,6 +257,8 @@ fn residuum_saves_work_on_high_albedo() {
     assert!(e_off.image <= MILK_MAX_IMAGE && e_off.grid <= MILK_MAX_GRID, "without the residuum: image {} grid {}", e_off.image, e_off.grid);
     assert!((e_on.image - e_off.image).abs() < 0.01, "errors {} vs {}", e_on.image, e_off.image);
 }
-/// Ratchet bounds of `residuum_saves_work_on_high_albedo` (measured + 10% + 0.01).
-const MILK_MAX_IMAGE: f64 = 1.0;
-const MILK_MAX_GRID: f64 = 1.0;
+/// Ratchet bounds of `residuum_saves_work_on_high_albedo` (measured + 10% + 0.01). Measured
+/// with / without the residuum: image 0.392 / 0.391, grid 0.286 / 0.286 (fixture noise 0.0078
+/// image, 0.018 grid; 262144 and 65536 paths).
+const MILK_MAX_IMAGE: f64 = 0.441;
+const MILK_MAX_GRID: f64 = 0.325;
