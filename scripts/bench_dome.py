@@ -175,6 +175,17 @@ def main() -> None:
         + ".",
         "Errors per N on the test scenes, and the residuum's effect in iterations: core/src/solvers/pop/tests/dome_cases.rs.",
     ]
+    on, off, noimp = runs["pop#64"], runs["pop#64-no-residuum"], runs["pop#64-no-importance"]
+    lines += [
+        "",
+        f"Summary: the scattered-light error goes {runs['pop#16']['scattered_relative_rmse']:.3f} (N 16) ->"
+        f" {runs['pop#125']['scattered_relative_rmse']:.3f} (N 125), POP's own bias (one HG lobe per cell and ordinate)"
+        " being the floor. The isotropic residuum at N 64: solve"
+        f" {on['grid_seconds']:.2f} s instead of {off['grid_seconds']:.2f} s, scattered error {on['scattered_relative_rmse']:.3f}"
+        f" instead of {off['scattered_relative_rmse']:.3f}, grid error {on['grid_relative_rmse']:.3f} instead of"
+        f" {off['grid_relative_rmse']:.3f}. Importance propagation at N 64: scattered error {on['scattered_relative_rmse']:.3f}"
+        f" with, {noimp['scattered_relative_rmse']:.3f} without.",
+    ]
     write_section("pop-dome", "\n".join(lines))
     log("wrote BENCHMARKS.md section `pop-dome`")
 
