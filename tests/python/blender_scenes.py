@@ -134,6 +134,39 @@ def point(power=200.0, location=(2.0, -1.0, 2.0), name="Point"):
     return ob
 
 
+def _aim(ob, target):
+    """Turns `ob` so that its local -Z (where Blender's spot and area lights emit) faces `target`."""
+    from mathutils import Vector
+    d = Vector(target) - ob.location
+    ob.rotation_euler = d.to_track_quat('-Z', 'Y').to_euler()
+
+
+def spot(power=300.0, location=(2.0, -1.5, 1.5), target=(0.0, 0.0, 0.0), size_deg=30.0, blend=0.3, radius=0.0,
+         name="Spot"):
+    light = bpy.data.lights.new(name, 'SPOT')
+    light.energy = power
+    light.spot_size = math.radians(size_deg)
+    light.spot_blend = blend
+    light.shadow_soft_size = radius
+    ob = _link(bpy.data.objects.new(name, light))
+    ob.location = location
+    _aim(ob, target)
+    return ob
+
+
+def area(shape='RECTANGLE', power=300.0, size=(1.0, 0.5), location=(1.5, -1.2, 1.5), target=(0.0, 0.0, 0.0),
+         name="Area"):
+    light = bpy.data.lights.new(name, 'AREA')
+    light.energy = power
+    light.shape = shape
+    light.size = size[0]
+    light.size_y = size[1]
+    ob = _link(bpy.data.objects.new(name, light))
+    ob.location = location
+    _aim(ob, target)
+    return ob
+
+
 def camera(location=(0.0, -6.0, 0.5), look_at=(0.0, 0.0, 0.0), width=32, height=24, name="Camera"):
     from mathutils import Vector
     cam = bpy.data.cameras.new(name)

@@ -741,7 +741,7 @@ def test_modal_path_with_progress_and_esc(fresh):
         ["Smoke_scattering_0001.vdb", "Smoke_scattering_0002.vdb"]  # the first run's, nothing new
 
 
-@pytest.mark.parametrize("light", ["sun", "point"])
+@pytest.mark.parametrize("light", ["sun", "point", "spot", "rect", "disk"])
 def test_single_scattering_matches_cycles(fresh, light):
     """Light units, directions, camera, object transform and anisotropy, end to end: Cycles with
     its default volume_bounces = 0 renders single scattering, which volscatter's compositor also
@@ -755,11 +755,20 @@ def test_single_scattering_matches_cycles(fresh, light):
     bs.scatter_absorb_material(ob, density=3.0, albedo=(0.9, 0.9, 0.9), g=0.3)
     if light == "sun":
         bs.sun(strength=3.0, rotation=(0.6, 0.3, 0.0))
-    else:
+    elif light == "point":
         bs.point(power=300.0, location=(2.0, -1.5, 1.5))
+    elif light == "spot":
+        # the cone edge (15 degrees, blend 0.3) runs through the volume, off its centre
+        bs.spot(power=300.0, location=(2.0, -1.5, 1.5), target=(0.5, 0.3, 0.0), size_deg=30.0, blend=0.3)
+    elif light == "rect":
+        # 1 x 0.5 m, stretched 1.5x along its width by the object's scale
+        a = bs.area('RECTANGLE', power=200.0, size=(1.0, 0.5), location=(1.6, -1.4, 1.3))
+        a.scale = (1.5, 1.0, 1.0)
+    else:
+        bs.area('DISK', power=200.0, size=(0.8, 0.8), location=(-1.7, -1.3, 1.1))
     bs.camera(width=16, height=12)
-    doc, _, _ = se.export(bpy.context, ob, str(fresh), 1, {"name": "reference", "grid_resolution": 6, "grid_spp": 2})
-    assert [l["type"] for l in doc["lights"]] == [{"sun": "distant", "point": "point"}[light]]
+    doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1, {"name": "reference", "grid_resolution": 6, "grid_spp": 2})
+    assert [l["type"] for l in doc["lights"]] == [light.replace("sun", "distant")], warnings
     with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite() as img:
         w, h = img.size()
         single = list(img.aov("single"))
@@ -773,6 +782,7 @@ def test_single_scattering_matches_cycles(fresh, light):
     n = w * h
     ours = [sum(single[c::3]) / n for c in range(3)] + [sum(alpha) / n]
     cyc = [sum(px[c::4]) / n for c in range(4)]
+    print("%s: Cycles %s, volscatter %s, ratio %s" % (light, cyc, ours, [cyc[c] / ours[c] for c in range(4)]))
     assert ours[0] > 1e-3
     for c in range(3):
         assert cyc[c] == pytest.approx(ours[c], rel=0.1), "Cycles %s, volscatter %s" % (cyc, ours)

@@ -8,6 +8,14 @@ left out (unsupported lights, ignored shader inputs) is collected in `warnings`.
 Conventions (measured with Cycles, /work/shared/notes/blender-conventions.md):
 - sun: `strength` is irradiance (W/m^2) perpendicular to the beam; `angle` its diameter;
 - point of power P: intensity P / (4 pi) W/sr, radius = `shadow_soft_size`;
+- spot of power P: the same axis intensity P / (4 pi) W/sr as a point of P watts (the cone
+  masks, it does not concentrate: a Cycles 5.0.1 render of a visible spot of radius r shows
+  radiance P / (4 pi^2 r^2) for any spot_size); cone half-angle spot_size / 2; `spot_blend` is
+  the core's `blend` (Cycles: smoothstep in the cosine over the outer blend fraction);
+- area of power P and world area A (object scale included): radiance P / (pi A) W/m^2/sr from
+  its local -Z face (a visible 1 m^2 square of 10 W renders 3.183 in Cycles 5.0.1, and the same
+  holds for rectangle, disk and ellipse with their own areas); an ellipse becomes the disk of
+  the same area (same power, same radiance);
 - world background colour C, strength s: dome radiance C * s;
 - Volume Scatter: sigma_s = Color * Density; Volume Absorption: sigma_a = (1 - Color) * Density;
 - Principled Volume (Cycles svm_node_principled_volume): with D = Density * grid,
@@ -291,6 +299,93 @@ def _light_color(light, warnings):
     return col
 
 
+#: The scene JSON light types the Principal Ordinates solver handles. The one place to change
+#: when pop handles more: the operator's error and warning and the solver's tooltip are made
+#: from it.
+POP_LIGHT_TYPES = ("distant",)
+
+_BLENDER_LIGHT_NAMES = {"distant": "sun", "point": "point", "spot": "spot", "rect": "area", "disk": "area",
+                        "dome": "world"}
+
+
+def pop_lights_note():
+    """What pop handles, for messages: "sun lights only so far"."""
+    names = []
+    for k in POP_LIGHT_TYPES:
+        n = _BLENDER_LIGHT_NAMES.get(k, k)
+        if n not in names:
+            names.append(n)
+    return "%s lights only so far" % " and ".join(names)
+
+
+def pop_light_messages(kinds):
+    """(error, warning) for a pop solve of lights of scene JSON types `kinds`; None for none."""
+    if not any(k in POP_LIGHT_TYPES for k in kinds):
+        return ("the Principal Ordinates solver handles %s, and the scene has none; choose the Reference solver"
+                % pop_lights_note(), None)
+    left = []
+    for k in kinds:
+        n = _BLENDER_LIGHT_NAMES.get(k, k)
+        if k not in POP_LIGHT_TYPES and n not in left:
+            left.append(n)
+    if not left:
+        return None, None
+    what = ", ".join("the world" if n == "world" else n + " lights" for n in left)
+    return None, ("the Principal Ordinates solver handles %s: %s left out (choose Reference to include them)"
+                  % (pop_lights_note(), what))
+
+
+def _axis_lengths(m3):
+    return [m3.col[i].length for i in range(3)]
+
+
+def _spot(orig, light, m, col, warnings):
+    p = _light_scale(light) / (4.0 * math.pi)  # axis intensity of a spot of P watts = a point's
+    if p <= 0:
+        return None
+    m3 = m.to_3x3()
+    sx, sy, _ = _axis_lengths(m3)
+    if abs(sx - sy) > 1e-4 * max(sx, sy):
+        warnings.append("light '%s': a spot under non-uniform object scale has an elliptical cone in Cycles; "
+                        "exported with a round cone" % orig.name)
+    d = (m3 @ _vec((0.0, 0.0, -1.0))).normalized()
+    half = min(max(math.degrees(float(light.spot_size)) / 2.0, 1e-3), 180.0)
+    return {"type": "spot", "position": list(m.translation), "direction": list(d), "intensity": [c * p for c in col],
+            "cone_half_angle_deg": half, "blend": min(max(float(light.spot_blend), 0.0), 1.0),
+            "radius": max(float(light.shadow_soft_size), 0.0)}
+
+
+def _area(orig, light, m, col, warnings):
+    power = _light_scale(light)
+    if power <= 0:
+        return None
+    spread = float(getattr(light, "spread", math.pi))
+    if spread < math.pi - 1e-4:
+        warnings.append("light '%s': area light spread %.1f degrees is exported as 180 (Lambertian)"
+                        % (orig.name, math.degrees(spread)))
+    m3 = m.to_3x3()
+    sx, sy, _ = _axis_lengths(m3)
+    normal = (m3 @ _vec((0.0, 0.0, -1.0))).normalized()
+    tangent = (m3 @ _vec((1.0, 0.0, 0.0))).normalized()
+    size_x = float(light.size)
+    size_y = float(light.size_y) if light.shape in ('RECTANGLE', 'ELLIPSE') else size_x
+    w, h = size_x * sx, size_y * sy  # world sizes: Cycles scales the light by its object's scale
+    if w <= 0 or h <= 0:
+        return None
+    pos = list(m.translation)
+    if light.shape in ('SQUARE', 'RECTANGLE'):
+        area = w * h
+        return {"type": "rect", "position": pos, "normal": list(normal), "tangent": list(tangent), "size": [w, h],
+                "radiance": [c * power / (math.pi * area) for c in col]}
+    # DISK, ELLIPSE: a disk of the same area (exact for a round one)
+    area = math.pi * w * h / 4.0
+    if abs(w - h) > 1e-4 * max(w, h):
+        warnings.append("light '%s': an elliptical area light (%.3g x %.3g m) is exported as a disk of the same area"
+                        % (orig.name, w, h))
+    return {"type": "disk", "position": pos, "normal": list(normal), "radius": math.sqrt(w * h) / 2.0,
+            "radiance": [c * power / (math.pi * area) for c in col]}
+
+
 def lights(scene, depsgraph, warnings):
     out = []
     for inst in depsgraph.object_instances:
@@ -321,6 +416,14 @@ def lights(scene, depsgraph, warnings):
                 continue
             out.append({"type": "point", "position": list(m.translation), "intensity": [c * p for c in col],
                         "radius": max(float(light.shadow_soft_size), 0.0)})
+        elif light.type == 'SPOT':
+            js = _spot(orig, light, m, col, warnings)
+            if js:
+                out.append(js)
+        elif light.type == 'AREA':
+            js = _area(orig, light, m, col, warnings)
+            if js:
+                out.append(js)
         else:
             warnings.append("light '%s': %s lights are not supported by volscatter yet and were left out"
                             % (orig.name, light.type.lower()))
