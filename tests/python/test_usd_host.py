@@ -279,13 +279,13 @@ def test_cli_bad_input(tmp_path, case):
 
 def test_cli_unsupported_light_warns_but_renders(tmp_path):
     stage, path = make_stage(tmp_path)
-    UsdLux.RectLight.Define(stage, "/World/Panel")
+    UsdLux.CylinderLight.Define(stage, "/World/Tube")
     UsdLux.SphereLight.Define(stage, "/World/Bulb").CreateIntensityAttr().Set(10.0)
     stage.Save()
     r = cli("render", path, "--solver", "pop", "--width", 16, "--height", 12, "-q",
             *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []), "--out", tmp_path / "w.exr")
     assert r.returncode == 0, r.stderr
-    assert "/World/Panel (RectLight) is not supported" in r.stderr
+    assert "/World/Tube (CylinderLight) is not supported" in r.stderr
     assert "solver pop does not handle point lights yet: light /World/Bulb" in r.stderr
 
 
