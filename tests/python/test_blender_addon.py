@@ -777,7 +777,9 @@ def test_single_scattering_matches_cycles(fresh, light):
     assert sc.cycles.volume_bounces == 0
     sc.render.film_transparent = True
     sc.render.filter_size = 0.01
-    cw, ch, px = bs.render_cycles(str(fresh / "single.exr"), samples=32)
+    # the local lights light part of the volume only, and Cycles' mean converges slowly there:
+    # for the spot 3% under its 1024-spp value at 32 and at 128 spp (a few seconds at 1024)
+    cw, ch, px = bs.render_cycles(str(fresh / "single.exr"), samples=32 if light in ("sun", "point") else 1024)
     assert (cw, ch) == (w, h)
     n = w * h
     ours = [sum(single[c::3]) / n for c in range(3)] + [sum(alpha) / n]
