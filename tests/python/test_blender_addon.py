@@ -187,8 +187,6 @@ def test_export_lights_camera_material(fresh):
     s.data.angle = math.radians(2.0)
     p = bs.point(power=100.0, location=(1.0, 2.0, 3.0))
     p.data.shadow_soft_size = 0.25
-    spot = bpy.data.lights.new("Spot", 'SPOT')
-    bs._link(bpy.data.objects.new("Spot", spot))
     world = bpy.data.worlds.new("W")
     bpy.context.scene.world = world
     if not world.node_tree:
@@ -215,7 +213,6 @@ def test_export_lights_camera_material(fresh):
     assert lights["point"]["position"] == pytest.approx([1, 2, 3])
     assert lights["point"]["radius"] == pytest.approx(0.25)
     assert lights["dome"]["color"] == pytest.approx([0.4, 0.6, 1.0])
-    assert any("Spot" in w and "not supported" in w for w in warnings)
     c = doc["camera"]
     assert (c["width"], c["height"]) == (30, 60)
     # AUTO fit on a portrait frame: the 36 mm sensor spans the height
@@ -226,6 +223,62 @@ def test_export_lights_camera_material(fresh):
     cam.data.sensor_fit = 'HORIZONTAL'
     doc, _, _ = se.export(bpy.context, ob, str(fresh), 1)
     assert doc["camera"]["fov_deg"] == pytest.approx(math.degrees(vfov), rel=1e-5)
+
+
+def test_export_spot_and_area_lights(fresh):
+    """Spot: P/(4 pi) W/sr on the axis, half of spot_size, spot_blend, radius, along local -Z.
+    Area: radiance P/(pi A) with A in the world (object scale), normal local -Z, tangent local X;
+    an ellipse as the disk of its area; spread < 180 and other unsupported settings warned."""
+    se = sys.modules[MODULE + ".scene_export"]
+    ob = bs.noise_volume(res=6)
+    bs.scatter_absorb_material(ob)
+    sp = bs.spot(power=100.0, location=(1.0, 2.0, 3.0), target=(1.0, 2.0, 0.0), size_deg=50.0, blend=0.25,
+                 radius=0.2)
+    sp.data.color = (1.0, 0.5, 0.25)
+    sp.data.exposure = 1.0
+    rect = bs.area('RECTANGLE', power=60.0, size=(2.0, 0.5), location=(0.0, 0.0, 2.0), target=(0.0, 0.0, 0.0),
+                   name="Rect")
+    rect.rotation_euler = (0.0, 0.0, math.radians(90.0))  # faces down, width along world +Y
+    rect.scale = (1.5, 1.0, 1.0)
+    sq = bs.area('SQUARE', power=10.0, size=(0.5, 3.0), location=(0.0, -2.0, 0.0), target=(0.0, 0.0, 0.0),
+                 name="Square")
+    sq.data.spread = math.radians(90.0)
+    bs.area('DISK', power=10.0, size=(0.8, 3.0), location=(2.0, 0.0, 0.0), name="Disk")
+    bs.area('ELLIPSE', power=10.0, size=(0.8, 0.2), location=(-2.0, 0.0, 0.0), name="Ellipse")
+    bs.camera()
+    doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1)
+    by = {}
+    for l in doc["lights"]:
+        by.setdefault(l["type"], []).append(l)
+    s = by["spot"][0]
+    assert s["intensity"] == pytest.approx([200.0 / (4 * math.pi) * c for c in (1.0, 0.5, 0.25)], rel=1e-5)
+    assert s["position"] == pytest.approx([1, 2, 3]) and s["direction"] == pytest.approx([0, 0, -1], abs=1e-5)
+    assert s["cone_half_angle_deg"] == pytest.approx(25.0, rel=1e-5) and s["blend"] == pytest.approx(0.25)
+    assert s["radius"] == pytest.approx(0.2)
+    r, q = by["rect"]
+    if r["size"][1] > q["size"][1] + 1.0:
+        r, q = q, r
+    assert r["size"] == pytest.approx([3.0, 0.5], rel=1e-5)  # 2 m x 1.5 (scale) by 0.5 m
+    assert r["radiance"] == pytest.approx([60.0 / (math.pi * 1.5)] * 3, rel=1e-5)
+    assert r["normal"] == pytest.approx([0, 0, -1], abs=1e-5) and r["tangent"] == pytest.approx([0, 1, 0], abs=1e-5)
+    assert q["size"] == pytest.approx([0.5, 0.5]), "a square uses `size` only"
+    assert q["normal"] == pytest.approx([0, 1, 0], abs=1e-5)
+    assert q["radiance"] == pytest.approx([10.0 / (math.pi * 0.25)] * 3, rel=1e-5)
+    disk, ell = sorted(by["disk"], key=lambda l: -l["radius"])
+    assert disk["radius"] == pytest.approx(0.4) and disk["normal"] == pytest.approx([-1, 0, 0], abs=1e-6)  # aimed at 0
+    assert disk["radiance"] == pytest.approx([10.0 / (math.pi * math.pi * 0.16)] * 3, rel=1e-5)
+    assert ell["radius"] == pytest.approx(math.sqrt(0.8 * 0.2) / 2, rel=1e-5)  # the same area
+    assert ell["radiance"] == pytest.approx([10.0 / (math.pi * math.pi * 0.04)] * 3, rel=1e-5)  # P / (pi A), A = pi 0.8 0.2 / 4
+    assert any("Ellipse" in w and "same area" in w for w in warnings), warnings
+    assert any("Square" in w and "spread" in w for w in warnings), warnings
+    assert not any("Disk" in w or "Rect" in w or "Spot" in w for w in warnings), warnings
+    # pop leaves them out, and says so in one message made from POP_LIGHT_TYPES
+    err, warn = se.pop_light_messages([l["type"] for l in doc["lights"]])
+    assert "sun lights only" in err and warn is None
+    err, warn = se.pop_light_messages(["distant", "spot", "rect", "disk", "dome"])
+    assert err is None and "spot lights, area lights and the world are left out" in warn
+    err, warn = se.pop_light_messages(["distant", "dome"])
+    assert err is None and "the world is left out" in warn
 
 
 def test_export_principled_volume(fresh):

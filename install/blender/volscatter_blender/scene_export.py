@@ -330,9 +330,11 @@ def pop_light_messages(kinds):
             left.append(n)
     if not left:
         return None, None
-    what = ", ".join("the world" if n == "world" else n + " lights" for n in left)
-    return None, ("the Principal Ordinates solver handles %s: %s left out (choose Reference to include them)"
-                  % (pop_lights_note(), what))
+    items = ["the world" if n == "world" else n + " lights" for n in left]
+    what = items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+    verb = "is" if items == ["the world"] else "are"
+    return None, ("the Principal Ordinates solver handles %s: %s %s left out (choose Reference to include them)"
+                  % (pop_lights_note(), what, verb))
 
 
 def _axis_lengths(m3):
