@@ -1,0 +1,98 @@
+//! `Pop::solve_with`'s backend on the GPU: every stage that touches every cell runs here, and a
+//! light's packets and J stay in device memory from its sweep to the merge, the merged grid from
+//! the merge to the upsampling. What crosses the bus: each light grid's coefficients and view
+//! cosines (sampled on the CPU) and the density mip, once; back come per-column sums (energy
+//! report, stopping test) and the scattering grid S.
+
+use glam::Vec3;
+use std::sync::{Arc, Mutex};
+
+use crate::context::{GpuContext, GpuError};
+use crate::pop::light::GpuLight;
+use crate::pop::merge::GpuMerged;
+use crate::pop::mip::GpuMip;
+use crate::pop::{init, merge, propagate_resident, upsample};
+use volscatter_core::medium::Medium;
+use volscatter_core::solvers::pop::backend::{PopBackend, SweepSums};
+use volscatter_core::solvers::pop::init::Initial;
+use volscatter_core::solvers::pop::light_grid::LightGrid;
+use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::solvers::pop::propagate::{Propagation, RunOptions};
+use volscatter_core::solvers::pop::{PopSettings, PropagationStats};
+use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::{Error, Result};
+
+/// A GPU failure as a solver error; `solve` falls back to the CPU on it under `auto`.
+pub fn gpu_error(e: GpuError) -> Error {
+    Error::InvalidArgument(format!("GPU: {e}"))
+}
+
+pub struct GpuBackend<'a> {
+    ctx: &'a GpuContext,
+    /// Residual checks of the propagation every this many iterations (one small readback).
+    check_every: u32,
+    /// The density mip of this solve, uploaded by the first stage that reads it.
+    mip: Mutex<Option<Arc<GpuMip>>>,
+}
+
+impl<'a> GpuBackend<'a> {
+    pub fn new(ctx: &'a GpuContext, check_every: u32) -> Self {
+        GpuBackend { ctx, check_every, mip: Mutex::new(None) }
+    }
+
+    fn mip(&self, mip: &MediumMip) -> Result<Arc<GpuMip>> {
+        let mut slot = self.mip.lock().map_err(|_| Error::InvalidArgument("GPU: mip lock poisoned".into()))?;
+        if let Some(m) = slot.as_ref() {
+            return Ok(m.clone());
+        }
+        let m = Arc::new(GpuMip::upload(self.ctx, mip).map_err(gpu_error)?);
+        *slot = Some(m.clone());
+        Ok(m)
+    }
+}
+
+impl PopBackend for GpuBackend<'_> {
+    type Light = GpuLight;
+    type Merged = GpuMerged;
+
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(GpuLight, SweepSums)> {
+        let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
+        let sums = init::sweep(self.ctx, &mut light, grid.h, fluence, a0, g).map_err(gpu_error)?;
+        Ok((light, sums))
+    }
+
+    fn propagate(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
+        if opts.vacuum_escape {
+            return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
+        }
+        let (stats, _times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every).map_err(gpu_error)?;
+        if !progress.update("pop propagation", 1.0) {
+            return Err(Error::Cancelled);
+        }
+        Ok(stats)
+    }
+
+    fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, GpuLight)], resolution: u32) -> Result<GpuMerged> {
+        let gmip = self.mip(mip)?;
+        let views: Vec<(&LightGrid, &wgpu::Buffer)> = lights.iter().map(|(g, l)| (g, &l.j)).collect();
+        merge::merge(self.ctx, &gmip, medium, mip, &views, resolution).map_err(gpu_error)
+    }
+
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &GpuMerged, settings: &PopSettings) -> Result<ScatteringGrid> {
+        let gmip = self.mip(mip)?;
+        upsample::upsample(self.ctx, &gmip, medium, mip, merged, settings).map_err(gpu_error)
+    }
+}
+
+impl GpuBackend<'_> {
+    /// Options the GPU port lacks (`vacuum_escape`): this light's propagation runs on the CPU,
+    /// its packets and J crossing the bus both ways.
+    fn propagate_on_cpu(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
+        let packets = light.read_packets(self.ctx).map_err(gpu_error)?;
+        let mut j = light.read_j(self.ctx).map_err(gpu_error)?;
+        let initial = Initial { direct: Vec::new(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
+        let stats = prop.run_with(opts, &initial, a_scattered, &mut j, progress)?;
+        self.ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j)));
+        Ok(stats)
+    }
+}
