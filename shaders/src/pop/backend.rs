@@ -11,7 +11,7 @@ use crate::context::{GpuContext, GpuError};
 use crate::pop::light::GpuLight;
 use crate::pop::merge::GpuMerged;
 use crate::pop::mip::GpuMip;
-use crate::pop::{init, merge, propagate_resident, upsample};
+use crate::pop::{init, merge, propagate_resident, upsample, GpuPropagationTimes};
 use volscatter_core::medium::Medium;
 use volscatter_core::solvers::pop::backend::{PopBackend, SweepSums};
 use volscatter_core::solvers::pop::init::Initial;
@@ -33,11 +33,18 @@ pub struct GpuBackend<'a> {
     check_every: u32,
     /// The density mip of this solve, uploaded by the first stage that reads it.
     mip: Mutex<Option<Arc<GpuMip>>>,
+    /// Split of each light's propagation time (benchmarks).
+    propagation_times: Mutex<Vec<GpuPropagationTimes>>,
 }
 
 impl<'a> GpuBackend<'a> {
     pub fn new(ctx: &'a GpuContext, check_every: u32) -> Self {
-        GpuBackend { ctx, check_every, mip: Mutex::new(None) }
+        GpuBackend { ctx, check_every, mip: Mutex::new(None), propagation_times: Mutex::new(Vec::new()) }
+    }
+
+    /// Upload / iterations / readback times of every propagation so far, in light order.
+    pub fn propagation_times(&self) -> Vec<GpuPropagationTimes> {
+        self.propagation_times.lock().map(|t| t.clone()).unwrap_or_default()
     }
 
     fn mip(&self, mip: &MediumMip) -> Result<Arc<GpuMip>> {
@@ -65,7 +72,10 @@ impl PopBackend for GpuBackend<'_> {
         if opts.vacuum_escape {
             return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
         }
-        let (stats, _times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every).map_err(gpu_error)?;
+        let (stats, times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every).map_err(gpu_error)?;
+        if let Ok(mut t) = self.propagation_times.lock() {
+            t.push(times);
+        }
         if !progress.update("pop propagation", 1.0) {
             return Err(Error::Cancelled);
         }

@@ -52,5 +52,6 @@ fn gpu_merge_matches_cpu() {
         let e_d = relative_rmse(&dens(&gpu.density), &dens(&cpu.density));
         eprintln!("merge (mip footprint {mip_footprint}, {resolution}): J relative RMSE {e_j:e}, density {e_d:e}");
         assert!(e_j < 1e-5 && e_d < 1e-5, "J {e_j}, density {e_d}");
+        assert!(cpu.j.data.iter().any(|v| v.x > 0.0) && cpu.density.iter().any(|&d| d > 0.0), "nothing compared");
     }
 }
