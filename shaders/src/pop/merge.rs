@@ -29,7 +29,7 @@ pub struct MergeParams {
     pub mip: MipParams,
 }
 const _: () = {
-    assert!(size_of::<MergeParams>() == 272);
+    assert!(size_of::<MergeParams>() == 304);
     assert!(offset_of!(MergeParams, merged_dims) == 144);
     assert!(offset_of!(MergeParams, mip) == 176);
 };

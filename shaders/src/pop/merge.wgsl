@@ -17,7 +17,7 @@ struct Params {
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> mip: array<f32>;
+@group(0) @binding(1) var<storage, read> mip: array<u32>;
 @group(0) @binding(2) var<storage, read> light_j: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> merged_j: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> merged_density: array<f32>;

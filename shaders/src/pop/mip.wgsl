@@ -1,12 +1,15 @@
 // The density's mip pyramid (volscatter-core solvers/pop/mip.rs `MediumMip::sample`), shared
 // by merge.wgsl and upsample.wgsl (prepended: WGSL has no includes). All levels lie in one
-// buffer `mip`; a kernel samples at one footprint, so the two levels and their blend weight
-// (`MediumMip::blend`) come in its `params.mip_*` fields. A footprint that would read the
+// buffer `mip` of u32 words, each level bricked (pop/mip.rs): a table of 8^3 bricks, 0 for an
+// empty brick, else 1 + the index of its stored voxels (floats as bits), so empty space costs
+// one word per brick. A kernel samples at one footprint, so the two levels and their blend
+// weight (`MediumMip::blend`) come in its `params.mip_*` fields. A footprint that would read the
 // density grid itself is served by level 0 when that level is the grid (factor 1): same values,
 // same trilinear weights.
 
 struct MipLevel {
-    dims: vec4<i32>,     // cells per axis, w = offset of cell 0 in `mip`
+    dims: vec4<i32>,     // cells per axis, w = offset of the level's brick table in `mip`
+    bricks: vec4<i32>,   // table size in bricks, w = offset of the level's first brick
     scale: vec4<f32>,    // voxels per cell, -, -, -
 };
 
@@ -18,7 +21,13 @@ fn mip_cell(l: MipLevel, c: vec3<i32>) -> f32 {
     if (any(c < vec3<i32>(0)) || any(c >= l.dims.xyz)) {
         return 0.0;
     }
-    return mip[u32(l.dims.w + c.x + l.dims.x * (c.y + l.dims.y * c.z))];
+    let b = c >> vec3<u32>(3u);
+    let entry = mip[u32(l.dims.w + b.x + l.bricks.x * (b.y + l.bricks.y * b.z))];
+    if (entry == 0u) {
+        return 0.0;
+    }
+    let v = c & vec3<i32>(7);
+    return bitcast<f32>(mip[u32(l.bricks.w) + (entry - 1u) * 512u + u32(v.x | (v.y << 3u) | (v.z << 6u))]);
 }
 
 // MediumMip::sample_level + Level::sample.

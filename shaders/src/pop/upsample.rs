@@ -32,7 +32,7 @@ pub struct UpsampleParams {
     pub mip: MipParams,
 }
 const _: () = {
-    assert!(size_of::<UpsampleParams>() == 304);
+    assert!(size_of::<UpsampleParams>() == 336);
     assert!(offset_of!(UpsampleParams, out_dims) == 144);
     assert!(offset_of!(UpsampleParams, mip) == 208);
 };
