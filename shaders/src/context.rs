@@ -323,3 +323,7 @@ impl GpuContext {
         self.read_buffer(&out, out_bytes)
     }
 }
+
+#[cfg(test)]
+#[path = "context_tests.rs"]
+mod tests;
