@@ -145,24 +145,29 @@ impl GpuContext {
     }
 
     /// The compute pipeline of `entry` in `wgsl`, compiled on first use (bind group 0's layout
-    /// derived from the shader: every binding the entry point uses, in binding order).
-    pub fn pipeline(&self, label: &'static str, wgsl: &'static str, entry: &'static str) -> Arc<wgpu::ComputePipeline> {
+    /// derived from the shader: every binding the entry point uses, in binding order). A
+    /// pipeline that fails to compile is an error and is not cached.
+    pub fn pipeline(&self, label: &'static str, wgsl: &'static str, entry: &'static str) -> Result<Arc<wgpu::ComputePipeline>, GpuError> {
         let mut cache = self.pipelines.lock().unwrap_or_else(|p| p.into_inner());
-        cache
-            .entry((label, entry))
-            .or_insert_with(|| {
-                let module =
-                    self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(wgsl.into()) });
-                Arc::new(self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(label),
-                    layout: None,
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                }))
-            })
-            .clone()
+        if let Some(p) = cache.get(&(label, entry)) {
+            return Ok(p.clone());
+        }
+        self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(wgsl.into()) });
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(self.device.pop_error_scope()) {
+            return Err(GpuError::Internal(format!("{label}: {e}")));
+        }
+        let pipeline = Arc::new(pipeline);
+        cache.insert((label, entry), pipeline.clone());
+        Ok(pipeline)
     }
 
     /// A uniform buffer holding `bytes` (a kernel's parameters).

@@ -39,9 +39,9 @@ impl std::fmt::Display for DeviceUsed {
     }
 }
 
-/// Runs `gpu` on the process's GPU context (`GpuContext::with_shared`) according to `choice`; with `Auto`, any GPU failure (no
-/// adapter, out of memory, device lost, too large) falls back to `cpu` with a message on
-/// stderr. With `Gpu`, failures are errors. Panics inside wgpu are caught.
+/// Runs `gpu` on the process's GPU context (`GpuContext::with_shared`) according to `choice`;
+/// with `Auto`, any GPU failure (no adapter, out of memory, device lost, too large) falls back
+/// to `cpu` with a message on stderr. With `Gpu`, failures are errors. Panics inside wgpu are caught.
 pub fn run_on<T>(
     choice: DeviceChoice,
     gpu: impl FnOnce(&crate::GpuContext) -> Result<T, crate::GpuError>,

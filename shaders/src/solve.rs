@@ -1,6 +1,6 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
-//! Solvers with GPU stages (today: `pop`: sweep, propagation, merge, upsampling) run them on the GPU; the others, and
-//! every solver under `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a GPU failure (no
+//! Solvers with GPU stages (today: `pop`: sweep, propagation, merge, upsampling) run them on
+//! the GPU; the others, and every solver under `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a GPU failure (no
 //! adapter, out of memory, lost device) falls back to the CPU with a note on stderr.
 
 use crate::device::{DeviceChoice, DeviceUsed};

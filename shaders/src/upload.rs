@@ -1,7 +1,7 @@
 //! Host-side packing of core types into GPU buffers.
 
 use glam::{Affine3A, Vec3};
-use volscatter_core::medium::grid::BRICK_VOXELS;
+use volscatter_core::medium::grid::{self, BRICK_VOXELS};
 use volscatter_core::medium::Medium;
 use volscatter_core::ScatteringGrid;
 
@@ -23,6 +23,9 @@ pub struct BrickedDensity {
     pub brick_dims: [u32; 4],
     pub words: Vec<u32>,
 }
+
+// medium.wgsl hard-codes the grid's encoding.
+const _: () = assert!(grid::BRICK_LOG2 == 3 && grid::EMPTY == 0 && grid::CONSTANT_BIT == 0x8000_0000);
 
 /// Bytes `bricked_density` will take, to check limits before building it.
 pub fn bricked_density_bytes(medium: &Medium) -> u64 {

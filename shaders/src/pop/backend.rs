@@ -27,12 +27,14 @@ pub fn gpu_error(e: GpuError) -> Error {
     Error::InvalidArgument(format!("GPU: {e}"))
 }
 
+/// One per solve (as `Pop::solve_with` is called): it holds that solve's density mip.
 pub struct GpuBackend<'a> {
     ctx: &'a GpuContext,
     /// Residual checks of the propagation every this many iterations (one small readback).
     check_every: u32,
-    /// The density mip of this solve, uploaded by the first stage that reads it.
-    mip: Mutex<Option<Arc<GpuMip>>>,
+    /// The density mip of this solve, uploaded by the first stage that reads it and dropped by
+    /// the last, with the address of the CPU mip it came from as a guard.
+    mip: Mutex<Option<(usize, Arc<GpuMip>)>>,
     /// Split of each light's propagation time (benchmarks).
     propagation_times: Mutex<Vec<GpuPropagationTimes>>,
 }
@@ -49,11 +51,14 @@ impl<'a> GpuBackend<'a> {
 
     fn mip(&self, mip: &MediumMip) -> Result<Arc<GpuMip>> {
         let mut slot = self.mip.lock().map_err(|_| Error::InvalidArgument("GPU: mip lock poisoned".into()))?;
-        if let Some(m) = slot.as_ref() {
-            return Ok(m.clone());
+        let key = mip as *const MediumMip as usize;
+        if let Some((k, m)) = slot.as_ref() {
+            if *k == key {
+                return Ok(m.clone());
+            }
         }
         let m = Arc::new(GpuMip::upload(self.ctx, mip).map_err(gpu_error)?);
-        *slot = Some(m.clone());
+        *slot = Some((key, m.clone()));
         Ok(m)
     }
 }
@@ -90,7 +95,12 @@ impl PopBackend for GpuBackend<'_> {
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &GpuMerged, settings: &PopSettings) -> Result<ScatteringGrid> {
         let gmip = self.mip(mip)?;
-        upsample::upsample(self.ctx, &gmip, medium, mip, merged, settings).map_err(gpu_error)
+        let out = upsample::upsample(self.ctx, &gmip, medium, mip, merged, settings).map_err(gpu_error);
+        // The solve's last stage: free the mip (and never serve it to a later solve).
+        if let Ok(mut slot) = self.mip.lock() {
+            *slot = None;
+        }
+        out
     }
 }
 

@@ -32,7 +32,7 @@ pub fn sweep(ctx: &GpuContext, light: &mut GpuLight, h: f32, fluence: Vec3, a0: 
     let a = (a0 * g).clamp(-0.9995, 0.9995);
     let params = InitParams { dims: [dims.x, dims.y, dims.z, 0], consts: [h, a, 0.0, 0.0], fluence: fluence.extend(0.0).to_array() };
     let params = ctx.uniform("init params", bytemuck::bytes_of(&params));
-    let pipeline = ctx.pipeline("init.wgsl", WGSL, "main");
+    let pipeline = ctx.pipeline("init.wgsl", WGSL, "main")?;
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     ctx.record(
         &mut enc,

@@ -83,7 +83,7 @@ pub fn merge(ctx: &GpuContext, gmip: &GpuMip, medium: &Medium, mip: &MediumMip, 
         grid: ScatteringGrid { data: Vec::new(), ..grid },
     };
     let d = merged.grid.dims;
-    let pipeline = ctx.pipeline("merge.wgsl", WGSL, "main");
+    let pipeline = ctx.pipeline("merge.wgsl", WGSL, "main")?;
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     let no_light = ctx.zeroed_storage("no light", 16)?;
     // With no light at all, one pass still writes the density guide.

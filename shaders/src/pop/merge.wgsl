@@ -1,8 +1,8 @@
 // Merging one light's accumulation grid into the medium-aligned grid (volscatter-core
 // solvers/pop/merge.rs), one dispatch per light in the CPU's order so the sums round alike.
 // The first dispatch also writes the density guide (mip.wgsl at the merged cells' footprint)
-// and its maximum, which the bilateral filter's range weight needs (densities are >= 0, so
-// their bit patterns order like the values and an atomicMax on u32 finds it).
+// and its maximum, which the bilateral filter's range weight needs (positive floats' bit
+// patterns order like their values, so an atomicMax on u32 finds it; zero and -0 count as 0).
 
 struct Params {
     merged_i2w: array<vec4<f32>, 3>,
@@ -64,7 +64,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (first) {
         let rho = mip_sample(affine(params.density_w2i, x));
         merged_density[o] = rho;
-        atomicMax(&max_density[0], bitcast<u32>(max(rho, 0.0)));
+        atomicMax(&max_density[0], select(0u, bitcast<u32>(rho), rho > 0.0));
     }
     var j = vec3<f32>(0.0);
     if (!first) {

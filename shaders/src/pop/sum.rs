@@ -24,7 +24,7 @@ pub fn total(ctx: &GpuContext, field: &wgpu::Buffer, dims: UVec3, stride: u32, o
     let slab = dims.x as u64 * dims.y as u64;
     let sums = ctx.zeroed_storage("column sums", slab * 16)?;
     let params = ctx.uniform("sum params", bytemuck::bytes_of(&SumParams { dims: [dims.x, dims.y, dims.z, 0], stride_offset: [stride, offset, 0, 0] }));
-    let pipeline = ctx.pipeline("sum.wgsl", WGSL, "main");
+    let pipeline = ctx.pipeline("sum.wgsl", WGSL, "main")?;
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     ctx.record(&mut enc, &pipeline, &[&params, field, &sums], [dims.x.div_ceil(8), dims.y.div_ceil(8), 1]);
     ctx.queue.submit([enc.finish()]);

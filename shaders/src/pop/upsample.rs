@@ -65,7 +65,7 @@ pub fn upsample(
     };
     let params = ctx.uniform("upsample params", bytemuck::bytes_of(&params));
     let s = ctx.zeroed_storage("scattering grid", n * 16)?;
-    let pipeline = ctx.pipeline("upsample.wgsl", WGSL, "main");
+    let pipeline = ctx.pipeline("upsample.wgsl", WGSL, "main")?;
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     ctx.record(
         &mut enc,
