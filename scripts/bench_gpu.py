@@ -67,12 +67,13 @@ def main():
         "Times in milliseconds, from the solver's own stage timings (`Pop::solve_with` with the GPU "
         "and the CPU backend; each GPU stage waits for the device, so its time is its GPU time). "
         "On the CPU in both: mip pyramid, light-grid sampling. GPU: sweep (with the light's upload), "
-        "propagation (its iterations alone in brackets: first dispatch to idle), merge (with the mip's upload), "
+        "propagation (its iterations alone in brackets: first dispatch to idle), merge (in brackets: of which "
+        "bricking and uploading the density mip), "
         "upsampling (with the read-back of S). "
         f"Floor: {BYTES_PER_CELL_ITERATION} B per cell per iteration at the adapter's peak bandwidth"
         + (f" ({bw / 1e12:.2f} TB/s)." if bw else " (unknown for this adapter: no floor)."),
         "",
-        "| medium | grid | cells | mip | light grid | GPU sweep | GPU propagation (iterations) | GPU merge | GPU upsample | GPU total "
+        "| medium | grid | cells | mip | light grid | GPU sweep | GPU propagation (iterations) | GPU merge (mip upload) | GPU upsample | GPU total "
         "| CPU sweep | CPU propagation | CPU merge | CPU upsample | CPU total | speed-up | floor | iterations / floor |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -86,7 +87,7 @@ def main():
         d = r["grid_dims"]
         lines.append(
             f"| {r['medium']}^3 | {d[0]}x{d[1]}x{d[2]} | {r['cells']} | {ms(g.get('mip'))} | {ms(g.get('light_grid'))} | "
-            f"{ms(g.get('init'))} | {ms(g.get('propagation'))} ({ms(r['gpu_iterations_s'])}) | {ms(g.get('merge'))} | "
+            f"{ms(g.get('init'))} | {ms(g.get('propagation'))} ({ms(r['gpu_iterations_s'])}) | {ms(g.get('merge'))} ({ms(r.get('gpu_mip_upload_s'))}) | "
             f"{ms(g.get('upsample'))} | {ms(r['gpu_total_s'])} | {ms(c.get('init'))} | {ms(c.get('propagation'))} | "
             f"{ms(c.get('merge'))} | {ms(c.get('upsample'))} | {ms(cpu_total)} | {speedup} | {ms(floor)} | {ratio} |"
         )

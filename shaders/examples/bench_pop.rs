@@ -86,6 +86,7 @@ fn main() {
                     "iterations": report.lights[0].propagation.iterations,
                     "medium_s": t_medium,
                     "gpu": stages(&gpu.timings), "gpu_total_s": gpu_total,
+                    "gpu_mip_upload_s": backend.mip_upload_seconds(),
                     "gpu_propagation_upload_s": prop.upload, "gpu_iterations_s": prop.iterations, "gpu_propagation_readback_s": prop.readback,
                     "cpu": cpu.as_ref().map(|c| &c.0), "cpu_total_s": cpu.as_ref().map(|c| c.1),
                     "threads": rayon::current_num_threads(),

@@ -37,16 +37,23 @@ pub struct GpuBackend<'a> {
     mip: Mutex<Option<(usize, Arc<GpuMip>)>>,
     /// Split of each light's propagation time (benchmarks).
     propagation_times: Mutex<Vec<GpuPropagationTimes>>,
+    /// Seconds spent bricking and uploading the mip (part of the merge stage's time).
+    mip_upload_s: Mutex<f64>,
 }
 
 impl<'a> GpuBackend<'a> {
     pub fn new(ctx: &'a GpuContext, check_every: u32) -> Self {
-        GpuBackend { ctx, check_every, mip: Mutex::new(None), propagation_times: Mutex::new(Vec::new()) }
+        GpuBackend { ctx, check_every, mip: Mutex::new(None), propagation_times: Mutex::new(Vec::new()), mip_upload_s: Mutex::new(0.0) }
     }
 
     /// Upload / iterations / readback times of every propagation so far, in light order.
     pub fn propagation_times(&self) -> Vec<GpuPropagationTimes> {
         self.propagation_times.lock().map(|t| t.clone()).unwrap_or_default()
+    }
+
+    /// Seconds spent bricking and uploading the density mip so far.
+    pub fn mip_upload_seconds(&self) -> f64 {
+        self.mip_upload_s.lock().map(|t| *t).unwrap_or_default()
     }
 
     fn mip(&self, mip: &MediumMip) -> Result<Arc<GpuMip>> {
@@ -57,7 +64,11 @@ impl<'a> GpuBackend<'a> {
                 return Ok(m.clone());
             }
         }
+        let t = std::time::Instant::now();
         let m = Arc::new(GpuMip::upload(self.ctx, mip).map_err(gpu_error)?);
+        if let Ok(mut s) = self.mip_upload_s.lock() {
+            *s += t.elapsed().as_secs_f64();
+        }
         *slot = Some((key, m.clone()));
         Ok(m)
     }
