@@ -1,5 +1,6 @@
 //! Adapter and device acquisition, error capture, and buffer helpers shared by the kernels.
 
+use std::any::Any;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use wgpu::util::DeviceExt;
@@ -30,6 +31,8 @@ pub struct GpuContext {
     lost: Arc<Mutex<Option<String>>>,
     /// Compiled kernels by (label, entry point): a shared context compiles each once.
     pipelines: Mutex<HashMap<(&'static str, &'static str), Arc<wgpu::ComputePipeline>>>,
+    /// Other device objects built once per context (see `cached`).
+    objects: Mutex<HashMap<&'static str, Arc<dyn Any + Send + Sync>>>,
 }
 
 /// The process's context (see `GpuContext::with_shared`).
@@ -96,7 +99,7 @@ impl GpuContext {
                 }
             });
         }
-        Ok(GpuContext { device, queue, info, limits, errors, lost, pipelines: Mutex::new(HashMap::new()) })
+        Ok(GpuContext { device, queue, info, limits, errors, lost, pipelines: Mutex::new(HashMap::new()), objects: Mutex::new(HashMap::new()) })
     }
 
     /// Runs `f` on the process's context, opened on first use (opening costs tens of
@@ -168,6 +171,23 @@ impl GpuContext {
         let pipeline = Arc::new(pipeline);
         cache.insert((label, entry), pipeline.clone());
         Ok(pipeline)
+    }
+
+    /// What `build` makes from the device, built once per context under `key` (kernels with
+    /// an explicit layout shared between entry points). A build that raises a validation
+    /// error is an error and is not kept.
+    pub fn cached<T: Any + Send + Sync>(&self, key: &'static str, build: impl FnOnce(&wgpu::Device) -> T) -> Result<Arc<T>, GpuError> {
+        let mut cache = self.objects.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(Ok(v)) = cache.get(key).map(|v| v.clone().downcast::<T>()) {
+            return Ok(v);
+        }
+        self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let value = Arc::new(build(&self.device));
+        if let Some(e) = pollster::block_on(self.device.pop_error_scope()) {
+            return Err(GpuError::Internal(format!("{key}: {e}")));
+        }
+        cache.insert(key, value.clone());
+        Ok(value)
     }
 
     /// A uniform buffer holding `bytes` (a kernel's parameters).

@@ -107,38 +107,44 @@ pub fn propagate_resident(
     let (p1, a1) = (ctx.zeroed_storage("p1", cell_bytes)?, ctx.zeroed_storage("a1", cell_bytes)?);
     let emit = ctx.zeroed_storage("emit", cell_bytes * 4)?;
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("propagate.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
-    let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..11)
-        .map(|b| wgpu::BindGroupLayoutEntry {
-            binding: b,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: if b == 0 {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
-            } else {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 5 }, has_dynamic_offset: false, min_binding_size: None }
-            },
-            count: None,
-        })
-        .collect();
-    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("pop"), entries: &layout_entries });
-    let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("pop"), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
-    let pipeline = |entry: &str| {
-        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
-    let (emit_pipe, gather_pipe) = (pipeline("emit_accumulate"), pipeline("gather"));
+    // Both kernels share one explicit layout (each uses a subset of the bindings), compiled once
+    // per context.
+    let kernels = ctx.cached("propagate.wgsl", |device| {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("propagate.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
+        let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..11)
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: if b == 0 {
+                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
+                } else {
+                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 5 }, has_dynamic_offset: false, min_binding_size: None }
+                },
+                count: None,
+            })
+            .collect();
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("pop"), entries: &layout_entries });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("pop"), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (emit, gather) = (pipeline("emit_accumulate"), pipeline("gather"));
+        (bgl, emit, gather)
+    })?;
+    let (bgl, emit_pipe, gather_pipe) = (&kernels.0, &kernels.1, &kernels.2);
     // Bind groups: "even" reads P0/A0 and writes P1/A1, "odd" the reverse.
     let bind = |u: &wgpu::Buffer, pin: &wgpu::Buffer, ain: &wgpu::Buffer, pout: &wgpu::Buffer, aout: &wgpu::Buffer| {
         let bufs = [u, sigma_s, sigma_a, mu, pin, ain, &emit, j_buf, &esc, pout, aout];
         let entries: Vec<wgpu::BindGroupEntry> =
             bufs.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop"), layout: &bgl, entries: &entries })
+        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop"), layout: bgl, entries: &entries })
     };
     let even_first = bind(&u_first, p0, &a0, &p1, &a1);
     let even = bind(&u_rest, p0, &a0, &p1, &a1);
@@ -157,7 +163,7 @@ pub fn propagate_resident(
     let injected = light.injected;
     let target = injected * prop.residual_threshold;
     let mut enc = device.create_command_encoder(&Default::default());
-    dispatch(&mut enc, &emit_pipe, &even_first);
+    dispatch(&mut enc, emit_pipe, &even_first);
     let mut iterations = 0u32;
     // Where the current packets live: false = P0/A0, true = P1/A1.
     let mut in_p1 = false;
@@ -166,8 +172,8 @@ pub fn propagate_resident(
     while iterations < prop.max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
         iterations += 1;
         let (g_bg, e_bg) = if in_p1 { (&odd, &even) } else { (&even, &odd) };
-        dispatch(&mut enc, &gather_pipe, g_bg);
-        dispatch(&mut enc, &emit_pipe, e_bg);
+        dispatch(&mut enc, gather_pipe, g_bg);
+        dispatch(&mut enc, emit_pipe, e_bg);
         in_p1 = !in_p1;
         if iterations % check_every == 0 || iterations == prop.max_iterations {
             ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
