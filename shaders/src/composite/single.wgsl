@@ -10,8 +10,8 @@
 struct Params {
     density_w2i: array<vec4<f32>, 3>,
     grid_i2w: array<vec4<f32>, 3>,     // S1 grid index -> world
-    density_origin: vec4<i32>,
-    density_dims: vec4<u32>,
+    density_brick_min: vec4<i32>,      // medium.wgsl
+    density_brick_dims: vec4<u32>,
     grid_dims: vec4<u32>,              // xyz, w = number of lights
     density_scale: vec4<f32>,
     albedo: vec4<f32>,
@@ -47,7 +47,7 @@ fn profile_factor(light: Light, w: vec3<f32>) -> f32 {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> density: array<f32>;
+@group(0) @binding(1) var<storage, read> density: array<u32>;
 @group(0) @binding(2) var<storage, read> lights: array<Light>;
 @group(0) @binding(3) var<storage, read_write> out_grid: array<vec4<f32>>;
 

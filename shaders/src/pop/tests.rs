@@ -53,3 +53,8 @@ fn gpu_propagation_matches_cpu() {
         }
     }
 }
+
+#[test]
+fn sum_wgsl_validates_and_params_layout_matches() {
+    assert_eq!(naga_struct_size(sum::WGSL, "Params") as usize, size_of::<sum::SumParams>());
+}

@@ -30,6 +30,7 @@
 //! prefiltered anisotropy of Sec. 5.1; energy is right, the angular detail of a map is not.
 
 pub mod accumulate;
+pub mod backend;
 pub mod init;
 pub mod light_grid;
 pub mod merge;
@@ -43,16 +44,11 @@ use glam::Vec3;
 use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
+use backend::PopBackend;
 use light_grid::LightGrid;
 use mip::MediumMip;
 pub use propagate::PropagationStats;
 pub use settings::PopSettings;
-
-/// One light's propagation: adds the accumulated in-scattered radiance into `j_acc` and
-/// returns the energy figures, as `propagate::Propagation::run_with` does.
-pub type PropagateFn<'a> = dyn Fn(&propagate::Propagation, propagate::RunOptions, &init::Initial, f32, &mut [Vec3], &dyn Progress) -> Result<PropagationStats>
-    + Sync
-    + 'a;
 
 pub struct Pop {
     pub settings: PopSettings,
@@ -100,12 +96,12 @@ impl Pop {
 
     /// Solves and returns the per-light energy report along with S and the timings.
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PopReport)> {
-        self.solve_with(scene, progress, &|prop, opts, init, a, j, progress| prop.run_with(opts, init, a, j, progress))
+        self.solve_with(scene, progress, &backend::CpuBackend)
     }
 
-    /// As `solve_detailed`, with each light's propagation (the costly stage) run by
-    /// `propagate`: the CPU's `Propagation::run_with`, or a GPU port (volscatter-gpu).
-    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, propagate: &PropagateFn) -> Result<(SolveOutput, PopReport)> {
+    /// As `solve_detailed`, with the stages that touch every cell (sweep, propagation, merge,
+    /// upsampling) run by `backend`: `backend::CpuBackend`, or the GPU port (volscatter-gpu).
+    pub fn solve_with<B: PopBackend>(&self, scene: &Scene, progress: &dyn Progress, backend: &B) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -162,10 +158,8 @@ impl Pop {
                 continue;
             }
             let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
-            let init = timings.time("pop init", || init::sweep(&grid, fluence));
-            let mut j_acc = vec![Vec3::ZERO; grid.len()];
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
-            accumulate::add_direct(&init.direct, &mu, a0, g, &mut j_acc);
+            let (mut light, sweep) = timings.time("pop init", || backend.init(&grid, fluence, &mu, a0, g))?;
             let prop = propagate::Propagation {
                 grid: &grid,
                 g,
@@ -176,23 +170,23 @@ impl Pop {
             };
             let t0 = std::time::Instant::now();
             let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape };
-            let stats = propagate(&prop, opts, &init, a0 * g, &mut j_acc, progress)?;
+            let stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
             report.lights.push(LightReport {
                 dims: grid.dims.to_array(),
                 cell_size: grid.h,
-                entering: init.entering.to_array(),
-                transmitted: init.transmitted.to_array(),
-                absorbed_direct: init.absorbed.to_array(),
+                entering: sweep.entering.to_array(),
+                transmitted: sweep.transmitted.to_array(),
+                absorbed_direct: sweep.absorbed.to_array(),
                 propagation: stats,
             });
-            lights.push((grid, j_acc));
+            lights.push((grid, light));
         }
-        let merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
+        let merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
         if !progress.update("pop upsample", 0.0) {
             return Err(Error::Cancelled);
         }
-        let scattering = timings.time("pop upsample", || upsample::upsample(medium, &mip, &merged, s))?;
+        let scattering = timings.time("pop upsample", || backend.upsample(medium, &mip, &merged, s))?;
         progress.update("pop upsample", 1.0);
         Ok((SolveOutput { scattering, timings: merge_timings(timings) }, report))
     }
