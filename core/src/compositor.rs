@@ -36,7 +36,7 @@ impl Default for CompositeOptions {
 }
 
 /// Ray/box intersection; returns the parameter range inside, if any.
-fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
+pub(crate) fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
     let inv = d.recip();
     let a = (lo - o) * inv;
     let b = (hi - o) * inv;
@@ -103,7 +103,7 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
     let [nx, ny, _] = grid.dims;
     let g = medium.g;
     let dome_dirs = dome_directions_of(scene, dome_directions);
-    let emitters = crate::translate::local_emitters(&scene.lights, AREA_VPLS_PER_SIDE);
+    let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {
@@ -136,7 +136,8 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
                         let w = to / dist;
                         let intensity = e.intensity_towards(-w);
                         if intensity.max_element() > 0.0 {
-                            sum += intensity / (dist * dist) * hg(w.dot(view), g) * tr(w, dist);
+                            // 1/d^2 bounded at the emitter's radius (translate::emission: paper 03's clamp).
+                            sum += intensity / (dist * dist).max(e.radius * e.radius) * hg(w.dot(view), g) * tr(w, dist);
                         }
                     }
                 }

@@ -8,7 +8,7 @@ use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, dense_density, dense_density_bytes};
 use glam::Vec3;
 use volscatter_core::compositor::{dome_directions_of, AREA_VPLS_PER_SIDE};
-use volscatter_core::translate::{local_emitters, PointEmitter, Profile};
+use volscatter_core::translate::{scene_emitters, PointEmitter, Profile};
 use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
@@ -67,7 +67,7 @@ impl GpuLight {
             pos_or_dir: e.position.extend(1.0).to_array(),
             power: e.intensity.extend(kind).to_array(),
             axis: axis.extend(cos_outer).to_array(),
-            extra: [cos_inner, 0.0, 0.0, 0.0],
+            extra: [cos_inner, e.radius, 0.0, 0.0],
         }
     }
 }
@@ -87,7 +87,7 @@ fn light_list(scene: &Scene, dome_directions: u32) -> Vec<GpuLight> {
             Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
         }
     }
-    out.extend(local_emitters(&scene.lights, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
+    out.extend(scene_emitters(scene, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
     out
 }
 

@@ -25,7 +25,7 @@ struct Light {
     pos_or_dir: vec4<f32>,             // w = kind
     power: vec4<f32>,                  // w = profile: 0 isotropic, 1 cone, 2 cosine
     axis: vec4<f32>,                   // profile axis, w = cos_outer (cone)
-    extra: vec4<f32>,                  // x = cos_inner (cone)
+    extra: vec4<f32>,                  // x = cos_inner (cone), y = radius (1/d^2 bounded at 1/r^2)
 };
 
 // translate::Profile::factor for the direction w away from the emitter.
@@ -111,7 +111,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let w = to / dist;
                 let intensity = light.power.xyz * profile_factor(light, -w);
                 if (max(intensity.x, max(intensity.y, intensity.z)) > 0.0) {
-                    sum += intensity / (dist * dist) * hg(dot(w, view), g) * transmittance(x, w, dist);
+                    sum += intensity / max(dist * dist, light.extra.y * light.extra.y) * hg(dot(w, view), g) * transmittance(x, w, dist);
                 }
             }
         }
