@@ -34,13 +34,22 @@ pub struct EmissionVpls {
     pub clamp_loss: Vec3,
 }
 
+/// The bound on 1/d^2 for a VPL standing for emission spread over `volume`: 3/8 of the radius
+/// R of the ball of that volume. For a uniformly emitting ball, the light a thin medium
+/// scatters inside it is sigma_s I 3 pi R (the double integral of 1/|x-y|^2 over a ball is
+/// 4 pi^2 R^4); a point of the same intensity I with 1/d^2 clamped at r scatters
+/// sigma_s I (4 pi R - 8 pi r / 3) there; equal for r = 3R/8.
+fn clamp_radius(volume: f32) -> f32 {
+    0.375 * (3.0 * volume / (4.0 * std::f32::consts::PI)).cbrt()
+}
+
 /// One emitting voxel on the Morton curve.
 struct Cell {
     key: u64,
     weight: f64,
     power: Vec3,
     position: Vec3,
-    radius: f32,
+    volume: f32,
 }
 
 /// Spreads the low 21 bits of `v` to every third bit.
@@ -66,14 +75,13 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     let mut cells = Vec::new();
     for term in &emission.terms {
         let dv = term.voxel_volume();
-        let radius = (3.0 * dv / four_pi).cbrt();
         let origin = term.grid.bbox().0;
         term.for_each_emitting_voxel(|ijk, e| {
             let power = e * (four_pi * dv);
             let weight = (power.x + power.y + power.z) as f64;
             if weight > 0.0 {
                 let position = term.index_to_world.transform_point3(ijk.as_vec3());
-                cells.push(Cell { key: morton(ijk, origin), weight, power, position, radius });
+                cells.push(Cell { key: morton(ijk, origin), weight, power, position, volume: dv });
             }
         });
     }
@@ -88,6 +96,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     // voxel's power in proportion to the overlap; its VPL sits at the voxel holding its midpoint.
     let stratum = total / n as f64;
     let mut power = vec![glam::DVec3::ZERO; n];
+    let mut volume = vec![0.0f64; n];
     let mut holder = vec![0usize; n];
     let mut start = 0.0f64;
     for (i, c) in cells.iter().enumerate() {
@@ -98,6 +107,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
             let (lo, hi) = (k as f64 * stratum, (k + 1) as f64 * stratum);
             let overlap = (end.min(hi) - start.max(lo)).max(0.0);
             *p += c.power.as_dvec3() * (overlap / c.weight);
+            volume[k] += c.volume as f64 * (overlap / c.weight);
             let mid = (k as f64 + 0.5) * stratum;
             if mid >= start && mid < end {
                 holder[k] = i;
@@ -109,21 +119,27 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     let mut out = EmissionVpls::default();
     let mut last_holder = usize::MAX;
     let mut total_power = glam::DVec3::ZERO;
+    let mut vpl_volume = Vec::new();
     for k in 0..n {
         let p = power[k].as_vec3();
         let cell = &cells[holder[k]];
         // Strata are in curve order, so strata sharing a voxel are consecutive: merge them.
         if holder[k] == last_holder {
-            if let Some(e) = out.emitters.last_mut() {
+            if let (Some(e), Some(v)) = (out.emitters.last_mut(), vpl_volume.last_mut()) {
                 e.intensity += p / four_pi;
+                *v += volume[k];
             }
         } else {
-            out.emitters.push(PointEmitter { position: cell.position, intensity: p / four_pi, radius: cell.radius, profile: Profile::Isotropic });
+            out.emitters.push(PointEmitter { position: cell.position, intensity: p / four_pi, radius: 0.0, profile: Profile::Isotropic });
+            vpl_volume.push(volume[k]);
             last_holder = holder[k];
         }
         total_power += power[k];
     }
     out.power = total_power.as_vec3();
+    for (e, v) in out.emitters.iter_mut().zip(vpl_volume) {
+        e.radius = clamp_radius(v as f32);
+    }
     for e in &out.emitters {
         let sigma_s = medium.sigma_s(medium.density_world(e.position));
         out.clamp_loss += sigma_s * e.intensity * (8.0 * std::f32::consts::PI / 3.0) * e.radius;
@@ -184,9 +200,16 @@ mod tests {
         eprintln!("plume, 128 VPLs: clamp loss / power = {loss:.4}");
     }
 
-    /// The compositor's single scattering of the emission (VPLs) against the path tracer's
-    /// single-scattering AOV (emission reaching first vertices, estimated without VPLs) on the
-    /// glowing plume, 32x32 pixels. See the assertion for the tolerance and why.
+    /// The compositor's single scattering of the emission (1024 VPLs) against the path
+    /// tracer's single-scattering AOV (emission reaching first vertices, estimated without
+    /// VPLs) on the glowing default plume (optical depth ~10 across), 32x32 pixels.
+    /// Measured: the reference's own noise at 256 spp is 0.26 relative RMSE (two seeds, see the
+    /// printout); VPLs vs reference 0.36 at 256 VPLs (mean -19%), 0.25 at 1024 (mean -9.5%),
+    /// 0.21 at 2048 (mean -7%): the error left is the reference's noise plus a bias that falls
+    /// with the VPL count:
+    /// a point per stratum sees its stratum's light through one optical depth, and in a thick
+    /// medium the mean of exp(-tau) over the stratum is larger (Jensen), so few VPLs are dark.
+    /// Tolerance: relative RMSE 0.3 and mean within 15% at 1024 VPLs.
     #[test]
     fn vpl_single_scattering_matches_reference() {
         use crate::compositor::{composite, CompositeOptions};
@@ -198,16 +221,19 @@ mod tests {
         scene.camera = crate::scene::Camera::look_at(c.position, c.position + c.forward, c.up, c.fov_deg, 32, 32);
         scene.lights.clear();
         scene.medium = plume_with_emission(EmissionLaw::Linear { color: Vec3::new(3.0, 1.5, 0.5) });
-        scene.medium.emission.as_mut().unwrap().vpl_count = 256;
-        let r = Reference::new(ReferenceSettings { spp: 256, ..Default::default() }).unwrap();
-        let img = r.render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
+        scene.medium.emission.as_mut().unwrap().vpl_count = 1024;
+        let render = |seed| Reference::new(ReferenceSettings { spp: 256, seed, ..Default::default() }).unwrap().render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
+        let (img, img2) = (render(0), render(1));
         let zero = ScatteringGrid::over_medium(&scene.medium, 8).unwrap();
         let comp = composite(&scene, &zero, &CompositeOptions::default()).unwrap();
         let (a, b) = (comp.aov("single").unwrap(), img.aov("single").unwrap());
         let e1 = relative_rmse(a, b);
+        let noise = relative_rmse(img2.aov("single").unwrap(), b);
         let mean = |v: &[Vec3]| v.iter().map(|p| p.x as f64).sum::<f64>() / v.len() as f64;
-        eprintln!("emission single AOV: relative RMSE {e1:.4}, mean {:.4} (VPLs) vs {:.4} (reference)", mean(a), mean(b));
-        assert!(e1 < 0.2, "single-scattering AOV of the emission: {e1}");
+        let (ma, mb) = (mean(a), mean(b));
+        eprintln!("emission single AOV: relative RMSE {e1:.4} (reference vs itself {noise:.4}), mean {ma:.4} (VPLs) vs {mb:.4} (reference)");
+        assert!(e1 < 0.3, "single-scattering AOV of the emission: {e1}");
+        assert!((ma / mb - 1.0).abs() < 0.15, "mean {ma} vs {mb}");
     }
 
     #[test]

@@ -231,7 +231,7 @@ impl<'a> Tracer<'a> {
     /// the ray inside the emission's bounds (pdf 1 / length), times the ratio-tracked
     /// transmittance to it. Unbiased wherever the emission is, even where the density is zero
     /// (a collision estimator e / sigma_t at real collisions would miss flames in clear air),
-    /// and for RGB extinction. Lives in emission.rs's sense: e in W m^-3 sr^-1.
+    /// and for RGB extinction (e in W m^-3 sr^-1, medium::emission).
     fn emission_along(&self, x: Vec3, d: Vec3, rng: &mut Rng) -> Vec3 {
         let Some(em) = &self.medium.emission else { return Vec3::ZERO };
         let (lo, hi) = em.world_bounds();
