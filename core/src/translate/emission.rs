@@ -8,15 +8,16 @@
 //! VPLs' total is the medium's `Emission::power()` to rounding. VPLs that land on the same voxel
 //! are merged.
 //!
-//! Singularities. A VPL stands for the emission spread over at least one voxel, so closer than
-//! about a voxel its 1/d^2 is not the physics. Paper 03 (Sec. 4.3) bounds the geometry term,
-//! G' = min(G, b), and notes the bias as energy lost near the VPLs. Each VPL's `radius` is that
-//! bound: r = the radius of the ball of one voxel's volume, (3 dV / 4 pi)^(1/3) = 0.62 voxel
-//! edges, and consumers clamp 1/d^2 to 1/r^2 (the compositor does). The scattered power this
-//! removes, in a medium optically thin over r, is integral over the ball of
-//! sigma_s I (1/d^2 - 1/r^2) dV = sigma_s I (8 pi / 3) r per VPL: `clamp_loss` reports its sum.
-//! Paper 03's bias compensation is not done: the loss is reported instead (a few per cent of the
-//! single scattering of the emission at most for 64^3 media; see the tests).
+//! Singularities. A VPL stands for the emission spread over its stratum (at least one voxel),
+//! so closer than about the stratum's size its 1/d^2 is not the physics. Paper 03 (Sec. 4.3)
+//! bounds the geometry term, G' = min(G, b), and notes the bias as energy lost near the VPLs.
+//! Each VPL's `radius` r sets that bound, b = 1/r^2, and consumers clamp 1/d^2 to it (the
+//! compositor does, on CPU and GPU). r is chosen so that nothing is lost against the physics
+//! at the scale of the stratum (`clamp_radius`: 3/8 of the radius of the ball of the stratum's
+//! volume). Against an unclamped point VPL the clamp removes, in a medium optically thin
+//! over r, integral over the ball of radius r of sigma_s I (1/d^2 - 1/r^2) dV =
+//! sigma_s I (8 pi / 3) r per VPL: `clamp_loss` reports the sum, as paper 03 asks. Paper 03's
+//! bias compensation is not done.
 
 use glam::{IVec3, Vec3};
 
