@@ -3,6 +3,7 @@
 //! `sigma_t = density_scale * density`, `sigma_s = albedo * sigma_t`, HG anisotropy `g`.
 
 pub mod blackbody;
+mod cie1931;
 pub mod emission;
 pub mod grid;
 pub mod majorant;

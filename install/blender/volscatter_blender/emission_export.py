@@ -9,7 +9,9 @@ Cycles' Principled Volume emits, per metre of path (radiance W/m^3/sr, independe
 luminance 1; volscatter-core medium/blackbody.rs). volscatter reads emission from grids of the
 volume's VDB: Emission Strength must come from an Attribute node naming a grid (e.g. "flame"),
 optionally through Math Multiply by a constant, like the density; the blackbody from the
-Temperature Attribute grid (e.g. "temperature"). A constant Emission Strength or a missing
+Temperature Attribute grid (e.g. "temperature") times the Temperature value, or from an
+Attribute node driving Temperature (the form Cycles 5.0.1 renders: with the grid named in
+Temperature Attribute it renders the whole volume as a sliver, install/README.md). A constant Emission Strength or a missing
 temperature grid would glow uniformly over the volume's bounds in Cycles: left out, with a
 warning.
 """
@@ -56,15 +58,29 @@ def principled_emission(node, mat, grid_names, warnings, grid_expr):
     if bb is not None and (bb.is_linked or float(bb.default_value) > 1e-3):
         bb = _constant(bb, "Blackbody Intensity", mat, warnings)
         tint = _constant(inp["Blackbody Tint"], "Blackbody Tint", mat, warnings)
-        temp = _constant(inp["Temperature"], "Temperature", mat, warnings)
+        temp = inp["Temperature"]
         attr = inp["Temperature Attribute"].default_value if "Temperature Attribute" in inp else ""
-        if None not in (bb, tint, temp):
+        source = None  # (grid, kelvin per unit)
+        if temp.is_linked:
+            # Temperature = Attribute(grid) [* constant]; Cycles multiplies in the Temperature
+            # Attribute too, when it names a grid: a product of two grids is not readable.
+            name, scale = grid_expr(temp.links[0], mat, 0)
             if attr and attr in grid_names:
-                out.update(temperature_grid=attr, temperature=max(float(temp.default_value), 0.0),
-                           blackbody_intensity=float(bb.default_value),
-                           blackbody_tint=[max(c, 0.0) for c in _rgb(tint)])
+                warnings.append("material '%s': Temperature is driven by grid '%s' and Temperature Attribute names "
+                                "grid '%s' too; their product is not supported, blackbody left out" % (mat.name, name, attr))
+            elif name in grid_names:
+                source = (name, scale)
             else:
-                warnings.append("material '%s': blackbody emission needs a temperature grid (Temperature Attribute "
-                                "'%s' is not in the volume: grids %s); left out"
-                                % (mat.name, attr, ", ".join(grid_names) or "none"))
+                warnings.append("material '%s': temperature grid '%s' is not in the volume; blackbody left out"
+                                % (mat.name, name))
+        elif attr and attr in grid_names:
+            source = (attr, float(temp.default_value))
+        else:
+            warnings.append("material '%s': blackbody emission needs a temperature grid (Temperature Attribute "
+                            "'%s' is not in the volume: grids %s); left out"
+                            % (mat.name, attr, ", ".join(grid_names) or "none"))
+        if source is not None and None not in (bb, tint):
+            out.update(temperature_grid=source[0], temperature=max(source[1], 0.0),
+                       blackbody_intensity=float(bb.default_value),
+                       blackbody_tint=[max(c, 0.0) for c in _rgb(tint)])
     return out or None
