@@ -74,3 +74,63 @@ pub fn build_emission(j: &EmissionJson, src: &DensitySource, limits: GridLimits)
     }
     Ok(Emission { terms, vpl_count })
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::{Scene, DEFAULT_SCENE_JSON};
+    use glam::Vec3;
+    use std::path::Path;
+
+    fn with_emission(block: &str) -> crate::error::Result<Scene> {
+        let json = DEFAULT_SCENE_JSON.replace(r#""g": 0.6}"#, &format!(r#""g": 0.6, "emission": {block}}}"#));
+        Scene::from_json_str(&json, Path::new("."))
+    }
+
+    #[test]
+    fn emission_parses_and_validates() {
+        let s = with_emission(r#"{"grid": "density", "color": [1, 0.5, 0.25], "strength": 2, "temperature_grid": "density", "temperature": 1500, "vpls": 32}"#).unwrap();
+        let e = s.medium.emission.as_ref().unwrap();
+        assert_eq!((e.terms.len(), e.vpl_count), (2, 32));
+        // Where the plume has density 1 the linear term gives strength * color.
+        let lin = crate::medium::EmissionLaw::Linear { color: Vec3::new(2.0, 1.0, 0.5) };
+        assert_eq!(e.terms[0].law, lin);
+        assert!(e.power().x > 0.0);
+        for (block, field) in [
+            (r#"{"grid": "density", "strength": -1}"#, "medium.emission.strength"),
+            (r#"{"grid": "density", "color": [1, "x", 0]}"#, "medium.emission"),
+            (r#"{"strength": 2}"#, "medium.emission"),
+            (r#"{"grid": "flame"}"#, "medium.emission.grid"),
+            (r#"{"temperature_grid": "density", "temperature": -5}"#, "medium.emission.temperature"),
+            (r#"{"grid": "density", "vpls": 0}"#, "medium.emission.vpls"),
+            (r#"{"grid": "density", "glow": 1}"#, "glow"),
+        ] {
+            let e = with_emission(block).unwrap_err().to_string();
+            assert!(e.contains(field), "{block}: {e}");
+        }
+    }
+
+    /// From a VDB: a named float grid of the same file, and clear errors for a missing grid or a
+    /// vector grid.
+    #[test]
+    fn emission_grids_come_from_the_vdb() {
+        // shared/ sits beside the repository, as for the VDB reader's tests.
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures/vdb");
+        let scene = |emission: &str| {
+            let json = format!(
+                r#"{{"format": 1, "medium": {{"vdb": "vec3_and_density_blosc.vdb", "emission": {emission}}},
+                    "camera": {{"position": [0, -4, 0], "look_at": [0, 0, 0], "width": 4, "height": 4}}}}"#
+            );
+            Scene::from_json_str(&json, &dir)
+        };
+        let s = scene(r#"{"grid": "density", "strength": 3}"#).unwrap();
+        let (sum, _) = s.medium.grid.sum_and_count_nonzero();
+        let dv = s.medium.voxel_size_world().x.powi(3) as f64;
+        let expected = (sum * dv * 3.0 * 4.0 * std::f64::consts::PI) as f32;
+        let p = s.medium.emission.as_ref().unwrap().power().x;
+        assert!((p - expected).abs() < 1e-4 * expected, "{p} vs {expected}");
+        let e = scene(r#"{"grid": "flame"}"#).unwrap_err().to_string();
+        assert!(e.contains("medium.emission.grid") && e.contains("flame"), "{e}");
+        let e = scene(r#"{"temperature_grid": "velocity"}"#).unwrap_err().to_string();
+        assert!(e.contains("medium.emission.temperature_grid") && e.contains("not float"), "{e}");
+    }
+}
