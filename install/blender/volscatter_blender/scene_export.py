@@ -27,6 +27,8 @@ import os
 
 import bpy
 
+from . import emission_export
+
 FORMAT = 1
 
 
@@ -231,21 +233,17 @@ def _principled(node, mat, grid_names, warnings):
         if ca and ca in grid_names:
             raise ExportError("material '%s': the colour comes from grid '%s' per voxel; volscatter needs one "
                               "colour (clear Color Attribute)" % (mat.name, ca))
-    em = inp.get("Emission Strength")
-    if em is not None and (em.is_linked or float(em.default_value) > 0.0):
-        warnings.append("material '%s': Principled Volume emission is ignored" % mat.name)
-    bb = inp.get("Blackbody Intensity")
-    ta = inp.get("Temperature Attribute")
-    if bb is not None and (bb.is_linked or float(bb.default_value) > 0.0) and ta is not None \
-            and ta.default_value in grid_names:
-        warnings.append("material '%s': blackbody emission is ignored" % mat.name)
+    emission = emission_export.principled_emission(node, mat, grid_names, warnings, _grid_expr)
     sig_s = [max(c, 0.0) * dens for c in col]
     sig_t = []
     for c in range(3):
         a = max(1.0 - col[c], 0.0) * max(1.0 - math.sqrt(max(absc[c], 0.0)), 0.0)
         sig_t.append((max(col[c], 0.0) + a) * dens)
     sig_a = [sig_t[c] - sig_s[c] for c in range(3)]
-    return _finish(mat, grid, sig_s, sig_a, g, grid_names)
+    params = _finish(mat, grid, sig_s, sig_a, g, grid_names)
+    if emission:
+        params["emission"] = emission
+    return params
 
 
 def _finish(mat, grid, sig_s, sig_a, g, grid_names):
@@ -553,8 +551,10 @@ def export(context, obj, out_dir, frame, solver=None, size=None):
     eval_obj = obj.evaluated_get(depsgraph)
     medium = {"vdb": vdb, "grid": med["grid"], "density_scale": med["density_scale"],
               "albedo": med["albedo"], "g": med["g"], "transform": matrix_rows(eval_obj.matrix_world)}
+    if med.get("emission"):
+        medium["emission"] = med["emission"]
     ls = lights(scene, depsgraph, warnings) + world_lights(scene, warnings)
-    if not ls:
+    if not ls and "emission" not in medium:
         if generated:
             _remove(vdb)
         raise ExportError("no light reaches the volume: add a sun or point light (or a world colour)")

@@ -8,7 +8,7 @@ use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
 use glam::Vec3;
 use volscatter_core::compositor::{dome_directions_of, AREA_VPLS_PER_SIDE};
-use volscatter_core::translate::{local_emitters, PointEmitter, Profile};
+use volscatter_core::translate::{scene_emitters, PointEmitter, Profile};
 use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
@@ -67,7 +67,7 @@ impl GpuLight {
             pos_or_dir: e.position.extend(1.0).to_array(),
             power: e.intensity.extend(kind).to_array(),
             axis: axis.extend(cos_outer).to_array(),
-            extra: [cos_inner, 0.0, 0.0, 0.0],
+            extra: [cos_inner, e.radius, 0.0, 0.0],
         }
     }
 }
@@ -87,7 +87,7 @@ fn light_list(scene: &Scene, dome_directions: u32) -> Vec<GpuLight> {
             Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
         }
     }
-    out.extend(local_emitters(&scene.lights, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
+    out.extend(scene_emitters(scene, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
     out
 }
 
@@ -110,7 +110,7 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         bounds_lo: lo.extend(0.0).to_array(),
         bounds_hi: hi.extend(0.0).to_array(),
         cam_pos: scene.camera.position.extend(0.0).to_array(),
-        misc: [medium.g, medium.voxel_size_world().min_element(), 0.0, 0.0],
+        misc: [medium.g, medium.voxel_size_world().min_element(), volscatter_core::compositor::near_field_radius(&grid), 0.0],
     };
     let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
     let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;

@@ -106,3 +106,26 @@ fn gpu_bricked_density_matches_cpu() {
     assert!(e < 1e-5, "{e}");
     assert!(cpu.data.iter().any(|v| v.x > 0.0));
 }
+
+/// The emissive plume's VPLs (translate::emission, isotropic emitters with a clamp radius, some
+/// on grid points: the 24^3 grid over the 64^3 plume shares no points with it, the 64^3 grid
+/// does) in the GPU single-scattering grid against the CPU's. Tolerance 1e-5 as above.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn gpu_single_scattering_of_emission_matches_cpu() {
+    use volscatter_core::medium::{Emission, EmissionLaw, EmissionTerm};
+    let ctx = gpu_or_skip();
+    let mut scene = Scene::default_scene();
+    scene.lights.clear();
+    let m = &scene.medium;
+    let term = EmissionTerm::new(m.grid.clone(), m.index_to_world, EmissionLaw::Blackbody { temperature: 1500.0, intensity: 1.0, tint: Vec3::ONE });
+    scene.medium.emission = Some(Emission { terms: vec![term], vpl_count: 64 });
+    for dim in [24, 64] {
+        let cpu = compositor::single_scattering_grid(&scene, dim, 64).unwrap();
+        let gpu = single::single_scattering_grid(&ctx, &scene, dim, 64).unwrap();
+        let e = relative_rmse(&gpu.data, &cpu.data);
+        eprintln!("emission VPLs, grid {dim}: single-scattering grid relative RMSE {e:e}");
+        assert!(e < 1e-5, "grid {dim}: {e}");
+        assert!(cpu.data.iter().any(|v| v.x > 0.0));
+    }
+}
