@@ -3,8 +3,8 @@
     python scripts/bench_gpu.py [--sizes 64,128,256,512] [--grids 16,32,64] [--iterations 32]
 
 Runs shaders/examples/bench_pop.rs on the adapter wgpu picks (a real GPU when present, else
-Mesa's lavapipe), and reports per-stage times for one distant light, the CPU propagation for
-comparison, and how far each GPU propagation is from its memory-traffic floor.
+Mesa's lavapipe), and reports per-stage times of the whole POP pipeline for one distant light
+on the GPU and on the CPU, and how far each GPU propagation is from its memory-traffic floor.
 """
 import argparse
 import datetime
@@ -44,11 +44,14 @@ def main():
     ap.add_argument("--sizes", default="64,128,256")
     ap.add_argument("--grids", default="16,32,64")
     ap.add_argument("--iterations", default="32")
+    ap.add_argument("--output", default="128", help="output (scattering) grid resolution")
+    ap.add_argument("--cpu-max-cells", default="300000", help="largest propagation grid also solved on the CPU")
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args()
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     cmd = ["cargo", "run", "--release", "-q", "-p", "volscatter-gpu", "--example", "bench_pop", "--",
-           "--sizes", a.sizes, "--grids", a.grids, "--iterations", a.iterations]
+           "--sizes", a.sizes, "--grids", a.grids, "--iterations", a.iterations, "--output", a.output,
+           "--cpu-max-cells", a.cpu_max_cells]
     out = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
     if out.returncode != 0:
         sys.exit(f"bench_pop failed ({out.returncode}):\n{out.stderr}")
@@ -57,28 +60,36 @@ def main():
     bw = bandwidth_of(adapter)
     lines = [
         f"Adapter: **{adapter}**; {rows[0]['threads'] if rows else '?'} CPU threads; "
-        f"{datetime.date.today().isoformat()}; one distant light, diffusion correction on, "
-        f"{a.iterations} iterations (residual threshold 0). Command: `python scripts/bench_gpu.py --sizes {a.sizes} --grids {a.grids}`.",
+        f"{datetime.date.today().isoformat()}; the plume at each size, one distant light, diffusion correction on, "
+        f"{a.iterations} iterations (residual threshold 0), merge grid twice the propagation grid, "
+        f"{a.output}^3 output grid. Command: `python scripts/bench_gpu.py --sizes {a.sizes} --grids {a.grids}`.",
         "",
-        "Times in milliseconds. CPU stages: mip pyramid, light-grid sampling, transmittance sweep. "
-        "GPU propagation: upload, iterations (first dispatch to idle), readback. "
+        "Times in milliseconds, from the solver's own stage timings (`Pop::solve_with` with the GPU "
+        "and the CPU backend; each GPU stage waits for the device, so its time is its GPU time). "
+        "On the CPU in both: mip pyramid, light-grid sampling. GPU: sweep (with the light's upload), "
+        "propagation (its iterations alone in brackets: first dispatch to idle), merge (in brackets: of which "
+        "bricking and uploading the density mip), "
+        "upsampling (with the read-back of S). "
         f"Floor: {BYTES_PER_CELL_ITERATION} B per cell per iteration at the adapter's peak bandwidth"
         + (f" ({bw / 1e12:.2f} TB/s)." if bw else " (unknown for this adapter: no floor)."),
         "",
-        "| medium | grid | cells | mip | light grid | init | GPU upload | GPU iterations | GPU readback | GPU total | CPU propagation | GPU speed-up | floor | iterations / floor |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| medium | grid | cells | mip | light grid | GPU sweep | GPU propagation (iterations) | GPU merge (mip upload) | GPU upsample | GPU total "
+        "| CPU sweep | CPU propagation | CPU merge | CPU upsample | CPU total | speed-up | floor | iterations / floor |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     ms = lambda s: "—" if s is None else f"{s * 1e3:.2f}"
     for r in rows:
         floor = r["cells"] * BYTES_PER_CELL_ITERATION * r["iterations"] / bw if bw else None
-        cpu = r["cpu_propagation_s"]
-        speedup = f"{cpu / r['gpu_propagation_total_s']:.1f}x" if cpu else "—"
+        g, c = r["gpu"], r["cpu"] or {}
+        cpu_total = r["cpu_total_s"]
+        speedup = f"{cpu_total / r['gpu_total_s']:.1f}x" if cpu_total else "—"
         ratio = f"{r['gpu_iterations_s'] / floor:.0f}x" if floor else "—"
         d = r["grid_dims"]
         lines.append(
-            f"| {r['medium']}^3 | {d[0]}x{d[1]}x{d[2]} | {r['cells']} | {ms(r['cpu_mip_s'])} | {ms(r['cpu_light_grid_s'])} | "
-            f"{ms(r['cpu_init_s'])} | {ms(r['gpu_upload_s'])} | {ms(r['gpu_iterations_s'])} | {ms(r['gpu_readback_s'])} | "
-            f"{ms(r['gpu_propagation_total_s'])} | {ms(cpu)} | {speedup} | {ms(floor)} | {ratio} |"
+            f"| {r['medium']}^3 | {d[0]}x{d[1]}x{d[2]} | {r['cells']} | {ms(g.get('mip'))} | {ms(g.get('light_grid'))} | "
+            f"{ms(g.get('init'))} | {ms(g.get('propagation'))} ({ms(r['gpu_iterations_s'])}) | {ms(g.get('merge'))} ({ms(r.get('gpu_mip_upload_s'))}) | "
+            f"{ms(g.get('upsample'))} | {ms(r['gpu_total_s'])} | {ms(c.get('init'))} | {ms(c.get('propagation'))} | "
+            f"{ms(c.get('merge'))} | {ms(c.get('upsample'))} | {ms(cpu_total)} | {speedup} | {ms(floor)} | {ratio} |"
         )
     text = "\n".join(lines)
     print(text)

@@ -36,7 +36,7 @@ impl Default for CompositeOptions {
 }
 
 /// Ray/box intersection; returns the parameter range inside, if any.
-fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
+pub(crate) fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
     let inv = d.recip();
     let a = (lo - o) * inv;
     let b = (hi - o) * inv;
@@ -103,7 +103,8 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
     let [nx, ny, _] = grid.dims;
     let g = medium.g;
     let dome_dirs = dome_directions_of(scene, dome_directions);
-    let emitters = crate::translate::local_emitters(&scene.lights, AREA_VPLS_PER_SIDE);
+    let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
+    let near = near_field_radius(&grid);
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {
@@ -130,21 +131,45 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
                     }
                 }
                 for e in &emitters {
-                    let to = e.position - x;
-                    let dist = to.length();
-                    if dist > 1e-6 {
-                        let w = to / dist;
-                        let intensity = e.intensity_towards(-w);
-                        if intensity.max_element() > 0.0 {
-                            sum += intensity / (dist * dist) * hg(w.dot(view), g) * tr(w, dist);
-                        }
-                    }
+                    sum += emitter_single(e, x, view, g, near, &tr);
                 }
                 slab[(i + nx * j) as usize] = medium.sigma_s(dens) * sum;
             }
         }
     });
     Ok(grid)
+}
+
+/// The grid holds point samples of S1 that the march interpolates trilinearly, so a grid
+/// point must carry the mean of S1 over its cell, not its value at the point: near an emitter
+/// inside the medium 1/d^2 is bounded by the cell mean of 1/|y|^2 over a ball of the cell's
+/// volume centred on the emitter, 3 / R^2 = 1 / (R / sqrt 3)^2, R = (3 h^3 / 4 pi)^(1/3).
+/// Returns R / sqrt 3 for the grid's smallest cell edge h (0.36 h).
+pub fn near_field_radius(grid: &ScatteringGrid) -> f32 {
+    let m = grid.index_to_world.matrix3;
+    let h = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
+    (3.0 / (4.0 * std::f32::consts::PI)).cbrt() * h / 3f32.sqrt()
+}
+
+/// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2
+/// bounded at the larger of the emitter's radius (translate::emission: paper 03's clamp) and
+/// the grid's `near` radius. An isotropic emitter on the grid point itself (an emission VPL at
+/// a voxel centre shared with the grid) gives I / r^2 with the phase function's mean, 1/4 pi.
+#[inline]
+fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &impl Fn(Vec3, f32) -> Vec3) -> Vec3 {
+    let to = e.position - x;
+    let dist = to.length();
+    let r = e.radius.max(near);
+    if dist > 1e-6 {
+        let w = to / dist;
+        let intensity = e.intensity_towards(-w);
+        if intensity.max_element() > 0.0 {
+            return intensity / (dist * dist).max(r * r) * hg(w.dot(view), g) * tr(w, dist);
+        }
+    } else if e.profile == crate::translate::Profile::Isotropic && r > 0.0 {
+        return e.intensity / (r * r) * (0.25 * std::f32::consts::FRAC_1_PI);
+    }
+    Vec3::ZERO
 }
 
 struct GridLookup<'a> {

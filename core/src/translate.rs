@@ -13,7 +13,9 @@
 use glam::Vec3;
 
 use crate::scene::light::{AreaLight, Spot};
-use crate::scene::Light;
+use crate::scene::{Light, Scene};
+
+pub mod emission;
 
 /// How a point emitter's intensity depends on the direction w (unit, away from it).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -138,6 +140,16 @@ pub fn local_emitters(lights: &[Light], area_k: u32) -> Vec<PointEmitter> {
             Light::Area(a) => out.extend(area_vpls(a, area_k)),
             Light::Distant { .. } | Light::Dome(_) => {}
         }
+    }
+    out
+}
+
+/// Every point emitter of the scene: `local_emitters(lights, area_k)`, then the emissive
+/// medium's VPLs (`emission::emission_vpls`, as many as `medium.emission.vpl_count`).
+pub fn scene_emitters(scene: &Scene, area_k: u32) -> Vec<PointEmitter> {
+    let mut out = local_emitters(&scene.lights, area_k);
+    if let Some(e) = &scene.medium.emission {
+        out.extend(emission::emission_vpls(&scene.medium, e.vpl_count).emitters);
     }
     out
 }

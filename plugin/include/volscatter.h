@@ -321,6 +321,54 @@ VsStatus vs_scene_add_point_light(VsScene *scene,
                                   float radius);
 
 /**
+ * Adds a spot light at `position` (3 floats, world metres) pointing along `direction` (3
+ * floats, not zero) with `intensity` (3 floats, RGB, W/sr, >= 0) on its axis, zero outside the
+ * cone of half-angle `cone_half_angle_deg` in (0, 180]. `blend` in [0, 1] softens the outer
+ * fraction of the cone (Cycles' spot blend: a smoothstep in the cosine from cos(half-angle)
+ * to cos(half-angle) + (1 - cos(half-angle)) * blend); `radius` >= 0 makes it a sphere of that
+ * radius (0: a point).
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_scene_add_spot_light(VsScene *scene,
+                                 const float *position,
+                                 const float *direction,
+                                 const float *intensity,
+                                 float cone_half_angle_deg,
+                                 float blend,
+                                 float radius);
+
+/**
+ * Adds a one-sided rectangular area light centred at `position` (3 floats, world metres),
+ * emitting towards `normal` (3 floats, not zero) with uniform `radiance` (3 floats, RGB,
+ * W/m^2/sr, >= 0; power pi * radiance * width * height). `width` (> 0) runs along `tangent`
+ * (3 floats, made perpendicular to the normal; NULL: any direction perpendicular to it),
+ * `height` (> 0) along normal x tangent.
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_scene_add_rect_light(VsScene *scene,
+                                 const float *position,
+                                 const float *normal,
+                                 const float *tangent,
+                                 float width,
+                                 float height,
+                                 const float *radiance);
+
+/**
+ * Adds a one-sided disc area light centred at `position` (3 floats, world metres), emitting
+ * towards `normal` (3 floats, not zero), of `radius` (> 0) and uniform `radiance` (3 floats,
+ * RGB, W/m^2/sr, >= 0; power pi * radiance * pi * radius^2).
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_scene_add_disk_light(VsScene *scene,
+                                 const float *position,
+                                 const float *normal,
+                                 float radius,
+                                 const float *radiance);
+
+/**
  * Adds a uniform dome (environment) light of radiance `color` (3 floats, RGB, W/m^2/sr, >= 0).
  *
  * Thread safety: any thread; calls on one scene are serialised.

@@ -1,18 +1,20 @@
-//! Times POP's stages for one distant light with the propagation on the CPU and on the GPU,
-//! for several medium sizes and propagation-grid resolutions, a fixed number of iterations.
-//! Prints one JSON object per configuration; `scripts/bench_gpu.py` turns them into the table
-//! in BENCHMARKS.md.
+//! Times POP's stages for one distant light over the procedural plume, the whole pipeline on
+//! the GPU (`GpuBackend`) and on the CPU (`CpuBackend`), for several medium sizes and
+//! propagation-grid resolutions, a fixed number of iterations. Prints one JSON object per
+//! configuration; `scripts/bench_gpu.py` turns them into the table in BENCHMARKS.md.
 //!
-//! cargo run --release -p volscatter-gpu --example bench_pop -- [--sizes 64,128,256] [--grids 16,32,64] [--iterations 32] [--cpu-max-cells N]
+//! cargo run --release -p volscatter-gpu --example bench_pop -- [--sizes 64,128,256] [--grids 16,32,64] [--iterations 32] [--output 128] [--cpu-max-cells N]
 
-use glam::Vec3;
 use serde_json::json;
+use std::collections::BTreeMap;
 use std::time::Instant;
 
-use volscatter_core::medium::{procedural, GridLimits, Medium};
-use volscatter_core::solvers::pop::{accumulate, init, light_grid::LightGrid, mip::MediumMip, propagate::Propagation};
-use volscatter_core::solvers::NoProgress;
-use volscatter_gpu::{pop, GpuContext};
+use volscatter_core::solvers::pop::backend::CpuBackend;
+use volscatter_core::solvers::pop::Pop;
+use volscatter_core::solvers::{NoProgress, Timings};
+use volscatter_core::Scene;
+use volscatter_gpu::pop::backend::GpuBackend;
+use volscatter_gpu::GpuContext;
 
 fn arg_list(args: &[String], name: &str, default: &[u32]) -> Vec<u32> {
     args.iter()
@@ -22,12 +24,29 @@ fn arg_list(args: &[String], name: &str, default: &[u32]) -> Vec<u32> {
         .unwrap_or_else(|| default.to_vec())
 }
 
+/// The plume at `n`^3 voxels, one distant light, the default scene's camera.
+fn scene(n: u32) -> Scene {
+    let json = json!({
+        "format": 1,
+        "medium": {"procedural": "plume", "dims": [n], "density_scale": 12.0, "albedo": 0.95, "g": 0.6},
+        "lights": [{"type": "distant", "direction": [-0.5, 0.6, -0.62], "irradiance": 5.0}],
+        "camera": {"position": [0.0, -4.6, 0.3], "look_at": [0, 0, 0], "width": 16, "height": 16}
+    });
+    Scene::from_json_str(&json.to_string(), std::path::Path::new("/")).expect("bench scene")
+}
+
+/// Stage name ("pop init") -> seconds.
+fn stages(t: &Timings) -> BTreeMap<String, f64> {
+    t.0.iter().map(|(k, v)| (k.trim_start_matches("pop ").replace(' ', "_"), *v)).collect()
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let sizes = arg_list(&args, "--sizes", &[64, 128, 256]);
     let grids = arg_list(&args, "--grids", &[16, 32, 64]);
     let iterations = arg_list(&args, "--iterations", &[32])[0];
-    let cpu_max_cells = arg_list(&args, "--cpu-max-cells", &[300_000])[0] as usize;
+    let output = arg_list(&args, "--output", &[128])[0];
+    let cpu_max_cells = arg_list(&args, "--cpu-max-cells", &[300_000])[0] as u64;
     let ctx = match GpuContext::new() {
         Ok(c) => c,
         Err(e) => {
@@ -36,57 +55,40 @@ fn main() {
         }
     };
     eprintln!("adapter: {}", ctx.describe());
-    let dir = Vec3::new(-0.5, 0.6, -0.62).normalize();
     for &n in &sizes {
         let t = Instant::now();
-        let (grid, to_world) = procedural::plume(n, GridLimits::default()).expect("plume");
-        let medium = Medium::new(grid, to_world, Vec3::splat(12.0), Vec3::splat(0.95), 0.6);
+        let scene = scene(n);
         let t_medium = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let mip = MediumMip::new(&medium, 1.0);
-        let t_mip = t.elapsed().as_secs_f64();
         for &res in &grids {
-            let t = Instant::now();
-            let lg = LightGrid::new(&medium, &mip, dir, res).expect("light grid");
-            let t_grid = t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let initial = init::sweep(&lg, Vec3::splat(5.0));
-            let t_init = t.elapsed().as_secs_f64();
-            let mu = accumulate::view_cosines(&lg, Vec3::new(0.0, -4.6, 0.3));
-            let prop = Propagation {
-                grid: &lg,
-                g: medium.g,
-                mu: &mu,
-                diffusion_correction: true,
-                max_iterations: iterations,
-                residual_threshold: 0.0,
-            };
+            let settings = json!({"grid_resolution": res, "max_iterations": iterations, "residual_threshold": 0.0,
+                                  "output_resolution": output, "dome_ordinates": 0});
+            let pop = Pop::from_settings(settings.as_object().unwrap()).expect("settings");
             // Warm-up (shader compilation, allocation), then the timed run.
-            let mut j = vec![Vec3::ZERO; lg.len()];
-            let _ = pop::propagate(&ctx, &prop, &initial, medium.g, &mut j, iterations, false);
-            let mut j = vec![Vec3::ZERO; lg.len()];
+            let _ = pop.solve_with(&scene, &NoProgress, &GpuBackend::new(&ctx, iterations));
+            let backend = GpuBackend::new(&ctx, iterations);
             let t = Instant::now();
-            let (stats, times) = pop::propagate(&ctx, &prop, &initial, medium.g, &mut j, iterations, false).expect("gpu propagation");
-            let t_gpu_total = t.elapsed().as_secs_f64();
-            let t_cpu = if lg.len() <= cpu_max_cells {
-                let mut jc = vec![Vec3::ZERO; lg.len()];
+            let (gpu, report) = pop.solve_with(&scene, &NoProgress, &backend).expect("gpu pop");
+            let gpu_total = t.elapsed().as_secs_f64();
+            let prop = backend.propagation_times().first().cloned().unwrap_or_default();
+            let dims = report.lights[0].dims;
+            let cells = dims.iter().map(|&d| d as u64).product::<u64>();
+            let cpu = (cells <= cpu_max_cells).then(|| {
                 let t = Instant::now();
-                prop.run(&initial, medium.g, &mut jc, &NoProgress).expect("cpu propagation");
-                Some(t.elapsed().as_secs_f64())
-            } else {
-                None
-            };
+                let (out, _) = pop.solve_with(&scene, &NoProgress, &CpuBackend).expect("cpu pop");
+                (stages(&out.timings), t.elapsed().as_secs_f64())
+            });
             println!(
                 "{}",
                 json!({
                     "adapter": ctx.describe(),
-                    "medium": n, "grid_resolution": res,
-                    "grid_dims": [lg.dims.x, lg.dims.y, lg.dims.z], "cells": lg.len(),
-                    "iterations": stats.iterations,
-                    "cpu_medium_s": t_medium, "cpu_mip_s": t_mip, "cpu_light_grid_s": t_grid, "cpu_init_s": t_init,
-                    "gpu_upload_s": times.upload, "gpu_iterations_s": times.iterations, "gpu_readback_s": times.readback,
-                    "gpu_propagation_total_s": t_gpu_total,
-                    "cpu_propagation_s": t_cpu,
+                    "medium": n, "grid_resolution": res, "output_resolution": output,
+                    "grid_dims": dims, "cells": cells,
+                    "iterations": report.lights[0].propagation.iterations,
+                    "medium_s": t_medium,
+                    "gpu": stages(&gpu.timings), "gpu_total_s": gpu_total,
+                    "gpu_mip_upload_s": backend.mip_upload_seconds(),
+                    "gpu_propagation_upload_s": prop.upload, "gpu_iterations_s": prop.iterations, "gpu_propagation_readback_s": prop.readback,
+                    "cpu": cpu.as_ref().map(|c| &c.0), "cpu_total_s": cpu.as_ref().map(|c| c.1),
                     "threads": rayon::current_num_threads(),
                 })
             );

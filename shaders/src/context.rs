@@ -1,5 +1,7 @@
 //! Adapter and device acquisition, error capture, and buffer helpers shared by the kernels.
 
+use std::any::Any;
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use wgpu::util::DeviceExt;
 
@@ -27,7 +29,14 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     errors: Arc<Mutex<Vec<String>>>,
     lost: Arc<Mutex<Option<String>>>,
+    /// Compiled kernels by (label, entry point): a shared context compiles each once.
+    pipelines: Mutex<HashMap<(&'static str, &'static str), Arc<wgpu::ComputePipeline>>>,
+    /// Other device objects built once per context (see `cached`).
+    objects: Mutex<HashMap<&'static str, Arc<dyn Any + Send + Sync>>>,
 }
+
+/// The process's context (see `GpuContext::with_shared`).
+static SHARED: Mutex<Option<Arc<GpuContext>>> = Mutex::new(None);
 
 impl GpuContext {
     /// Picks the best adapter (high performance; software adapters such as lavapipe allowed as
@@ -90,7 +99,131 @@ impl GpuContext {
                 }
             });
         }
-        Ok(GpuContext { device, queue, info, limits, errors, lost })
+        Ok(GpuContext { device, queue, info, limits, errors, lost, pipelines: Mutex::new(HashMap::new()), objects: Mutex::new(HashMap::new()) })
+    }
+
+    /// Runs `f` on the process's context, opened on first use (opening costs tens of
+    /// milliseconds to seconds, per solve it would dominate small scenes) and opened afresh
+    /// when the previous one lost its device. Callers are serialised: the context's error list
+    /// then belongs to the one running caller, so an error is never blamed on another thread's
+    /// work (one GPU runs one solve at a time anyway). Errors left over from a failed caller
+    /// are dropped before the next one starts.
+    pub fn with_shared<T>(f: impl FnOnce(&GpuContext) -> T) -> Result<T, GpuError> {
+        // A caller that panicked (wgpu panics are caught further up) leaves the lock
+        // poisoned: the context may be in any state, so it is dropped and reopened.
+        let mut slot = SHARED.lock().unwrap_or_else(|poisoned| {
+            let mut guard = poisoned.into_inner();
+            *guard = None;
+            SHARED.clear_poison();
+            guard
+        });
+        if slot.as_ref().is_some_and(|ctx| ctx.is_lost()) {
+            *slot = None;
+        }
+        let ctx = match slot.as_ref() {
+            Some(ctx) => ctx.clone(),
+            None => {
+                let ctx = Arc::new(GpuContext::new()?);
+                *slot = Some(ctx.clone());
+                ctx
+            }
+        };
+        ctx.clear_errors();
+        let out = f(&ctx);
+        if ctx.is_lost() {
+            *slot = None;
+        }
+        Ok(out)
+    }
+
+    /// Whether the device was lost (a lost device never comes back: open a new context).
+    pub fn is_lost(&self) -> bool {
+        self.lost.lock().map(|l| l.is_some()).unwrap_or(true)
+    }
+
+    fn clear_errors(&self) {
+        if let Ok(mut errs) = self.errors.lock() {
+            errs.clear();
+        }
+    }
+
+    /// The compute pipeline of `entry` in `wgsl`, compiled on first use (bind group 0's layout
+    /// derived from the shader: every binding the entry point uses, in binding order). A
+    /// pipeline that fails to compile is an error and is not cached.
+    pub fn pipeline(&self, label: &'static str, wgsl: &'static str, entry: &'static str) -> Result<Arc<wgpu::ComputePipeline>, GpuError> {
+        let mut cache = self.pipelines.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(p) = cache.get(&(label, entry)) {
+            return Ok(p.clone());
+        }
+        self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(wgsl.into()) });
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(self.device.pop_error_scope()) {
+            return Err(GpuError::Internal(format!("{label}: {e}")));
+        }
+        let pipeline = Arc::new(pipeline);
+        cache.insert((label, entry), pipeline.clone());
+        Ok(pipeline)
+    }
+
+    /// What `build` makes from the device, built once per context under `key` (kernels with
+    /// an explicit layout shared between entry points). A build that raises a validation
+    /// error is an error and is not kept.
+    pub fn cached<T: Any + Send + Sync>(&self, key: &'static str, build: impl FnOnce(&wgpu::Device) -> T) -> Result<Arc<T>, GpuError> {
+        let mut cache = self.objects.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(Ok(v)) = cache.get(key).map(|v| v.clone().downcast::<T>()) {
+            return Ok(v);
+        }
+        self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let value = Arc::new(build(&self.device));
+        if let Some(e) = pollster::block_on(self.device.pop_error_scope()) {
+            return Err(GpuError::Internal(format!("{key}: {e}")));
+        }
+        cache.insert(key, value.clone());
+        Ok(value)
+    }
+
+    /// A uniform buffer holding `bytes` (a kernel's parameters).
+    pub fn uniform(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage: wgpu::BufferUsages::UNIFORM })
+    }
+
+    /// A zero-filled storage buffer of `bytes` (at least one vec4: empty bindings are invalid),
+    /// checked against the adapter's limits first.
+    pub fn zeroed_storage(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
+        self.check_storage_size(label, bytes)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false, // wgpu zero-initialises buffers
+        }))
+    }
+
+    /// Records one compute pass: `pipeline` with bind group 0 = `buffers` at bindings 0, 1, ...
+    pub fn record(&self, enc: &mut wgpu::CommandEncoder, pipeline: &wgpu::ComputePipeline, buffers: &[&wgpu::Buffer], groups: [u32; 3]) {
+        let entries: Vec<wgpu::BindGroupEntry> =
+            buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
+        let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout: &pipeline.get_bind_group_layout(0), entries: &entries });
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+    }
+
+    /// Submits `enc`, waits for the device to finish and reports any error it raised (so a
+    /// stage's wall time is its GPU time, and its errors are its own).
+    pub fn submit_and_wait(&self, enc: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        self.queue.submit([enc.finish()]);
+        self.device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
+        self.check()
     }
 
     /// One line naming the adapter, for logs and benchmark tables.
@@ -215,3 +348,7 @@ impl GpuContext {
         self.read_buffer(&out, out_bytes)
     }
 }
+
+#[cfg(test)]
+#[path = "context_tests.rs"]
+mod tests;

@@ -39,9 +39,9 @@ impl std::fmt::Display for DeviceUsed {
     }
 }
 
-/// Runs `gpu` on a fresh GPU context according to `choice`; with `Auto`, any GPU failure (no
-/// adapter, out of memory, device lost, too large) falls back to `cpu` with a message on
-/// stderr. With `Gpu`, failures are errors. Panics inside wgpu are caught.
+/// Runs `gpu` on the process's GPU context (`GpuContext::with_shared`) according to `choice`;
+/// with `Auto`, any GPU failure (no adapter, out of memory, device lost, too large) falls back
+/// to `cpu` with a message on stderr. With `Gpu`, failures are errors. Panics inside wgpu are caught.
 pub fn run_on<T>(
     choice: DeviceChoice,
     gpu: impl FnOnce(&crate::GpuContext) -> Result<T, crate::GpuError>,
@@ -50,12 +50,13 @@ pub fn run_on<T>(
     if choice == DeviceChoice::Cpu {
         return Ok((cpu(), DeviceUsed::Cpu));
     }
-    let attempt = crate::GpuContext::new().and_then(|ctx| {
+    let attempt = crate::GpuContext::with_shared(|ctx| {
         let name = ctx.describe();
-        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| gpu(&ctx)))
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| gpu(ctx)))
             .map_err(|_| crate::GpuError::Internal("a GPU kernel panicked".into()))??;
         Ok((out, DeviceUsed::Gpu(name)))
-    });
+    })
+    .and_then(|r| r);
     match (attempt, choice) {
         (Ok(r), _) => Ok(r),
         (Err(e), DeviceChoice::Auto) => {

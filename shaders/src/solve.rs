@@ -1,10 +1,11 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
-//! Solvers with GPU stages (today: `pop`'s propagation) run them on the GPU; the others, and
-//! every solver under `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a GPU failure (no
+//! Solvers with GPU stages (today: `pop`: sweep, propagation, merge, upsampling) run them on
+//! the GPU; the others, and every solver under `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a GPU failure (no
 //! adapter, out of memory, lost device) falls back to the CPU with a note on stderr.
 
 use crate::device::{DeviceChoice, DeviceUsed};
-use crate::{pop, GpuContext, GpuError};
+use crate::pop::backend::{gpu_error, GpuBackend};
+use crate::{GpuContext, GpuError};
 use volscatter_core::solvers::pop::Pop;
 use volscatter_core::solvers::{self, Progress, SolveOutput};
 use volscatter_core::{Error, Result, Scene};
@@ -12,23 +13,9 @@ use volscatter_core::{Error, Result, Scene};
 /// Residual checks of the GPU propagation happen every this many iterations (one readback).
 const CHECK_EVERY: u32 = 8;
 
-fn gpu_error(e: GpuError) -> Error {
-    Error::InvalidArgument(format!("GPU: {e}"))
-}
-
-/// `pop` with its propagation on the GPU. Options the GPU port does not implement
-/// (`vacuum_escape`) run that light on the CPU.
+/// `pop` with its sweep, propagation, merge and upsampling on the GPU.
 fn pop_on_gpu(ctx: &GpuContext, pop_solver: &Pop, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-    let (out, _report) = pop_solver.solve_with(scene, progress, &|prop, opts, init, a, j, progress| {
-        if opts.vacuum_escape {
-            return prop.run_with(opts, init, a, j, progress);
-        }
-        let (stats, _times) = pop::propagate(ctx, prop, init, a, j, CHECK_EVERY, opts.keep_remaining).map_err(gpu_error)?;
-        if !progress.update("pop propagation", 1.0) {
-            return Err(Error::Cancelled);
-        }
-        Ok(stats)
-    })?;
+    let (out, _report) = pop_solver.solve_with(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY))?;
     Ok(out)
 }
 
@@ -45,10 +32,15 @@ pub fn solve(
         return Ok((cpu()?, DeviceUsed::Cpu));
     }
     let pop_solver = Pop::from_settings(settings)?;
-    let attempt = GpuContext::new().map_err(gpu_error).and_then(|ctx| {
+    let attempt = GpuContext::with_shared(|ctx| {
         let name = ctx.describe();
-        pop_on_gpu(&ctx, &pop_solver, scene, progress).map(|out| (out, DeviceUsed::Gpu(name)))
-    });
+        // A panic inside wgpu must not reach the host (nor poison the shared context).
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pop_on_gpu(ctx, &pop_solver, scene, progress)))
+            .unwrap_or_else(|_| Err(gpu_error(GpuError::Internal("a GPU kernel panicked".into()))))
+            .map(|out| (out, DeviceUsed::Gpu(name)))
+    })
+    .map_err(gpu_error)
+    .and_then(|r| r);
     match attempt {
         Ok(r) => Ok(r),
         Err(Error::Cancelled) => Err(Error::Cancelled),

@@ -1,6 +1,7 @@
 //! Host-side packing of core types into GPU buffers.
 
-use glam::{Affine3A, IVec3, Vec3};
+use glam::{Affine3A, Vec3};
+use volscatter_core::medium::grid::{self, BRICK_VOXELS};
 use volscatter_core::medium::Medium;
 use volscatter_core::ScatteringGrid;
 
@@ -10,32 +11,41 @@ pub fn affine_rows(a: &Affine3A) -> [[f32; 4]; 3] {
     [m.row(0).to_array(), m.row(1).to_array(), m.row(2).to_array()]
 }
 
-/// The medium's density as a dense x-fastest array over its index bounds plus the one-voxel
-/// zero ring (so the kernel's trilinear lookups match `DensityGrid::sample` everywhere).
-/// Returns (index of element 0, dims, values).
-pub fn dense_density(medium: &Medium) -> (IVec3, IVec3, Vec<f32>) {
-    if medium.grid.is_empty() {
-        return (IVec3::ZERO, IVec3::ONE, vec![0.0]);
-    }
-    let (lo, hi) = medium.grid.bbox();
-    let origin = lo - IVec3::ONE;
-    let dims = hi - lo + IVec3::splat(3);
-    let mut values = Vec::with_capacity(dims.x as usize * dims.y as usize * dims.z as usize);
-    for z in 0..dims.z {
-        for y in 0..dims.y {
-            for x in 0..dims.x {
-                values.push(medium.grid.voxel(origin + IVec3::new(x, y, z)));
-            }
-        }
-    }
-    (origin, dims, values)
+/// The medium's density as it is stored on the CPU (`DensityGrid`: a table over the bounding
+/// box in 8^3 bricks, the bricks of voxels, the constant tiles), in one buffer of u32 words
+/// (floats as their bits): table, then bricks, then constants. Empty space costs one table
+/// word, so a sparse cloud takes its own memory on the GPU, not its bounding box's; lookups
+/// (composite/medium.wgsl) read the same voxels as `DensityGrid::voxel`.
+pub struct BrickedDensity {
+    /// Table corner in bricks; w = offset of the first brick's voxels in `words`.
+    pub brick_min: [i32; 4],
+    /// Table size in bricks; w = offset of the constants in `words`.
+    pub brick_dims: [u32; 4],
+    pub words: Vec<u32>,
 }
 
-/// Bytes the dense density would take, to check limits before building it.
-pub fn dense_density_bytes(medium: &Medium) -> u64 {
-    let (lo, hi) = medium.grid.bbox();
-    let d = (hi - lo + IVec3::splat(3)).max(IVec3::ONE).as_i64vec3();
-    (d.x * d.y * d.z) as u64 * 4
+// medium.wgsl hard-codes the grid's encoding.
+const _: () = assert!(grid::BRICK_LOG2 == 3 && grid::EMPTY == 0 && grid::CONSTANT_BIT == 0x8000_0000);
+
+/// Bytes `bricked_density` will take, to check limits before building it.
+pub fn bricked_density_bytes(medium: &Medium) -> u64 {
+    let (_, _, table, bricks, constants) = medium.grid.storage();
+    (table.len() as u64 + bricks.len() as u64 * BRICK_VOXELS as u64 + constants.len() as u64) * 4
+}
+
+pub fn bricked_density(medium: &Medium) -> BrickedDensity {
+    let (brick_min, brick_dims, table, bricks, constants) = medium.grid.storage();
+    let mut words = Vec::with_capacity((bricked_density_bytes(medium) / 4) as usize);
+    words.extend_from_slice(table);
+    let bricks_at = words.len() as i32;
+    words.extend(bricks.iter().flat_map(|b| b.iter().map(|v| v.to_bits())));
+    let constants_at = words.len() as u32;
+    words.extend(constants.iter().map(|v| v.to_bits()));
+    BrickedDensity {
+        brick_min: [brick_min.x, brick_min.y, brick_min.z, bricks_at],
+        brick_dims: [brick_dims.x.max(0) as u32, brick_dims.y.max(0) as u32, brick_dims.z.max(0) as u32, constants_at],
+        words,
+    }
 }
 
 /// RGB grid as vec4 (WGSL arrays of vec3 have a 16-byte stride anyway).

@@ -7,7 +7,8 @@
  * usage: smoke SCENE.json OUT_DIR [DENSITY.vdb]
  *   A: SCENE.json loaded from the file: scattering grid, composite, reference render, and
  *      the grid written as EXR and VDB, the image as EXR.
- *   B: the same scene's lights rebuilt piecewise around a dense density buffer made here.
+ *   B: the same scene's lights rebuilt piecewise around a dense density buffer made here, plus
+ *      a spot, a rect and a disk light.
  *   C: (with DENSITY.vdb) SCENE.json with its medium replaced by the VDB's "density" grid.
  * Exit status 0 when every call did what it should; messages on stderr otherwise.
  */
@@ -211,6 +212,10 @@ int main(int argc, char **argv) {
     const float sun_dir[3] = {-0.3f, 0.5f, -0.8f}, sun_e[3] = {4.0f, 3.8f, 3.5f};
     const float lamp_pos[3] = {1.5f, -1.0f, 1.0f}, lamp_i[3] = {2.0f, 1.5f, 1.0f};
     const float sky[3] = {0.1f, 0.15f, 0.25f};
+    const float spot_pos[3] = {-1.5f, -1.0f, 1.2f}, spot_dir[3] = {1.5f, 1.0f, -1.2f}, spot_i[3] = {3.0f, 2.5f, 2.0f};
+    const float rect_pos[3] = {0.0f, 0.0f, 1.5f}, down[3] = {0.0f, 0.0f, -1.0f}, rect_t[3] = {1.0f, 1.0f, 0.0f};
+    const float rect_l[3] = {0.8f, 0.8f, 1.0f};
+    const float disk_pos[3] = {0.0f, -1.5f, 0.0f}, disk_n[3] = {0.0f, 1.0f, 0.0f}, disk_l[3] = {1.0f, 0.7f, 0.5f};
     const float cam[3] = {0.3f, -4.0f, 0.5f}, target[3] = {0.0f, 0.0f, 0.0f};
     size_t lights = 0;
     unsigned dims_header[3] = {NX, NY, NZ};
@@ -235,8 +240,13 @@ int main(int argc, char **argv) {
     REQUIRE_OK(vs_scene_add_distant_light(b, sun_dir, sun_e, 0.0f), vs_scene_last_error, b);
     REQUIRE_OK(vs_scene_add_point_light(b, lamp_pos, lamp_i, 0.0f), vs_scene_last_error, b);
     REQUIRE_OK(vs_scene_add_dome_light(b, sky), vs_scene_last_error, b);
+    REQUIRE_OK(vs_scene_add_spot_light(b, spot_pos, spot_dir, spot_i, 25.0f, 0.3f, 0.0f), vs_scene_last_error, b);
+    REQUIRE_OK(vs_scene_add_rect_light(b, rect_pos, down, rect_t, 0.6f, 0.4f, rect_l), vs_scene_last_error, b);
+    REQUIRE_OK(vs_scene_add_disk_light(b, disk_pos, disk_n, 0.3f, disk_l), vs_scene_last_error, b);
+    CHECK(vs_scene_add_disk_light(b, disk_pos, disk_n, 0.0f, disk_l) == VS_STATUS_INVALID_SCENE, "disk of radius 0");
+    CHECK(strstr(vs_scene_last_error(b), "radius") != NULL, "disk message: %s", vs_scene_last_error(b));
     REQUIRE_OK(vs_scene_light_count(b, &lights), vs_scene_last_error, b);
-    CHECK(lights == 3, "light count %zu", lights);
+    CHECK(lights == 6, "light count %zu", lights);
     REQUIRE_OK(vs_scene_set_camera(b, cam, target, NULL, 45.0f, 24, 16), vs_scene_last_error, b);
     REQUIRE_OK(vs_scene_set_solver(b, "reference", "{\"seed\": 3, \"spp\": 4, \"grid_resolution\": 10, \"grid_spp\": 8}"),
                vs_scene_last_error, b);

@@ -134,6 +134,39 @@ def point(power=200.0, location=(2.0, -1.0, 2.0), name="Point"):
     return ob
 
 
+def _aim(ob, target):
+    """Turns `ob` so that its local -Z (where Blender's spot and area lights emit) faces `target`."""
+    from mathutils import Vector
+    d = Vector(target) - ob.location
+    ob.rotation_euler = d.to_track_quat('-Z', 'Y').to_euler()
+
+
+def spot(power=300.0, location=(2.0, -1.5, 1.5), target=(0.0, 0.0, 0.0), size_deg=30.0, blend=0.3, radius=0.0,
+         name="Spot"):
+    light = bpy.data.lights.new(name, 'SPOT')
+    light.energy = power
+    light.spot_size = math.radians(size_deg)
+    light.spot_blend = blend
+    light.shadow_soft_size = radius
+    ob = _link(bpy.data.objects.new(name, light))
+    ob.location = location
+    _aim(ob, target)
+    return ob
+
+
+def area(shape='RECTANGLE', power=300.0, size=(1.0, 0.5), location=(1.5, -1.2, 1.5), target=(0.0, 0.0, 0.0),
+         name="Area"):
+    light = bpy.data.lights.new(name, 'AREA')
+    light.energy = power
+    light.shape = shape
+    light.size = size[0]
+    light.size_y = size[1]
+    ob = _link(bpy.data.objects.new(name, light))
+    ob.location = location
+    _aim(ob, target)
+    return ob
+
+
 def camera(location=(0.0, -6.0, 0.5), look_at=(0.0, 0.0, 0.0), width=32, height=24, name="Camera"):
     from mathutils import Vector
     cam = bpy.data.cameras.new(name)
@@ -245,3 +278,80 @@ def angle_between(a, b):
     na = math.sqrt(sum(x * x for x in a))
     nb = math.sqrt(sum(x * x for x in b))
     return math.degrees(math.acos(max(-1.0, min(1.0, dot / (na * nb)))))
+
+
+def emissive_volume(res=24, mode="strength", albedo=0.9, density=3.0):
+    """A glowing ball in smoke: Volume Cube of constant density 1 over [-1, 1]^3 plus a grid
+    'flame' = clamp(1 - |p| / 0.6) (Geometry Nodes: a second Volume Cube's grid stored under
+    that name), with a Principled Volume (Density `density`, Color `albedo`) emitting either
+    Emission Strength = 4 * flame with Emission Color (1, 0.5, 0.2) (`mode` "strength") or
+    blackbody at Temperature 3000 K * flame ("blackbody"). Returns (object, Principled node)."""
+    vol = bpy.data.volumes.new("Fire")
+    ob = _link(bpy.data.objects.new("Fire", vol))
+    ng = bpy.data.node_groups.new("Fire_gen", 'GeometryNodeTree')
+    ng.interface.new_socket("Geometry", in_out='OUTPUT', socket_type='NodeSocketGeometry')
+    n = ng.nodes
+    cube = n.new('GeometryNodeVolumeCube')          # constant density 1
+    blob = n.new('GeometryNodeVolumeCube')          # 1 - |p| / 0.6, clamped: a glowing ball
+    for vc in (cube, blob):
+        for a in 'XYZ':
+            vc.inputs['Resolution ' + a].default_value = res
+        vc.inputs['Min'].default_value = (-1, -1, -1)
+        vc.inputs['Max'].default_value = (1, 1, 1)
+    cube.inputs['Density'].default_value = 1.0
+    pos = n.new('GeometryNodeInputPosition')
+    ln = n.new('ShaderNodeVectorMath')
+    ln.operation = 'LENGTH'
+    ng.links.new(pos.outputs[0], ln.inputs[0])
+    mr = n.new('ShaderNodeMapRange')
+    mr.clamp = True
+    mr.inputs['From Min'].default_value = 0.0
+    mr.inputs['From Max'].default_value = 0.6
+    mr.inputs['To Min'].default_value = 1.0
+    mr.inputs['To Max'].default_value = 0.0
+    ng.links.new(ln.outputs['Value'], mr.inputs['Value'])
+    ng.links.new(mr.outputs['Result'], blob.inputs['Density'])
+    get = n.new('GeometryNodeGetNamedGrid')
+    get.data_type = 'FLOAT'
+    get.inputs['Name'].default_value = "density"
+    ng.links.new(blob.outputs[0], get.inputs['Volume'])
+    store = n.new('GeometryNodeStoreNamedGrid')
+    store.data_type = 'FLOAT'
+    store.inputs['Name'].default_value = "flame"
+    ng.links.new(cube.outputs[0], store.inputs['Volume'])
+    ng.links.new(get.outputs['Grid'], store.inputs['Grid'])
+    setm = n.new('GeometryNodeSetMaterial')
+    setm.name = "Set Material"
+    ng.links.new(store.outputs[0], setm.inputs['Geometry'])
+    out = n.new('NodeGroupOutput')
+    ng.links.new(setm.outputs[0], out.inputs[0])
+    ob.modifiers.new("generate", 'NODES').node_group = ng
+    mat, nt = _material("Fire_mat")
+    o = nt.nodes.new('ShaderNodeOutputMaterial')
+    pv = nt.nodes.new('ShaderNodeVolumePrincipled')
+    pv.inputs['Density'].default_value = density
+    pv.inputs['Color'].default_value = (albedo, albedo, albedo, 1.0)
+    if mode == "strength":
+        attr = nt.nodes.new('ShaderNodeAttribute')
+        attr.attribute_name = "flame"
+        mul = nt.nodes.new('ShaderNodeMath')
+        mul.operation = 'MULTIPLY'
+        mul.inputs[1].default_value = 4.0
+        nt.links.new(attr.outputs['Fac'], mul.inputs[0])
+        nt.links.new(mul.outputs[0], pv.inputs['Emission Strength'])
+        pv.inputs['Emission Color'].default_value = (1.0, 0.5, 0.2, 1.0)
+    else:
+        # Temperature from an Attribute node: with the grid in Temperature Attribute instead,
+        # Cycles 5.0.1 renders the volume as a sliver (install/README.md).
+        attr = nt.nodes.new('ShaderNodeAttribute')
+        attr.attribute_name = "flame"
+        mul = nt.nodes.new('ShaderNodeMath')
+        mul.operation = 'MULTIPLY'
+        mul.inputs[1].default_value = 3000.0
+        nt.links.new(attr.outputs['Fac'], mul.inputs[0])
+        nt.links.new(mul.outputs[0], pv.inputs['Temperature'])
+        pv.inputs['Blackbody Intensity'].default_value = 1.0
+        pv.inputs['Temperature Attribute'].default_value = ""
+    nt.links.new(pv.outputs[0], o.inputs['Volume'])
+    assign(ob, mat)
+    return ob, pv

@@ -187,8 +187,6 @@ def test_export_lights_camera_material(fresh):
     s.data.angle = math.radians(2.0)
     p = bs.point(power=100.0, location=(1.0, 2.0, 3.0))
     p.data.shadow_soft_size = 0.25
-    spot = bpy.data.lights.new("Spot", 'SPOT')
-    bs._link(bpy.data.objects.new("Spot", spot))
     world = bpy.data.worlds.new("W")
     bpy.context.scene.world = world
     if not world.node_tree:
@@ -215,7 +213,6 @@ def test_export_lights_camera_material(fresh):
     assert lights["point"]["position"] == pytest.approx([1, 2, 3])
     assert lights["point"]["radius"] == pytest.approx(0.25)
     assert lights["dome"]["color"] == pytest.approx([0.4, 0.6, 1.0])
-    assert any("Spot" in w and "not supported" in w for w in warnings)
     c = doc["camera"]
     assert (c["width"], c["height"]) == (30, 60)
     # AUTO fit on a portrait frame: the 36 mm sensor spans the height
@@ -226,6 +223,62 @@ def test_export_lights_camera_material(fresh):
     cam.data.sensor_fit = 'HORIZONTAL'
     doc, _, _ = se.export(bpy.context, ob, str(fresh), 1)
     assert doc["camera"]["fov_deg"] == pytest.approx(math.degrees(vfov), rel=1e-5)
+
+
+def test_export_spot_and_area_lights(fresh):
+    """Spot: P/(4 pi) W/sr on the axis, half of spot_size, spot_blend, radius, along local -Z.
+    Area: radiance P/(pi A) with A in the world (object scale), normal local -Z, tangent local X;
+    an ellipse as the disk of its area; spread < 180 and other unsupported settings warned."""
+    se = sys.modules[MODULE + ".scene_export"]
+    ob = bs.noise_volume(res=6)
+    bs.scatter_absorb_material(ob)
+    sp = bs.spot(power=100.0, location=(1.0, 2.0, 3.0), target=(1.0, 2.0, 0.0), size_deg=50.0, blend=0.25,
+                 radius=0.2)
+    sp.data.color = (1.0, 0.5, 0.25)
+    sp.data.exposure = 1.0
+    rect = bs.area('RECTANGLE', power=60.0, size=(2.0, 0.5), location=(0.0, 0.0, 2.0), target=(0.0, 0.0, 0.0),
+                   name="Rect")
+    rect.rotation_euler = (0.0, 0.0, math.radians(90.0))  # faces down, width along world +Y
+    rect.scale = (1.5, 1.0, 1.0)
+    sq = bs.area('SQUARE', power=10.0, size=(0.5, 3.0), location=(0.0, -2.0, 0.0), target=(0.0, 0.0, 0.0),
+                 name="Square")
+    sq.data.spread = math.radians(90.0)
+    bs.area('DISK', power=10.0, size=(0.8, 3.0), location=(2.0, 0.0, 0.0), name="Disk")
+    bs.area('ELLIPSE', power=10.0, size=(0.8, 0.2), location=(-2.0, 0.0, 0.0), name="Ellipse")
+    bs.camera()
+    doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1)
+    by = {}
+    for l in doc["lights"]:
+        by.setdefault(l["type"], []).append(l)
+    s = by["spot"][0]
+    assert s["intensity"] == pytest.approx([200.0 / (4 * math.pi) * c for c in (1.0, 0.5, 0.25)], rel=1e-5)
+    assert s["position"] == pytest.approx([1, 2, 3]) and s["direction"] == pytest.approx([0, 0, -1], abs=1e-5)
+    assert s["cone_half_angle_deg"] == pytest.approx(25.0, rel=1e-5) and s["blend"] == pytest.approx(0.25)
+    assert s["radius"] == pytest.approx(0.2)
+    r, q = by["rect"]
+    if r["size"][1] > q["size"][1] + 1.0:
+        r, q = q, r
+    assert r["size"] == pytest.approx([3.0, 0.5], rel=1e-5)  # 2 m x 1.5 (scale) by 0.5 m
+    assert r["radiance"] == pytest.approx([60.0 / (math.pi * 1.5)] * 3, rel=1e-5)
+    assert r["normal"] == pytest.approx([0, 0, -1], abs=1e-5) and r["tangent"] == pytest.approx([0, 1, 0], abs=1e-5)
+    assert q["size"] == pytest.approx([0.5, 0.5]), "a square uses `size` only"
+    assert q["normal"] == pytest.approx([0, 1, 0], abs=1e-5)
+    assert q["radiance"] == pytest.approx([10.0 / (math.pi * 0.25)] * 3, rel=1e-5)
+    disk, ell = sorted(by["disk"], key=lambda l: -l["radius"])
+    assert disk["radius"] == pytest.approx(0.4) and disk["normal"] == pytest.approx([-1, 0, 0], abs=1e-6)  # aimed at 0
+    assert disk["radiance"] == pytest.approx([10.0 / (math.pi * math.pi * 0.16)] * 3, rel=1e-5)
+    assert ell["radius"] == pytest.approx(math.sqrt(0.8 * 0.2) / 2, rel=1e-5)  # the same area
+    assert ell["radiance"] == pytest.approx([10.0 / (math.pi * math.pi * 0.04)] * 3, rel=1e-5)  # P / (pi A), A = pi 0.8 0.2 / 4
+    assert any("Ellipse" in w and "same area" in w for w in warnings), warnings
+    assert any("Square" in w and "spread" in w for w in warnings), warnings
+    assert not any("Disk" in w or "Rect" in w or "Spot" in w for w in warnings), warnings
+    # pop leaves them out, and says so in one message made from POP_LIGHT_TYPES
+    err, warn = se.pop_light_messages([l["type"] for l in doc["lights"]])
+    assert "sun lights only" in err and warn is None
+    err, warn = se.pop_light_messages(["distant", "spot", "rect", "disk", "dome"])
+    assert err is None and "spot lights, area lights and the world are left out" in warn
+    err, warn = se.pop_light_messages(["distant", "dome"])
+    assert err is None and "the world is left out" in warn
 
 
 def test_export_principled_volume(fresh):
@@ -741,7 +794,7 @@ def test_modal_path_with_progress_and_esc(fresh):
         ["Smoke_scattering_0001.vdb", "Smoke_scattering_0002.vdb"]  # the first run's, nothing new
 
 
-@pytest.mark.parametrize("light", ["sun", "point"])
+@pytest.mark.parametrize("light", ["sun", "point", "spot", "rect", "disk"])
 def test_single_scattering_matches_cycles(fresh, light):
     """Light units, directions, camera, object transform and anisotropy, end to end: Cycles with
     its default volume_bounces = 0 renders single scattering, which volscatter's compositor also
@@ -755,11 +808,20 @@ def test_single_scattering_matches_cycles(fresh, light):
     bs.scatter_absorb_material(ob, density=3.0, albedo=(0.9, 0.9, 0.9), g=0.3)
     if light == "sun":
         bs.sun(strength=3.0, rotation=(0.6, 0.3, 0.0))
-    else:
+    elif light == "point":
         bs.point(power=300.0, location=(2.0, -1.5, 1.5))
+    elif light == "spot":
+        # the cone edge (15 degrees, blend 0.3) runs through the volume, off its centre
+        bs.spot(power=300.0, location=(2.0, -1.5, 1.5), target=(0.5, 0.3, 0.0), size_deg=30.0, blend=0.3)
+    elif light == "rect":
+        # 1 x 0.5 m, stretched 1.5x along its width by the object's scale
+        a = bs.area('RECTANGLE', power=200.0, size=(1.0, 0.5), location=(1.6, -1.4, 1.3))
+        a.scale = (1.5, 1.0, 1.0)
+    else:
+        bs.area('DISK', power=200.0, size=(0.8, 0.8), location=(-1.7, -1.3, 1.1))
     bs.camera(width=16, height=12)
-    doc, _, _ = se.export(bpy.context, ob, str(fresh), 1, {"name": "reference", "grid_resolution": 6, "grid_spp": 2})
-    assert [l["type"] for l in doc["lights"]] == [{"sun": "distant", "point": "point"}[light]]
+    doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1, {"name": "reference", "grid_resolution": 6, "grid_spp": 2})
+    assert [l["type"] for l in doc["lights"]] == [light.replace("sun", "distant")], warnings
     with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite() as img:
         w, h = img.size()
         single = list(img.aov("single"))
@@ -768,11 +830,14 @@ def test_single_scattering_matches_cycles(fresh, light):
     assert sc.cycles.volume_bounces == 0
     sc.render.film_transparent = True
     sc.render.filter_size = 0.01
-    cw, ch, px = bs.render_cycles(str(fresh / "single.exr"), samples=32)
+    # the local lights light part of the volume only, and Cycles' mean converges slowly there:
+    # for the spot 3% under its 1024-spp value at 32 and at 128 spp (a few seconds at 1024)
+    cw, ch, px = bs.render_cycles(str(fresh / "single.exr"), samples=32 if light in ("sun", "point") else 1024)
     assert (cw, ch) == (w, h)
     n = w * h
     ours = [sum(single[c::3]) / n for c in range(3)] + [sum(alpha) / n]
     cyc = [sum(px[c::4]) / n for c in range(4)]
+    print("%s: Cycles %s, volscatter %s, ratio %s" % (light, cyc, ours, [cyc[c] / ours[c] for c in range(4)]))
     assert ours[0] > 1e-3
     for c in range(3):
         assert cyc[c] == pytest.approx(ours[c], rel=0.1), "Cycles %s, volscatter %s" % (cyc, ours)
@@ -789,3 +854,68 @@ def test_saved_blend_keeps_relative_paths(fresh):
     vol = bpy.data.objects["Smoke_scattering"].data
     assert vol.filepath == "//volscatter/Smoke_scattering_0001.vdb"
     assert os.path.isfile(str(fresh / "volscatter" / "Smoke_scattering_0001.vdb"))
+
+
+@pytest.mark.parametrize("mode", ["strength", "blackbody"])
+def test_emission_scattered_by_smoke_matches_cycles(fresh, mode):
+    """Principled Volume emission (Emission Strength from a 'flame' grid, or blackbody from it as
+    a temperature grid) is exported to `medium.emission`, and the light the smoke scatters from
+    it agrees with Cycles. Cycles with no lights and its default volume_bounces = 0 renders the
+    emission seen directly plus its single scattering (an emission picked up by the ray that
+    leaves the first scattering point; measured on this scene: 0.0047 red, against 0.0045 for
+    volscatter's path-traced single-scattering AOV, and 0.0096 with volume_bounces = 1, which
+    adds the second order). Rendering again with Color black (the same extinction, sigma_t =
+    Density, and no scattering) leaves the direct part, so the difference is the single
+    scattering of the emission, which volscatter's compositor computes (AOV "single", from 1024
+    VPLs). Compared as means over the image per channel. Tolerance 15%: Cycles' noise at 64
+    samples (a few % on the mean) and the VPLs' bias (-4% against the path tracer here)."""
+    se = sys.modules[MODULE + ".scene_export"]
+    native = _native()
+    ob, pv = bs.emissive_volume(mode=mode)
+    bs.camera(width=16, height=12)
+    doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1, {"name": "reference", "grid_resolution": 6, "grid_spp": 2})
+    em = doc["medium"]["emission"]
+    assert doc["lights"] == [] and not [w for w in warnings if "emission" in w], warnings
+    if mode == "strength":
+        assert em["grid"] == "flame" and em["strength"] == pytest.approx(4.0)
+        assert em["color"] == pytest.approx([1.0, 0.5, 0.2])
+    else:
+        assert em["temperature_grid"] == "flame" and em["temperature"] == pytest.approx(3000.0)
+        assert em["blackbody_intensity"] == pytest.approx(1.0) and em["blackbody_tint"] == pytest.approx([1.0] * 3)
+    em["vpls"] = 1024
+    with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite() as img:
+        w, h = img.size()
+        single = list(img.aov("single"))
+    sc = bpy.context.scene
+    assert sc.cycles.volume_bounces == 0
+    sc.render.film_transparent = True
+    sc.render.filter_size = 0.01
+    _, _, pa = bs.render_cycles(str(fresh / "with_scattering.exr"), samples=64)
+    pv.inputs['Color'].default_value = (0.0, 0.0, 0.0, 1.0)
+    cw, ch, pb = bs.render_cycles(str(fresh / "absorbing.exr"), samples=64)
+    assert (cw, ch) == (w, h)
+    n = w * h
+    ours = [sum(single[c::3]) / n for c in range(3)]
+    cyc = [(sum(pa[c::4]) - sum(pb[c::4])) / n for c in range(3)]
+    print("scattered emission (%s): Cycles %s, volscatter %s" % (mode, cyc, ours))
+    assert ours[0] > 1e-4
+    for c in range(3):
+        assert ours[c] == pytest.approx(cyc[c], rel=0.15, abs=0.02 * max(cyc)), "Cycles %s, volscatter %s" % (cyc, ours)
+
+
+def test_emission_export_warnings(fresh):
+    """Emission volscatter cannot read is left out with a warning, never silently: a constant
+    Emission Strength (Cycles glows over the whole box) and a blackbody without its grid."""
+    se = sys.modules[MODULE + ".scene_export"]
+    ob, pv = bs.emissive_volume(mode="strength")
+    bs.camera(width=8, height=6)
+    bs.sun()
+    nt = pv.id_data
+    nt.links.remove(pv.inputs['Emission Strength'].links[0])
+    pv.inputs['Emission Strength'].default_value = 2.0
+    pv.inputs['Blackbody Intensity'].default_value = 1.0
+    pv.inputs['Temperature Attribute'].default_value = "temperature"
+    doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1)
+    assert "emission" not in doc["medium"]
+    assert any("constant Emission Strength" in w for w in warnings), warnings
+    assert any("temperature grid" in w for w in warnings), warnings

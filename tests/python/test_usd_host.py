@@ -106,6 +106,27 @@ def test_abi_version_and_errors():
         s.light_count()
 
 
+def test_local_lights_through_the_binding():
+    """Scene.add_spot_light / add_rect_light / add_disk_light reach vs_scene_add_*_light: valid
+    lights count, bad ones raise with the library's message and leave the scene unchanged."""
+    with Scene() as s:
+        s.add_spot_light([1, 0, 2], [0, 0, -1], [3, 3, 3], 20.0, blend=0.3, radius=0.1)
+        s.add_rect_light([0, 0, 2], [0, 0, -1], 1.0, 0.5, [1, 1, 1], tangent=[1, 0, 0])
+        s.add_rect_light([0, 0, 2], [0, 0, -1], 1.0, 0.5, [1, 1, 1])  # tangent NULL
+        s.add_disk_light([0, 0, 2], [0, 0, -1], 0.3, [1, 1, 1])
+        assert s.light_count() == 4
+        with pytest.raises(VolscatterError, match="blend") as e:
+            s.add_spot_light([0, 0, 0], [0, 0, -1], [1, 1, 1], 20.0, blend=2.0)
+        assert e.value.status == 5
+        with pytest.raises(VolscatterError, match="size"):
+            s.add_rect_light([0, 0, 0], [0, 0, -1], 0.0, 1.0, [1, 1, 1])
+        with pytest.raises(VolscatterError, match="normal"):
+            s.add_disk_light([0, 0, 0], [0, 0, 0], 0.3, [1, 1, 1])
+        with pytest.raises(VolscatterError, match="tangent"):
+            s.add_rect_light([0, 0, 0], [0, 0, -1], 1.0, 1.0, [1, 1, 1], tangent=[1, 0])
+        assert s.light_count() == 4
+
+
 def test_wrong_library_is_refused(tmp_path):
     code = ("import os, sys; sys.path.insert(0, %r); os.environ['VOLSCATTER_LIB'] = %r\n"
             "import volscatter\n"
@@ -279,13 +300,13 @@ def test_cli_bad_input(tmp_path, case):
 
 def test_cli_unsupported_light_warns_but_renders(tmp_path):
     stage, path = make_stage(tmp_path)
-    UsdLux.RectLight.Define(stage, "/World/Panel")
+    UsdLux.CylinderLight.Define(stage, "/World/Tube")
     UsdLux.SphereLight.Define(stage, "/World/Bulb").CreateIntensityAttr().Set(10.0)
     stage.Save()
     r = cli("render", path, "--solver", "pop", "--width", 16, "--height", 12, "-q",
             *sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), []), "--out", tmp_path / "w.exr")
     assert r.returncode == 0, r.stderr
-    assert "/World/Panel (RectLight) is not supported" in r.stderr
+    assert "/World/Tube (CylinderLight) is not supported" in r.stderr
     assert "solver pop does not handle point lights yet: light /World/Bulb" in r.stderr
 
 

@@ -242,15 +242,113 @@ def test_colour_temperature(tmp_path):
 
 def test_unsupported_lights_warn_by_name(tmp_path):
     stage, path = make_stage(tmp_path)
-    UsdLux.RectLight.Define(stage, "/L/rect")
-    UsdLux.DiskLight.Define(stage, "/L/disk")
     UsdLux.CylinderLight.Define(stage, "/L/tube")
     _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
     stage.Save()
     sc = S.read_stage(path)
     assert [l.path for l in sc.lights] == ["/L/sun"]
-    for p, t in (("/L/rect", "RectLight"), ("/L/disk", "DiskLight"), ("/L/tube", "CylinderLight")):
-        assert any(p in w and t in w and "not supported" in w for w in sc.warnings), sc.warnings
+    assert any("/L/tube" in w and "CylinderLight" in w and "not supported" in w for w in sc.warnings), sc.warnings
+
+
+def _shape(light, **attrs):
+    sh = UsdLux.ShapingAPI.Apply(light.GetPrim())
+    for k, v in attrs.items():
+        {"angle": sh.CreateShapingConeAngleAttr, "softness": sh.CreateShapingConeSoftnessAttr,
+         "focus": sh.CreateShapingFocusAttr}[k]().Set(v)
+    return sh
+
+
+def test_spot_from_sphere_light_with_shaping_api(tmp_path):
+    """UsdLux ShapingAPI on a SphereLight: a spot along the prim's -Z whose axis intensity is the
+    unshaped sphere's (shaping multiplies radiance, it does not renormalise), cut off at
+    shaping:cone:angle, faded per shaping:cone:softness."""
+    stage, path = make_stage(tmp_path)
+    a = _light(stage, UsdLux.SphereLight, "/L/spot", intensity=8.0, exposure=1.0, normalize=True)
+    a.CreateRadiusAttr().Set(0.2)
+    _shape(a, angle=30.0, softness=0.3, focus=2.0)
+    UsdGeom.Xformable(a).AddTranslateOp().Set(Gf.Vec3d(1, 2, 3))
+    UsdGeom.Xformable(a).AddRotateXOp().Set(90.0)  # -Z -> +Y
+    b = _light(stage, UsdLux.SphereLight, "/L/hard", intensity=2.0)
+    b.CreateRadiusAttr().Set(0.5)
+    _shape(b, angle=45.0)
+    c = _light(stage, UsdLux.SphereLight, "/L/default_cone", intensity=1.0, normalize=True)
+    _shape(c)  # the spec's default cone angle, 90: "emission beyond it is guaranteed to be zero"
+    d = _light(stage, UsdLux.SphereLight, "/L/open", intensity=1.0, normalize=True)
+    _shape(d, angle=180.0)
+    e = _light(stage, UsdLux.SphereLight, "/L/full_soft", intensity=1.0, normalize=True)
+    _shape(e, angle=30.0, softness=1.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    s = _by_path(sc, "/L/spot").json
+    assert s["type"] == "spot" and approx(s["position"], [1.0, 2.0, 3.0])
+    assert approx(s["direction"], [0.0, 1.0, 0.0], abs_=1e-6)
+    assert approx(s["intensity"], [16.0 / 4.0] * 3)  # normalize: I = intensity 2^exposure / 4
+    assert s["radius"] == pytest.approx(0.2) and s["cone_half_angle_deg"] == pytest.approx(30.0)
+    # the fades meet at their midpoint, 1/2 at 30 (1 - 0.3/2) = 25.5 degrees
+    cos_out, cos_mid = math.cos(math.radians(30.0)), math.cos(math.radians(25.5))
+    assert s["blend"] == pytest.approx(2.0 * (cos_mid - cos_out) / (1.0 - cos_out), rel=1e-6)
+    assert s["blend"] == pytest.approx(0.5458, abs=1e-4)
+    assert _by_path(sc, "/L/spot").detail["cone_fade_difference"] < 0.04
+    assert any("/L/spot" in w and "focus" in w for w in sc.warnings), sc.warnings
+    h = _by_path(sc, "/L/hard").json
+    assert h["type"] == "spot" and h["blend"] == 0.0 and h["cone_half_angle_deg"] == pytest.approx(45.0)
+    assert approx(h["intensity"], [2.0 * math.pi * 0.25] * 3)  # I = L pi r^2 without normalize
+    assert approx(h["direction"], [0.0, 0.0, -1.0])
+    assert _by_path(sc, "/L/default_cone").json["cone_half_angle_deg"] == pytest.approx(90.0)
+    assert _by_path(sc, "/L/open").json["type"] == "point"
+    assert _by_path(sc, "/L/full_soft").json["blend"] == 1.0
+    assert any("/L/full_soft" in w and "softness" in w for w in sc.warnings), sc.warnings
+    # Blender's convention: softness is Cycles' spot_blend
+    assert S.read_stage(path, light_convention="blender").lights[0].json["blend"] == pytest.approx(0.3)
+
+
+def test_rect_light_units_and_frame(tmp_path):
+    """RectLight: width along local X, height along local Y, emits towards local -Z; with
+    normalize the radiance is L' / world area (scale included)."""
+    stage, path = make_stage(tmp_path)
+    col = Gf.Vec3f(1.0, 0.5, 0.25)
+    a = _light(stage, UsdLux.RectLight, "/L/norm", intensity=6.0, exposure=1.0, color=col, normalize=True)
+    a.CreateWidthAttr().Set(2.0)
+    a.CreateHeightAttr().Set(0.5)
+    UsdGeom.Xformable(a).AddTranslateOp().Set(Gf.Vec3d(0, 0, 2))
+    UsdGeom.Xformable(a).AddRotateZOp().Set(90.0)   # local X -> world +Y
+    UsdGeom.Xformable(a).AddScaleOp().Set(Gf.Vec3f(1.5, 1.0, 1.0))
+    b = _light(stage, UsdLux.RectLight, "/L/plain", intensity=3.0)
+    b.CreateTextureFileAttr().Set(Sdf.AssetPath("panel.png"))
+    UsdGeom.Xformable(b).AddRotateXOp().Set(-90.0)  # -Z -> -Y
+    stage.Save()
+    sc = S.read_stage(path)
+    n = _by_path(sc, "/L/norm").json
+    assert n["type"] == "rect" and approx(n["position"], [0.0, 0.0, 2.0])
+    assert approx(n["normal"], [0.0, 0.0, -1.0], abs_=1e-6) and approx(n["tangent"], [0.0, 1.0, 0.0], abs_=1e-6)
+    assert approx(n["size"], [3.0, 0.5])
+    assert approx(n["radiance"], [12.0 * c / 1.5 for c in (1.0, 0.5, 0.25)])  # L = L' / (3 x 0.5 m^2)
+    p = _by_path(sc, "/L/plain").json
+    assert approx(p["size"], [1.0, 1.0]) and approx(p["radiance"], [3.0] * 3)  # spec defaults, no normalize
+    assert approx(p["normal"], [0.0, -1.0, 0.0], abs_=1e-6)
+    assert any("/L/plain" in w and "texture" in w for w in sc.warnings), sc.warnings
+
+
+def test_disk_light_units(tmp_path):
+    stage, path = make_stage(tmp_path, up="Y")
+    a = _light(stage, UsdLux.DiskLight, "/L/norm", intensity=5.0, normalize=True)
+    a.CreateRadiusAttr().Set(0.5)
+    UsdGeom.Xformable(a).AddScaleOp().Set(Gf.Vec3f(2.0, 2.0, 1.0))
+    b = _light(stage, UsdLux.DiskLight, "/L/ellipse", intensity=5.0)
+    UsdGeom.Xformable(b).AddScaleOp().Set(Gf.Vec3f(2.0, 0.5, 1.0))
+    c = _light(stage, UsdLux.DiskLight, "/L/shaped", intensity=5.0)
+    _shape(c, angle=40.0)
+    stage.Save()
+    sc = S.read_stage(path)
+    n = _by_path(sc, "/L/norm").json
+    assert n["type"] == "disk" and n["radius"] == pytest.approx(1.0)
+    assert approx(n["radiance"], [5.0 / math.pi] * 3)
+    # Y-up: the light's -Z (towards the viewer of a Y-up stage) is volscatter's +Y
+    assert approx(n["normal"], [0.0, 1.0, 0.0], abs_=1e-6)
+    e = _by_path(sc, "/L/ellipse").json
+    assert e["radius"] == pytest.approx(0.5) and approx(e["radiance"], [5.0] * 3)  # same area: 0.5 sqrt(2 x 0.5)
+    assert any("/L/ellipse" in w and "same area" in w for w in sc.warnings), sc.warnings
+    assert any("/L/shaped" in w and "ShapingAPI" in w for w in sc.warnings), sc.warnings
 
 
 def test_pop_warns_about_point_and_dome(tmp_path):

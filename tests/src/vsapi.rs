@@ -92,6 +92,9 @@ api! {
     vs_scene_clear_lights: fn(Scene) -> S;
     vs_scene_add_distant_light: fn(Scene, F, F, f32) -> S;
     vs_scene_add_point_light: fn(Scene, F, F, f32) -> S;
+    vs_scene_add_spot_light: fn(Scene, F, F, F, f32, f32, f32) -> S;
+    vs_scene_add_rect_light: fn(Scene, F, F, F, f32, f32, F) -> S;
+    vs_scene_add_disk_light: fn(Scene, F, F, f32, F) -> S;
     vs_scene_add_dome_light: fn(Scene, F) -> S;
     vs_scene_add_dome_texture: fn(Scene, Cs, f32) -> S;
     vs_scene_light_count: fn(Scene, *mut usize) -> S;

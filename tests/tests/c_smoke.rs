@@ -170,6 +170,32 @@ fn c_host_renders_and_matches_the_rust_api() {
         scene::build_light(&json::LightJson::Distant { direction: [-0.3, 0.5, -0.8], irradiance: json::Rgb::Rgb([4.0, 3.8, 3.5]), angle_deg: 0.0 }, "l", base).unwrap(),
         scene::build_light(&json::LightJson::Point { position: [1.5, -1.0, 1.0], intensity: json::Rgb::Rgb([2.0, 1.5, 1.0]), radius: 0.0 }, "l", base).unwrap(),
         scene::build_light(&json::LightJson::Dome { color: Some(json::Rgb::Rgb([0.1, 0.15, 0.25])), texture: None, intensity: 1.0 }, "l", base).unwrap(),
+        scene::build_light(
+            &json::LightJson::Spot {
+                position: [-1.5, -1.0, 1.2],
+                direction: [1.5, 1.0, -1.2],
+                intensity: json::Rgb::Rgb([3.0, 2.5, 2.0]),
+                cone_half_angle_deg: 25.0,
+                blend: 0.3,
+                radius: 0.0,
+            },
+            "l",
+            base,
+        )
+        .unwrap(),
+        scene::build_light(
+            &json::LightJson::Rect {
+                position: [0.0, 0.0, 1.5],
+                normal: [0.0, 0.0, -1.0],
+                tangent: Some([1.0, 1.0, 0.0]),
+                size: [0.6, 0.4],
+                radiance: json::Rgb::Rgb([0.8, 0.8, 1.0]),
+            },
+            "l",
+            base,
+        )
+        .unwrap(),
+        scene::build_light(&json::LightJson::Disk { position: [0.0, -1.5, 0.0], normal: [0.0, 1.0, 0.0], radius: 0.3, radiance: json::Rgb::Rgb([1.0, 0.7, 0.5]) }, "l", base).unwrap(),
     ];
     let camera = scene::build_camera(&json::CameraJson {
         position: [0.3, -4.0, 0.5],

@@ -95,6 +95,9 @@ _SIGNATURES = {
     "vs_scene_clear_lights": (c_int32, [_ScenePtr]),
     "vs_scene_add_distant_light": (c_int32, [_ScenePtr, _F, _F, c_float]),
     "vs_scene_add_point_light": (c_int32, [_ScenePtr, _F, _F, c_float]),
+    "vs_scene_add_spot_light": (c_int32, [_ScenePtr, _F, _F, _F, c_float, c_float, c_float]),
+    "vs_scene_add_rect_light": (c_int32, [_ScenePtr, _F, _F, _F, c_float, c_float, _F]),
+    "vs_scene_add_disk_light": (c_int32, [_ScenePtr, _F, _F, c_float, _F]),
     "vs_scene_add_dome_light": (c_int32, [_ScenePtr, _F]),
     "vs_scene_add_dome_texture": (c_int32, [_ScenePtr, c_char_p, c_float]),
     "vs_scene_light_count": (c_int32, [_ScenePtr, POINTER(c_size_t)]),
@@ -322,6 +325,22 @@ class Scene(_Handle):
     def add_point_light(self, position, intensity, radius: float = 0.0):
         self._check(lib().vs_scene_add_point_light(self._p(), _floats(position, 3, "position"),
                                                    _floats(intensity, 3, "intensity"), float(radius)), "point light")
+
+    def add_spot_light(self, position, direction, intensity, cone_half_angle_deg: float, blend: float = 0.0,
+                       radius: float = 0.0):
+        self._check(lib().vs_scene_add_spot_light(self._p(), _floats(position, 3, "position"),
+                                                  _floats(direction, 3, "direction"), _floats(intensity, 3, "intensity"),
+                                                  float(cone_half_angle_deg), float(blend), float(radius)), "spot light")
+
+    def add_rect_light(self, position, normal, width: float, height: float, radiance, tangent=None):
+        t = None if tangent is None else _floats(tangent, 3, "tangent")
+        self._check(lib().vs_scene_add_rect_light(self._p(), _floats(position, 3, "position"), _floats(normal, 3, "normal"),
+                                                  t, float(width), float(height), _floats(radiance, 3, "radiance")),
+                    "rect light")
+
+    def add_disk_light(self, position, normal, radius: float, radiance):
+        self._check(lib().vs_scene_add_disk_light(self._p(), _floats(position, 3, "position"), _floats(normal, 3, "normal"),
+                                                  float(radius), _floats(radiance, 3, "radiance")), "disk light")
 
     def add_dome_light(self, color):
         self._check(lib().vs_scene_add_dome_light(self._p(), _floats(color, 3, "color")), "dome light")

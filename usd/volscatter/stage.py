@@ -17,6 +17,34 @@ Everything here is pure translation; no native code runs. Conventions (see usd/R
     (W/sr); with ``normalize`` the sizeFactor is the sphere's area 4 pi r^2, so
     I = intensity * 2^exposure * color / 4, independent of r. ``treatAsPoint`` keeps I and
     places a point (radius 0).
+  - SphereLight with UsdLuxShapingAPI applied -> spot, unless ``shaping:cone:angle`` >= 180
+    (no cut-off: a point). The spec's "light's primary axis" is the prim's -Z, as for every
+    UsdLux emission direction. Shaping multiplies the emitted radiance and does not renormalise
+    it, so the spot's axis intensity is the unshaped sphere's I above.
+      * ``shaping:cone:angle`` (degrees off the axis, default 90; emission beyond it "is
+        guaranteed to be zero") -> ``cone_half_angle_deg``. Note that the default of 90 on an
+        applied ShapingAPI already cuts the back hemisphere, per the spec text.
+      * ``shaping:cone:softness`` s (clamped to [0, 1]): UsdLux fades with
+        1 - smoothstep(theta_off, a (1 - s), a) in the *angle*; volscatter's spot (Cycles'
+        blend) is a smoothstep in the *cosine* from cos a up to cos_in = cos a + (1 - cos a)
+        blend. Both end at a; we match the fade's midpoint (1/2 at the angle a (1 - s/2)):
+        cos_in = 2 cos(a (1 - s/2)) - cos a, clamped to 1 (blend <= 1). The curves then differ
+        by at most 0.04 of the axis intensity, and the cone's power by 0.6%, at a = 30 deg,
+        s = 0.3; by 0.06 and 1.6% at a = 60 deg, s = 0.5; but a cosine smoothstep cannot start
+        at the axis, so for s -> 1 the difference grows to 0.35 (1.6x the power at a = 30,
+        s = 1). Where it exceeds 0.1 a warning gives it (``_cone_fade_difference``).
+      * ``shaping:focus`` > 0 (|cos|^focus on the radiance) and ``shaping:focusTint``, and
+        ``shaping:ies:file``: not representable; ignored with a warning.
+    ShapingAPI with a cone or focus on any other light type: ignored with a warning.
+  - RectLight (``width`` along the prim's local X, ``height`` along local Y, both scaled by the
+    transform) -> rect emitting from its local -Z, tangent = local X. Radiance L (W/m^2/sr);
+    with ``normalize`` the sizeFactor is the world-space area width * height. A
+    ``texture:file`` is ignored (warning): the light is emitted with its uniform colour.
+  - DiskLight (``radius`` in the XY plane, scaled by the transform) -> disk emitting from its
+    local -Z, radiance L; with ``normalize`` sizeFactor = pi r^2 (world space). A
+    non-uniformly scaled disk (an ellipse) becomes the disk of the same area, with a warning.
+  - CylinderLight, GeometryLight, PortalLight, plugin lights: not supported; a warning names
+    the prim and the light is left out.
   - DomeLight: radiance = intensity * 2^exposure * color (* texture); normalize is ignored.
   - Colour temperature (when enabled): UsdLuxBlackbodyTemperatureAsRgb(T) divided
     component-wise by its value at 6500 K, as the spec says ("normalized such that the default
@@ -31,6 +59,18 @@ Everything here is pure translation; no native code runs. Conventions (see usd/R
   factor 4 back so that E equals the sun's strength in W/m^2, as Cycles renders it. Blender's
   SphereLight export (intensity = power / pi, normalize = 1) already agrees with UsdLux:
   I = (P / pi) / 4 = P / (4 pi) W/sr, Cycles' point light intensity. No factor there.
+  Blender 5.0's spot and area lights (checked by exporting them with bpy):
+  - a spot of power P, spot_size S, spot_blend b, radius r is a SphereLight with ShapingAPI:
+    intensity P / pi, normalize 1, radius r, ``shaping:cone:angle`` = S / 2 and
+    ``shaping:cone:softness`` = b (Blender's importer reads them back the same way). The
+    intensity agrees with UsdLux (P / (4 pi) W/sr on the axis, as Cycles renders a spot of P
+    watts), but softness holds Cycles' blend, a fade in the cosine: under the Blender
+    convention blend = softness, not the angle-to-cosine mapping above.
+  - an area light of power P is a RectLight (square, rectangle: width ``size``, height
+    ``size_y``) or a DiskLight (disk: radius size / 2; ellipse: radius (size + size_y) / 4)
+    with intensity P / pi and normalize 1: UsdLux radiance (P / pi) / A, Cycles' radiance
+    P / (pi A). No factor there either; the ellipse's written disk has Blender's power, not
+    its shape.
 """
 
 from __future__ import annotations
@@ -50,9 +90,8 @@ DEFAULT_DENSITY_SCALE = 1.0
 DEFAULT_ALBEDO = 1.0
 DEFAULT_G = 0.0
 
-#: Light types read today, and those reported as unsupported.
-UNSUPPORTED_LIGHT_TYPES = ("RectLight", "DiskLight", "CylinderLight", "GeometryLight", "PortalLight",
-                           "PluginLight")
+#: Light types reported as unsupported (warned and left out).
+UNSUPPORTED_LIGHT_TYPES = ("CylinderLight", "GeometryLight", "PortalLight", "PluginLight")
 
 
 def _pxr():
@@ -263,6 +302,38 @@ class StageScene:
 
 
 # ----------------------------------------------------------------------------------------------
+
+def _smoothstep(x: float) -> float:
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def usdlux_softness_to_blend(cone_angle_deg: float, softness: float) -> float:
+    """volscatter's (Cycles') spot blend whose fade, a smoothstep in the cosine, has its
+    midpoint where UsdLux's fade in the angle has its own: at cone_angle * (1 - softness/2)."""
+    if softness <= 0.0:
+        return 0.0
+    a = math.radians(cone_angle_deg)
+    cos_outer = math.cos(a)
+    cos_inner = min(2.0 * math.cos(a * (1.0 - 0.5 * softness)) - cos_outer, 1.0)
+    return min(max((cos_inner - cos_outer) / (1.0 - cos_outer), 0.0), 1.0)
+
+
+def _cone_fade_difference(cone_angle_deg: float, softness: float, blend: float, n: int = 400) -> float:
+    """Largest difference between UsdLux's cone fade (softness) and volscatter's (blend), as
+    fractions of the axis intensity, over the cone."""
+    a = math.radians(cone_angle_deg)
+    cos_outer = math.cos(a)
+    cos_inner = cos_outer + (1.0 - cos_outer) * blend
+    start = a * (1.0 - softness)
+    worst = 0.0
+    for i in range(n + 1):
+        t = a * i / n
+        usd = 1.0 - _smoothstep((t - start) / (a - start)) if a > start else 1.0
+        ours = _smoothstep((math.cos(t) - cos_outer) / (cos_inner - cos_outer)) if cos_inner > cos_outer else 1.0
+        worst = max(worst, abs(usd - ours))
+    return worst
+
 
 def open_stage(path):
     """Opens a stage; a missing or malformed file gives VolscatterError."""
@@ -530,6 +601,10 @@ class _Reader:
                 out.append(self.distant(prim))
             elif prim.IsA(UsdLux.SphereLight):
                 out.append(self.sphere(prim))
+            elif prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight):
+                info = self.rect(prim) if prim.IsA(UsdLux.RectLight) else self.disk(prim)
+                if info is not None:
+                    out.append(info)
             elif prim.IsA(UsdLux.DomeLight) or tname == "DomeLight_1":
                 out.append(self.dome(prim))
             else:
@@ -552,13 +627,22 @@ class _Reader:
         rgb = [s * color[i] * bb[i] for i in range(3)]
         detail = {"intensity": intensity, "exposure": exposure, "color": color, "normalize": normalize,
                   "color_temperature": kelvin if ct_on else None, "blackbody": list(bb)}
-        if prim.HasAPI(UsdLux.ShapingAPI):
-            sh = UsdLux.ShapingAPI(prim)
-            cone = float(_get(sh.GetShapingConeAngleAttr(), self.t, 90.0))
-            ies = _get(sh.GetShapingIesFileAttr(), self.t)
-            if cone < 90.0 or (ies is not None and ies.path):
-                self.warnings.append(f"light {prim.GetPath()}: ShapingAPI (cone/IES) is not supported; emitted as unshaped")
+        if prim.HasAPI(UsdLux.ShapingAPI) and not prim.IsA(UsdLux.SphereLight):
+            sh = self._shaping(prim)
+            if sh["cone_angle"] < 180.0 or sh["focus"] > 0.0 or sh["ies"]:
+                self.warnings.append(f"light {prim.GetPath()}: ShapingAPI (cone/focus/IES) on a {prim.GetTypeName()} is "
+                                     "not supported; emitted as unshaped")
         return rgb, normalize, detail
+
+    def _shaping(self, prim) -> dict:
+        """The UsdLuxShapingAPI inputs volscatter reads (spec defaults when unauthored)."""
+        from pxr import UsdLux
+        sh = UsdLux.ShapingAPI(prim)
+        ies = _get(sh.GetShapingIesFileAttr(), self.t)
+        return {"cone_angle": float(_get(sh.GetShapingConeAngleAttr(), self.t, 90.0)),
+                "cone_softness": float(_get(sh.GetShapingConeSoftnessAttr(), self.t, 0.0)),
+                "focus": float(_get(sh.GetShapingFocusAttr(), self.t, 0.0)),
+                "ies": str(ies.path) if ies is not None and ies.path else ""}
 
     def distant(self, prim) -> LightInfo:
         from pxr import UsdLux
@@ -604,9 +688,89 @@ class _Reader:
                 self.warnings.append(f"light {prim.GetPath()}: radius 0 without normalize emits nothing (UsdLux: L * pi r^2)")
         pos = self.point(m4)
         detail.update({"radius_m": r, "treat_as_point": as_point})
-        return LightInfo(path=str(prim.GetPath()), usd_type="SphereLight",
-                         json={"type": "point", "position": pos, "intensity": intensity,
-                               "radius": 0.0 if as_point else r}, detail=detail)
+        js = {"type": "point", "position": pos, "intensity": intensity, "radius": 0.0 if as_point else r}
+        if prim.HasAPI(UsdLux.ShapingAPI):
+            js = self._spot(prim, m4, js, detail)
+        return LightInfo(path=str(prim.GetPath()), usd_type="SphereLight", json=js, detail=detail)
+
+    def _spot(self, prim, m4, point_json, detail) -> dict:
+        """A shaped SphereLight: a spot along the prim's -Z (see the module's notes)."""
+        sh = self._shaping(prim)
+        detail["shaping"] = sh
+        where = f"light {prim.GetPath()}"
+        if sh["focus"] > 0.0:
+            self.warnings.append(f"{where}: shaping:focus {sh['focus']:g} is not supported and was ignored")
+        if sh["ies"]:
+            self.warnings.append(f"{where}: IES profile {sh['ies']!r} is not supported and was ignored")
+        angle = sh["cone_angle"]
+        if angle >= 180.0:
+            return point_json
+        if angle <= 0.0:
+            self.warnings.append(f"{where}: shaping:cone:angle {angle:g} emits nothing: left as a 0.01 degree cone")
+        angle = max(angle, 0.01)
+        softness = min(max(sh["cone_softness"], 0.0), 1.0)
+        if self.light_convention == "blender":
+            blend = softness  # Blender writes Cycles' spot_blend (a fade in the cosine) as the softness
+        else:
+            blend = usdlux_softness_to_blend(angle, softness)
+            diff = _cone_fade_difference(angle, softness, blend)
+            detail["cone_fade_difference"] = diff
+            if diff > 0.1:
+                self.warnings.append(f"{where}: shaping:cone:softness {softness:g} (a fade in the angle) is approximated "
+                                     f"by a fade in the cosine; they differ by up to {diff:.2f} of the axis intensity")
+        detail.update({"cone_half_angle_deg": angle, "blend": blend})
+        return {"type": "spot", "position": point_json["position"], "direction": self.direction(m4, (0.0, 0.0, -1.0)),
+                "intensity": point_json["intensity"], "cone_half_angle_deg": angle, "blend": min(max(blend, 0.0), 1.0),
+                "radius": point_json["radius"]}
+
+    @staticmethod
+    def _axis_scales(m4) -> Tuple[float, float]:
+        """Lengths of the prim's local X and Y axes in the world (metres per local unit)."""
+        return tuple(math.sqrt(sum(m4[i][j] ** 2 for i in range(3))) for j in range(2))
+
+    def rect(self, prim) -> Optional[LightInfo]:
+        from pxr import UsdLux
+        rgb, normalize, detail = self._scalar(prim)
+        light = UsdLux.RectLight(prim)
+        m4 = self.world4(prim)
+        sx, sy = self._axis_scales(m4)
+        w = abs(float(_get(light.GetWidthAttr(), self.t, 1.0))) * sx
+        h = abs(float(_get(light.GetHeightAttr(), self.t, 1.0))) * sy
+        tex = _get(light.GetTextureFileAttr(), self.t)
+        if tex is not None and tex.path:
+            self.warnings.append(f"light {prim.GetPath()}: RectLight texture {tex.path!r} is not supported; "
+                                 "emitted with its uniform colour")
+        area = w * h
+        detail.update({"width_m": w, "height_m": h, "area_m2": area})
+        if area <= 0.0:
+            self.warnings.append(f"light {prim.GetPath()}: RectLight of zero area emits nothing: left out")
+            return None
+        radiance = [c / area for c in rgb] if normalize else rgb
+        return LightInfo(path=str(prim.GetPath()), usd_type="RectLight",
+                         json={"type": "rect", "position": self.point(m4), "normal": self.direction(m4, (0.0, 0.0, -1.0)),
+                               "tangent": self.direction(m4, (1.0, 0.0, 0.0)), "size": [w, h], "radiance": radiance},
+                         detail=detail)
+
+    def disk(self, prim) -> Optional[LightInfo]:
+        from pxr import UsdLux
+        rgb, normalize, detail = self._scalar(prim)
+        light = UsdLux.DiskLight(prim)
+        m4 = self.world4(prim)
+        sx, sy = self._axis_scales(m4)
+        r_local = abs(float(_get(light.GetRadiusAttr(), self.t, 0.5)))
+        if abs(sx - sy) > 1e-4 * max(sx, sy):
+            self.warnings.append(f"light {prim.GetPath()}: a non-uniformly scaled DiskLight (an ellipse) is read as "
+                                 "the disk of the same area")
+        r = r_local * math.sqrt(sx * sy)  # the disk of the world-space area
+        area = math.pi * r * r
+        detail.update({"radius_m": r, "area_m2": area})
+        if area <= 0.0:
+            self.warnings.append(f"light {prim.GetPath()}: DiskLight of zero radius emits nothing: left out")
+            return None
+        radiance = [c / area for c in rgb] if normalize else rgb
+        return LightInfo(path=str(prim.GetPath()), usd_type="DiskLight",
+                         json={"type": "disk", "position": self.point(m4), "normal": self.direction(m4, (0.0, 0.0, -1.0)),
+                               "radius": r, "radiance": radiance}, detail=detail)
 
     def dome(self, prim) -> LightInfo:
         from pxr import UsdLux

@@ -15,9 +15,9 @@ pub const BRICK: i32 = 1 << BRICK_LOG2;
 pub const BRICK_VOXELS: usize = (BRICK * BRICK * BRICK) as usize;
 
 /// Table entry meaning "all zero".
-const EMPTY: u32 = 0;
+pub const EMPTY: u32 = 0;
 /// Table entries with this bit set index `constants`; otherwise entry - 1 indexes `bricks`.
-const CONSTANT_BIT: u32 = 1 << 31;
+pub const CONSTANT_BIT: u32 = 1 << 31;
 
 /// Limits checked *before* memory is allocated for a grid.
 #[derive(Clone, Copy, Debug)]
@@ -106,6 +106,13 @@ impl DensityGrid {
     pub fn max_value(&self) -> f32 {
         self.max_value
     }
+    /// The sparse storage as it is, for uploads that keep it sparse (volscatter-gpu): corner and
+    /// size of the table in bricks, the table (`EMPTY`, `CONSTANT_BIT | i` for `constants[i]`,
+    /// else `i + 1` for `bricks[i]`), the bricks (8^3 voxels, x fastest) and the constants.
+    pub fn storage(&self) -> (IVec3, IVec3, &[u32], &[[f32; BRICK_VOXELS]], &[f32]) {
+        (self.brick_min, self.brick_dims, &self.table, &self.bricks, &self.constants)
+    }
+
     pub fn memory_bytes(&self) -> u64 {
         (self.table.len() * 4 + self.bricks.len() * BRICK_VOXELS * 4 + self.constants.len() * 4) as u64
     }

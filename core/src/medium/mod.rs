@@ -2,6 +2,9 @@
 //! with the material that turns density into coefficients (DESIGN.md "Scene model and units"):
 //! `sigma_t = density_scale * density`, `sigma_s = albedo * sigma_t`, HG anisotropy `g`.
 
+pub mod blackbody;
+mod cie1931;
+pub mod emission;
 pub mod grid;
 pub mod majorant;
 pub mod procedural;
@@ -9,6 +12,7 @@ pub mod raw;
 
 use glam::{Affine3A, IVec3, Vec3};
 
+pub use emission::{Emission, EmissionLaw, EmissionTerm};
 pub use grid::{DensityGrid, DensityGridBuilder, GridLimits};
 pub use majorant::MajorantGrid;
 
@@ -23,11 +27,13 @@ pub struct Medium {
     pub density_scale: Vec3,
     pub albedo: Vec3,
     pub g: f32,
+    /// Volume emission (fire), if any: see emission.rs.
+    pub emission: Option<Emission>,
 }
 
 impl Medium {
     pub fn new(grid: DensityGrid, index_to_world: Affine3A, density_scale: Vec3, albedo: Vec3, g: f32) -> Self {
-        Medium { grid, index_to_world, world_to_index: index_to_world.inverse(), density_scale, albedo, g }
+        Medium { grid, index_to_world, world_to_index: index_to_world.inverse(), density_scale, albedo, g, emission: None }
     }
 
     /// Index-space box outside which the density is exactly zero (one voxel of trilinear

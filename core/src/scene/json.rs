@@ -65,6 +65,40 @@ pub struct MediumJson {
     /// Row-major object-to-world matrix applied after the grid's own index-to-object map.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transform: Option<Vec<f32>>,
+    /// Volume emission (fire): see `EmissionJson`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub emission: Option<EmissionJson>,
+}
+
+/// Emission of the medium, radiance per metre (W/m^3/sr), as Principled Volume's:
+/// `strength * color * grid + blackbody_intensity * blackbody_tint * blackbody(temperature *
+/// temperature_grid)`. Grids are float grids of the medium's VDB file (or `"density"`, the
+/// density grid itself, for any medium). At least one of `grid` and `temperature_grid`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmissionJson {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid: Option<String>,
+    #[serde(default = "one")]
+    pub color: Rgb,
+    #[serde(default = "one_f")]
+    pub strength: f32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_grid: Option<String>,
+    /// Kelvin per unit of `temperature_grid` (Principled Volume's Temperature input).
+    #[serde(default = "default_temperature")]
+    pub temperature: f32,
+    #[serde(default = "one_f")]
+    pub blackbody_intensity: f32,
+    #[serde(default = "white")]
+    pub blackbody_tint: Rgb,
+    /// Virtual point lights made of the emission by the light translation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vpls: Option<u32>,
+}
+
+fn default_temperature() -> f32 {
+    1000.0
 }
 
 fn one() -> Rgb {

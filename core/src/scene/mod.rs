@@ -2,6 +2,7 @@
 //! versioned JSON form (`json.rs`, docs/scene-format.md) or piecewise by hosts.
 
 pub mod camera;
+pub mod emission;
 pub mod environment;
 pub mod json;
 pub mod light;
@@ -296,7 +297,13 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
         let file = m.vdb.as_ref().unwrap();
         crate::vdb::load_density(&base_dir.join(file), m.grid.as_deref(), limits)?
     };
-    Ok(Medium::new(grid, object_to_world * index_to_object, density_scale, albedo, m.g))
+    let mut medium = Medium::new(grid, object_to_world * index_to_object, density_scale, albedo, m.g);
+    if let Some(e) = &m.emission {
+        let vdb = m.vdb.as_ref().map(|f| base_dir.join(f));
+        let src = emission::DensitySource { vdb: vdb.as_deref(), grid: &medium.grid, index_to_object, object_to_world };
+        medium.emission = Some(emission::build_emission(e, &src, limits)?);
+    }
+    Ok(medium)
 }
 
 #[cfg(test)]

@@ -122,13 +122,11 @@ class _JobOperator:
         for w in warnings:
             self._warn(w)
         if self._solver["name"] == "pop":
-            kinds = [l["type"] for l in doc["lights"]]
-            if "distant" not in kinds:
-                raise ExportError("the Principal Ordinates solver handles sun lights only so far, and the scene has "
-                                  "none; choose the Reference solver")
-            if any(k != "distant" for k in kinds):
-                self._warn("the Principal Ordinates solver handles sun lights only so far: point lights and the "
-                           "world are left out (choose Reference to include them)")
+            error, warning = scene_export.pop_light_messages([l["type"] for l in doc["lights"]])
+            if error:
+                raise ExportError(error)
+            if warning:
+                self._warn(warning)
         return doc
 
     def image_size(self, context):

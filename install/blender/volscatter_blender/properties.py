@@ -3,6 +3,8 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
 
+from . import scene_export
+
 # Blender 5 warns about "//" paths in properties that do not declare support for them (the
 # option does not exist in older versions).
 _BLEND_RELATIVE = {'PATH_SUPPORTS_BLEND_RELATIVE'} if bpy.app.version >= (5, 0, 0) else set()
@@ -22,7 +24,7 @@ class VolscatterSettings(bpy.types.PropertyGroup):
     solver: EnumProperty(
         name="Solver",
         items=[
-            ('pop', "Principal Ordinates", "Fast propagation solver (sun lights only so far)"),
+            ('pop', "Principal Ordinates", "Fast propagation solver (%s)" % scene_export.pop_lights_note()),
             ('reference', "Reference", "Unbiased volumetric path tracer (slow, ground truth)"),
         ],
         default='reference',

@@ -343,6 +343,81 @@ pub unsafe extern "C" fn vs_scene_add_point_light(scene: *mut VsScene, position:
     })
 }
 
+/// Adds a spot light at `position` (3 floats, world metres) pointing along `direction` (3
+/// floats, not zero) with `intensity` (3 floats, RGB, W/sr, >= 0) on its axis, zero outside the
+/// cone of half-angle `cone_half_angle_deg` in (0, 180]. `blend` in [0, 1] softens the outer
+/// fraction of the cone (Cycles' spot blend: a smoothstep in the cosine from cos(half-angle)
+/// to cos(half-angle) + (1 - cos(half-angle)) * blend); `radius` >= 0 makes it a sphere of that
+/// radius (0: a point).
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_spot_light(
+    scene: *mut VsScene,
+    position: *const f32,
+    direction: *const f32,
+    intensity: *const f32,
+    cone_half_angle_deg: f32,
+    blend: f32,
+    radius: f32,
+) -> VsStatus {
+    add_light(scene, || {
+        Ok(LightJson::Spot {
+            position: floats_arg(position, "position")?,
+            direction: floats_arg(direction, "direction")?,
+            intensity: rgb(floats_arg(intensity, "intensity")?),
+            cone_half_angle_deg: finite_arg(cone_half_angle_deg, "cone_half_angle_deg")?,
+            blend: finite_arg(blend, "blend")?,
+            radius: finite_arg(radius, "radius")?,
+        })
+    })
+}
+
+/// Adds a one-sided rectangular area light centred at `position` (3 floats, world metres),
+/// emitting towards `normal` (3 floats, not zero) with uniform `radiance` (3 floats, RGB,
+/// W/m^2/sr, >= 0; power pi * radiance * width * height). `width` (> 0) runs along `tangent`
+/// (3 floats, made perpendicular to the normal; NULL: any direction perpendicular to it),
+/// `height` (> 0) along normal x tangent.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_rect_light(
+    scene: *mut VsScene,
+    position: *const f32,
+    normal: *const f32,
+    tangent: *const f32,
+    width: f32,
+    height: f32,
+    radiance: *const f32,
+) -> VsStatus {
+    add_light(scene, || {
+        Ok(LightJson::Rect {
+            position: floats_arg(position, "position")?,
+            normal: floats_arg(normal, "normal")?,
+            tangent: if tangent.is_null() { None } else { Some(floats_arg(tangent, "tangent")?) },
+            size: [finite_arg(width, "width")?, finite_arg(height, "height")?],
+            radiance: rgb(floats_arg(radiance, "radiance")?),
+        })
+    })
+}
+
+/// Adds a one-sided disc area light centred at `position` (3 floats, world metres), emitting
+/// towards `normal` (3 floats, not zero), of `radius` (> 0) and uniform `radiance` (3 floats,
+/// RGB, W/m^2/sr, >= 0; power pi * radiance * pi * radius^2).
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_add_disk_light(scene: *mut VsScene, position: *const f32, normal: *const f32, radius: f32, radiance: *const f32) -> VsStatus {
+    add_light(scene, || {
+        Ok(LightJson::Disk {
+            position: floats_arg(position, "position")?,
+            normal: floats_arg(normal, "normal")?,
+            radius: finite_arg(radius, "radius")?,
+            radiance: rgb(floats_arg(radiance, "radiance")?),
+        })
+    })
+}
+
 /// Adds a uniform dome (environment) light of radiance `color` (3 floats, RGB, W/m^2/sr, >= 0).
 ///
 /// Thread safety: any thread; calls on one scene are serialised.

@@ -8,8 +8,8 @@ struct Params {
     density_w2i: array<vec4<f32>, 3>,  // world -> density index, rows of a 3x4 affine
     s_w2i: array<vec4<f32>, 3>,        // world -> S grid index
     s1_w2i: array<vec4<f32>, 3>,       // world -> S1 grid index
-    density_origin: vec4<i32>,         // index of buffer element 0
-    density_dims: vec4<u32>,
+    density_brick_min: vec4<i32>,      // medium.wgsl
+    density_brick_dims: vec4<u32>,
     s_dims: vec4<u32>,
     s1_dims: vec4<u32>,
     density_scale: vec4<f32>,
@@ -26,7 +26,7 @@ struct Params {
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> density: array<f32>;
+@group(0) @binding(1) var<storage, read> density: array<u32>;
 @group(0) @binding(2) var<storage, read> s_grid: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> s1_grid: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> env_map: array<vec4<f32>>;

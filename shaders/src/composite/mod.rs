@@ -7,7 +7,7 @@ use glam::{Vec3, Vec4};
 use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
-use crate::upload::{affine_rows, dense_density, dense_density_bytes, grid_dims, rgb_as_vec4};
+use crate::upload::{affine_rows, bricked_density, bricked_density_bytes, grid_dims, rgb_as_vec4};
 use volscatter_core::compositor::{assemble_image, CompositeOptions};
 use volscatter_core::{Image, ScatteringGrid, Scene};
 
@@ -24,8 +24,8 @@ pub struct CompositeParams {
     pub density_w2i: [[f32; 4]; 3],
     pub s_w2i: [[f32; 4]; 3],
     pub s1_w2i: [[f32; 4]; 3],
-    pub density_origin: [i32; 4],
-    pub density_dims: [u32; 4],
+    pub density_brick_min: [i32; 4],
+    pub density_brick_dims: [u32; 4],
     pub s_dims: [u32; 4],
     pub s1_dims: [u32; 4],
     pub density_scale: [f32; 4],
@@ -45,7 +45,7 @@ pub struct CompositeParams {
 const _: () = {
     assert!(size_of::<CompositeParams>() == 384);
     assert!(offset_of!(CompositeParams, s_w2i) == 48);
-    assert!(offset_of!(CompositeParams, density_origin) == 144);
+    assert!(offset_of!(CompositeParams, density_brick_min) == 144);
     assert!(offset_of!(CompositeParams, density_scale) == 208);
     assert!(offset_of!(CompositeParams, cam_pos) == 256);
     assert!(offset_of!(CompositeParams, env_color) == 320);
@@ -71,11 +71,11 @@ pub fn composite_with_single(
 ) -> Result<Image, GpuError> {
     let medium = &scene.medium;
     let cam = &scene.camera;
-    ctx.check_storage_size("density", dense_density_bytes(medium))?;
+    ctx.check_storage_size("density", bricked_density_bytes(medium))?;
     ctx.check_storage_size("scattering grid", s.data.len() as u64 * 16)?;
     let pixels = cam.width as u64 * cam.height as u64;
     ctx.check_storage_size("image", pixels * 48)?;
-    let (origin, dims, values) = dense_density(medium);
+    let density = bricked_density(medium);
     let env = scene.environment();
     let (env_pixels, env_dims, has_map) = match env.and_then(|e| e.map.as_ref()) {
         Some(m) => (m.pixels.iter().map(|p| [p.x, p.y, p.z, 0.0]).collect::<Vec<_>>(), [m.width as u32, m.height as u32, 0, 0], true),
@@ -88,8 +88,8 @@ pub fn composite_with_single(
         density_w2i: affine_rows(&medium.world_to_index),
         s_w2i: affine_rows(&s.index_to_world.inverse()),
         s1_w2i: affine_rows(&single.index_to_world.inverse()),
-        density_origin: [origin.x, origin.y, origin.z, 0],
-        density_dims: [dims.x as u32, dims.y as u32, dims.z as u32, 0],
+        density_brick_min: density.brick_min,
+        density_brick_dims: density.brick_dims,
         s_dims: grid_dims(s),
         s1_dims: grid_dims(single),
         density_scale: v4(medium.density_scale, 0.0),
@@ -107,7 +107,7 @@ pub fn composite_with_single(
         env_dims,
         misc: [(0.5 * cam.fov_deg.to_radians()).tan(), step, 0.0, 0.0],
     };
-    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&values))?;
+    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
     let s_buf = ctx.storage_buffer("scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&s.data)))?;
     let s1_buf = ctx.storage_buffer("single scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&single.data)))?;
     let env_buf = ctx.storage_buffer("environment", bytemuck::cast_slice(&env_pixels))?;

@@ -5,10 +5,10 @@ use bytemuck::{Pod, Zeroable};
 use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
-use crate::upload::{affine_rows, dense_density, dense_density_bytes};
+use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
 use glam::Vec3;
 use volscatter_core::compositor::{dome_directions_of, AREA_VPLS_PER_SIDE};
-use volscatter_core::translate::{local_emitters, PointEmitter, Profile};
+use volscatter_core::translate::{scene_emitters, PointEmitter, Profile};
 use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
@@ -21,8 +21,8 @@ pub const WGSL: &str = concat!(include_str!("medium.wgsl"), include_str!("single
 pub struct SingleParams {
     pub density_w2i: [[f32; 4]; 3],
     pub grid_i2w: [[f32; 4]; 3],
-    pub density_origin: [i32; 4],
-    pub density_dims: [u32; 4],
+    pub density_brick_min: [i32; 4],
+    pub density_brick_dims: [u32; 4],
     pub grid_dims: [u32; 4],
     pub density_scale: [f32; 4],
     pub albedo: [f32; 4],
@@ -34,7 +34,7 @@ pub struct SingleParams {
 
 const _: () = {
     assert!(size_of::<SingleParams>() == 240);
-    assert!(offset_of!(SingleParams, density_origin) == 96);
+    assert!(offset_of!(SingleParams, density_brick_min) == 96);
     assert!(offset_of!(SingleParams, density_scale) == 144);
     assert!(offset_of!(SingleParams, misc) == 224);
 };
@@ -67,7 +67,7 @@ impl GpuLight {
             pos_or_dir: e.position.extend(1.0).to_array(),
             power: e.intensity.extend(kind).to_array(),
             axis: axis.extend(cos_outer).to_array(),
-            extra: [cos_inner, 0.0, 0.0, 0.0],
+            extra: [cos_inner, e.radius, 0.0, 0.0],
         }
     }
 }
@@ -87,32 +87,32 @@ fn light_list(scene: &Scene, dome_directions: u32) -> Vec<GpuLight> {
             Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
         }
     }
-    out.extend(local_emitters(&scene.lights, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
+    out.extend(scene_emitters(scene, AREA_VPLS_PER_SIDE).iter().map(GpuLight::emitter));
     out
 }
 
 pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid, GpuError> {
     let medium = &scene.medium;
     let mut grid = ScatteringGrid::over_medium(medium, max_dim).map_err(|e| GpuError::TooLarge(e.to_string()))?;
-    ctx.check_storage_size("density", dense_density_bytes(medium))?;
+    ctx.check_storage_size("density", bricked_density_bytes(medium))?;
     ctx.check_storage_size("single scattering grid", grid.data.len() as u64 * 16)?;
-    let (origin, dims, values) = dense_density(medium);
+    let density = bricked_density(medium);
     let lights = light_list(scene, dome_directions);
     let (lo, hi) = medium.world_bounds();
     let params = SingleParams {
         density_w2i: affine_rows(&medium.world_to_index),
         grid_i2w: affine_rows(&grid.index_to_world),
-        density_origin: [origin.x, origin.y, origin.z, 0],
-        density_dims: [dims.x as u32, dims.y as u32, dims.z as u32, 0],
+        density_brick_min: density.brick_min,
+        density_brick_dims: density.brick_dims,
         grid_dims: [grid.dims[0], grid.dims[1], grid.dims[2], lights.len() as u32],
         density_scale: medium.density_scale.extend(0.0).to_array(),
         albedo: medium.albedo.extend(0.0).to_array(),
         bounds_lo: lo.extend(0.0).to_array(),
         bounds_hi: hi.extend(0.0).to_array(),
         cam_pos: scene.camera.position.extend(0.0).to_array(),
-        misc: [medium.g, medium.voxel_size_world().min_element(), 0.0, 0.0],
+        misc: [medium.g, medium.voxel_size_world().min_element(), volscatter_core::compositor::near_field_radius(&grid), 0.0],
     };
-    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&values))?;
+    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
     let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;
     let bytes = ctx.run_single_pass(
         "single scattering",

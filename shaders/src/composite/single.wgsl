@@ -10,22 +10,22 @@
 struct Params {
     density_w2i: array<vec4<f32>, 3>,
     grid_i2w: array<vec4<f32>, 3>,     // S1 grid index -> world
-    density_origin: vec4<i32>,
-    density_dims: vec4<u32>,
+    density_brick_min: vec4<i32>,      // medium.wgsl
+    density_brick_dims: vec4<u32>,
     grid_dims: vec4<u32>,              // xyz, w = number of lights
     density_scale: vec4<f32>,
     albedo: vec4<f32>,
     bounds_lo: vec4<f32>,
     bounds_hi: vec4<f32>,
     cam_pos: vec4<f32>,
-    misc: vec4<f32>,                   // g, minimum march step, -, -
+    misc: vec4<f32>,                   // g, minimum march step, near-field radius of the grid, -
 };
 
 struct Light {
     pos_or_dir: vec4<f32>,             // w = kind
     power: vec4<f32>,                  // w = profile: 0 isotropic, 1 cone, 2 cosine
     axis: vec4<f32>,                   // profile axis, w = cos_outer (cone)
-    extra: vec4<f32>,                  // x = cos_inner (cone)
+    extra: vec4<f32>,                  // x = cos_inner (cone), y = radius (1/d^2 bounded at 1/r^2)
 };
 
 // translate::Profile::factor for the direction w away from the emitter.
@@ -47,7 +47,7 @@ fn profile_factor(light: Light, w: vec3<f32>) -> f32 {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> density: array<f32>;
+@group(0) @binding(1) var<storage, read> density: array<u32>;
 @group(0) @binding(2) var<storage, read> lights: array<Light>;
 @group(0) @binding(3) var<storage, read_write> out_grid: array<vec4<f32>>;
 
@@ -105,14 +105,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let w = light.pos_or_dir.xyz;
             sum += light.power.xyz * hg(dot(w, view), g) * transmittance(x, w, 3.4e38);
         } else {
+            // compositor::emitter_single: 1/d^2 bounded at max(emitter radius, grid near radius).
             let to = light.pos_or_dir.xyz - x;
             let dist = length(to);
+            let r = max(light.extra.y, params.misc.z);
             if (dist > 1e-6) {
                 let w = to / dist;
                 let intensity = light.power.xyz * profile_factor(light, -w);
                 if (max(intensity.x, max(intensity.y, intensity.z)) > 0.0) {
-                    sum += intensity / (dist * dist) * hg(dot(w, view), g) * transmittance(x, w, dist);
+                    sum += intensity / max(dist * dist, r * r) * hg(dot(w, view), g) * transmittance(x, w, dist);
                 }
+            } else if (light.power.w == 0.0 && r > 0.0) {
+                sum += light.power.xyz / (r * r) * (0.25 / 3.14159265358979);
             }
         }
     }

@@ -75,3 +75,57 @@ fn gpu_single_scattering_grid_matches_cpu() {
     ];
     check(&scene, "spot + disc");
 }
+
+/// The bricked density upload (upload.rs, medium.wgsl) on what the plume lacks: constant tiles
+/// (VDB tiles), empty bricks inside the table, negative indices. The single-scattering grid
+/// reads the density everywhere along its shadow rays; tolerance as above (1e-5).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn gpu_bricked_density_matches_cpu() {
+    use glam::{Affine3A, IVec3};
+    use volscatter_core::medium::{DensityGridBuilder, GridLimits, Medium};
+    let ctx = gpu_or_skip();
+    let mut b = DensityGridBuilder::new(GridLimits::default());
+    b.fill_tile(IVec3::new(-16, -8, -8), 8, 0.7).unwrap();
+    // x in [-8, 8) stays empty but inside the table, apart from the voxels set below.
+    b.fill_tile(IVec3::new(8, -8, -8), 8, 0.3).unwrap();
+    for i in 0..40 {
+        b.set(IVec3::new(-6 + i % 5, i / 5 - 5, i % 7 - 4), 0.05 * i as f32).unwrap();
+    }
+    let grid = b.build().unwrap();
+    let (_, _, _, bricks, constants) = grid.storage();
+    assert!(!bricks.is_empty() && !constants.is_empty(), "the grid should hold both bricks and tiles");
+    let mut scene = Scene::default_scene();
+    let g = scene.medium.g;
+    scene.medium = Medium::new(grid, Affine3A::from_scale(Vec3::splat(0.06)), Vec3::splat(8.0), Vec3::splat(0.9), g);
+    let cpu = compositor::single_scattering_grid(&scene, 24, 16).unwrap();
+    let gpu = single::single_scattering_grid(&ctx, &scene, 24, 16).unwrap();
+    assert_eq!(cpu.dims, gpu.dims);
+    let e = relative_rmse(&gpu.data, &cpu.data);
+    eprintln!("bricked density: single-scattering grid relative RMSE {e:e}");
+    assert!(e < 1e-5, "{e}");
+    assert!(cpu.data.iter().any(|v| v.x > 0.0));
+}
+
+/// The emissive plume's VPLs (translate::emission, isotropic emitters with a clamp radius, some
+/// on grid points: the 24^3 grid over the 64^3 plume shares no points with it, the 64^3 grid
+/// does) in the GPU single-scattering grid against the CPU's. Tolerance 1e-5 as above.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn gpu_single_scattering_of_emission_matches_cpu() {
+    use volscatter_core::medium::{Emission, EmissionLaw, EmissionTerm};
+    let ctx = gpu_or_skip();
+    let mut scene = Scene::default_scene();
+    scene.lights.clear();
+    let m = &scene.medium;
+    let term = EmissionTerm::new(m.grid.clone(), m.index_to_world, EmissionLaw::Blackbody { temperature: 1500.0, intensity: 1.0, tint: Vec3::ONE });
+    scene.medium.emission = Some(Emission { terms: vec![term], vpl_count: 64 });
+    for dim in [24, 64] {
+        let cpu = compositor::single_scattering_grid(&scene, dim, 64).unwrap();
+        let gpu = single::single_scattering_grid(&ctx, &scene, dim, 64).unwrap();
+        let e = relative_rmse(&gpu.data, &cpu.data);
+        eprintln!("emission VPLs, grid {dim}: single-scattering grid relative RMSE {e:e}");
+        assert!(e < 1e-5, "grid {dim}: {e}");
+        assert!(cpu.data.iter().any(|v| v.x > 0.0));
+    }
+}

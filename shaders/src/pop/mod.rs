@@ -1,7 +1,18 @@
-//! POP on the GPU. Today: the propagation loop (Eq. 1-8), the stage that dominates POP's cost
-//! (every iteration touches every cell); grid setup, the transmittance sweep, merge and
-//! upsampling run on the CPU around it. Inputs and outputs are those of
-//! `volscatter_core::solvers::pop::propagate::Propagation::run`, checked against it in tests.
+//! POP on the GPU: the stages that touch every cell, each a port of its CPU counterpart in
+//! `volscatter_core::solvers::pop` and tested against it: the transmittance sweep (init.rs),
+//! the propagation loop (Eq. 1-8, here), the merge of the lights (merge.rs) and the joint
+//! bilateral upsampling (upsample.rs), over a density mip uploaded once (mip.rs).
+//! `backend::GpuBackend` runs them as `Pop::solve_with`'s backend, keeping each light's data in
+//! device memory (light.rs) from its sweep to the merge; only S and a few sums come back.
+//! Still on the CPU: the mip pyramid and the sampling of each light grid's coefficients.
+
+pub mod backend;
+pub mod init;
+pub mod light;
+pub mod merge;
+pub mod mip;
+pub mod sum;
+pub mod upsample;
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -9,6 +20,7 @@ use std::mem::size_of;
 use std::time::Instant;
 
 use crate::context::{GpuContext, GpuError};
+use light::{read_rgb, GpuLight};
 use volscatter_core::solvers::pop::init::Initial;
 use volscatter_core::solvers::pop::propagate::Propagation;
 use volscatter_core::solvers::pop::PropagationStats;
@@ -40,16 +52,42 @@ fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
 }
 
 /// Runs the propagation on the GPU and adds the accumulated in-scattered radiance into `j_acc`
-/// like the CPU version. The residual is checked every `check_every` iterations (a readback),
-/// so the GPU may run up to `check_every - 1` iterations more than the CPU would. With
-/// `keep_remaining` (`RunOptions::keep_remaining`), the packets still travelling at the end
-/// come back in `PropagationStats::remaining` (for the isotropic residuum).
+/// like the CPU version: uploads the light, runs `propagate_resident`, reads J back. The
+/// residual is checked every `check_every` iterations, so the GPU may run up to
+/// `check_every - 1` iterations more than the CPU would. With `keep_remaining`
+/// (`RunOptions::keep_remaining`) the packets still travelling at the end come back in
+/// `PropagationStats::remaining` (for the isotropic residuum).
 pub fn propagate(
     ctx: &GpuContext,
     prop: &Propagation,
     init: &Initial,
     a_scattered: f32,
     j_acc: &mut [Vec3],
+    check_every: u32,
+    keep_remaining: bool,
+) -> Result<(PropagationStats, GpuPropagationTimes), GpuError> {
+    let t_start = Instant::now();
+    let mut light = GpuLight::upload(ctx, prop.grid, prop.mu)?;
+    ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&vec4s(&init.packets)));
+    ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&vec4s(j_acc)));
+    light.injected = init.packets.iter().copied().sum();
+    let upload = t_start.elapsed().as_secs_f64();
+    let (stats, mut times) = propagate_resident(ctx, &light, prop, a_scattered, check_every, keep_remaining)?;
+    times.upload += upload;
+    let t_read = Instant::now();
+    j_acc.copy_from_slice(&light.read_j(ctx)?);
+    times.readback += t_read.elapsed().as_secs_f64();
+    Ok((stats, times))
+}
+
+/// The propagation of a light whose packets and J are in device memory (after `init::sweep`):
+/// adds into `light.j` and consumes `light.packets`. Only sums come back: the residual every
+/// `check_every` iterations (one slab of column sums), the escaped energy at the end.
+pub fn propagate_resident(
+    ctx: &GpuContext,
+    light: &GpuLight,
+    prop: &Propagation,
+    a_scattered: f32,
     check_every: u32,
     keep_remaining: bool,
 ) -> Result<(PropagationStats, GpuPropagationTimes), GpuError> {
@@ -66,66 +104,55 @@ pub fn propagate(
         flags: [prop.diffusion_correction as u32, prop.diffusion_correction as u32, 0, 0],
         weight: [weight, 0.0, 0.0, 0.0],
     };
-    let uniform = |w: f32| {
-        wgpu::util::DeviceExt::create_buffer_init(
-            device,
-            &wgpu::util::BufferInitDescriptor { label: Some("pop params"), contents: bytemuck::bytes_of(&params(w)), usage: wgpu::BufferUsages::UNIFORM },
-        )
-    };
-    let (u_first, u_rest) = (uniform(0.5), uniform(1.0));
-    let sigma_s = ctx.storage_buffer("sigma_s", bytemuck::cast_slice(&vec4s(&grid.sigma_s)))?;
-    let sigma_a = ctx.storage_buffer("sigma_a", bytemuck::cast_slice(&vec4s(&grid.sigma_a)))?;
-    let mu = ctx.storage_buffer("mu", bytemuck::cast_slice(prop.mu))?;
-    let p0 = ctx.storage_buffer("p0", bytemuck::cast_slice(&vec4s(&init.packets)))?;
-    let a0 = ctx.storage_buffer("a0", bytemuck::cast_slice(&vec![[a_scattered, a_scattered, a_scattered, 0.0f32]; n]))?;
-    let zeros = |label: &str, bytes: u64| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: bytes.max(16),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false, // wgpu zero-initialises buffers
-        })
-    };
-    let (p1, a1) = (zeros("p1", cell_bytes), zeros("a1", cell_bytes));
-    let emit = zeros("emit", cell_bytes * 4);
-    let j_buf = ctx.storage_buffer("j", bytemuck::cast_slice(&vec4s(j_acc)))?;
-    let esc = zeros("escapes", cell_bytes * 2);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("propagate.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
-    let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..11)
-        .map(|b| wgpu::BindGroupLayoutEntry {
-            binding: b,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: if b == 0 {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
-            } else {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 5 }, has_dynamic_offset: false, min_binding_size: None }
-            },
-            count: None,
-        })
-        .collect();
-    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("pop"), entries: &layout_entries });
-    let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("pop"), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
-    let pipeline = |entry: &str| {
-        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
-    let (emit_pipe, gather_pipe) = (pipeline("emit_accumulate"), pipeline("gather"));
+    let (u_first, u_rest) = (ctx.uniform("pop params", bytemuck::bytes_of(&params(0.5))), ctx.uniform("pop params", bytemuck::bytes_of(&params(1.0))));
+    let (sigma_s, sigma_a, mu, p0, j_buf) = (&light.sigma_s, &light.sigma_a, &light.mu, &light.packets, &light.j);
+    let a0 = ctx.zeroed_storage("a0", cell_bytes)?;
+    ctx.queue.write_buffer(&a0, 0, bytemuck::cast_slice(&vec![[a_scattered, a_scattered, a_scattered, 0.0f32]; n]));
+    let (p1, a1) = (ctx.zeroed_storage("p1", cell_bytes)?, ctx.zeroed_storage("a1", cell_bytes)?);
+    let emit = ctx.zeroed_storage("emit", cell_bytes * 4)?;
+    let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
+    // Both kernels share one explicit layout (each uses a subset of the bindings), compiled once
+    // per context.
+    let kernels = ctx.cached("propagate.wgsl", |device| {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("propagate.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
+        let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..11)
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: if b == 0 {
+                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
+                } else {
+                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 5 }, has_dynamic_offset: false, min_binding_size: None }
+                },
+                count: None,
+            })
+            .collect();
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("pop"), entries: &layout_entries });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("pop"), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (emit, gather) = (pipeline("emit_accumulate"), pipeline("gather"));
+        (bgl, emit, gather)
+    })?;
+    let (bgl, emit_pipe, gather_pipe) = (&kernels.0, &kernels.1, &kernels.2);
     // Bind groups: "even" reads P0/A0 and writes P1/A1, "odd" the reverse.
     let bind = |u: &wgpu::Buffer, pin: &wgpu::Buffer, ain: &wgpu::Buffer, pout: &wgpu::Buffer, aout: &wgpu::Buffer| {
-        let bufs = [u, &sigma_s, &sigma_a, &mu, pin, ain, &emit, &j_buf, &esc, pout, aout];
+        let bufs = [u, sigma_s, sigma_a, mu, pin, ain, &emit, j_buf, &esc, pout, aout];
         let entries: Vec<wgpu::BindGroupEntry> =
             bufs.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop"), layout: &bgl, entries: &entries })
+        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop"), layout: bgl, entries: &entries })
     };
-    let even_first = bind(&u_first, &p0, &a0, &p1, &a1);
-    let even = bind(&u_rest, &p0, &a0, &p1, &a1);
-    let odd = bind(&u_rest, &p1, &a1, &p0, &a0);
+    let even_first = bind(&u_first, p0, &a0, &p1, &a1);
+    let even = bind(&u_rest, p0, &a0, &p1, &a1);
+    let odd = bind(&u_rest, &p1, &a1, p0, &a0);
     let groups = [grid.dims.x.div_ceil(4), grid.dims.y.div_ceil(4), grid.dims.z.div_ceil(4)];
     let dispatch = |enc: &mut wgpu::CommandEncoder, pipe: &wgpu::ComputePipeline, bg: &wgpu::BindGroup| {
         let mut pass = enc.begin_compute_pass(&Default::default());
@@ -137,10 +164,10 @@ pub fn propagate(
     let upload = t_start.elapsed().as_secs_f64();
 
     let t_iter = Instant::now();
-    let injected: Vec3 = init.packets.iter().copied().sum();
+    let injected = light.injected;
     let target = injected * prop.residual_threshold;
     let mut enc = device.create_command_encoder(&Default::default());
-    dispatch(&mut enc, &emit_pipe, &even_first);
+    dispatch(&mut enc, emit_pipe, &even_first);
     let mut iterations = 0u32;
     // Where the current packets live: false = P0/A0, true = P1/A1.
     let mut in_p1 = false;
@@ -149,35 +176,32 @@ pub fn propagate(
     while iterations < prop.max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
         iterations += 1;
         let (g_bg, e_bg) = if in_p1 { (&odd, &even) } else { (&even, &odd) };
-        dispatch(&mut enc, &gather_pipe, g_bg);
-        dispatch(&mut enc, &emit_pipe, e_bg);
+        dispatch(&mut enc, gather_pipe, g_bg);
+        dispatch(&mut enc, emit_pipe, e_bg);
         in_p1 = !in_p1;
         if iterations % check_every == 0 || iterations == prop.max_iterations {
             ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
             if prop.residual_threshold > 0.0 && iterations < prop.max_iterations {
-                let p = ctx.read_buffer(if in_p1 { &p1 } else { &p0 }, cell_bytes)?;
-                remaining = bytemuck::cast_slice::<u8, [f32; 4]>(&p).iter().map(|v| Vec3::new(v[0], v[1], v[2])).sum();
+                remaining = sum::total(ctx, if in_p1 { &p1 } else { p0 }, grid.dims, 1, 0)?;
             }
         }
     }
-    ctx.queue.submit([enc.finish()]);
-    device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
-    ctx.check()?;
+    ctx.submit_and_wait(enc)?;
     let iterations_s = t_iter.elapsed().as_secs_f64();
 
     let t_read = Instant::now();
-    let j = ctx.read_buffer(&j_buf, cell_bytes)?;
-    let p = ctx.read_buffer(if in_p1 { &p1 } else { &p0 }, cell_bytes)?;
-    let a = ctx.read_buffer(if in_p1 { &a1 } else { &a0 }, cell_bytes)?;
-    let e = ctx.read_buffer(&esc, cell_bytes * 2)?;
-    for (dst, v) in j_acc.iter_mut().zip(bytemuck::cast_slice::<u8, [f32; 4]>(&j)) {
-        *dst = Vec3::new(v[0], v[1], v[2]);
-    }
-    let vec3s = |bytes: &[u8]| bytemuck::cast_slice::<u8, [f32; 4]>(bytes).iter().map(|v| Vec3::new(v[0], v[1], v[2])).collect::<Vec<_>>();
-    let remaining = vec3s(&p);
-    let residual: Vec3 = remaining.iter().copied().sum();
-    let residual_anisotropy = volscatter_core::solvers::pop::propagate::mean_anisotropy(&remaining, &vec3s(&a));
-    let escaped: Vec3 = bytemuck::cast_slice::<u8, [f32; 4]>(&e).chunks(2).map(|v| Vec3::new(v[0][0], v[0][1], v[0][2])).sum();
+    let residual = sum::total(ctx, if in_p1 { &p1 } else { p0 }, grid.dims, 1, 0)?;
+    // Escapes realised so far: the first of each cell's two vec4s (propagate.wgsl).
+    let escaped = sum::total(ctx, &esc, grid.dims, 2, 0)?;
+    // For the isotropic residuum: the packets still travelling and their mean anisotropy.
+    let (remaining, residual_anisotropy) = if keep_remaining {
+        let p = read_rgb(ctx, if in_p1 { &p1 } else { p0 }, n as u64)?;
+        let a = read_rgb(ctx, if in_p1 { &a1 } else { &a0 }, n as u64)?;
+        let mean_a = volscatter_core::solvers::pop::propagate::mean_anisotropy(&p, &a);
+        (p, mean_a)
+    } else {
+        (Vec::new(), Vec3::ZERO)
+    };
     let absorbed = (injected - escaped - residual).max(Vec3::ZERO);
     let times = GpuPropagationTimes { upload, iterations: iterations_s, readback: t_read.elapsed().as_secs_f64() };
     Ok((

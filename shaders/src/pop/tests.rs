@@ -64,8 +64,13 @@ fn gpu_propagation_matches_cpu() {
     }
 }
 
+#[test]
+fn sum_wgsl_validates_and_params_layout_matches() {
+    assert_eq!(naga_struct_size(sum::WGSL, "Params") as usize, size_of::<sum::SumParams>());
+}
+
 /// The isotropic residuum's propagation (a = 0 in a medium-aligned grid with an empty margin,
-/// packets gathered from a light's grid) on the GPU against the CPU, as the solver's hook
+/// packets gathered from a light's grid) on the GPU against the CPU, as the GPU backend
 /// runs it. Same tolerances as above.
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]

@@ -24,7 +24,8 @@ pub fn footprint(medium: &Medium, grid: &ScatteringGrid) -> f32 {
     spacing / medium.voxel_size_world().max_element()
 }
 
-pub fn merge(medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, Vec<Vec3>)], resolution: u32) -> Result<Merged> {
+/// `lights`: each light's grid and its accumulation J, summed in this order.
+pub fn merge(medium: &Medium, mip: &MediumMip, lights: &[(&LightGrid, &[Vec3])], resolution: u32) -> Result<Merged> {
     let mut j = ScatteringGrid::over_medium(medium, resolution)?;
     let fp = footprint(medium, &j);
     let [nx, ny, _] = j.dims;

@@ -124,19 +124,40 @@ impl MediumMip {
         lev.sample(q)
     }
 
-    /// Mean density around index-space point `p` over a box of about `footprint` voxels per
-    /// side: trilinear within and linear between the two nearest levels (like GPU trilinear
-    /// mip filtering). Footprints of one voxel or less read the density grid itself.
-    pub fn sample(&self, medium: &Medium, p_index: Vec3, footprint: f32) -> f32 {
+    /// Index-space corner (voxel units) of cell 0 of every level.
+    pub fn origin(&self) -> IVec3 {
+        self.lo
+    }
+
+    /// The levels, finest first: (cells per axis, voxels per cell per axis, x-fastest values).
+    /// For ports of `sample` (volscatter-gpu uploads them once per solve).
+    pub fn levels(&self) -> impl Iterator<Item = (IVec3, i32, &[f32])> {
+        self.levels.iter().map(|l| (l.dims, l.factor, l.data.as_slice()))
+    }
+
+    /// What `sample` reads for a footprint: `None` = the density grid itself, else the two
+    /// levels and the weight of the second. It depends on the footprint only, so a kernel
+    /// sampling at one footprint can take it as a constant.
+    pub fn blend(&self, footprint: f32) -> Option<(usize, usize, f32)> {
         let base = self.levels[0].factor as f32;
         if footprint <= 1.0 && base <= 1.0 {
-            return medium.grid.sample(p_index);
+            return None;
         }
         let lf = (footprint.max(1.0) / base).log2().max(0.0);
         let l0 = (lf.floor() as usize).min(self.levels.len() - 1);
         let l1 = (l0 + 1).min(self.levels.len() - 1);
         let t = (lf - l0 as f32).clamp(0.0, 1.0);
-        let a = if base <= 1.0 && l0 == 0 && footprint <= 1.0 { medium.grid.sample(p_index) } else { self.sample_level(l0, p_index) };
+        Some((l0, l1, t))
+    }
+
+    /// Mean density around index-space point `p` over a box of about `footprint` voxels per
+    /// side: trilinear within and linear between the two nearest levels (like GPU trilinear
+    /// mip filtering). Footprints of one voxel or less read the density grid itself.
+    pub fn sample(&self, medium: &Medium, p_index: Vec3, footprint: f32) -> f32 {
+        let Some((l0, l1, t)) = self.blend(footprint) else {
+            return medium.grid.sample(p_index);
+        };
+        let a = self.sample_level(l0, p_index);
         if t == 0.0 || l1 == l0 {
             return a;
         }

@@ -30,12 +30,13 @@
 //! the camera (importance.rs, Sec. 5.2). With `isotropic_residuum`, every light (distant or
 //! dome ordinate) stops at its switch iteration m' (Eq. 10) and the energy still travelling in
 //! all of them is propagated isotropically in one medium-aligned grid (residuum.rs, Sec. 5.4),
-//! through the same propagation hook (CPU or GPU).
+//! with the same backend as the lights (CPU or GPU).
 //!
 //! Not here yet (a later issue): point lights (radial grids, Sec. 6; left out with a warning
 //! on stderr).
 
 pub mod accumulate;
+pub mod backend;
 pub mod dome;
 pub mod importance;
 pub mod init;
@@ -52,16 +53,11 @@ use glam::Vec3;
 use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
+use backend::PopBackend;
 use light_grid::LightGrid;
 use mip::MediumMip;
 pub use propagate::PropagationStats;
 pub use settings::PopSettings;
-
-/// One light's propagation: adds the accumulated in-scattered radiance into `j_acc` and
-/// returns the energy figures, as `propagate::Propagation::run_with` does.
-pub type PropagateFn<'a> = dyn Fn(&propagate::Propagation, propagate::RunOptions, &init::Initial, f32, &mut [Vec3], &dyn Progress) -> Result<PropagationStats>
-    + Sync
-    + 'a;
 
 pub struct Pop {
     pub settings: PopSettings,
@@ -149,12 +145,12 @@ impl Pop {
 
     /// Solves and returns the per-light energy report along with S and the timings.
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PopReport)> {
-        self.solve_with(scene, progress, &|prop, opts, init, a, j, progress| prop.run_with(opts, init, a, j, progress))
+        self.solve_with(scene, progress, &backend::CpuBackend)
     }
 
-    /// As `solve_detailed`, with each light's propagation (the costly stage) run by
-    /// `propagate`: the CPU's `Propagation::run_with`, or a GPU port (volscatter-gpu).
-    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, propagate: &PropagateFn) -> Result<(SolveOutput, PopReport)> {
+    /// As `solve_detailed`, with the stages that touch every cell (sweep, propagation, merge,
+    /// upsampling) run by `backend`: `backend::CpuBackend`, or the GPU port (volscatter-gpu).
+    pub fn solve_with<B: PopBackend>(&self, scene: &Scene, progress: &dyn Progress, backend: &B) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -217,10 +213,8 @@ impl Pop {
                 continue;
             }
             let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
-            let init = timings.time("pop init", || init::sweep(&grid, fluence));
-            let mut j_acc = vec![Vec3::ZERO; grid.len()];
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
-            accumulate::add_direct(&init.direct, &mu, a0, g, &mut j_acc);
+            let (mut light, sweep) = timings.time("pop init", || backend.init(&grid, fluence, &mu, a0, g))?;
             // With the residuum, each light stops at its switch iteration m' (Eq. 10).
             let max_iterations = match &residuum {
                 Some(_) if s.residuum_iterations > 0 => s.residuum_iterations.min(s.max_iterations),
@@ -237,7 +231,7 @@ impl Pop {
             };
             let t0 = std::time::Instant::now();
             let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
-            let mut stats = propagate(&prop, opts, &init, a0 * g, &mut j_acc, progress)?;
+            let mut stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
             if let Some(r) = residuum.as_mut() {
                 r.gather(&grid, &std::mem::take(&mut stats.remaining));
             }
@@ -245,12 +239,12 @@ impl Pop {
             report.lights.push(LightReport {
                 dims: grid.dims.to_array(),
                 cell_size: grid.h,
-                entering: init.entering.to_array(),
-                transmitted: init.transmitted.to_array(),
-                absorbed_direct: init.absorbed.to_array(),
+                entering: sweep.entering.to_array(),
+                transmitted: sweep.transmitted.to_array(),
+                absorbed_direct: sweep.absorbed.to_array(),
                 propagation: stats,
             });
-            lights.push((grid, j_acc));
+            lights.push((grid, light));
         }
         // The residuum runs only when the lights handed over more than the residual threshold
         // of all the energy they scattered, and iterates until what is left falls below that
@@ -260,35 +254,35 @@ impl Pop {
         if let Some(r) = residuum.filter(|r| (r.gathered() * r.grid.h * r.grid.h).cmpgt(scattered * s.residual_threshold).any()) {
             let t0 = std::time::Instant::now();
             let threshold = (scattered * s.residual_threshold / (r.gathered() * r.grid.h * r.grid.h).max(Vec3::splat(1e-30))).max_element().min(1.0);
-            let (grid, j_acc, rep) = run_residuum(r, scene, s, threshold, progress, propagate)?;
+            let (grid, light, rep) = run_residuum(r, scene, s, threshold, progress, backend)?;
             timings.0.push(("pop residuum".into(), t0.elapsed().as_secs_f64()));
             report.residuum = Some(rep);
-            lights.push((grid, j_acc));
+            lights.push((grid, light));
         }
-        let merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
+        let merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
         if !progress.update("pop upsample", 0.0) {
             return Err(Error::Cancelled);
         }
-        let scattering = timings.time("pop upsample", || upsample::upsample(medium, &mip, &merged, s))?;
+        let scattering = timings.time("pop upsample", || backend.upsample(medium, &mip, &merged, s))?;
         progress.update("pop upsample", 1.0);
         Ok((SolveOutput { scattering, timings: merge_timings(timings) }, report))
     }
 }
 
-/// Propagates the gathered residuum isotropically (a = 0) through the same hook as the lights,
-/// to convergence; returns its grid and accumulation for merging.
-fn run_residuum(
+/// Propagates the gathered residuum isotropically (a = 0) with the same backend as the lights,
+/// to convergence; returns its grid and light (J) for merging.
+fn run_residuum<B: PopBackend>(
     r: residuum::Residuum,
     scene: &Scene,
     s: &PopSettings,
     residual_threshold: f32,
     progress: &dyn Progress,
-    propagate: &PropagateFn,
-) -> Result<(LightGrid, Vec<Vec3>, ResiduumReport)> {
+    backend: &B,
+) -> Result<(LightGrid, B::Light, ResiduumReport)> {
     let grid = r.grid;
     let gathered = r.packets.iter().copied().sum::<Vec3>();
-    let init = init::Initial { direct: vec![Vec3::ZERO; grid.len()], packets: r.packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
     let mu = accumulate::view_cosines(&grid, scene.camera.position);
+    let mut light = backend.light_from_packets(&grid, &mu, r.packets)?;
     let prop = propagate::Propagation {
         grid: &grid,
         g: scene.medium.g,
@@ -297,11 +291,10 @@ fn run_residuum(
         max_iterations: s.max_iterations,
         residual_threshold,
     };
-    let mut j_acc = vec![Vec3::ZERO; grid.len()];
     let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false };
-    let stats = propagate(&prop, opts, &init, 0.0, &mut j_acc, progress)?;
+    let stats = backend.propagate(&mut light, &prop, opts, 0.0, progress)?;
     let rep = ResiduumReport { dims: grid.dims.to_array(), cell_size: grid.h, gathered: gathered.to_array(), propagation: stats };
-    Ok((grid, j_acc, rep))
+    Ok((grid, light, rep))
 }
 
 /// Sums repeated phases (one entry per light) into one entry each, keeping the order.

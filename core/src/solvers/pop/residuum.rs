@@ -25,11 +25,11 @@
 //! - The residuum grid is a `LightGrid` whose direction is the medium's z axis (its cells
 //!   line up with the medium's box for an axis-aligned medium), with `MARGIN_CELLS` of empty
 //!   space around the box; with a = 0 the direction does not matter to the propagation, and
-//!   the same propagation hook (CPU or GPU) runs it.
+//!   the same backend (CPU or GPU, backend.rs) propagates it.
 //! - The packets handed over were already accumulated for the step they were about to take;
 //!   the residuum's first iteration accumulates them for half a step again (its packets are
 //!   treated as born in their cells, propagate.rs). That is half a step of hundreds, left as
-//!   is so that the hook's inputs stay those of any light.
+//!   is so that the residuum is a light like any other to the backend.
 
 use glam::{IVec3, Vec3};
 

@@ -204,3 +204,5 @@ impl Solver for Reference {
 
 #[cfg(test)]
 pub(crate) mod tests;
+#[cfg(test)]
+mod emission_tests;

@@ -226,6 +226,24 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// One-sample estimate of the emitted radiance arriving at `x` from direction `-d`:
+    /// integral over t of T(x, x + t d) e(x + t d) dt, by a point t uniform on the segment of
+    /// the ray inside the emission's bounds (pdf 1 / length), times the ratio-tracked
+    /// transmittance to it. Unbiased wherever the emission is, even where the density is zero
+    /// (a collision estimator e / sigma_t at real collisions would miss flames in clear air),
+    /// and for RGB extinction (e in W m^-3 sr^-1, medium::emission).
+    fn emission_along(&self, x: Vec3, d: Vec3, rng: &mut Rng) -> Vec3 {
+        let Some(em) = &self.medium.emission else { return Vec3::ZERO };
+        let (lo, hi) = em.world_bounds();
+        let Some((t0, t1)) = crate::compositor::ray_box(x, d, lo, hi) else { return Vec3::ZERO };
+        let t = t0 + (t1 - t0) * rng.f32();
+        let e = em.at(x + d * t);
+        if e.max_element() <= 0.0 {
+            return Vec3::ZERO;
+        }
+        e * (t1 - t0) * self.transmittance(x, d, t, rng)
+    }
+
     /// Radiance escaping to the environment along a phase-sampled direction, MIS-weighted
     /// against the dome's own sampling.
     fn escaped(&self, d: Vec3, pdf_phase: f32) -> Vec3 {
@@ -258,6 +276,12 @@ impl<'a> Tracer<'a> {
             let new_d = self.phase.sample(d, rng.pair());
             let pdf = hg(new_d.dot(d), self.phase.g);
             d = new_d;
+            // The medium's emission reaching this vertex along the phase-sampled direction
+            // (the phase sample has weight 1, so beta is unchanged).
+            if self.medium.emission.is_some() {
+                let le = beta * self.emission_along(x, d, rng);
+                if depth == 1 { first += le } else { later += le }
+            }
             match self.free_flight(x, d, &mut beta, rng) {
                 None => {
                     let le = beta * self.escaped(d, pdf);

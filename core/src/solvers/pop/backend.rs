@@ -1,0 +1,92 @@
+//! Where POP's per-light and whole-medium stages run. `Pop::solve_with` drives the pipeline
+//! (ordinates, mip, light grids, reports) and hands the stages that touch every cell to a
+//! `PopBackend`: the CPU code of this module's siblings (`CpuBackend`), or the GPU port in
+//! volscatter-gpu, which keeps each light's data in device memory from the sweep through merge
+//! and upsampling (hence the associated types: a backend decides where a light's state lives).
+
+use glam::Vec3;
+
+use super::light_grid::LightGrid;
+use super::merge::Merged;
+use super::mip::MediumMip;
+use super::propagate::{Propagation, PropagationStats, RunOptions};
+use super::settings::PopSettings;
+use super::{accumulate, init, merge, upsample};
+use crate::error::Result;
+use crate::medium::Medium;
+use crate::solvers::{Progress, ScatteringGrid};
+
+/// The sums of a transmittance sweep that the energy report needs (see `init::Initial`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SweepSums {
+    pub entering: Vec3,
+    pub transmitted: Vec3,
+    pub absorbed: Vec3,
+}
+
+pub trait PopBackend: Sync {
+    /// One light between its sweep and the merge: the packets still to propagate and the
+    /// accumulation grid J.
+    type Light;
+    /// All lights merged into the medium-aligned grid, with its density guide.
+    type Merged;
+
+    /// Transmittance sweep (init.rs) and single scattering of the unscattered light into a
+    /// fresh J (accumulate::add_direct with anisotropy `a0 g`).
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(Self::Light, SweepSums)>;
+
+    /// A light whose packets are given instead of swept, with J zero: the isotropic residuum
+    /// (residuum.rs), which gathers the packets the lights leave at their switch iteration.
+    fn light_from_packets(&self, grid: &LightGrid, mu: &[f32], packets: Vec<Vec3>) -> Result<Self::Light>;
+
+    /// Propagation of the light's packets (propagate.rs), adding into its J. With
+    /// `opts.keep_remaining` the packets still travelling at the end come back in
+    /// `PropagationStats::remaining`.
+    fn propagate(&self, light: &mut Self::Light, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats>;
+
+    /// merge.rs over all lights, in order.
+    fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, Self::Light)], resolution: u32) -> Result<Self::Merged>;
+
+    /// upsample.rs: the scattering grid S.
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Self::Merged, settings: &PopSettings) -> Result<ScatteringGrid>;
+}
+
+/// The CPU pipeline.
+pub struct CpuBackend;
+
+/// A light on the CPU: its sweep (packets) and accumulation.
+pub struct CpuLight {
+    pub initial: init::Initial,
+    pub j: Vec<Vec3>,
+}
+
+impl PopBackend for CpuBackend {
+    type Light = CpuLight;
+    type Merged = Merged;
+
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(CpuLight, SweepSums)> {
+        let initial = init::sweep(grid, fluence);
+        let mut j = vec![Vec3::ZERO; grid.len()];
+        accumulate::add_direct(&initial.direct, mu, a0, g, &mut j);
+        let sums = SweepSums { entering: initial.entering, transmitted: initial.transmitted, absorbed: initial.absorbed };
+        Ok((CpuLight { initial, j }, sums))
+    }
+
+    fn light_from_packets(&self, grid: &LightGrid, _mu: &[f32], packets: Vec<Vec3>) -> Result<CpuLight> {
+        let initial = init::Initial { direct: Vec::new(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
+        Ok(CpuLight { initial, j: vec![Vec3::ZERO; grid.len()] })
+    }
+
+    fn propagate(&self, light: &mut CpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
+        prop.run_with(opts, &light.initial, a_scattered, &mut light.j, progress)
+    }
+
+    fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, CpuLight)], resolution: u32) -> Result<Merged> {
+        let views: Vec<(&LightGrid, &[Vec3])> = lights.iter().map(|(g, l)| (g, l.j.as_slice())).collect();
+        merge::merge(medium, mip, &views, resolution)
+    }
+
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
+        upsample::upsample(medium, mip, merged, settings)
+    }
+}

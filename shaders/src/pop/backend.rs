@@ -1,0 +1,136 @@
+//! `Pop::solve_with`'s backend on the GPU: every stage that touches every cell runs here, and a
+//! light's packets and J stay in device memory from its sweep to the merge, the merged grid from
+//! the merge to the upsampling. What crosses the bus: each light grid's coefficients and view
+//! cosines (sampled on the CPU) and the density mip, once; back come per-column sums (energy
+//! report, stopping test) and the scattering grid S.
+
+use glam::Vec3;
+use std::sync::{Arc, Mutex};
+
+use crate::context::{GpuContext, GpuError};
+use crate::pop::light::GpuLight;
+use crate::pop::merge::GpuMerged;
+use crate::pop::mip::GpuMip;
+use crate::pop::{init, merge, propagate_resident, upsample, GpuPropagationTimes};
+use volscatter_core::medium::Medium;
+use volscatter_core::solvers::pop::backend::{PopBackend, SweepSums};
+use volscatter_core::solvers::pop::init::Initial;
+use volscatter_core::solvers::pop::light_grid::LightGrid;
+use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::solvers::pop::propagate::{Propagation, RunOptions};
+use volscatter_core::solvers::pop::{PopSettings, PropagationStats};
+use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::{Error, Result};
+
+/// A GPU failure as a solver error; `solve` falls back to the CPU on it under `auto`.
+pub fn gpu_error(e: GpuError) -> Error {
+    Error::InvalidArgument(format!("GPU: {e}"))
+}
+
+/// One per solve (as `Pop::solve_with` is called): it holds that solve's density mip.
+pub struct GpuBackend<'a> {
+    ctx: &'a GpuContext,
+    /// Residual checks of the propagation every this many iterations (one small readback).
+    check_every: u32,
+    /// The density mip of this solve, uploaded by the first stage that reads it and dropped by
+    /// the last, with the address of the CPU mip it came from as a guard.
+    mip: Mutex<Option<(usize, Arc<GpuMip>)>>,
+    /// Split of each light's propagation time (benchmarks).
+    propagation_times: Mutex<Vec<GpuPropagationTimes>>,
+    /// Seconds spent bricking and uploading the mip (part of the merge stage's time).
+    mip_upload_s: Mutex<f64>,
+}
+
+impl<'a> GpuBackend<'a> {
+    pub fn new(ctx: &'a GpuContext, check_every: u32) -> Self {
+        GpuBackend { ctx, check_every, mip: Mutex::new(None), propagation_times: Mutex::new(Vec::new()), mip_upload_s: Mutex::new(0.0) }
+    }
+
+    /// Upload / iterations / readback times of every propagation so far, in light order.
+    pub fn propagation_times(&self) -> Vec<GpuPropagationTimes> {
+        self.propagation_times.lock().map(|t| t.clone()).unwrap_or_default()
+    }
+
+    /// Seconds spent bricking and uploading the density mip so far.
+    pub fn mip_upload_seconds(&self) -> f64 {
+        self.mip_upload_s.lock().map(|t| *t).unwrap_or_default()
+    }
+
+    fn mip(&self, mip: &MediumMip) -> Result<Arc<GpuMip>> {
+        let mut slot = self.mip.lock().map_err(|_| Error::InvalidArgument("GPU: mip lock poisoned".into()))?;
+        let key = mip as *const MediumMip as usize;
+        if let Some((k, m)) = slot.as_ref() {
+            if *k == key {
+                return Ok(m.clone());
+            }
+        }
+        let t = std::time::Instant::now();
+        let m = Arc::new(GpuMip::upload(self.ctx, mip).map_err(gpu_error)?);
+        if let Ok(mut s) = self.mip_upload_s.lock() {
+            *s += t.elapsed().as_secs_f64();
+        }
+        *slot = Some((key, m.clone()));
+        Ok(m)
+    }
+}
+
+impl PopBackend for GpuBackend<'_> {
+    type Light = GpuLight;
+    type Merged = GpuMerged;
+
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(GpuLight, SweepSums)> {
+        let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
+        let sums = init::sweep(self.ctx, &mut light, grid.h, fluence, a0, g).map_err(gpu_error)?;
+        Ok((light, sums))
+    }
+
+    fn light_from_packets(&self, grid: &LightGrid, mu: &[f32], packets: Vec<Vec3>) -> Result<GpuLight> {
+        let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
+        self.ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&packets)));
+        light.injected = packets.iter().copied().sum();
+        Ok(light)
+    }
+
+    fn propagate(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
+        if opts.vacuum_escape {
+            return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
+        }
+        let (stats, times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every, opts.keep_remaining).map_err(gpu_error)?;
+        if let Ok(mut t) = self.propagation_times.lock() {
+            t.push(times);
+        }
+        if !progress.update("pop propagation", 1.0) {
+            return Err(Error::Cancelled);
+        }
+        Ok(stats)
+    }
+
+    fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, GpuLight)], resolution: u32) -> Result<GpuMerged> {
+        let gmip = self.mip(mip)?;
+        let views: Vec<(&LightGrid, &wgpu::Buffer)> = lights.iter().map(|(g, l)| (g, &l.j)).collect();
+        merge::merge(self.ctx, &gmip, medium, mip, &views, resolution).map_err(gpu_error)
+    }
+
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &GpuMerged, settings: &PopSettings) -> Result<ScatteringGrid> {
+        let gmip = self.mip(mip)?;
+        let out = upsample::upsample(self.ctx, &gmip, medium, mip, merged, settings).map_err(gpu_error);
+        // The solve's last stage: free the mip (and never serve it to a later solve).
+        if let Ok(mut slot) = self.mip.lock() {
+            *slot = None;
+        }
+        out
+    }
+}
+
+impl GpuBackend<'_> {
+    /// Options the GPU port lacks (`vacuum_escape`): this light's propagation runs on the CPU,
+    /// its packets and J crossing the bus both ways.
+    fn propagate_on_cpu(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
+        let packets = light.read_packets(self.ctx).map_err(gpu_error)?;
+        let mut j = light.read_j(self.ctx).map_err(gpu_error)?;
+        let initial = Initial { direct: Vec::new(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
+        let stats = prop.run_with(opts, &initial, a_scattered, &mut j, progress)?;
+        self.ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j)));
+        Ok(stats)
+    }
+}
