@@ -51,7 +51,10 @@ pub struct PopSettings {
     pub dome_ordinates: u32,
     /// Weight the choice of the dome's ordinates by how much light from each direction reaches
     /// the camera (importance propagation, Sec. 5.2, importance.rs): more ordinates where they
-    /// are seen. Costs a few small propagations per solve; helps most with few ordinates.
+    /// are seen. Costs a few small propagations per solve. Measured (tests/dome_cases.rs,
+    /// image error at N = 16 / 64 / 125): uniform dome 0.313 / 0.203 / 0.153 without, 0.298 /
+    /// 0.157 / 0.143 with; sun sky 0.305 / 0.205 / 0.196 without, 0.354 / 0.227 / 0.215 with
+    /// (it draws ordinates behind the medium, away from a sun on the camera's side).
     pub dome_importance: bool,
     /// Isotropic residuum (Sec. 5.4, residuum.rs): each light's grid runs only until its
     /// packets have become nearly isotropic (Eq. 10, or `residuum_iterations`), then the
