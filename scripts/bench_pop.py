@@ -162,7 +162,7 @@ def main() -> None:
         f"`python3 scripts/bench_pop.py` on {datetime.date.today().isoformat()}, {platform.machine()}, {threads} CPU threads"
         f" (shared with other jobs: times are wall-clock and pessimistic){' — QUICK RUN, not for committing' if args.quick else ''}.",
         f"Baseline: `reference` at {base_spp} spp; grids compared on 16^3 points, reference grid at {grid_spp} paths per point.",
-        "POP at its defaults (32 cells along the longest side per light, 6 dome ordinates at 16, residual 1e-3, output 128).",
+        "POP at its defaults (32 cells along the longest side per light, 16 dome ordinates at 16 with importance, isotropic residuum, residual 1e-3, output 128).",
         "Errors are relative RMSE against the baseline: *image* as rendered (incl. background), *scattered* = image minus",
         "background (the light the solvers compute), *grid* = scattering grid S. *Reference at POP's error*: spp where the",
         "reference's own error c/sqrt(spp) (fitted at 4/16/64 spp) equals POP's scattered error, times its seconds per spp.",
@@ -178,7 +178,7 @@ def main() -> None:
     phases = ["pop mip", "pop light grid", "pop init", "pop propagation", "pop merge", "pop upsample", "composite"]
     lines += [
         "",
-        "POP time per phase (seconds, wall) on the default scene (sun + 6 dome ordinates), 32x32 image:",
+        "POP time per phase (seconds, wall) on the default scene (sun + 16 dome ordinates), 32x32 image:",
         "",
         "| grid resolution | " + " | ".join(p.replace("pop ", "") for p in phases) + " | solve total |",
         "|---|" + "---|" * (len(phases) + 1),

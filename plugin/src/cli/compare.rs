@@ -20,7 +20,9 @@ pub struct CompareArgs {
     pub scene: Option<PathBuf>,
     /// Comma-separated solver names; the baseline is `reference` if listed, else the last.
     /// `reference@N` is the reference at N paths per pixel with its own seed (for error versus
-    /// time curves against a converged baseline); it gets no scattering grid.
+    /// time curves against a converged baseline); it gets no scattering grid. `NAME#LABEL` is
+    /// NAME once more with the settings `--set NAME#LABEL.KEY=VALUE` on top of `--set NAME.KEY`
+    /// (several variants of one solver against one baseline).
     #[arg(long, default_value = "pop,reference")]
     pub solvers: String,
     /// Setting for one solver, SOLVER.KEY=VALUE (JSON value), repeatable:
@@ -72,7 +74,7 @@ fn settings_for(scene: &Scene, name: &str, args: &CompareArgs) -> Result<serde_j
         let (solver, key) = k
             .split_once('.')
             .ok_or_else(|| Error::InvalidArgument(format!("--set {kv}: name the solver, as in pop.{k}=...")))?;
-        if !solvers::SOLVER_NAMES.contains(&solver) {
+        if !solvers::SOLVER_NAMES.contains(&solver.split('#').next().unwrap_or("")) {
             return Err(Error::InvalidArgument(format!("--set {kv}: unknown solver `{solver}`")));
         }
         if solver == name {
@@ -121,12 +123,12 @@ pub fn run(args: CompareArgs) -> Result<()> {
         return Err(Error::InvalidArgument("--solvers needs at least two names".into()));
     }
     for n in &names {
-        let base_name = n.split('@').next().unwrap_or("");
+        let base_name = n.split(['@', '#']).next().unwrap_or("");
         if let Some(spp) = n.strip_prefix("reference@") {
             if spp.parse::<u32>().map_or(true, |v| v == 0) {
                 return Err(Error::InvalidArgument(format!("`{n}`: expected reference@SPP with SPP > 0")));
             }
-        } else if !solvers::SOLVER_NAMES.contains(&base_name) || n.contains('@') {
+        } else if !solvers::SOLVER_NAMES.contains(&base_name) || n.contains('@') || (n.contains('#') && base_name == "reference") {
             return Err(Error::InvalidArgument(format!("unknown solver `{n}` (known: {})", solvers::SOLVER_NAMES.join(", "))));
         }
     }
@@ -136,8 +138,11 @@ pub fn run(args: CompareArgs) -> Result<()> {
     let mut runs = Vec::new();
     for (index, name) in names.iter().enumerate() {
         let sweep_spp = name.strip_prefix("reference@").and_then(|v| v.parse::<u32>().ok());
-        let solver_name = if sweep_spp.is_some() { "reference" } else { name.as_str() };
+        let solver_name = if sweep_spp.is_some() { "reference" } else { name.split('#').next().unwrap_or("") };
         let mut settings = settings_for(&scene, solver_name, &args)?;
+        if name.contains('#') {
+            settings.extend(settings_for(&scene, name, &args)?);
+        }
         if let Some(spp) = sweep_spp {
             settings.insert("spp".into(), json!(spp));
             settings.insert("seed".into(), json!(1000 + index as u64));
@@ -165,7 +170,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
             };
             (image, grid, image_seconds, grid_seconds)
         } else {
-            let solver = solvers::by_name(name, &settings)?;
+            let solver = solvers::by_name(solver_name, &settings)?;
             let t = Instant::now();
             let out = solver.solve(&scene, &progress)?;
             let grid_seconds = t.elapsed().as_secs_f64();

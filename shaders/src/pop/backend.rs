@@ -84,11 +84,18 @@ impl PopBackend for GpuBackend<'_> {
         Ok((light, sums))
     }
 
+    fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, mu: &[f32]) -> Result<GpuLight> {
+        let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
+        self.ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&packets)));
+        light.injected = packets.iter().copied().sum();
+        Ok(light)
+    }
+
     fn propagate(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
         if opts.vacuum_escape {
             return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
         }
-        let (stats, times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every).map_err(gpu_error)?;
+        let (stats, times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every, opts.keep_remaining).map_err(gpu_error)?;
         if let Ok(mut t) = self.propagation_times.lock() {
             t.push(times);
         }

@@ -20,7 +20,7 @@ use std::mem::size_of;
 use std::time::Instant;
 
 use crate::context::{GpuContext, GpuError};
-use light::GpuLight;
+use light::{read_rgb, GpuLight};
 use volscatter_core::solvers::pop::init::Initial;
 use volscatter_core::solvers::pop::propagate::Propagation;
 use volscatter_core::solvers::pop::PropagationStats;
@@ -55,6 +55,8 @@ fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
 /// like the CPU version: uploads the light, runs `propagate_resident`, reads J back. The
 /// residual is checked every `check_every` iterations, so the GPU may run up to
 /// `check_every - 1` iterations more than the CPU would.
+/// With `keep_remaining`, the packets still travelling at the end come back in
+/// `PropagationStats::remaining` (for the isotropic residuum).
 pub fn propagate(
     ctx: &GpuContext,
     prop: &Propagation,
@@ -62,6 +64,7 @@ pub fn propagate(
     a_scattered: f32,
     j_acc: &mut [Vec3],
     check_every: u32,
+    keep_remaining: bool,
 ) -> Result<(PropagationStats, GpuPropagationTimes), GpuError> {
     let t_start = Instant::now();
     let mut light = GpuLight::upload(ctx, prop.grid, prop.mu)?;
@@ -69,7 +72,7 @@ pub fn propagate(
     ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&vec4s(j_acc)));
     light.injected = init.packets.iter().copied().sum();
     let upload = t_start.elapsed().as_secs_f64();
-    let (stats, mut times) = propagate_resident(ctx, &light, prop, a_scattered, check_every)?;
+    let (stats, mut times) = propagate_resident(ctx, &light, prop, a_scattered, check_every, keep_remaining)?;
     times.upload += upload;
     let t_read = Instant::now();
     j_acc.copy_from_slice(&light.read_j(ctx)?);
@@ -79,13 +82,16 @@ pub fn propagate(
 
 /// The propagation of a light whose packets and J are in device memory (after `init::sweep`):
 /// adds into `light.j` and consumes `light.packets`. Only sums come back: the residual every
-/// `check_every` iterations (one slab of column sums), the escaped energy at the end.
+/// `check_every` iterations (one slab of column sums), the escaped energy at the end; with
+/// `keep_remaining` (the isotropic residuum) also the packets still travelling and their
+/// anisotropy, read back whole (`residual_anisotropy` is left zero without it).
 pub fn propagate_resident(
     ctx: &GpuContext,
     light: &GpuLight,
     prop: &Propagation,
     a_scattered: f32,
     check_every: u32,
+    keep_remaining: bool,
 ) -> Result<(PropagationStats, GpuPropagationTimes), GpuError> {
     let t_start = Instant::now();
     let grid = prop.grid;
@@ -189,6 +195,14 @@ pub fn propagate_resident(
     let residual = sum::total(ctx, if in_p1 { &p1 } else { p0 }, grid.dims, 1, 0)?;
     // Escapes realised so far: the first of each cell's two vec4s (propagate.wgsl).
     let escaped = sum::total(ctx, &esc, grid.dims, 2, 0)?;
+    let (remaining, residual_anisotropy) = if keep_remaining {
+        let p = read_rgb(ctx, if in_p1 { &p1 } else { p0 }, n as u64)?;
+        let a = read_rgb(ctx, if in_p1 { &a1 } else { &a0 }, n as u64)?;
+        let mean_a = volscatter_core::solvers::pop::propagate::mean_anisotropy(&p, &a);
+        (p, mean_a)
+    } else {
+        (Vec::new(), Vec3::ZERO)
+    };
     let absorbed = (injected - escaped - residual).max(Vec3::ZERO);
     let times = GpuPropagationTimes { upload, iterations: iterations_s, readback: t_read.elapsed().as_secs_f64() };
     Ok((
@@ -198,6 +212,8 @@ pub fn propagate_resident(
             escaped: escaped.to_array(),
             absorbed: absorbed.to_array(),
             residual: residual.to_array(),
+            residual_anisotropy: residual_anisotropy.to_array(),
+            remaining,
         },
         times,
     ))

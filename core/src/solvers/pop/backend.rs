@@ -35,6 +35,10 @@ pub trait PopBackend: Sync {
     /// fresh J (accumulate::add_direct with anisotropy `a0 g`).
     fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(Self::Light, SweepSums)>;
 
+    /// A light whose packets are given (the isotropic residuum's, gathered from other grids)
+    /// with an empty J.
+    fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, mu: &[f32]) -> Result<Self::Light>;
+
     /// Propagation of the light's packets (propagate.rs), adding into its J.
     fn propagate(&self, light: &mut Self::Light, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats>;
 
@@ -64,6 +68,12 @@ impl PopBackend for CpuBackend {
         accumulate::add_direct(&initial.direct, mu, a0, g, &mut j);
         let sums = SweepSums { entering: initial.entering, transmitted: initial.transmitted, absorbed: initial.absorbed };
         Ok((CpuLight { initial, j }, sums))
+    }
+
+    fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, _mu: &[f32]) -> Result<CpuLight> {
+        let zero = vec![Vec3::ZERO; grid.len()];
+        let initial = init::Initial { direct: zero.clone(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
+        Ok(CpuLight { initial, j: zero })
     }
 
     fn propagate(&self, light: &mut CpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {

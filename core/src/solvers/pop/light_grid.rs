@@ -42,6 +42,12 @@ impl LightGrid {
 
     /// Sets up the frame and samples the medium. `resolution` cells along the longest side.
     pub fn new(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32) -> Result<Self> {
+        Self::with_margin(medium, mip, d, resolution, 0)
+    }
+
+    /// As `new`, with `margin` extra empty cells on every side (the cell size is that of
+    /// `new`).
+    pub fn with_margin(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32, margin: u32) -> Result<Self> {
         let d = d.normalize();
         let (u, v) = orthonormal_basis(d);
         let rot = Mat3A::from_cols(u.into(), v.into(), d.into());
@@ -60,8 +66,10 @@ impl LightGrid {
             pmin = pmin.min(p);
             pmax = pmax.max(p);
         }
+        let h = (pmax - pmin).max(Vec3::splat(1e-6)).max_element() / resolution as f32;
+        pmin -= Vec3::splat(margin as f32 * h);
+        pmax += Vec3::splat(margin as f32 * h);
         let extent = (pmax - pmin).max(Vec3::splat(1e-6));
-        let h = extent.max_element() / resolution as f32;
         let dims = (extent / h).ceil().as_uvec3().max(UVec3::ONE);
         let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
         if count > 1 << 27 {

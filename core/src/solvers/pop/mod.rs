@@ -1,4 +1,4 @@
-//! `pop`: principal-ordinates propagation (paper 01, Sec. 4) for distant lights.
+//! `pop`: principal-ordinates propagation (paper 01, Sec. 4-5) for distant lights and domes.
 //!
 //! Pipeline per distant light: a propagation grid aligned with the light (light_grid.rs) over
 //! a mip-prefiltered copy of the medium (mip.rs); a transmittance sweep that gives the exact
@@ -23,19 +23,28 @@
 //!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
 //! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).
 //!
-//! Not here yet (later issues): point lights (radial grids, Sec. 6; left out with a warning on
-//! stderr) and proper environment lighting (importance-sampled ordinates, importance
-//! propagation, isotropic residuum, Sec. 5). A dome is handled crudely but honestly: a fixed
-//! set of `dome_ordinates` distant ordinates, each with its cell's mean radiance and the
-//! prefiltered anisotropy of Sec. 5.1; energy is right, the angular detail of a map is not.
+//! Environment lighting (Sec. 5): a dome becomes `dome_ordinates` distant ordinates, the
+//! sphere cut into regions of equal importance, each ordinate carrying exactly its region's
+//! light with its radiance-weighted mean cosine as initial anisotropy (dome.rs, Sec. 5.1);
+//! the importance is the dome's luminance times a directional importance map propagated from
+//! the camera (importance.rs, Sec. 5.2). With `isotropic_residuum`, every light (distant or
+//! dome ordinate) stops at its switch iteration m' (Eq. 10) and the energy still travelling in
+//! all of them is propagated isotropically in one medium-aligned grid (residuum.rs, Sec. 5.4),
+//! through the same propagation hook (CPU or GPU).
+//!
+//! Not here yet (a later issue): point lights (radial grids, Sec. 6; left out with a warning
+//! on stderr).
 
 pub mod accumulate;
 pub mod backend;
+pub mod dome;
+pub mod importance;
 pub mod init;
 pub mod light_grid;
 pub mod merge;
 pub mod mip;
 pub mod propagate;
+pub mod residuum;
 pub mod settings;
 pub mod upsample;
 
@@ -78,10 +87,50 @@ impl LightReport {
     }
 }
 
+/// The isotropic residuum's figures (residuum.rs), per unit cell cross-section of its grid.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ResiduumReport {
+    pub dims: [u32; 3],
+    pub cell_size: f32,
+    /// The lights' energy still travelling when they switched, gathered here
+    /// (= `propagation.injected`).
+    pub gathered: [f32; 3],
+    pub propagation: PropagationStats,
+}
+
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct PopReport {
     pub lights: Vec<LightReport>,
+    /// Present when the isotropic residuum ran.
+    pub residuum: Option<ResiduumReport>,
     pub warnings: Vec<String>,
+}
+
+impl PopReport {
+    /// Energy balance of the whole solve in watts (each grid's figures times its cell
+    /// cross-section): (light leaving + absorbed) / light entering, per channel. With the
+    /// residuum, what the lights hand over is counted where it finally goes.
+    pub fn energy_balance(&self) -> [f32; 3] {
+        let (mut entering, mut out) = (Vec3::ZERO, Vec3::ZERO);
+        for l in &self.lights {
+            let area = l.cell_size * l.cell_size;
+            entering += Vec3::from(l.entering) * area;
+            let p = &l.propagation;
+            out += (Vec3::from(l.transmitted) + Vec3::from(l.absorbed_direct) + Vec3::from(p.escaped) + Vec3::from(p.absorbed)) * area;
+        }
+        if let Some(r) = &self.residuum {
+            out += (Vec3::from(r.propagation.escaped) + Vec3::from(r.propagation.absorbed)) * r.cell_size * r.cell_size;
+        }
+        std::array::from_fn(|c| if entering[c] > 0.0 { out[c] / entering[c] } else { 1.0 })
+    }
+
+    /// Propagation work: cell updates summed over every grid (cells x iterations), the
+    /// measure of cost the residuum saves.
+    pub fn cell_updates(&self) -> u64 {
+        let cells = |d: [u32; 3]| d[0] as u64 * d[1] as u64 * d[2] as u64;
+        self.lights.iter().map(|l| cells(l.dims) * l.propagation.iterations as u64).sum::<u64>()
+            + self.residuum.as_ref().map_or(0, |r| cells(r.dims) * r.propagation.iterations as u64)
+    }
 }
 
 impl Pop {
@@ -106,6 +155,15 @@ impl Pop {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = PopReport::default();
+        // The finest footprint asked of the mip: the output grid's spacing or the light grids'
+        // cells, whichever is smaller.
+        let out_probe = ScatteringGrid::over_medium(medium, s.output_resolution)?;
+        let merge_probe = ScatteringGrid::over_medium(medium, s.merge_resolution())?;
+        let (wlo, whi) = medium.world_bounds();
+        let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
+        let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
+        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
+
         // Every light becomes ordinates: (direction of travel, fluence, initial anisotropy,
         // grid resolution).
         let mut distant: Vec<(Vec3, Vec3, f32, u32)> = Vec::new();
@@ -120,8 +178,13 @@ impl Pop {
                     distant.push((*direction, fluence, 1.0 - 0.5 * one_minus_cos, s.grid_resolution));
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
-                    for (d, fluence, a0) in dome_ordinates(env, s.dome_ordinates) {
-                        distant.push((d, fluence, a0, s.dome_grid_resolution()));
+                    let weights = if s.dome_importance {
+                        Some(timings.time("pop importance", || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction))?)
+                    } else {
+                        None
+                    };
+                    for o in dome::select_ordinates(env, s.dome_ordinates, weights.as_ref()) {
+                        distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
                 Light::Point { .. } | Light::Spot(_) | Light::Area(_) => report.warnings.push(format!(
@@ -142,17 +205,9 @@ impl Pop {
             return Err(Error::Cancelled);
         }
 
-        // The finest footprint asked of the mip: the output grid's spacing or the light grids'
-        // cells, whichever is smaller.
-        let out_probe = ScatteringGrid::over_medium(medium, s.output_resolution)?;
-        let merge_probe = ScatteringGrid::over_medium(medium, s.merge_resolution())?;
-        let (wlo, whi) = medium.world_bounds();
-        let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
-        let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
-        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
-
         let g = medium.g;
-        let mut lights = Vec::with_capacity(distant.len());
+        let mut lights = Vec::with_capacity(distant.len() + 1);
+        let mut residuum = if s.isotropic_residuum { Some(residuum::Residuum::new(medium, &mip, s.residuum_grid_resolution())?) } else { None };
         for (direction, fluence, a0, resolution) in distant {
             if fluence.max_element() <= 0.0 {
                 continue;
@@ -160,17 +215,26 @@ impl Pop {
             let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
             let (mut light, sweep) = timings.time("pop init", || backend.init(&grid, fluence, &mu, a0, g))?;
+            // With the residuum, each light stops at its switch iteration m' (Eq. 10).
+            let max_iterations = match &residuum {
+                Some(_) if s.residuum_iterations > 0 => s.residuum_iterations.min(s.max_iterations),
+                Some(_) => residuum::switch_iteration(a0 * g, g, residuum::mean_sigma_s(&grid), grid.h, s.residuum_anisotropy, grid.dims.z, s.max_iterations),
+                None => s.max_iterations,
+            };
             let prop = propagate::Propagation {
                 grid: &grid,
                 g,
                 mu: &mu,
                 diffusion_correction: s.diffusion_correction,
-                max_iterations: s.max_iterations,
+                max_iterations,
                 residual_threshold: s.residual_threshold,
             };
             let t0 = std::time::Instant::now();
-            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape };
-            let stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
+            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
+            let mut stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
+            if let Some(r) = residuum.as_mut() {
+                r.gather(&grid, &std::mem::take(&mut stats.remaining));
+            }
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
             report.lights.push(LightReport {
                 dims: grid.dims.to_array(),
@@ -180,6 +244,19 @@ impl Pop {
                 absorbed_direct: sweep.absorbed.to_array(),
                 propagation: stats,
             });
+            lights.push((grid, light));
+        }
+        // The residuum runs only when the lights handed over more than the residual threshold
+        // of all the energy they scattered, and iterates until what is left falls below that
+        // same absolute amount (the paper's epsilon_L over all grids): a light that converged
+        // before its switch hands over a negligible rest that needs no grid of its own.
+        let scattered = report.lights.iter().map(|l| Vec3::from(l.propagation.injected) * l.cell_size * l.cell_size).sum::<Vec3>();
+        if let Some(r) = residuum.filter(|r| (r.gathered() * r.grid.h * r.grid.h).cmpgt(scattered * s.residual_threshold).any()) {
+            let t0 = std::time::Instant::now();
+            let threshold = (scattered * s.residual_threshold / (r.gathered() * r.grid.h * r.grid.h).max(Vec3::splat(1e-30))).max_element().min(1.0);
+            let (grid, light, rep) = run_residuum(r, scene, s, threshold, progress, backend)?;
+            timings.0.push(("pop residuum".into(), t0.elapsed().as_secs_f64()));
+            report.residuum = Some(rep);
             lights.push((grid, light));
         }
         let merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
@@ -192,35 +269,32 @@ impl Pop {
     }
 }
 
-/// Directions of `n` points spread evenly over the sphere (Fibonacci lattice).
-fn fibonacci_sphere(n: u32) -> Vec<Vec3> {
-    let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
-    (0..n)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = golden * i as f32;
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect()
-}
-
-/// A dome as `n` ordinates: (direction of travel, fluence, initial anisotropy). Each ordinate
-/// owns the directions nearest to it (solid angle ~ 4 pi / n); its fluence is the mean radiance
-/// over them (2048 probe directions) times the solid angle, so the total equals the dome's
-/// fluence exactly for a uniform colour. Anisotropy: the mean cosine of a cone of that solid
-/// angle, 1 - 1/n (Sec. 5.1's prefiltering).
-fn dome_ordinates(env: &crate::scene::Environment, n: u32) -> Vec<(Vec3, Vec3, f32)> {
-    let dirs = fibonacci_sphere(n);
-    let probes = fibonacci_sphere(2048);
-    let mut sum = vec![Vec3::ZERO; dirs.len()];
-    for p in &probes {
-        let k = (0..dirs.len()).max_by(|&a, &b| dirs[a].dot(*p).total_cmp(&dirs[b].dot(*p))).unwrap();
-        sum[k] += env.radiance(*p);
-    }
-    let omega = 4.0 * std::f32::consts::PI / probes.len() as f32;
-    // Light arriving from direction w (towards the sky) travels along -w.
-    dirs.iter().zip(sum).map(|(w, s)| (-*w, s * omega, 1.0 - 1.0 / n as f32)).collect()
+/// Propagates the gathered residuum isotropically (a = 0) through the same hook as the lights,
+/// to convergence; returns its grid and accumulation for merging.
+fn run_residuum<B: PopBackend>(
+    r: residuum::Residuum,
+    scene: &Scene,
+    s: &PopSettings,
+    residual_threshold: f32,
+    progress: &dyn Progress,
+    backend: &B,
+) -> Result<(LightGrid, B::Light, ResiduumReport)> {
+    let grid = r.grid;
+    let gathered = r.packets.iter().copied().sum::<Vec3>();
+    let mu = accumulate::view_cosines(&grid, scene.camera.position);
+    let mut light = backend.with_packets(&grid, r.packets, &mu)?;
+    let prop = propagate::Propagation {
+        grid: &grid,
+        g: scene.medium.g,
+        mu: &mu,
+        diffusion_correction: s.diffusion_correction,
+        max_iterations: s.max_iterations,
+        residual_threshold,
+    };
+    let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false };
+    let stats = backend.propagate(&mut light, &prop, opts, 0.0, progress)?;
+    let rep = ResiduumReport { dims: grid.dims.to_array(), cell_size: grid.h, gathered: gathered.to_array(), propagation: stats };
+    Ok((grid, light, rep))
 }
 
 /// Sums repeated phases (one entry per light) into one entry each, keeping the order.

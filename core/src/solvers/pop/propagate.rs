@@ -58,6 +58,13 @@ pub struct PropagationStats {
     pub escaped: [f32; 3],
     pub absorbed: [f32; 3],
     pub residual: [f32; 3],
+    /// Energy-weighted mean anisotropy of the light still travelling at the end (what the
+    /// isotropic residuum, residuum.rs, treats as isotropic: Sec. 5.4's |a| < epsilon_a).
+    pub residual_anisotropy: [f32; 3],
+    /// Per cell, the packets still travelling at the end: filled only with
+    /// `RunOptions::keep_remaining` (the isotropic residuum gathers them).
+    #[serde(skip)]
+    pub remaining: Vec<Vec3>,
 }
 
 #[inline]
@@ -75,6 +82,9 @@ fn clamp_a(a: f32) -> f32 {
 pub struct RunOptions {
     /// Let the isotropic part of light that has left the medium escape (see run_with).
     pub vacuum_escape: bool,
+    /// Return the packets still travelling when the iterations stop in
+    /// `PropagationStats::remaining` (for the isotropic residuum, Sec. 5.4).
+    pub keep_remaining: bool,
 }
 
 pub struct Propagation<'a> {
@@ -117,7 +127,8 @@ impl Propagation<'_> {
         self.run_with(RunOptions::default(), init, a_scattered, j_acc, progress)
     }
 
-    /// `run` with options that the GPU port (shaders/src/pop) does not have yet.
+    /// `run` with options (the GPU port, shaders/src/pop, has `keep_remaining` but not
+    /// `vacuum_escape`).
     pub fn run_with(&self, opts: RunOptions, init: &Initial, a_scattered: f32, j_acc: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
         let grid = self.grid;
         let n = grid.len();
@@ -260,6 +271,14 @@ impl Propagation<'_> {
             escaped: escaped.to_array(),
             absorbed: absorbed.to_array(),
             residual: remaining.to_array(),
+            residual_anisotropy: mean_anisotropy(&p, &a).to_array(),
+            remaining: if opts.keep_remaining { p } else { Vec::new() },
         })
     }
+}
+
+/// Energy-weighted mean anisotropy of packets `p` with anisotropies `a`, per channel.
+pub fn mean_anisotropy(p: &[Vec3], a: &[Vec3]) -> Vec3 {
+    let (pa, sum) = p.iter().zip(a).fold((Vec3::ZERO, Vec3::ZERO), |(pa, sum), (p, a)| (pa + *p * *a, sum + *p));
+    Vec3::select(sum.cmpgt(Vec3::ZERO), pa / sum.max(Vec3::splat(1e-30)), Vec3::ZERO)
 }

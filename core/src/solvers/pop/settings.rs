@@ -42,11 +42,34 @@ pub struct PopSettings {
     /// one step outside acts as a perfect absorber, closer than the physical extrapolated
     /// boundary (0.71 / sigma_tr).
     pub vacuum_escape: bool,
-    /// A dome is approximated by this many distant ordinates (Fibonacci directions, each
-    /// carrying its cell's mean radiance times its solid angle, with the cone's mean cosine
-    /// as initial anisotropy: the prefiltering of Sec. 5.1 without importance sampling). 0: the
-    /// dome is left out of the scattering, with a warning.
+    /// A dome is approximated by this many distant ordinates (Sec. 5, dome.rs): the sphere is
+    /// cut into regions of equal importance (the dome's luminance, times the directional
+    /// importance when `dome_importance` is on, mixed half and half with a uniform density),
+    /// each ordinate carrying exactly its region's light, with the region's radiance-weighted
+    /// mean cosine as initial anisotropy (Sec. 5.1). 0: the dome is left out of the
+    /// scattering, with a warning. The paper uses 27 to 64.
     pub dome_ordinates: u32,
+    /// Weight the choice of the dome's ordinates by how much light from each direction reaches
+    /// the camera (importance propagation, Sec. 5.2, importance.rs): more ordinates where they
+    /// are seen. Costs a few small propagations per solve; helps most with few ordinates.
+    pub dome_importance: bool,
+    /// Isotropic residuum (Sec. 5.4, residuum.rs): each light's grid runs only until its
+    /// packets have become nearly isotropic (Eq. 10, or `residuum_iterations`), then the
+    /// energy still travelling in all of them is gathered into one medium-aligned grid and
+    /// propagated isotropically to convergence. Saves most of the iterations in high-albedo
+    /// media with many ordinates, for a small change of the result (see the tests).
+    pub isotropic_residuum: bool,
+    /// The anisotropy below which light counts as isotropic, epsilon_a of Eq. 9-10 (the paper:
+    /// "around 0.1, or even higher").
+    pub residuum_anisotropy: f32,
+    /// Iterations per light before switching to the residuum, m'; 0 = Eq. 10 per light (at
+    /// least the grid's depth along the light).
+    pub residuum_iterations: u32,
+    /// Cells along the longest side of the residuum grid; 0 = the dome ordinates' resolution
+    /// (`dome_grid_resolution`): isotropic light is smooth, and the lattice's isotropic
+    /// diffusion needs iterations in proportion to the square of the resolution, so a grid
+    /// twice as fine costs about 32 times as much.
+    pub residuum_grid_resolution: u32,
     /// Propagation grid resolution of each dome ordinate; 0 = half of `grid_resolution`
     /// (sky light is smooth, and there are many ordinates).
     pub dome_grid_resolution: u32,
@@ -65,8 +88,13 @@ impl Default for PopSettings {
             spatial_sigma: 0.8,
             diffusion_correction: true,
             vacuum_escape: false,
-            dome_ordinates: 6,
+            dome_ordinates: 16,
             dome_grid_resolution: 0,
+            dome_importance: true,
+            isotropic_residuum: true,
+            residuum_anisotropy: 0.1,
+            residuum_iterations: 0,
+            residuum_grid_resolution: 0,
         }
     }
 }
@@ -94,8 +122,14 @@ impl PopSettings {
         if !(self.spatial_sigma.is_finite() && self.spatial_sigma > 0.0 && self.spatial_sigma <= 4.0) {
             return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {}", self.spatial_sigma)));
         }
-        if self.dome_ordinates > 64 {
-            return Err(Error::scene("solver.dome_ordinates", format!("must be in 0..=64, got {}", self.dome_ordinates)));
+        if self.dome_ordinates > 1024 {
+            return Err(Error::scene("solver.dome_ordinates", format!("must be in 0..=1024, got {}", self.dome_ordinates)));
+        }
+        if !(self.residuum_anisotropy.is_finite() && self.residuum_anisotropy > 0.0 && self.residuum_anisotropy < 1.0) {
+            return Err(Error::scene("solver.residuum_anisotropy", format!("must be in (0, 1), got {}", self.residuum_anisotropy)));
+        }
+        if self.residuum_grid_resolution != 0 && !(2..=512).contains(&self.residuum_grid_resolution) {
+            return Err(Error::scene("solver.residuum_grid_resolution", format!("must be 0 or in 2..=512, got {}", self.residuum_grid_resolution)));
         }
         if self.dome_grid_resolution != 0 && !(2..=512).contains(&self.dome_grid_resolution) {
             return Err(Error::scene("solver.dome_grid_resolution", format!("must be 0 or in 2..=512, got {}", self.dome_grid_resolution)));
@@ -105,6 +139,10 @@ impl PopSettings {
 
     pub fn dome_grid_resolution(&self) -> u32 {
         if self.dome_grid_resolution == 0 { (self.grid_resolution / 2).max(8) } else { self.dome_grid_resolution }
+    }
+
+    pub fn residuum_grid_resolution(&self) -> u32 {
+        if self.residuum_grid_resolution == 0 { self.dome_grid_resolution() } else { self.residuum_grid_resolution }
     }
 
     pub fn merge_resolution(&self) -> u32 {
