@@ -84,7 +84,7 @@ impl PopBackend for GpuBackend<'_> {
         Ok((light, sums))
     }
 
-    fn light_from_packets(&self, grid: &LightGrid, mu: &[f32], packets: Vec<Vec3>) -> Result<GpuLight> {
+    fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, mu: &[f32]) -> Result<GpuLight> {
         let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
         self.ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&packets)));
         light.injected = packets.iter().copied().sum();

@@ -54,8 +54,8 @@ fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
 /// Runs the propagation on the GPU and adds the accumulated in-scattered radiance into `j_acc`
 /// like the CPU version: uploads the light, runs `propagate_resident`, reads J back. The
 /// residual is checked every `check_every` iterations, so the GPU may run up to
-/// `check_every - 1` iterations more than the CPU would. With `keep_remaining`
-/// (`RunOptions::keep_remaining`) the packets still travelling at the end come back in
+/// `check_every - 1` iterations more than the CPU would.
+/// With `keep_remaining`, the packets still travelling at the end come back in
 /// `PropagationStats::remaining` (for the isotropic residuum).
 pub fn propagate(
     ctx: &GpuContext,
@@ -82,7 +82,9 @@ pub fn propagate(
 
 /// The propagation of a light whose packets and J are in device memory (after `init::sweep`):
 /// adds into `light.j` and consumes `light.packets`. Only sums come back: the residual every
-/// `check_every` iterations (one slab of column sums), the escaped energy at the end.
+/// `check_every` iterations (one slab of column sums), the escaped energy at the end; with
+/// `keep_remaining` (the isotropic residuum) also the packets still travelling and their
+/// anisotropy, read back whole (`residual_anisotropy` is left zero without it).
 pub fn propagate_resident(
     ctx: &GpuContext,
     light: &GpuLight,
@@ -193,7 +195,6 @@ pub fn propagate_resident(
     let residual = sum::total(ctx, if in_p1 { &p1 } else { p0 }, grid.dims, 1, 0)?;
     // Escapes realised so far: the first of each cell's two vec4s (propagate.wgsl).
     let escaped = sum::total(ctx, &esc, grid.dims, 2, 0)?;
-    // For the isotropic residuum: the packets still travelling and their mean anisotropy.
     let (remaining, residual_anisotropy) = if keep_remaining {
         let p = read_rgb(ctx, if in_p1 { &p1 } else { p0 }, n as u64)?;
         let a = read_rgb(ctx, if in_p1 { &a1 } else { &a0 }, n as u64)?;
@@ -212,7 +213,7 @@ pub fn propagate_resident(
             absorbed: absorbed.to_array(),
             residual: residual.to_array(),
             residual_anisotropy: residual_anisotropy.to_array(),
-            remaining: if keep_remaining { remaining } else { Vec::new() },
+            remaining,
         },
         times,
     ))

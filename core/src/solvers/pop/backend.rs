@@ -35,13 +35,11 @@ pub trait PopBackend: Sync {
     /// fresh J (accumulate::add_direct with anisotropy `a0 g`).
     fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(Self::Light, SweepSums)>;
 
-    /// A light whose packets are given instead of swept, with J zero: the isotropic residuum
-    /// (residuum.rs), which gathers the packets the lights leave at their switch iteration.
-    fn light_from_packets(&self, grid: &LightGrid, mu: &[f32], packets: Vec<Vec3>) -> Result<Self::Light>;
+    /// A light whose packets are given (the isotropic residuum's, gathered from other grids)
+    /// with an empty J.
+    fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, mu: &[f32]) -> Result<Self::Light>;
 
-    /// Propagation of the light's packets (propagate.rs), adding into its J. With
-    /// `opts.keep_remaining` the packets still travelling at the end come back in
-    /// `PropagationStats::remaining`.
+    /// Propagation of the light's packets (propagate.rs), adding into its J.
     fn propagate(&self, light: &mut Self::Light, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats>;
 
     /// merge.rs over all lights, in order.
@@ -72,9 +70,10 @@ impl PopBackend for CpuBackend {
         Ok((CpuLight { initial, j }, sums))
     }
 
-    fn light_from_packets(&self, grid: &LightGrid, _mu: &[f32], packets: Vec<Vec3>) -> Result<CpuLight> {
-        let initial = init::Initial { direct: Vec::new(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
-        Ok(CpuLight { initial, j: vec![Vec3::ZERO; grid.len()] })
+    fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, _mu: &[f32]) -> Result<CpuLight> {
+        let zero = vec![Vec3::ZERO; grid.len()];
+        let initial = init::Initial { direct: zero.clone(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
+        Ok(CpuLight { initial, j: zero })
     }
 
     fn propagate(&self, light: &mut CpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {

@@ -282,7 +282,7 @@ fn run_residuum<B: PopBackend>(
     let grid = r.grid;
     let gathered = r.packets.iter().copied().sum::<Vec3>();
     let mu = accumulate::view_cosines(&grid, scene.camera.position);
-    let mut light = backend.light_from_packets(&grid, &mu, r.packets)?;
+    let mut light = backend.with_packets(&grid, r.packets, &mu)?;
     let prop = propagate::Propagation {
         grid: &grid,
         g: scene.medium.g,
