@@ -35,6 +35,7 @@ pub mod light_grid;
 pub mod merge;
 pub mod mip;
 pub mod propagate;
+pub mod radial;
 pub mod settings;
 pub mod upsample;
 
@@ -85,6 +86,8 @@ impl LightReport {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct PopReport {
     pub lights: Vec<LightReport>,
+    /// Local lights' radial grids (radial/), in W.
+    pub radial: Vec<radial::RadialReport>,
     pub warnings: Vec<String>,
 }
 
@@ -106,6 +109,17 @@ impl Pop {
     /// As `solve_detailed`, with each light's propagation (the costly stage) run by
     /// `propagate`: the CPU's `Propagation::run_with`, or a GPU port (volscatter-gpu).
     pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, propagate: &PropagateFn) -> Result<(SolveOutput, PopReport)> {
+        self.solve_with_backends(scene, progress, propagate, &radial::cpu_propagate)
+    }
+
+    /// As `solve_with`, with the radial grids' propagation run by `radial_propagate`.
+    pub fn solve_with_backends(
+        &self,
+        scene: &Scene,
+        progress: &dyn Progress,
+        propagate: &PropagateFn,
+        radial_propagate: &radial::RadialPropagateFn,
+    ) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -128,9 +142,8 @@ impl Pop {
                         distant.push((d, fluence, a0, s.dome_grid_resolution()));
                     }
                 }
-                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => report.warnings.push(format!(
-                    "pop: lights[{i}] is a local (point, spot or area) light, which pop does not handle yet (radial grids, paper Sec. 6): left out of the result"
-                )),
+                // Local lights: radial grids, below.
+                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
                 Light::Dome(_) => report.warnings.push(format!(
                     "pop: lights[{i}] is a dome and dome_ordinates = 0: its light is left out of the scattering (the compositor still shows it behind the medium)"
                 )),
@@ -139,8 +152,9 @@ impl Pop {
         for w in &report.warnings {
             eprintln!("warning: {w}");
         }
-        if distant.is_empty() {
-            return Err(Error::InvalidArgument("pop: the scene has no distant light (or dome); pop handles only those so far".into()));
+        let local = radial::sources(&scene.lights, s.area_vpls);
+        if distant.is_empty() && local.is_empty() {
+            return Err(Error::InvalidArgument("pop: the scene has no light pop can propagate (distant, dome with ordinates, point, spot or area)".into()));
         }
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);
@@ -188,7 +202,13 @@ impl Pop {
             });
             lights.push((grid, j_acc));
         }
-        let merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
+        let mut merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
+        // --- local lights (radial.rs) ---
+        let merged_spacing = radial::spacing(&merged.j);
+        let (radial_lights, radial_reports) = radial::solve_sources(scene, &mip, s, merged_spacing, &local, progress, radial_propagate, &mut timings)?;
+        timings.time("pop merge", || radial::add_to_merged(&mut merged.j, &radial_lights));
+        report.radial = radial_reports;
+        // --- end local lights ---
         if !progress.update("pop upsample", 0.0) {
             return Err(Error::Cancelled);
         }
