@@ -5,7 +5,8 @@
 
 use crate::device::{DeviceChoice, DeviceUsed};
 use crate::{pop, GpuContext, GpuError};
-use volscatter_core::solvers::pop::Pop;
+use volscatter_core::solvers::pop::radial::RadialPropagateFn;
+use volscatter_core::solvers::pop::{Pop, PropagateFn};
 use volscatter_core::solvers::{self, Progress, SolveOutput};
 use volscatter_core::{Error, Result, Scene};
 
@@ -19,7 +20,15 @@ fn gpu_error(e: GpuError) -> Error {
 /// `pop` with its propagation on the GPU. Options the GPU port does not implement
 /// (`vacuum_escape`) run that light on the CPU.
 fn pop_on_gpu(ctx: &GpuContext, pop_solver: &Pop, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-    let (out, _report) = pop_solver.solve_with(scene, progress, &|prop, opts, init, a, j, progress| {
+    // Local lights' radial grids (pop/radial.rs).
+    let radial: &RadialPropagateFn = &|prop, init, j, progress| {
+        let (stats, _times) = pop::radial::propagate_radial(ctx, prop, init, j, CHECK_EVERY).map_err(gpu_error)?;
+        if !progress.update("pop radial propagation", 1.0) {
+            return Err(Error::Cancelled);
+        }
+        Ok(stats)
+    };
+    let propagate: &PropagateFn = &|prop, opts, init, a, j, progress| {
         if opts.vacuum_escape {
             return prop.run_with(opts, init, a, j, progress);
         }
@@ -28,7 +37,8 @@ fn pop_on_gpu(ctx: &GpuContext, pop_solver: &Pop, scene: &Scene, progress: &dyn 
             return Err(Error::Cancelled);
         }
         Ok(stats)
-    })?;
+    };
+    let (out, _report) = pop_solver.solve_with_backends(scene, progress, propagate, radial)?;
     Ok(out)
 }
 

@@ -9,6 +9,15 @@
 //! - P is power (W), see init.rs; the fluence a cell sees is P s / V with V its volume.
 //! - No side faces: the angular directions are closed (octahedral folding). Light leaves
 //!   only through the outer shell.
+//! - Outer faces are larger. A cubic lattice with equal front and back fractions keeps
+//!   isotropic light where it is only if its density is uniform; here uniform fluence (the
+//!   state a non-absorbing medium keeps) means power per cell proportional to V / s, which grows
+//!   by q per shell when s is diffusion-matched (s ~ h^2 ~ r^2) and by q^2 when s = h. So the
+//!   front and back fractions are weighted by R_out / r_mid and R_in / r_mid (squared when
+//!   s = h) and the fractions renormalised: then uniform isotropic light is stationary, light
+//!   drifts outwards as in physical diffusion about a point, and a lobe along the principal
+//!   direction (all front) is unchanged. Departure from the paper, which does not say how it
+//!   treats the isotropic part; without it diffuse light piles up towards the centre.
 //! - Light sent inwards from the innermost shell crosses the centre and continues outwards in
 //!   the opposite column; its lobe, about the old outward direction, is about the new one with
 //!   anisotropy -a.
@@ -74,10 +83,19 @@ pub struct RadialPropagation<'a> {
 impl RadialPropagation<'_> {
     fn emit(&self, c: usize, a: Vec3) -> Emit {
         let grid = self.grid;
-        let h = grid.thickness(c / grid.slab());
+        let k = c / grid.slab();
+        let h = grid.thickness(k);
         let front = per_channel(a, |a| hg_cone_fraction(COS_45, clamp_a(a)));
         let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
         let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
+        // Outer faces are larger than inner ones (see the module doc): weights R_out / r_mid
+        // and R_in / r_mid (squared without the diffusion correction), renormalised.
+        let (r0, r1, rm) = (grid.radii[k], grid.radii[k + 1], grid.mid_radius(k));
+        let m = if self.diffusion_correction { 1 } else { 2 };
+        let (wf, wb) = ((r1 / rm).powi(m), (r0 / rm).powi(m));
+        let z = front * wf + back * wb + side * 4.0;
+        let inv = Vec3::select(z.cmpgt(Vec3::ZERO), Vec3::ONE / z.max(Vec3::splat(1e-30)), Vec3::ZERO);
+        let (front, back, side) = (front * wf * inv, back * wb * inv, side * inv);
         let kappa = if self.diffusion_correction {
             let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c];
             let iso = (sigma_tr * (0.5 * h)).min(Vec3::splat(64.0));
