@@ -55,7 +55,7 @@ pub fn propagate_radial(
     let params = |weight: f32| RadialParams {
         dims: [grid.n(), slab as u32, nk as u32, n as u32],
         consts: [prop.g, prop.g.abs().max(1e-6).ln(), 0.0, 0.0],
-        flags: [prop.diffusion_correction as u32, 0, 0, 0],
+        flags: [prop.diffusion_correction as u32, prop.vacuum_escape as u32, 0, 0],
         weight: [weight, 0.0, 0.0, 0.0],
     };
     let uniform = |w: f32| {
@@ -102,7 +102,7 @@ pub fn propagate_radial(
             ty: if b == 0 {
                 wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
             } else {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 7 }, has_dynamic_offset: false, min_binding_size: None }
+                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 7 && b != 6 }, has_dynamic_offset: false, min_binding_size: None }
             },
             count: None,
         })
@@ -231,16 +231,16 @@ mod tests {
         let grid = RadialGrid::new(medium, &mip, position, 16, 0.0, 24).unwrap();
         let mu = propagate::view_cosines(&grid, scene.camera.position);
         let initial = init::sweep(&grid, medium, &emitter);
-        for diffusion in [false, true] {
-            let prop = propagate::RadialPropagation { grid: &grid, g: medium.g, mu: &mu, diffusion_correction: diffusion, max_iterations: 24, residual_threshold: 0.0 };
+        for (diffusion, vacuum_escape) in [(false, false), (true, false), (true, true)] {
+            let prop = propagate::RadialPropagation { grid: &grid, g: medium.g, mu: &mu, diffusion_correction: diffusion, vacuum_escape, max_iterations: 24, residual_threshold: 0.0 };
             let mut j_cpu = vec![Vec3::ZERO; grid.len()];
             let cpu = prop.run(&initial, &mut j_cpu, &NoProgress).unwrap();
             let mut j_gpu = vec![Vec3::ZERO; grid.len()];
             let (gpu, _) = propagate_radial(&ctx, &prop, &initial, &mut j_gpu, 8).unwrap();
             assert_eq!(cpu.iterations, gpu.iterations);
             let e = relative_rmse(&j_gpu, &j_cpu);
-            eprintln!("diffusion={diffusion}: J relative RMSE {e:e}");
-            assert!(e < 1e-4, "diffusion={diffusion}: J relative RMSE {e}");
+            eprintln!("diffusion={diffusion} vacuum_escape={vacuum_escape}: J relative RMSE {e:e}");
+            assert!(e < 1e-4, "diffusion={diffusion} vacuum_escape={vacuum_escape}: J relative RMSE {e}");
             for (name, a, b) in [("escaped", gpu.escaped, cpu.escaped), ("residual", gpu.residual, cpu.residual)] {
                 let rel = (Vec3::from(a) - Vec3::from(b)).length() / Vec3::from(b).length().max(1e-20);
                 eprintln!("{name}: relative difference {rel:e}");

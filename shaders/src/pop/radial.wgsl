@@ -11,7 +11,7 @@
 struct Params {
     dims: vec4<u32>,    // n, columns (n^2), shells, cells
     consts: vec4<f32>,  // g, ln|g|, -, -
-    flags: vec4<u32>,   // diffusion_correction, -, -, -
+    flags: vec4<u32>,   // diffusion_correction, vacuum_escape, -, -
     weight: vec4<f32>,  // J weight of this emission (0.5 for the packets' birth cells), -, -, -
 };
 
@@ -23,7 +23,8 @@ struct Params {
 @group(0) @binding(4) var<storage, read> shells: array<vec4<f32>>;
 // Per column, two entries: the four angular neighbours; the opposite column, -, -, -.
 @group(0) @binding(5) var<storage, read> columns: array<vec4<u32>>;
-@group(0) @binding(6) var<storage, read> p_in: array<vec4<f32>>;
+// Read-write: emit_accumulate removes what escapes from empty cells (vacuum_escape).
+@group(0) @binding(6) var<storage, read_write> p_in: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read> a_in: array<vec4<f32>>;
 // Four vec4 per cell: front, side, back fractions and path length.
 @group(0) @binding(8) var<storage, read_write> emit: array<vec4<f32>>;
@@ -93,7 +94,15 @@ fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     emit[4u * c + 1u] = vec4<f32>(side, 0.0);
     emit[4u * c + 2u] = vec4<f32>(back, 0.0);
     emit[4u * c + 3u] = vec4<f32>(path, 0.0);
-    let p = p_in[c].xyz;
+    var p = p_in[c].xyz;
+    var vac = vec3<f32>(0.0);
+    if (params.flags.y != 0u && all(sigma_s[c].xyz == vec3<f32>(0.0)) && all(sigma_a[c].xyz == vec3<f32>(0.0))) {
+        // Outside the medium the isotropic part escapes (radial/propagate.rs).
+        let keep = min(abs(a), vec3<f32>(1.0));
+        vac = p * (vec3<f32>(1.0) - keep);
+        p = p * keep;
+        p_in[c] = vec4<f32>(p, 0.0);
+    }
     let w = p * path * (shell.y * params.weight.x);
     let ag = clamp_a(a * g);
     j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg(mu[c], ag), 0.0);
@@ -101,7 +110,7 @@ fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (k == params.dims.z - 1u) {
         out = front;
     }
-    esc[2u * c] = vec4<f32>(esc[2u * c].xyz + esc[2u * c + 1u].xyz, 0.0);
+    esc[2u * c] = vec4<f32>(esc[2u * c].xyz + esc[2u * c + 1u].xyz + vac, 0.0);
     esc[2u * c + 1u] = vec4<f32>(p * out, 0.0);
 }
 

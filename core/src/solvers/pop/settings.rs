@@ -59,6 +59,11 @@ pub struct PopSettings {
     pub radial_max_shells: u32,
     /// An area light becomes `area_vpls` x `area_vpls` VPLs, each with its own radial grid.
     pub area_vpls: u32,
+    /// `vacuum_escape` for the radial grids, on by default there: light leaving a medium
+    /// around a light must not random-walk back in. Measured (test settings): paper Fig. 10
+    /// sphere at g 0, image rel. RMSE 0.48 (1.5x too bright) -> 0.17 and 3944 -> 3518
+    /// iterations; lights beside the plume 0.31 -> 0.33 (2% darker) in 3x fewer iterations.
+    pub radial_vacuum_escape: bool,
 }
 
 impl Default for PopSettings {
@@ -79,6 +84,7 @@ impl Default for PopSettings {
             radial_resolution: 0,
             radial_max_shells: 64,
             area_vpls: 3,
+            radial_vacuum_escape: true,
         }
     }
 }

@@ -21,8 +21,9 @@
 //! inverse-square law stops at r_c (grid shells start there and lookups clamp r to it), and its
 //! light arrives in the cone the patch subtends (initial anisotropy, Sec. 6's prefiltering
 //! "VPLs with a large importance have a high initial anisotropy"). No bias compensation: the
-//! single-scattered power the clamp removes, sigma_s(VPL) x power x 2/3 r_c per VPL, is
-//! reported (`RadialReport::clamped`); the power propagated is unchanged.
+//! single-scattered power the clamp removes (about sigma_s(VPL) x power x 2/3 r_c per VPL in a
+//! thin medium, attenuated in a dense one) is reported (`RadialReport::clamped`); the power
+//! propagated is unchanged.
 //!
 //! Point lights get the same lookup clamp at the radius where 1/r^2 equals its mean over one
 //! merged cell (0.36 cell), since the merged grid holds cell values, not point values.
@@ -173,18 +174,14 @@ pub fn solve_sources(
             g: medium.g,
             mu: &mu,
             diffusion_correction: s.diffusion_correction,
+            vacuum_escape: s.radial_vacuum_escape,
             max_iterations: s.max_iterations,
             residual_threshold: s.residual_threshold,
         };
         let t0 = std::time::Instant::now();
         let stats = propagate_fn(&prop, &init, &mut j, progress)?;
         timings.0.push(("pop radial propagation".into(), t0.elapsed().as_secs_f64()));
-        let clamped = if e.clamp_radius > 0.0 {
-            let sigma_s = medium.sigma_s(medium.density_world(src.position));
-            sigma_s * (init.entering * (2.0 / 3.0 * e.clamp_radius))
-        } else {
-            Vec3::ZERO
-        };
+        let clamped = clamped_single_scattering(medium, src.position, init.entering, e.clamp_radius);
         reports.push(RadialReport {
             light: src.light,
             kind: src.kind.into(),
@@ -201,6 +198,26 @@ pub fn solve_sources(
         lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp });
     }
     Ok((lights, reports))
+}
+
+/// Single-scattered power the clamp of a VPL of power `power` removes, with the medium at the
+/// VPL taken as uniform: sigma_s P integral_0^r_c (exp(-sigma_t r) - (r / r_c)^2 exp(-sigma_t r))
+/// dr (the 1/r^2 law against its clamped 1/r_c^2, both attenuated; 64-step midpoint rule).
+/// Without attenuation this is sigma_s P 2/3 r_c.
+fn clamped_single_scattering(medium: &crate::medium::Medium, at: Vec3, power: Vec3, r_c: f32) -> Vec3 {
+    if r_c <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let dens = medium.density_world(at);
+    let (ss, st) = (medium.sigma_s(dens), medium.sigma_t(dens));
+    const STEPS: u32 = 64;
+    let dr = r_c / STEPS as f32;
+    let mut sum = Vec3::ZERO;
+    for i in 0..STEPS {
+        let r = (i as f32 + 0.5) * dr;
+        sum += (-st * r).exp() * (1.0 - (r / r_c).powi(2)) * dr;
+    }
+    ss * power * sum
 }
 
 /// Spacing of a grid's points (its largest axis step).

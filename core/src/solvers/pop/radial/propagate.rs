@@ -18,6 +18,8 @@
 //!   drifts outwards as in physical diffusion about a point, and a lobe along the principal
 //!   direction (all front) is unchanged. Departure from the paper, which does not say how it
 //!   treats the isotropic part; without it diffuse light piles up towards the centre.
+//! - `vacuum_escape` (on by default for radial grids, `PopSettings::radial_vacuum_escape`): in
+//!   empty cells the isotropic part of the light leaves the grid, as in propagate.rs.
 //! - Light sent inwards from the innermost shell crosses the centre and continues outwards in
 //!   the opposite column; its lobe, about the old outward direction, is about the new one with
 //!   anisotropy -a.
@@ -76,6 +78,8 @@ pub struct RadialPropagation<'a> {
     pub g: f32,
     pub mu: &'a [f32],
     pub diffusion_correction: bool,
+    /// In empty cells the isotropic part of the light escapes (see `PopSettings::vacuum_escape`).
+    pub vacuum_escape: bool,
     pub max_iterations: u32,
     pub residual_threshold: f32,
 }
@@ -186,27 +190,35 @@ impl RadialPropagation<'_> {
             std::mem::swap(&mut p, &mut p_next);
             std::mem::swap(&mut a, &mut a_next);
             let a_ref = &a;
-            let (arrived, esc) = emit
+            let vacuum_escape = self.vacuum_escape;
+            let (arrived, esc, vac) = emit
                 .par_iter_mut()
                 .zip(j_acc.par_iter_mut())
-                .zip(p.par_iter())
+                .zip(p.par_iter_mut())
                 .enumerate()
                 .map(|(c, ((e, jc), pc))| {
-                    if *pc == Vec3::ZERO {
+                    let arrived = *pc;
+                    if arrived == Vec3::ZERO {
                         *e = Emit::default();
-                        return (Vec3::ZERO, Vec3::ZERO);
+                        return (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+                    }
+                    let mut vac = Vec3::ZERO;
+                    if vacuum_escape && grid.sigma_s[c] == Vec3::ZERO && grid.sigma_a[c] == Vec3::ZERO {
+                        let keep = a_ref[c].abs().min(Vec3::ONE);
+                        vac = *pc * (Vec3::ONE - keep);
+                        *pc *= keep;
                     }
                     *e = self.emit(c, a_ref[c]);
                     let w = *pc * e.path * inv_volume[c / slab];
                     *jc += w * per_channel(a_ref[c], |ac| hg(self.mu[c], clamp_a(ac * g)));
-                    (*pc, escaped_at(c, e, *pc))
+                    (arrived, escaped_at(c, e, *pc), vac)
                 })
-                .reduce(|| (Vec3::ZERO, Vec3::ZERO), |x, y| (x.0 + y.0, x.1 + y.1));
+                .reduce(|| (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
             absorbed += (before - esc_next - arrived).max(Vec3::ZERO);
-            escaped += esc_next;
+            escaped += esc_next + vac;
             esc_next = esc;
-            before = arrived;
-            remaining = arrived;
+            before = arrived - vac;
+            remaining = arrived - vac;
             let decades = (remaining / injected.max(Vec3::splat(1e-30))).max_element().max(1e-12).log10();
             let frac = (iterations as f32 / self.max_iterations as f32).max(decades / self.residual_threshold.max(1e-12).log10());
             if !progress.update("pop radial propagation", frac.clamp(0.0, 1.0)) {

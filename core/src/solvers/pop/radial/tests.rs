@@ -168,6 +168,10 @@ fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
         for (v, key) in [(&mut rgb, &rings), (&mut ref_img, &rings), (&mut pop_grid, &bins), (&mut ref_grid, &bins)] {
             symmetrise(v, key);
         }
+        if std::env::var("POP_ROWS").is_ok() {
+            let row = |v: &[Vec3]| (SIZE / 2..SIZE).map(|x| format!("{:.4}", v[(x + SIZE * (SIZE / 2)) as usize].y)).collect::<Vec<_>>().join(" ");
+            eprintln!("pop rings {}\nref rings {}", row(&rgb), row(&ref_img));
+        }
     }
     if std::env::var("POP_ROWS").is_ok() {
         let [nx, ny, nz] = frame.dims;
@@ -246,12 +250,91 @@ fn explore() {
     }
 }
 
-fn check_case(name: &str, max_image: f64, max_grid: f64) {
-    let (e, rep) = pop_vs_fixture(name, &test_settings());
+fn check_case(name: &str, settings: PopSettings, max_image: f64, max_grid: f64) {
+    let (e, rep) = pop_vs_fixture(name, &settings);
     eprintln!("{name}: image {:.4} (mean x{:.3}), grid {:.4} (mean x{:.3}), iterations {}", e.image, e.image_ratio, e.grid, e.grid_ratio, rep.radial[0].propagation.iterations);
     assert!(rep.warnings.is_empty(), "{:?}", rep.warnings);
     assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
     assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+    assert!((0.8..1.2).contains(&e.grid_ratio), "{name}: grid mean x{:.3}", e.grid_ratio);
+    for r in &rep.radial {
+        assert!((r.energy_balance()[1] - 1.0).abs() < 2e-3, "{name}: energy balance {:?}", r.energy_balance());
+    }
+}
+
+// Accuracy against the converged reference (fixtures: 65536 paths per pixel, 16384 (plume) and
+// 8192 (sphere) per grid point; plume fixtures' own noise about 0.9% (image) and 2% (grid)). The
+// sphere's fixtures are noisier (a point light inside a medium gives the path tracer heavy-
+// tailed NEE weights: 7% and 31% image noise at g 0 and 0.8), so those cases are compared after
+// averaging over the scene's rotational symmetry. Bounds: the error measured with
+// `test_settings()` when written, plus 10% and 0.01, a ratchet against regressions as in
+// pop/tests.rs. Measured (image / grid rel. RMSE, grid mean ratio):
+// - Fig. 10 sphere, g 0: 0.166 / 0.126, x1.09 (converged: 3518 iterations; light random-walks
+//   through the lattice one shell per step, the paper's reason for the isotropic residuum);
+// - Fig. 10 sphere, g 0.8: 0.444 / 0.329, x1.01; the image error is the centre: the forward-
+//   scattering peak of the unscattered light (f_hg(1, 0.8) = 3.6 / sr) right around the point
+//   light, which the medium-aligned merged grid cannot resolve (inner ring 0.29 vs 0.55);
+// - plume lit from beside by a point, sphere, spot, rect light: 0.325 / 0.332 (x0.93), 0.322 /
+//   0.325 (x0.92), 0.378 / 0.364 (x0.87), 0.327 / 0.324 (x0.93); pop's distant-light plume case
+//   has 0.394 / 0.334. With the default settings (32 columns, merged grid 64): 0.300 / 0.321,
+//   0.297 / 0.313, 0.333 / 0.340, 0.296 / 0.309.
+
+#[test]
+fn fig10_point_in_sphere_g0_against_reference() {
+    check_case("fig10_g0", PopSettings { max_iterations: 4000, ..test_settings() }, 0.19, 0.15);
+}
+
+#[test]
+fn fig10_point_in_sphere_g08_against_reference() {
+    check_case("fig10_g08", test_settings(), 0.50, 0.37);
+}
+
+#[test]
+fn point_light_beside_plume_against_reference() {
+    check_case("plume_point", test_settings(), 0.37, 0.375);
+}
+
+#[test]
+fn sphere_light_beside_plume_against_reference() {
+    check_case("plume_sphere", test_settings(), 0.365, 0.37);
+}
+
+#[test]
+fn spot_light_beside_plume_against_reference() {
+    check_case("plume_spot", test_settings(), 0.43, 0.41);
+}
+
+#[test]
+fn rect_light_beside_plume_against_reference() {
+    check_case("plume_rect", test_settings(), 0.37, 0.37);
+}
+
+/// An area light is `area_vpls`^2 radial grids whose powers add up to the light's; a VPL
+/// inside the medium reports the single scattering its clamp removes (radial/mod.rs). Measured
+/// with 2 x 2 VPLs of a 0.8 x 0.5 m light inside the plume (r_c = 0.18 m, sigma_t r_c about 1):
+/// 5.15 W of the 12.57 W emitted (41%): the clamp is a real loss in so dense a medium, which
+/// more VPLs (smaller r_c) reduce; the propagated power is unchanged.
+#[test]
+fn area_light_vpls_carry_its_power_and_report_the_clamp() {
+    let mut sc = case("plume_rect");
+    let power = match &sc.lights[0] {
+        Light::Area(a) => a.power(),
+        _ => unreachable!(),
+    };
+    let s = PopSettings { area_vpls: 2, ..test_settings() };
+    let (_, rep) = Pop::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    assert_eq!(rep.radial.len(), 4);
+    let total: Vec3 = rep.radial.iter().map(|r| Vec3::from(r.entering)).sum();
+    assert!((total - power).abs().max_element() < 1e-3 * power.max_element(), "{total} vs {power}");
+    assert!(rep.radial.iter().all(|r| r.clamped == [0.0; 3]), "VPLs outside the medium clamp nothing");
+    // Move the light into the plume: now the clamp removes a little single scattering.
+    if let Light::Area(a) = &mut sc.lights[0] {
+        a.center = Vec3::new(0.0, 0.0, 0.2);
+    }
+    let (_, rep) = Pop::new(s).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let clamped: f32 = rep.radial.iter().map(|r| r.clamped[1]).sum();
+    eprintln!("clamped single scattering: {clamped:.4} W of {:.3} W emitted", power.y);
+    assert!(clamped > 0.0 && clamped < 0.5 * power.y, "{clamped}");
 }
 
 /// Energy: a point light of intensity I at the centre of the non-absorbing Fig. 10 sphere. The
@@ -289,18 +372,22 @@ fn light_leaving_the_sphere_is_the_lights_power() {
 /// sweep along the columns, the profile per column, the 1/r^2 lookup and the merge together.
 /// (Not the sphere light: the compositor treats it as a point at its centre, marching shadow
 /// rays through the sphere's inside, where pop, like the reference, starts at its surface.)
+/// Measured at 48 columns per side: rel. RMSE 0.063 (point, mean x1.055), 0.062 (spot, x1.007),
+/// 0.062 (rect, x1.055); bound 0.08. The error is angular resolution: the lights sit outside
+/// the medium, which then covers only a few hundred of the 2304 columns (at 16, 32, 64 columns
+/// the point light's error is 0.18, 0.093, 0.052), and a coarse column averages the density
+/// across its width before the exponential (brighter, by Jensen's inequality).
 #[test]
 fn single_scattering_matches_compositor() {
     for name in ["plume_point", "plume_spot", "plume_rect"] {
         let mut sc = case(name);
         sc.medium.albedo = Vec3::splat(0.02);
-        let rr: u32 = std::env::var("RR").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
-        let out = Pop::new(PopSettings { grid_resolution: 32, radial_resolution: rr, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
+        let out = Pop::new(PopSettings { grid_resolution: 32, radial_resolution: 48, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
         let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
         let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
         let single = img.aov("single").unwrap();
         let e = relative_rmse(&rgb, single);
         eprintln!("{name}: POP vs compositor single scattering {e:.4}, mean x{:.4}", mean(&rgb) / mean(single));
-        assert!(e < 0.1, "{name}: {e}");
+        assert!(e < 0.08, "{name}: {e}");
     }
 }
