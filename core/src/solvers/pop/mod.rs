@@ -1,4 +1,6 @@
-//! `pop`: principal-ordinates propagation (paper 01, Sec. 4) for distant lights.
+//! `pop`: principal-ordinates propagation (paper 01, Sec. 4) for distant lights, and radial
+//! grids (Sec. 6) for point, sphere, spot and area lights (radial/, whose module doc lists its
+//! own departures: equal-area octahedral map, power per cell, face-size weights, VPL clamp).
 //!
 //! Pipeline per distant light: a propagation grid aligned with the light (light_grid.rs) over
 //! a mip-prefiltered copy of the medium (mip.rs); a transmittance sweep that gives the exact
@@ -23,9 +25,11 @@
 //!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
 //! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).
 //!
-//! Not here yet (later issues): point lights (radial grids, Sec. 6; left out with a warning on
-//! stderr) and proper environment lighting (importance-sampled ordinates, importance
-//! propagation, isotropic residuum, Sec. 5). A dome is handled crudely but honestly: a fixed
+//! Local lights: each point, sphere or spot light, and each VPL of an area light, propagates in
+//! its own radial grid (radial/), whose J is added into the merged grid before upsampling.
+//!
+//! Not here yet (later issues): proper environment lighting (importance-sampled ordinates,
+//! importance propagation, isotropic residuum, Sec. 5). A dome is handled crudely but honestly: a fixed
 //! set of `dome_ordinates` distant ordinates, each with its cell's mean radiance and the
 //! prefiltered anisotropy of Sec. 5.1; energy is right, the angular detail of a map is not.
 
