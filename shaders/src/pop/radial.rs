@@ -160,7 +160,7 @@ pub fn propagate_radial(
         dispatch(&mut enc, &gather_pipe, g_bg);
         dispatch(&mut enc, &emit_pipe, e_bg);
         in_p1 = !in_p1;
-        if iterations % check_every == 0 || iterations == prop.max_iterations {
+        if iterations.is_multiple_of(check_every) || iterations == prop.max_iterations {
             ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
             if prop.residual_threshold > 0.0 && iterations < prop.max_iterations {
                 remaining = sum_p(&ctx.read_buffer(if in_p1 { &p1 } else { &p0 }, cell_bytes)?);

@@ -33,7 +33,7 @@ impl RadialGrid {
     /// `n` angular cells per side (even), shells from at least `r_min` (emitter radius or
     /// clamp radius; 0 for a point), at most `max_shells`.
     pub fn new(medium: &Medium, mip: &MediumMip, centre: Vec3, n: u32, r_min: f32, max_shells: u32) -> Result<Self> {
-        if n < 4 || n % 2 != 0 {
+        if n < 4 || !n.is_multiple_of(2) {
             return Err(Error::InvalidArgument(format!("radial grid: n must be even and >= 4, got {n}")));
         }
         let (lo, hi) = medium.world_bounds();

@@ -112,6 +112,16 @@ fn inner_optical_depth(medium: &Medium, centre: Vec3, dir: Vec3, r0: f32, r1: f3
     medium.sigma_t(dens * dt)
 }
 
+/// One column's sweep: direct fluence and packets per shell, and its power emitted,
+/// transmitted and absorbed.
+struct ColumnSweep {
+    direct: Vec<Vec3>,
+    packets: Vec<Vec3>,
+    entering: Vec3,
+    transmitted: Vec3,
+    absorbed: Vec3,
+}
+
 pub fn sweep(grid: &RadialGrid, medium: &Medium, e: &Emitter) -> RadialInitial {
     let slab = grid.slab();
     let nk = grid.shells();
@@ -123,14 +133,14 @@ pub fn sweep(grid: &RadialGrid, medium: &Medium, e: &Emitter) -> RadialInitial {
     let mut direct = vec![Vec3::ZERO; grid.len()];
     let mut packets = vec![Vec3::ZERO; grid.len()];
     // Column by column (each writes only its own cells: strided, so collected then scattered).
-    let columns: Vec<(Vec<Vec3>, Vec<Vec3>, Vec3, Vec3, Vec3)> = (0..slab)
+    let columns: Vec<ColumnSweep> = (0..slab)
         .into_par_iter()
         .map(|c| {
             let mut dir_col = vec![Vec3::ZERO; nk];
             let mut pk_col = vec![Vec3::ZERO; nk];
             let power = e.intensity * (factors[c] * omega);
             if power.max_element() <= 0.0 {
-                return (dir_col, pk_col, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+                return ColumnSweep { direct: dir_col, packets: pk_col, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
             }
             let dir = grid.cols.directions[c];
             let tau0 = inner_optical_depth(medium, grid.centre, dir, e.radius, grid.radii[0]);
@@ -151,18 +161,18 @@ pub fn sweep(grid: &RadialGrid, medium: &Medium, e: &Emitter) -> RadialInitial {
                 absorbed += lost - lost * frac_s;
                 tau += st * h;
             }
-            (dir_col, pk_col, power, power * (-tau).exp(), absorbed)
+            ColumnSweep { direct: dir_col, packets: pk_col, entering: power, transmitted: power * (-tau).exp(), absorbed }
         })
         .collect();
     let (mut entering, mut transmitted, mut absorbed) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
-    for (c, (dcol, pcol, p, t, a)) in columns.into_iter().enumerate() {
+    for (c, col) in columns.into_iter().enumerate() {
         for k in 0..nk {
-            direct[c + slab * k] = dcol[k];
-            packets[c + slab * k] = pcol[k];
+            direct[c + slab * k] = col.direct[k];
+            packets[c + slab * k] = col.packets[k];
         }
-        entering += p;
-        transmitted += t;
-        absorbed += a;
+        entering += col.entering;
+        transmitted += col.transmitted;
+        absorbed += col.absorbed;
     }
     let a_direct = (0..grid.len()).map(|i| a_shell[i / slab]).collect();
     RadialInitial { direct, a_direct, packets, entering, transmitted, absorbed }

@@ -192,7 +192,7 @@ fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
 /// Ring of each pixel about the image centre (one pixel wide).
 fn image_rings(size: u32) -> Vec<u32> {
     let c = 0.5 * size as f32;
-    (0..size * size).map(|p| ((((p % size) as f32 + 0.5 - c).hypot((p / size) as f32 + 0.5 - c)) as u32)).collect()
+    (0..size * size).map(|p| (((p % size) as f32 + 0.5 - c).hypot((p / size) as f32 + 0.5 - c)) as u32).collect()
 }
 
 /// Orbit of each grid point under rotations about the y axis through the origin: distance
