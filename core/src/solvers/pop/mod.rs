@@ -207,7 +207,7 @@ impl Pop {
             lights.push((grid, j_acc));
         }
         let mut merged = timings.time("pop merge", || merge::merge(medium, &mip, &lights, s.merge_resolution()))?;
-        // --- local lights (radial.rs) ---
+        // --- local lights (radial/) ---
         let merged_spacing = radial::spacing(&merged.j);
         let (radial_lights, radial_reports) = radial::solve_sources(scene, &mip, s, merged_spacing, &local, progress, radial_propagate, &mut timings)?;
         timings.time("pop merge", || radial::add_to_merged(&mut merged.j, &radial_lights));

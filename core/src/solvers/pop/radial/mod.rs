@@ -194,7 +194,8 @@ pub fn solve_sources(
             propagation: stats,
             clamped: clamped.to_array(),
         });
-        let r_clamp = e.clamp_radius.max(CELL_MEAN_RADIUS * merged_spacing);
+        // Inside a sphere light no further brightening (its surface is where the light starts).
+        let r_clamp = e.clamp_radius.max(e.radius).max(CELL_MEAN_RADIUS * merged_spacing);
         lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp });
     }
     Ok((lights, reports))

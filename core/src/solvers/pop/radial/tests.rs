@@ -391,3 +391,22 @@ fn single_scattering_matches_compositor() {
         assert!(e < 0.08, "{name}: {e}");
     }
 }
+
+/// The radial settings parse, and bad values are errors naming the key.
+#[test]
+fn radial_settings_parse_and_reject() {
+    let map = |v: serde_json::Value| v.as_object().unwrap().clone();
+    let p = Pop::from_settings(&map(serde_json::json!({"radial_resolution": 10, "area_vpls": 4, "radial_vacuum_escape": false}))).unwrap();
+    assert_eq!((p.settings.radial_resolution(), p.settings.area_vpls, p.settings.radial_vacuum_escape), (10, 4, false));
+    // 0 follows grid_resolution, rounded up to even (the octahedral folding needs it).
+    assert_eq!(PopSettings { grid_resolution: 15, ..Default::default() }.radial_resolution(), 16);
+    for (bad, field) in [
+        (serde_json::json!({"radial_resolution": 2}), "radial_resolution"),
+        (serde_json::json!({"radial_max_shells": 0}), "radial_max_shells"),
+        (serde_json::json!({"area_vpls": 0}), "area_vpls"),
+        (serde_json::json!({"area_vpls": 100}), "area_vpls"),
+    ] {
+        let e = Pop::from_settings(&map(bad.clone())).err().unwrap_or_else(|| panic!("{bad} accepted")).to_string();
+        assert!(e.contains(field), "{bad}: {e}");
+    }
+}
