@@ -17,6 +17,7 @@ use volscatter_core::solvers::pop::backend::{PopBackend, SweepSums};
 use volscatter_core::solvers::pop::init::Initial;
 use volscatter_core::solvers::pop::light_grid::LightGrid;
 use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::solvers::pop::radial::{self, init::RadialInitial, propagate::RadialPropagation, RadialLight};
 use volscatter_core::solvers::pop::propagate::{Propagation, RunOptions};
 use volscatter_core::solvers::pop::{PopSettings, PropagationStats};
 use volscatter_core::solvers::{Progress, ScatteringGrid};
@@ -109,6 +110,31 @@ impl PopBackend for GpuBackend<'_> {
         let gmip = self.mip(mip)?;
         let views: Vec<(&LightGrid, &wgpu::Buffer)> = lights.iter().map(|(g, l)| (g, &l.j)).collect();
         merge::merge(self.ctx, &gmip, medium, mip, &views, resolution).map_err(gpu_error)
+    }
+
+    fn propagate_radial(&self, prop: &RadialPropagation, init: &RadialInitial, j: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
+        let (stats, _times) = crate::pop::radial::propagate_radial(self.ctx, prop, init, j, self.check_every).map_err(gpu_error)?;
+        if !progress.update("pop radial propagation", 1.0) {
+            return Err(Error::Cancelled);
+        }
+        Ok(stats)
+    }
+
+    fn merged_grid<'m>(&self, merged: &'m GpuMerged) -> &'m ScatteringGrid {
+        &merged.grid
+    }
+
+    /// The radial grids are sampled on the CPU (radial::add_to_merged), so the merged J makes
+    /// one round trip when the scene has local lights.
+    fn add_radial(&self, merged: &mut GpuMerged, lights: &[RadialLight]) -> Result<()> {
+        if lights.is_empty() {
+            return Ok(());
+        }
+        let mut j = merged.grid.clone();
+        j.data = crate::pop::light::read_rgb(self.ctx, &merged.j, merged.grid.dims.iter().map(|&d| d as u64).product()).map_err(gpu_error)?;
+        radial::add_to_merged(&mut j, lights);
+        self.ctx.queue.write_buffer(&merged.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j.data)));
+        Ok(())
     }
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &GpuMerged, settings: &PopSettings) -> Result<ScatteringGrid> {

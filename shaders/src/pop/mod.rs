@@ -25,6 +25,9 @@ use volscatter_core::solvers::pop::init::Initial;
 use volscatter_core::solvers::pop::propagate::Propagation;
 use volscatter_core::solvers::pop::PropagationStats;
 
+// Local lights' radial grids (radial.wgsl).
+pub mod radial;
+
 pub const WGSL: &str = include_str!("propagate.wgsl");
 
 /// Mirrors `struct Params` in propagate.wgsl.

@@ -11,6 +11,7 @@ use super::merge::Merged;
 use super::mip::MediumMip;
 use super::propagate::{Propagation, PropagationStats, RunOptions};
 use super::settings::PopSettings;
+use super::radial::{self, init::RadialInitial, propagate::RadialPropagation, RadialLight};
 use super::{accumulate, init, merge, upsample};
 use crate::error::Result;
 use crate::medium::Medium;
@@ -42,8 +43,19 @@ pub trait PopBackend: Sync {
     /// Propagation of the light's packets (propagate.rs), adding into its J.
     fn propagate(&self, light: &mut Self::Light, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats>;
 
+    /// A radial grid's propagation (radial/propagate.rs) for local lights; the GPU overrides it.
+    fn propagate_radial(&self, prop: &RadialPropagation, init: &RadialInitial, j: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
+        radial::cpu_propagate(prop, init, j, progress)
+    }
+
     /// merge.rs over all lights, in order.
     fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, Self::Light)], resolution: u32) -> Result<Self::Merged>;
+
+    /// The merged grid's dims and frame.
+    fn merged_grid<'m>(&self, merged: &'m Self::Merged) -> &'m ScatteringGrid;
+
+    /// Adds the local lights' radial grids into the merged J (radial::add_to_merged).
+    fn add_radial(&self, merged: &mut Self::Merged, lights: &[RadialLight]) -> Result<()>;
 
     /// upsample.rs: the scattering grid S.
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Self::Merged, settings: &PopSettings) -> Result<ScatteringGrid>;
@@ -83,6 +95,15 @@ impl PopBackend for CpuBackend {
     fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, CpuLight)], resolution: u32) -> Result<Merged> {
         let views: Vec<(&LightGrid, &[Vec3])> = lights.iter().map(|(g, l)| (g, l.j.as_slice())).collect();
         merge::merge(medium, mip, &views, resolution)
+    }
+
+    fn merged_grid<'m>(&self, merged: &'m Merged) -> &'m ScatteringGrid {
+        &merged.j
+    }
+
+    fn add_radial(&self, merged: &mut Merged, lights: &[RadialLight]) -> Result<()> {
+        radial::add_to_merged(&mut merged.j, lights);
+        Ok(())
     }
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {

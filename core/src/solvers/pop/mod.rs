@@ -1,4 +1,7 @@
-//! `pop`: principal-ordinates propagation (paper 01, Sec. 4-5) for distant lights and domes.
+//! `pop`: principal-ordinates propagation (paper 01, Sec. 4-6) for distant lights, domes, and,
+//! through radial grids (Sec. 6), point, sphere, spot and area lights (radial/, whose module doc
+//! lists its own departures: equal-area octahedral map, power per cell, face-size weights, VPL
+//! clamp).
 //!
 //! Pipeline per distant light: a propagation grid aligned with the light (light_grid.rs) over
 //! a mip-prefiltered copy of the medium (mip.rs); a transmittance sweep that gives the exact
@@ -32,8 +35,8 @@
 //! all of them is propagated isotropically in one medium-aligned grid (residuum.rs, Sec. 5.4),
 //! with the same backend as the lights (CPU or GPU).
 //!
-//! Not here yet (a later issue): point lights (radial grids, Sec. 6; left out with a warning
-//! on stderr).
+//! Local lights: each point, sphere or spot light, and each VPL of an area light, propagates in
+//! its own radial grid (radial/), whose J is added into the merged grid before upsampling.
 
 pub mod accumulate;
 pub mod backend;
@@ -44,6 +47,7 @@ pub mod light_grid;
 pub mod merge;
 pub mod mip;
 pub mod propagate;
+pub mod radial;
 pub mod residuum;
 pub mod settings;
 pub mod upsample;
@@ -103,6 +107,8 @@ pub struct PopReport {
     pub lights: Vec<LightReport>,
     /// Present when the isotropic residuum ran.
     pub residuum: Option<ResiduumReport>,
+    /// Local lights' radial grids (radial/), in W.
+    pub radial: Vec<radial::RadialReport>,
     pub warnings: Vec<String>,
 }
 
@@ -187,9 +193,8 @@ impl Pop {
                         distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
-                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => report.warnings.push(format!(
-                    "pop: lights[{i}] is a local (point, spot or area) light, which pop does not handle yet (radial grids, paper Sec. 6): left out of the result"
-                )),
+                // Local lights: radial grids, below.
+                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
                 Light::Dome(_) => report.warnings.push(format!(
                     "pop: lights[{i}] is a dome and dome_ordinates = 0: its light is left out of the scattering (the compositor still shows it behind the medium)"
                 )),
@@ -198,8 +203,9 @@ impl Pop {
         for w in &report.warnings {
             eprintln!("warning: {w}");
         }
-        if distant.is_empty() {
-            return Err(Error::InvalidArgument("pop: the scene has no distant light (or dome); pop handles only those so far".into()));
+        let local = radial::sources(&scene.lights, s.area_vpls);
+        if distant.is_empty() && local.is_empty() {
+            return Err(Error::InvalidArgument("pop: the scene has no light pop can propagate (distant, dome with ordinates, point, spot or area)".into()));
         }
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);
@@ -259,7 +265,14 @@ impl Pop {
             report.residuum = Some(rep);
             lights.push((grid, light));
         }
-        let merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
+        let mut merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
+        // --- local lights (radial/) ---
+        let merged_spacing = radial::spacing(backend.merged_grid(&merged));
+        let radial_propagate: &radial::RadialPropagateFn = &|prop, init, j, progress| backend.propagate_radial(prop, init, j, progress);
+        let (radial_lights, radial_reports) = radial::solve_sources(scene, &mip, s, merged_spacing, &local, progress, radial_propagate, &mut timings)?;
+        timings.time("pop merge", || backend.add_radial(&mut merged, &radial_lights))?;
+        report.radial = radial_reports;
+        // --- end local lights ---
         if !progress.update("pop upsample", 0.0) {
             return Err(Error::Cancelled);
         }

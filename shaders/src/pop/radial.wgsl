@@ -1,0 +1,167 @@
+// POP propagation in a local light's radial grid (volscatter-core solvers/pop/radial/
+// propagate.rs): shells x octahedral columns, power per cell. Two kernels per iteration,
+// ping-pong between P/A buffers, one invocation per cell (cells: column fastest, shell slowest):
+//   emit_accumulate: fractions of P sent outwards (front), to the four angular neighbours
+//     (side) and inwards (back), weighted for the faces' sizes and renormalised; the path one
+//     step stands for; J += P s / V f_hg(mu, a g); energy leaving through the outer shell.
+//   gather: each cell collects from its radial neighbours, its four angular ones, and (in the
+//     innermost shell) from the opposite column through the centre, with the anisotropy negated.
+// RGB in .xyz of each vec4.
+
+struct Params {
+    dims: vec4<u32>,    // n, columns (n^2), shells, cells
+    consts: vec4<f32>,  // g, ln|g|, -, -
+    flags: vec4<u32>,   // diffusion_correction, vacuum_escape, -, -
+    weight: vec4<f32>,  // J weight of this emission (0.5 for the packets' birth cells), -, -, -
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> sigma_a: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> mu: array<f32>;
+// Per shell: radial length h, 1 / cell volume, front and back face weights.
+@group(0) @binding(4) var<storage, read> shells: array<vec4<f32>>;
+// Per column, two entries: the four angular neighbours; the opposite column, -, -, -.
+@group(0) @binding(5) var<storage, read> columns: array<vec4<u32>>;
+// Read-write: emit_accumulate removes what escapes from empty cells (vacuum_escape).
+@group(0) @binding(6) var<storage, read_write> p_in: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read> a_in: array<vec4<f32>>;
+// Four vec4 per cell: front, side, back fractions and path length.
+@group(0) @binding(8) var<storage, read_write> emit: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> j_acc: array<vec4<f32>>;
+// Two vec4 per cell: escapes realised so far, escapes of the current emission.
+@group(0) @binding(10) var<storage, read_write> esc: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read_write> p_out: array<vec4<f32>>;
+@group(0) @binding(12) var<storage, read_write> a_out: array<vec4<f32>>;
+
+const PI: f32 = 3.14159265358979;
+const COS_45: f32 = 0.70710678118654752;
+
+fn clamp_a(a: vec3<f32>) -> vec3<f32> {
+    return clamp(a, vec3<f32>(-0.9995), vec3<f32>(0.9995));
+}
+
+// phase::hg_cone_fraction: HG energy in the cone cos >= c.
+fn cone_fraction1(c: f32, g: f32) -> f32 {
+    if (abs(g) < 1e-4) {
+        return (1.0 - c) * 0.5;
+    }
+    let a = 1.0 + g * g;
+    let f1 = 1.0 / sqrt(max(a - 2.0 * g, 1e-12));
+    let fc = 1.0 / sqrt(max(a - 2.0 * g * c, 1e-12));
+    return clamp((1.0 - g * g) / (2.0 * g) * (f1 - fc), 0.0, 1.0);
+}
+
+fn cone_fraction(c: f32, g: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(cone_fraction1(c, g.x), cone_fraction1(c, g.y), cone_fraction1(c, g.z));
+}
+
+fn hg(mu_: f32, g: vec3<f32>) -> vec3<f32> {
+    let d = vec3<f32>(1.0) + g * g - 2.0 * g * mu_;
+    return (vec3<f32>(1.0) - g * g) / (4.0 * PI * d * sqrt(max(d, vec3<f32>(1e-12))));
+}
+
+@compute @workgroup_size(64)
+fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let c = gid.x;
+    if (c >= params.dims.w) {
+        return;
+    }
+    let k = c / params.dims.y;
+    let shell = shells[k];
+    let h = shell.x;
+    let g = params.consts.x;
+    let a = a_in[c].xyz;
+    let ca = clamp_a(a);
+    var front = cone_fraction(COS_45, ca);
+    var back = vec3<f32>(1.0) - cone_fraction(-COS_45, ca);
+    var side = max((vec3<f32>(1.0) - front - back) * 0.25, vec3<f32>(0.0));
+    let z = front * shell.z + back * shell.w + side * 4.0;
+    let inv = select(vec3<f32>(0.0), vec3<f32>(1.0) / max(z, vec3<f32>(1e-30)), z > vec3<f32>(0.0));
+    front = front * shell.z * inv;
+    back = back * shell.w * inv;
+    side = side * inv;
+    var kappa = vec3<f32>(1.0);
+    if (params.flags.x != 0u) {
+        let sigma_tr = sigma_s[c].xyz * (1.0 - abs(g)) + sigma_a[c].xyz;
+        let iso = min(sigma_tr * (0.5 * h), vec3<f32>(64.0));
+        let aa = min(abs(a), vec3<f32>(1.0));
+        let ball = select(vec3<f32>(0.75), (front - back) / max(aa, vec3<f32>(1e-3)), aa > vec3<f32>(1e-3));
+        kappa = aa * ball + (vec3<f32>(1.0) - aa) * iso;
+    }
+    let path = kappa * h;
+    emit[4u * c] = vec4<f32>(front, 0.0);
+    emit[4u * c + 1u] = vec4<f32>(side, 0.0);
+    emit[4u * c + 2u] = vec4<f32>(back, 0.0);
+    emit[4u * c + 3u] = vec4<f32>(path, 0.0);
+    var p = p_in[c].xyz;
+    var vac = vec3<f32>(0.0);
+    if (params.flags.y != 0u && all(sigma_s[c].xyz == vec3<f32>(0.0)) && all(sigma_a[c].xyz == vec3<f32>(0.0))) {
+        // Outside the medium the isotropic part escapes (radial/propagate.rs).
+        let keep = min(abs(a), vec3<f32>(1.0));
+        vac = p * (vec3<f32>(1.0) - keep);
+        p = p * keep;
+        p_in[c] = vec4<f32>(p, 0.0);
+    }
+    let w = p * path * (shell.y * params.weight.x);
+    let ag = clamp_a(a * g);
+    j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg(mu[c], ag), 0.0);
+    var out = vec3<f32>(0.0);
+    if (k == params.dims.z - 1u) {
+        out = front;
+    }
+    esc[2u * c] = vec4<f32>(esc[2u * c].xyz + esc[2u * c + 1u].xyz + vac, 0.0);
+    esc[2u * c + 1u] = vec4<f32>(p * out, 0.0);
+}
+
+struct Gathered {
+    l: vec3<f32>,
+    la: vec3<f32>,
+};
+
+fn add_from(acc: ptr<function, Gathered>, src: u32, slot: u32, sign: f32, sa_d: vec3<f32>, ss_d: vec3<f32>) {
+    let ps = p_in[src].xyz;
+    if (all(ps == vec3<f32>(0.0))) {
+        return;
+    }
+    let frac = emit[4u * src + slot].xyz;
+    let path = emit[4u * src + 3u].xyz;
+    let sa = 0.5 * (sigma_a[src].xyz + sa_d);
+    let ss = 0.5 * (sigma_s[src].xyz + ss_d);
+    let dl = ps * frac * exp(-sa * path);
+    let da = a_in[src].xyz * exp(ss * path * params.consts.y);
+    (*acc).l += dl;
+    (*acc).la += dl * da * sign;
+}
+
+@compute @workgroup_size(64)
+fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let dst = gid.x;
+    if (dst >= params.dims.w) {
+        return;
+    }
+    let slab = params.dims.y;
+    let col = dst % slab;
+    let k = dst / slab;
+    let sa_d = sigma_a[dst].xyz;
+    let ss_d = sigma_s[dst].xyz;
+    var acc: Gathered;
+    acc.l = vec3<f32>(0.0);
+    acc.la = vec3<f32>(0.0);
+    // Same order as the CPU, so the sums round alike.
+    if (k > 0u) {
+        add_from(&acc, dst - slab, 0u, 1.0, sa_d, ss_d);
+    } else {
+        add_from(&acc, columns[2u * col + 1u].x, 2u, -1.0, sa_d, ss_d);
+    }
+    if (k + 1u < params.dims.z) {
+        add_from(&acc, dst + slab, 2u, 1.0, sa_d, ss_d);
+    }
+    let nb = columns[2u * col];
+    add_from(&acc, nb.x + slab * k, 1u, 1.0, sa_d, ss_d);
+    add_from(&acc, nb.y + slab * k, 1u, 1.0, sa_d, ss_d);
+    add_from(&acc, nb.z + slab * k, 1u, 1.0, sa_d, ss_d);
+    add_from(&acc, nb.w + slab * k, 1u, 1.0, sa_d, ss_d);
+    p_out[dst] = vec4<f32>(acc.l, 0.0);
+    a_out[dst] = vec4<f32>(select(vec3<f32>(0.0), acc.la / max(acc.l, vec3<f32>(1e-30)), acc.l > vec3<f32>(1e-30)), 0.0);
+}
