@@ -1,14 +1,15 @@
 //! An emissive medium as virtual point lights (VPLs) inside it.
 //!
-//! Every voxel with emission e (W m^-3 sr^-1 at its centre) emits the power 4 pi e dV. The voxels,
-//! ordered along a Morton (Z-order) curve so that neighbours in the order are neighbours in space,
-//! are cut into `n` strata of equal power (by the sum of the RGB channels); each stratum becomes
-//! one isotropic VPL at the centre of the voxel holding the stratum's midpoint (stratified,
+//! Every trilinear cell (the cube between 8 voxel centres) with mean emission e (W m^-3 sr^-1,
+//! `EmissionTerm::for_each_emitting_cell`) emits the power 4 pi e dV. The cells, ordered along a
+//! Morton (Z-order) curve so that neighbours in the order are neighbours in space, are cut into
+//! `n` strata of equal power (by the sum of the RGB channels); each stratum becomes one
+//! isotropic VPL at the centre of the cell holding the stratum's midpoint (stratified,
 //! deterministic importance sampling by emitted power) with the stratum's exact RGB power, so the
-//! VPLs' total is the medium's `Emission::power()` to rounding. VPLs that land on the same voxel
+//! VPLs' total is the medium's `Emission::power()` to rounding. VPLs that land on the same cell
 //! are merged.
 //!
-//! Singularities. A VPL stands for the emission spread over its stratum (at least one voxel),
+//! Singularities. A VPL stands for the emission spread over its stratum (at least one cell),
 //! so closer than about the stratum's size its 1/d^2 is not the physics. Paper 03 (Sec. 4.3)
 //! bounds the geometry term, G' = min(G, b), and notes the bias as energy lost near the VPLs.
 //! Each VPL's `radius` r sets that bound, b = 1/r^2, and consumers clamp 1/d^2 to it (the
@@ -44,7 +45,7 @@ fn clamp_radius(volume: f32) -> f32 {
     0.375 * (3.0 * volume / (4.0 * std::f32::consts::PI)).cbrt()
 }
 
-/// One emitting voxel on the Morton curve.
+/// One emitting cell on the Morton curve.
 struct Cell {
     key: u64,
     weight: f64,
@@ -76,12 +77,12 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     let mut cells = Vec::new();
     for term in &emission.terms {
         let dv = term.voxel_volume();
-        let origin = term.grid.bbox().0;
-        term.for_each_emitting_voxel(|ijk, e| {
+        let origin = term.grid.bbox().0 - IVec3::ONE;
+        term.for_each_emitting_cell(|ijk, e| {
             let power = e * (four_pi * dv);
             let weight = (power.x + power.y + power.z) as f64;
             if weight > 0.0 {
-                let position = term.index_to_world.transform_point3(ijk.as_vec3());
+                let position = term.index_to_world.transform_point3(ijk.as_vec3() + Vec3::splat(0.5));
                 cells.push(Cell { key: morton(ijk, origin), weight, power, position, volume: dv });
             }
         });
@@ -94,7 +95,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     cells.sort_by_key(|c| c.key);
 
     // Walk the cumulative weight: stratum k covers [k, k+1) * total / n and receives each
-    // voxel's power in proportion to the overlap; its VPL sits at the voxel holding its midpoint.
+    // cell's power in proportion to the overlap; its VPL sits at the cell holding its midpoint.
     let stratum = total / n as f64;
     let mut power = vec![glam::DVec3::ZERO; n];
     let mut volume = vec![0.0f64; n];
@@ -124,7 +125,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     for k in 0..n {
         let p = power[k].as_vec3();
         let cell = &cells[holder[k]];
-        // Strata are in curve order, so strata sharing a voxel are consecutive: merge them.
+        // Strata are in curve order, so strata sharing a cell are consecutive: merge them.
         if holder[k] == last_holder {
             if let (Some(e), Some(v)) = (out.emitters.last_mut(), vpl_volume.last_mut()) {
                 e.intensity += p / four_pi;
@@ -190,7 +191,7 @@ mod tests {
             }
         }
         // Stratified by power: with 128 strata no VPL holds much more than 1/128 of the power
-        // unless one voxel does.
+        // unless one cell does.
         let v = emission_vpls(&linear, 128);
         let max = v.emitters.iter().map(|e| e.power().element_sum()).fold(0.0, f32::max);
         assert!(max < 2.5 * v.power.element_sum() / 128.0, "{max}");
