@@ -153,8 +153,9 @@ pub fn near_field_radius(grid: &ScatteringGrid) -> f32 {
 /// The mean of 1/|y|^2 over a ball of radius `r` whose centre is at distance `d` from the
 /// origin: (3 / (2 r^3 d)) ((r^2 - d^2)/2 ln((r + d)/|r - d|) + d r). It is 3/r^2 at d = 0,
 /// bounded, and 1/d^2 (1 + x^2/5 + 3 x^4/35 + x^6/21 + ...), x = r/d, far away (the series is
-/// used for x < 1/4, where the closed form cancels; truncation error < 1e-5). Its integral over all space equals that of 1/d^2:
-/// it spreads a point emitter's near field without losing energy.
+/// used for x < 1/4, where the closed form cancels; truncation error < 1e-5). Its integral
+/// over all space equals that of 1/d^2: it spreads a point emitter's near field without losing
+/// energy (a sphere light's radius enters too: outside it the kernel is 1/d^2 within r^2/5d^2).
 #[inline]
 pub fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
     if r <= 0.0 {
