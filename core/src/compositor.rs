@@ -141,33 +141,55 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
 }
 
 /// The grid holds point samples of S1 that the march interpolates trilinearly, so a grid
-/// point must carry the mean of S1 over its cell, not its value at the point: near an emitter
-/// inside the medium 1/d^2 is bounded by the cell mean of 1/|y|^2 over a ball of the cell's
-/// volume centred on the emitter, 3 / R^2 = 1 / (R / sqrt 3)^2, R = (3 h^3 / 4 pi)^(1/3).
-/// Returns R / sqrt 3 for the grid's smallest cell edge h (0.36 h).
+/// point must carry the mean of S1 around it, not its value at the point, or an emitter inside
+/// the medium (1/d^2) is over- or under-counted by where it falls between grid points. Returns
+/// the radius of the ball with the volume of one grid cell, (3 h^3 / 4 pi)^(1/3).
 pub fn near_field_radius(grid: &ScatteringGrid) -> f32 {
     let m = grid.index_to_world.matrix3;
-    let h = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
-    (3.0 / (4.0 * std::f32::consts::PI)).cbrt() * h / 3f32.sqrt()
+    let volume = glam::Mat3::from(m).determinant().abs();
+    (3.0 * volume / (4.0 * std::f32::consts::PI)).cbrt()
+}
+
+/// The mean of 1/|y|^2 over a ball of radius `r` whose centre is at distance `d` from the
+/// origin: (3 / (2 r^3 d)) ((r^2 - d^2)/2 ln((r + d)/|r - d|) + d r). It is 3/r^2 at d = 0,
+/// bounded, and 1/d^2 (1 + x^2/5 + 3 x^4/35 + x^6/21 + ...), x = r/d, far away (the series is
+/// used for x < 1/4, where the closed form cancels; truncation error < 1e-5). Its integral
+/// over all space equals that of 1/d^2: it spreads a point emitter's near field without losing
+/// energy (a sphere light's radius enters too: outside it the kernel is 1/d^2 within r^2/5d^2).
+#[inline]
+pub fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
+    if r <= 0.0 {
+        return 1.0 / (d * d);
+    }
+    if d < 1e-4 * r {
+        return 3.0 / (r * r);
+    }
+    let x = r / d;
+    if x < 0.25 {
+        let x2 = x * x;
+        return (1.0 + x2 * (0.2 + x2 * (3.0 / 35.0 + x2 / 21.0))) / (d * d);
+    }
+    let gap = (r - d).abs().max(1e-7 * r);
+    1.5 / (r * r * r * d) * (0.5 * (r * r - d * d) * ((r + d) / gap).ln() + d * r)
 }
 
 /// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2
-/// bounded at the larger of the emitter's radius (translate::emission: paper 03's clamp) and
-/// the grid's `near` radius. An isotropic emitter on the grid point itself (an emission VPL at
-/// a voxel centre shared with the grid) gives I / r^2 with the phase function's mean, 1/4 pi.
+/// replaced by its mean over a ball of radius sqrt(emitter radius^2 + near^2) (the emitter's
+/// own extent, translate::emission, convolved with the grid's cell: radii of convolved balls
+/// add roughly in squares). On the grid point itself the phase function's mean, 1/4 pi, is used.
 #[inline]
 fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &impl Fn(Vec3, f32) -> Vec3) -> Vec3 {
     let to = e.position - x;
     let dist = to.length();
-    let r = e.radius.max(near);
+    let r = (e.radius * e.radius + near * near).sqrt();
     if dist > 1e-6 {
         let w = to / dist;
         let intensity = e.intensity_towards(-w);
         if intensity.max_element() > 0.0 {
-            return intensity / (dist * dist).max(r * r) * hg(w.dot(view), g) * tr(w, dist);
+            return intensity * ball_mean_inverse_square(dist, r) * hg(w.dot(view), g) * tr(w, dist);
         }
     } else if e.profile == crate::translate::Profile::Isotropic && r > 0.0 {
-        return e.intensity / (r * r) * (0.25 * std::f32::consts::FRAC_1_PI);
+        return e.intensity * ball_mean_inverse_square(0.0, r) * (0.25 * std::f32::consts::FRAC_1_PI);
     }
     Vec3::ZERO
 }

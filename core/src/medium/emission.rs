@@ -70,26 +70,64 @@ impl EmissionTerm {
         glam::Mat3::from(self.index_to_world.matrix3).determinant().abs()
     }
 
-    /// Visits every voxel with a positive value: its index and the emitted radiance per metre
-    /// at its centre.
-    pub fn for_each_emitting_voxel(&self, mut f: impl FnMut(IVec3, Vec3)) {
-        self.grid.for_each_brick(|origin, brick| match brick {
-            BrickRef::Dense(values) => {
-                for (i, &v) in values.iter().enumerate() {
-                    if v > 0.0 {
-                        let local = IVec3::new((i & 7) as i32, ((i >> 3) & 7) as i32, (i >> 6) as i32);
-                        f(origin + local, self.law.radiance(v));
+    /// Visits every trilinear cell where the emission is not zero — the cube whose corners are
+    /// the 8 voxel centres `c + {0,1}^3` — with the mean emitted radiance per metre over it.
+    /// The cells tile space and carry the whole field: the sum of mean x voxel volume is the
+    /// integral of e. `Linear`: the mean of the 8 corners (exact). `Blackbody`: the law is not
+    /// linear in the interpolated temperature (T^4 and the colour), so 3^3-point Gauss-Legendre
+    /// over the cell (exact for the T^4 of a trilinear T; the colour varies slowly). In index
+    /// order (z, y, x), so sums over cells are deterministic.
+    pub fn for_each_emitting_cell(&self, mut f: impl FnMut(IVec3, Vec3)) {
+        let mut cells = Vec::new();
+        self.grid.for_each_brick(|origin, brick| {
+            let mut visit = |ijk: IVec3| {
+                for d in 0..8 {
+                    cells.push(ijk - IVec3::new(d & 1, (d >> 1) & 1, d >> 2));
+                }
+            };
+            match brick {
+                BrickRef::Dense(values) => {
+                    for (i, &v) in values.iter().enumerate() {
+                        if v > 0.0 {
+                            visit(origin + IVec3::new((i & 7) as i32, ((i >> 3) & 7) as i32, (i >> 6) as i32));
+                        }
                     }
                 }
-            }
-            BrickRef::Constant(v) if v > 0.0 => {
-                let e = self.law.radiance(v);
-                for i in 0..512 {
-                    f(origin + IVec3::new(i & 7, (i >> 3) & 7, i >> 6), e);
+                BrickRef::Constant(v) if v > 0.0 => {
+                    for i in 0..512 {
+                        visit(origin + IVec3::new(i & 7, (i >> 3) & 7, i >> 6));
+                    }
                 }
+                BrickRef::Constant(_) => {}
             }
-            BrickRef::Constant(_) => {}
         });
+        cells.sort_unstable_by_key(|c| (c.z, c.y, c.x));
+        cells.dedup();
+        const NODES: [f32; 3] = [0.5 - 0.387_298_33, 0.5, 0.5 + 0.387_298_33];
+        const WEIGHTS: [f32; 3] = [5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0];
+        for c in cells {
+            let mean = match self.law {
+                EmissionLaw::Linear { color } => {
+                    let sum: f32 = (0..8).map(|d| self.grid.voxel(c + IVec3::new(d & 1, (d >> 1) & 1, d >> 2)).max(0.0)).sum();
+                    color * (sum / 8.0)
+                }
+                EmissionLaw::Blackbody { .. } => {
+                    let mut acc = Vec3::ZERO;
+                    for (k, wz) in NODES.iter().zip(WEIGHTS) {
+                        for (j, wy) in NODES.iter().zip(WEIGHTS) {
+                            for (i, wx) in NODES.iter().zip(WEIGHTS) {
+                                let v = self.grid.sample(c.as_vec3() + Vec3::new(*i, *j, *k));
+                                acc += self.law.radiance(v) * (wx * wy * wz);
+                            }
+                        }
+                    }
+                    acc
+                }
+            };
+            if mean.max_element() > 0.0 {
+                f(c, mean);
+            }
+        }
     }
 
     /// Axis-aligned world box outside which this term is zero.
@@ -142,15 +180,14 @@ impl Emission {
         )
     }
 
-    /// Total emitted power (W per channel): 4 pi x the sum over voxels of the voxel-centre
-    /// radiance x voxel volume. Exact for `Linear` terms (trilinear hat functions integrate to
-    /// one voxel volume each); for `Blackbody` it is the voxel-centre quadrature of the
-    /// non-linear law over the interpolated temperature.
+    /// Total emitted power (W per channel): 4 pi x the integral of e over space, by the cells of
+    /// `EmissionTerm::for_each_emitting_cell` (exact for `Linear` terms; Gauss-Legendre for
+    /// `Blackbody`).
     pub fn power(&self) -> Vec3 {
         let mut total = glam::DVec3::ZERO;
         for term in &self.terms {
             let mut sum = glam::DVec3::ZERO;
-            term.for_each_emitting_voxel(|_, e| sum += e.as_dvec3());
+            term.for_each_emitting_cell(|_, e| sum += e.as_dvec3());
             total += sum * term.voxel_volume() as f64;
         }
         (total * 4.0 * std::f64::consts::PI).as_vec3()

@@ -1,23 +1,24 @@
 //! An emissive medium as virtual point lights (VPLs) inside it.
 //!
-//! Every voxel with emission e (W m^-3 sr^-1 at its centre) emits the power 4 pi e dV. The voxels,
-//! ordered along a Morton (Z-order) curve so that neighbours in the order are neighbours in space,
-//! are cut into `n` strata of equal power (by the sum of the RGB channels); each stratum becomes
-//! one isotropic VPL at the centre of the voxel holding the stratum's midpoint (stratified,
+//! Every trilinear cell (the cube between 8 voxel centres) with mean emission e (W m^-3 sr^-1,
+//! `EmissionTerm::for_each_emitting_cell`) emits the power 4 pi e dV. The cells, ordered along a
+//! Morton (Z-order) curve so that neighbours in the order are neighbours in space, are cut into
+//! `n` strata of equal power (by the sum of the RGB channels); each stratum becomes one
+//! isotropic VPL at the centre of the cell holding the stratum's midpoint (stratified,
 //! deterministic importance sampling by emitted power) with the stratum's exact RGB power, so the
-//! VPLs' total is the medium's `Emission::power()` to rounding. VPLs that land on the same voxel
+//! VPLs' total is the medium's `Emission::power()` to rounding. VPLs that land on the same cell
 //! are merged.
 //!
-//! Singularities. A VPL stands for the emission spread over its stratum (at least one voxel),
-//! so closer than about the stratum's size its 1/d^2 is not the physics. Paper 03 (Sec. 4.3)
-//! bounds the geometry term, G' = min(G, b), and notes the bias as energy lost near the VPLs.
-//! Each VPL's `radius` r sets that bound, b = 1/r^2, and consumers clamp 1/d^2 to it (the
-//! compositor does, on CPU and GPU). r is chosen so that nothing is lost against the physics
-//! at the scale of the stratum (`clamp_radius`: 3/8 of the radius of the ball of the stratum's
-//! volume). Against an unclamped point VPL the clamp removes, in a medium optically thin
-//! over r, integral over the ball of radius r of sigma_s I (1/d^2 - 1/r^2) dV =
-//! sigma_s I (8 pi / 3) r per VPL: `clamp_loss` reports the sum, as paper 03 asks. Paper 03's
-//! bias compensation is not done.
+//! Singularities. A VPL stands for the emission spread over its stratum (at least one cell), so
+//! closer than about the stratum's size its 1/d^2 is not the physics. Paper 03 (Sec. 4.3) bounds
+//! the geometry term, G' = min(G, b), which loses the energy above the bound near every VPL.
+//! Here each VPL's `radius` is that of the ball of its stratum's volume, and consumers replace
+//! 1/d^2 by its mean over a ball of that radius (compositor::ball_mean_inverse_square, on CPU and
+//! GPU): bounded (3/r^2 at the VPL) like paper 03's clamp, but the irradiance of a uniformly
+//! emitting ball instead of a cut, so nothing is lost: its integral over space equals 1/d^2's.
+//! `clamp_loss` reports what paper 03's hard clamp at the same bound, min(1/d^2, 3/r^2), would
+//! remove in a medium optically thin over r: integral over the ball of radius r/sqrt 3 of
+//! sigma_s I (1/d^2 - 3/r^2) dV = sigma_s I (8 pi / 3) (r / sqrt 3) per VPL.
 
 use glam::{IVec3, Vec3};
 
@@ -30,21 +31,17 @@ pub struct EmissionVpls {
     pub emitters: Vec<PointEmitter>,
     /// Total emitted power (W per channel): the sum of the VPLs' powers.
     pub power: Vec3,
-    /// Single-scattered power (W) removed by clamping 1/d^2 at the VPLs' radii (thin-medium
-    /// estimate, see the module comment).
+    /// Single-scattered power (W) that paper 03's hard clamp at the same bound would remove
+    /// (thin-medium estimate, see the module comment); the ball kernel used instead loses none.
     pub clamp_loss: Vec3,
 }
 
-/// The bound on 1/d^2 for a VPL standing for emission spread over `volume`: 3/8 of the radius
-/// R of the ball of that volume. For a uniformly emitting ball, the light a thin medium
-/// scatters inside it is sigma_s I 3 pi R (the double integral of 1/|x-y|^2 over a ball is
-/// 4 pi^2 R^4); a point of the same intensity I with 1/d^2 clamped at r scatters
-/// sigma_s I (4 pi R - 8 pi r / 3) there; equal for r = 3R/8.
-fn clamp_radius(volume: f32) -> f32 {
-    0.375 * (3.0 * volume / (4.0 * std::f32::consts::PI)).cbrt()
+/// The radius of the ball of `volume`: a VPL's extent, over which consumers spread its 1/d^2.
+fn ball_radius(volume: f32) -> f32 {
+    (3.0 * volume / (4.0 * std::f32::consts::PI)).cbrt()
 }
 
-/// One emitting voxel on the Morton curve.
+/// One emitting cell on the Morton curve.
 struct Cell {
     key: u64,
     weight: f64,
@@ -76,12 +73,12 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     let mut cells = Vec::new();
     for term in &emission.terms {
         let dv = term.voxel_volume();
-        let origin = term.grid.bbox().0;
-        term.for_each_emitting_voxel(|ijk, e| {
+        let origin = term.grid.bbox().0 - IVec3::ONE;
+        term.for_each_emitting_cell(|ijk, e| {
             let power = e * (four_pi * dv);
             let weight = (power.x + power.y + power.z) as f64;
             if weight > 0.0 {
-                let position = term.index_to_world.transform_point3(ijk.as_vec3());
+                let position = term.index_to_world.transform_point3(ijk.as_vec3() + Vec3::splat(0.5));
                 cells.push(Cell { key: morton(ijk, origin), weight, power, position, volume: dv });
             }
         });
@@ -94,7 +91,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     cells.sort_by_key(|c| c.key);
 
     // Walk the cumulative weight: stratum k covers [k, k+1) * total / n and receives each
-    // voxel's power in proportion to the overlap; its VPL sits at the voxel holding its midpoint.
+    // cell's power in proportion to the overlap; its VPL sits at the cell holding its midpoint.
     let stratum = total / n as f64;
     let mut power = vec![glam::DVec3::ZERO; n];
     let mut volume = vec![0.0f64; n];
@@ -124,7 +121,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     for k in 0..n {
         let p = power[k].as_vec3();
         let cell = &cells[holder[k]];
-        // Strata are in curve order, so strata sharing a voxel are consecutive: merge them.
+        // Strata are in curve order, so strata sharing a cell are consecutive: merge them.
         if holder[k] == last_holder {
             if let (Some(e), Some(v)) = (out.emitters.last_mut(), vpl_volume.last_mut()) {
                 e.intensity += p / four_pi;
@@ -139,11 +136,11 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
     }
     out.power = total_power.as_vec3();
     for (e, v) in out.emitters.iter_mut().zip(vpl_volume) {
-        e.radius = clamp_radius(v as f32);
+        e.radius = ball_radius(v as f32);
     }
     for e in &out.emitters {
         let sigma_s = medium.sigma_s(medium.density_world(e.position));
-        out.clamp_loss += sigma_s * e.intensity * (8.0 * std::f32::consts::PI / 3.0) * e.radius;
+        out.clamp_loss += sigma_s * e.intensity * (8.0 * std::f32::consts::PI / 3.0) * (e.radius / 3f32.sqrt());
     }
     out
 }
@@ -190,7 +187,7 @@ mod tests {
             }
         }
         // Stratified by power: with 128 strata no VPL holds much more than 1/128 of the power
-        // unless one voxel does.
+        // unless one cell does.
         let v = emission_vpls(&linear, 128);
         let max = v.emitters.iter().map(|e| e.power().element_sum()).fold(0.0, f32::max);
         assert!(max < 2.5 * v.power.element_sum() / 128.0, "{max}");
@@ -205,11 +202,9 @@ mod tests {
     /// tracer's single-scattering AOV (emission reaching first vertices, estimated without
     /// VPLs) on the glowing default plume (optical depth ~10 across), 32x32 pixels.
     /// Measured: the reference's own noise at 256 spp is 0.26 relative RMSE (two seeds, see the
-    /// printout); VPLs vs reference 0.36 at 256 VPLs (mean -19%), 0.25 at 1024 (mean -9.5%),
-    /// 0.21 at 2048 (mean -7%): the error left is the reference's noise plus a bias that falls
-    /// with the VPL count:
-    /// a point per stratum sees its stratum's light through one optical depth, and in a thick
-    /// medium the mean of exp(-tau) over the stratum is larger (Jensen), so few VPLs are dark.
+    /// printout); VPLs vs reference 0.21 (mean -7%). The bias left falls with the VPL count (a
+    /// point per stratum sees its stratum's light through one optical depth, and in a thick
+    /// medium the mean of exp(-tau) over the stratum is larger, Jensen).
     /// Tolerance: relative RMSE 0.3 and mean within 15% at 1024 VPLs.
     #[test]
     fn vpl_single_scattering_matches_reference() {
@@ -235,6 +230,38 @@ mod tests {
         eprintln!("emission single AOV: relative RMSE {e1:.4} (reference vs itself {noise:.4}), mean {ma:.4} (VPLs) vs {mb:.4} (reference)");
         assert!(e1 < 0.3, "single-scattering AOV of the emission: {e1}");
         assert!((ma / mb - 1.0).abs() < 0.15, "mean {ma} vs {mb}");
+    }
+
+    /// The ball kernel: 3/r^2 at the centre, the mean of 1/|y|^2 over the ball (a 60^3 lattice
+    /// over the ball: 3% inside it, 0.5% outside) inside and outside it, continuous where it switches to its series,
+    /// 1/d^2 far away.
+    #[test]
+    fn ball_kernel_is_the_mean_of_inverse_square() {
+        use crate::compositor::ball_mean_inverse_square as k;
+        let r = 0.3f32;
+        assert!((k(0.0, r) - 3.0 / (r * r)).abs() < 1e-4 * k(0.0, r));
+        assert!((k(1.2 - 1e-5, r) / k(1.2 + 1e-5, r) - 1.0).abs() < 1e-4);
+        assert!((k(30.0, r) * 900.0 - 1.0).abs() < 1e-4);
+        for d in [0.1f32, 0.29, 0.45, 0.7] {
+            let n = 60;
+            let (mut sum, mut count) = (0.0f64, 0u32);
+            for i in 0..n {
+                for j in 0..n {
+                    for l in 0..n {
+                        let p = (Vec3::new(i as f32, j as f32, l as f32) + 0.5) / n as f32 * 2.0 - 1.0;
+                        if p.length() <= 1.0 {
+                            sum += 1.0 / (Vec3::new(d, 0.0, 0.0) - p * r).length_squared() as f64;
+                            count += 1;
+                        }
+                    }
+                }
+            }
+            let mc = (sum / count as f64) as f32;
+            // Inside the ball the integrand's singularity makes the lattice estimate coarser
+            // (1.5% at d = r/3; the closed form agrees with a 1-D quadrature to 1e-7 there).
+            let tol = if d < r { 0.03 } else { 5e-3 };
+            assert!((k(d, r) / mc - 1.0).abs() < tol, "d {d}: {} vs {mc}", k(d, r));
+        }
     }
 
     #[test]

@@ -18,14 +18,14 @@ struct Params {
     bounds_lo: vec4<f32>,
     bounds_hi: vec4<f32>,
     cam_pos: vec4<f32>,
-    misc: vec4<f32>,                   // g, minimum march step, near-field radius of the grid, -
+    misc: vec4<f32>,                   // g, minimum march step, radius of the ball of one grid cell, -
 };
 
 struct Light {
     pos_or_dir: vec4<f32>,             // w = kind
     power: vec4<f32>,                  // w = profile: 0 isotropic, 1 cone, 2 cosine
     axis: vec4<f32>,                   // profile axis, w = cos_outer (cone)
-    extra: vec4<f32>,                  // x = cos_inner (cone), y = radius (1/d^2 bounded at 1/r^2)
+    extra: vec4<f32>,                  // x = cos_inner (cone), y = extent radius (1/d^2 averaged over a ball)
 };
 
 // translate::Profile::factor for the direction w away from the emitter.
@@ -79,6 +79,23 @@ fn transmittance(x: vec3<f32>, d: vec3<f32>, t_max: f32) -> vec3<f32> {
     return exp(-params.density_scale.xyz * tau * h);
 }
 
+// compositor::ball_mean_inverse_square: the mean of 1/|y|^2 over a ball of radius r at distance d.
+fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
+    if (r <= 0.0) {
+        return 1.0 / (d * d);
+    }
+    if (d < 1e-4 * r) {
+        return 3.0 / (r * r);
+    }
+    let x = r / d;
+    if (x < 0.25) {
+        let x2 = x * x;
+        return (1.0 + x2 * (0.2 + x2 * (3.0 / 35.0 + x2 / 21.0))) / (d * d);
+    }
+    let gap = max(abs(r - d), 1e-7 * r);
+    return 1.5 / (r * r * r * d) * (0.5 * (r * r - d * d) * log((r + d) / gap) + d * r);
+}
+
 @compute @workgroup_size(4, 4, 4)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (any(gid >= params.grid_dims.xyz)) {
@@ -105,18 +122,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let w = light.pos_or_dir.xyz;
             sum += light.power.xyz * hg(dot(w, view), g) * transmittance(x, w, 3.4e38);
         } else {
-            // compositor::emitter_single: 1/d^2 bounded at max(emitter radius, grid near radius).
+            // compositor::emitter_single: 1/d^2 as its mean over a ball (emitter extent and grid cell).
             let to = light.pos_or_dir.xyz - x;
             let dist = length(to);
-            let r = max(light.extra.y, params.misc.z);
+            let r = sqrt(light.extra.y * light.extra.y + params.misc.z * params.misc.z);
             if (dist > 1e-6) {
                 let w = to / dist;
                 let intensity = light.power.xyz * profile_factor(light, -w);
                 if (max(intensity.x, max(intensity.y, intensity.z)) > 0.0) {
-                    sum += intensity / max(dist * dist, r * r) * hg(dot(w, view), g) * transmittance(x, w, dist);
+                    sum += intensity * ball_mean_inverse_square(dist, r) * hg(dot(w, view), g) * transmittance(x, w, dist);
                 }
             } else if (light.power.w == 0.0 && r > 0.0) {
-                sum += light.power.xyz / (r * r) * (0.25 / 3.14159265358979);
+                sum += light.power.xyz * ball_mean_inverse_square(0.0, r) * (0.25 / 3.14159265358979);
             }
         }
     }
