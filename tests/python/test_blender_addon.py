@@ -272,13 +272,15 @@ def test_export_spot_and_area_lights(fresh):
     assert any("Ellipse" in w and "same area" in w for w in warnings), warnings
     assert any("Square" in w and "spread" in w for w in warnings), warnings
     assert not any("Disk" in w or "Rect" in w or "Spot" in w for w in warnings), warnings
-    # pop leaves them out, and says so in one message made from POP_LIGHT_TYPES
-    err, warn = se.pop_light_messages([l["type"] for l in doc["lights"]])
-    assert "sun lights only" in err and warn is None
-    err, warn = se.pop_light_messages(["distant", "spot", "rect", "disk", "dome"])
-    assert err is None and "spot lights, area lights and the world are left out" in warn
-    err, warn = se.pop_light_messages(["distant", "dome"])
-    assert err is None and "the world is left out" in warn
+    # pop handles every light type now (radial grids), and says what it handles in one message
+    # made from POP_LIGHT_TYPES
+    assert se.pop_light_messages([l["type"] for l in doc["lights"]]) == (None, None)
+    assert se.pop_light_messages(["distant", "spot", "rect", "disk", "dome", "emission"]) == (None, None)
+    err, warn = se.pop_light_messages([])
+    assert warn is None and "choose the Reference solver" in err
+    assert se.pop_lights_note() == "sun, point, spot and area lights, the world and volume emission"
+    err, warn = se.pop_light_messages(["distant", "laser"])
+    assert err is None and "laser lights are left out" in warn
 
 
 def test_export_principled_volume(fresh):

@@ -28,8 +28,9 @@ from .vdbwrite import write_grids
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
 
-#: Solvers and the light types they use today (pop: distant lights only, issues 8 and 9 add the rest).
-SOLVER_LIGHTS = {"reference": {"distant", "point", "dome"}, "pop": {"distant"}}
+#: Solvers and the light types they use (both handle every type the stage reader produces).
+SOLVER_LIGHTS = {"reference": {"distant", "point", "spot", "rect", "disk", "dome"},
+                 "pop": {"distant", "point", "spot", "rect", "disk", "dome"}}
 
 
 @dataclass

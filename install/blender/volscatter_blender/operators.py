@@ -122,7 +122,8 @@ class _JobOperator:
         for w in warnings:
             self._warn(w)
         if self._solver["name"] == "pop":
-            error, warning = scene_export.pop_light_messages([l["type"] for l in doc["lights"]])
+            kinds = [l["type"] for l in doc["lights"]] + (["emission"] if doc["medium"].get("emission") else [])
+            error, warning = scene_export.pop_light_messages(kinds)
             if error:
                 raise ExportError(error)
             if warning:

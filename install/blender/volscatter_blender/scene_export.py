@@ -300,20 +300,26 @@ def _light_color(light, warnings):
 #: The scene JSON light types the Principal Ordinates solver handles. The one place to change
 #: when pop handles more: the operator's error and warning and the solver's tooltip are made
 #: from it.
-POP_LIGHT_TYPES = ("distant",)
+POP_LIGHT_TYPES = ("distant", "point", "spot", "rect", "disk", "dome", "emission")
 
 _BLENDER_LIGHT_NAMES = {"distant": "sun", "point": "point", "spot": "spot", "rect": "area", "disk": "area",
-                        "dome": "world"}
+                        "dome": "world", "emission": "volume emission"}
 
 
 def pop_lights_note():
-    """What pop handles, for messages: "sun lights only so far"."""
+    """What pop handles, for messages: "sun, point, spot and area lights, the world and volume
+    emission"."""
     names = []
     for k in POP_LIGHT_TYPES:
         n = _BLENDER_LIGHT_NAMES.get(k, k)
         if n not in names:
             names.append(n)
-    return "%s lights only so far" % " and ".join(names)
+    lamps = [n for n in names if n not in ("world", "volume emission")]
+    items = []
+    if lamps:
+        items.append((", ".join(lamps[:-1]) + " and " + lamps[-1] if len(lamps) > 1 else lamps[0]) + " lights")
+    items += ["the world" if n == "world" else n for n in names if n in ("world", "volume emission")]
+    return ", ".join(items[:-1]) + " and " + items[-1] if len(items) > 1 else items[0]
 
 
 def pop_light_messages(kinds):

@@ -203,9 +203,10 @@ impl Pop {
         for w in &report.warnings {
             eprintln!("warning: {w}");
         }
-        let local = radial::sources(&scene.lights, s.area_vpls);
+        let mut local = radial::sources(&scene.lights, s.area_vpls);
+        local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
         if distant.is_empty() && local.is_empty() {
-            return Err(Error::InvalidArgument("pop: the scene has no light pop can propagate (distant, dome with ordinates, point, spot or area)".into()));
+            return Err(Error::InvalidArgument("pop: the scene has no light pop can propagate (distant, dome with ordinates, point, spot, area, or an emissive medium)".into()));
         }
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);

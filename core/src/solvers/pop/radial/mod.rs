@@ -55,6 +55,27 @@ pub fn cpu_propagate(prop: &RadialPropagation, init: &init::RadialInitial, j: &m
     prop.run(init, j, progress)
 }
 
+/// An emissive medium's light (medium.emission) as `n` VPLs of equal power
+/// (translate::emission), each a radial source starting at the radius of its stratum's ball:
+/// the light a stratum emits reaches the medium around it from that ball, as the compositor
+/// spreads each VPL's 1/d^2 over the same ball. `light` is `first_index` (after the lights).
+pub fn emission_sources(medium: &crate::medium::Medium, n: u32, first_index: usize) -> Vec<RadialSource> {
+    if medium.emission.is_none() {
+        return Vec::new();
+    }
+    translate::emission::emission_vpls(medium, n)
+        .emitters
+        .into_iter()
+        .filter(|e| e.intensity.is_finite() && e.position.is_finite() && e.intensity.max_element() > 0.0)
+        .map(|e| RadialSource {
+            light: first_index,
+            kind: "emission VPL",
+            position: e.position,
+            emitter: Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius: 0.0 },
+        })
+        .collect()
+}
+
 /// A point emitter of the scene: which light it comes from and what it is.
 #[derive(Clone, Copy, Debug)]
 pub struct RadialSource {
