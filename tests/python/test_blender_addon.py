@@ -531,13 +531,15 @@ def test_error_no_camera(fresh):
     _expect_error(ob, fresh, "no active camera")
 
 
-def test_error_pop_without_sun(fresh):
+def test_error_pop_without_lights(fresh):
+    """pop handles every light type, so what is refused is a scene with no light at all (no
+    lamp, no world, no emission), before any solver runs."""
     ob = bs.noise_volume(res=6)
     bs.principled_material(ob)
-    bs.point()
     bs.camera()
+    bpy.context.scene.world = None
     _tiny(ob, fresh, solver="pop")
-    _expect_error(ob, fresh, "sun lights only")
+    _expect_error(ob, fresh, "no light reaches the volume")
 
 
 def test_cancel_leaves_scene_unchanged(fresh, monkeypatch):

@@ -351,15 +351,16 @@ def test_disk_light_units(tmp_path):
     assert any("/L/shaped" in w and "ShapingAPI" in w for w in sc.warnings), sc.warnings
 
 
-def test_pop_warns_about_point_and_dome(tmp_path):
+def test_pop_handles_sphere_and_dome_lights(tmp_path):
     stage, path = make_stage(tmp_path)
     _light(stage, UsdLux.DistantLight, "/L/sun", intensity=1.0)
     _light(stage, UsdLux.SphereLight, "/L/lamp", intensity=1.0)
     _light(stage, UsdLux.DomeLight, "/L/sky", intensity=1.0)
     stage.Save()
     sc = S.read_stage(path)
-    ws = R.solver_warnings(sc, "pop")
-    assert len(ws) == 2 and any("/L/lamp" in w for w in ws) and any("/L/sky" in w for w in ws)
+    # pop has radial grids and dome ordinates now: nothing is left out, by either solver
+    assert [l.json["type"] for l in sc.lights] == ["distant", "point", "dome"]
+    assert R.solver_warnings(sc, "pop") == []
     assert R.solver_warnings(sc, "reference") == []
 
 

@@ -563,7 +563,7 @@ def export(context, obj, out_dir, frame, solver=None, size=None):
     if not ls and "emission" not in medium:
         if generated:
             _remove(vdb)
-        raise ExportError("no light reaches the volume: add a sun or point light (or a world colour)")
+        raise ExportError("no light reaches the volume: add a sun, point, spot or area light (or a world colour, or volume emission)")
     doc = {"format": FORMAT, "medium": medium, "lights": ls, "camera": cam}
     if solver:
         doc["solver"] = solver
