@@ -28,7 +28,7 @@ use volscatter_core::solvers::pop::PropagationStats;
 // Local lights' radial grids (radial.wgsl).
 pub mod radial;
 
-pub const WGSL: &str = include_str!("propagate.wgsl");
+pub const WGSL: &str = concat!(include_str!("lobe.wgsl"), include_str!("propagate.wgsl"));
 
 /// Mirrors `struct Params` in propagate.wgsl.
 #[repr(C)]

@@ -13,7 +13,7 @@ use volscatter_core::solvers::pop::radial::init::RadialInitial;
 use volscatter_core::solvers::pop::radial::propagate::RadialPropagation;
 use volscatter_core::solvers::pop::PropagationStats;
 
-pub const WGSL: &str = include_str!("radial.wgsl");
+pub const WGSL: &str = concat!(include_str!("lobe.wgsl"), include_str!("radial.wgsl"));
 
 /// Mirrors `struct Params` in radial.wgsl.
 #[repr(C)]

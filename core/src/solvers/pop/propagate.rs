@@ -38,15 +38,15 @@ use crate::solvers::Progress;
 
 const COS_45: f32 = std::f32::consts::FRAC_1_SQRT_2;
 
-/// How one source cell emits this iteration.
+/// How one source cell emits this iteration (also the radial grids', radial/propagate.rs).
 #[derive(Clone, Copy, Default)]
-struct Emit {
+pub(crate) struct Emit {
     /// Fractions of P towards the cell in front (along d), each side cell, and behind.
-    front: Vec3,
-    side: Vec3,
-    back: Vec3,
+    pub front: Vec3,
+    pub side: Vec3,
+    pub back: Vec3,
     /// Light path this iteration stands for (metres).
-    path: Vec3,
+    pub path: Vec3,
 }
 
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -68,13 +68,13 @@ pub struct PropagationStats {
 }
 
 #[inline]
-fn per_channel(a: Vec3, f: impl Fn(f32) -> f32) -> Vec3 {
+pub(crate) fn per_channel(a: Vec3, f: impl Fn(f32) -> f32) -> Vec3 {
     Vec3::new(f(a.x), f(a.y), f(a.z))
 }
 
 /// HG anisotropy parameter clamped away from the delta (|a| = 1).
 #[inline]
-fn clamp_a(a: f32) -> f32 {
+pub(crate) fn clamp_a(a: f32) -> f32 {
     a.clamp(-0.9995, 0.9995)
 }
 
@@ -85,6 +85,33 @@ pub struct RunOptions {
     /// Return the packets still travelling when the iterations stop in
     /// `PropagationStats::remaining` (for the isotropic residuum, Sec. 5.4).
     pub keep_remaining: bool,
+}
+
+/// The fractions of a lobe of anisotropy `a` (per channel) sent to the cell in front, to each
+/// of the four side cells and to the cell behind (Eq. 1-3: HG energy in the 45-degree cones and
+/// the quarters of the band between them). They sum to one.
+pub(crate) fn lobe_fractions(a: Vec3) -> (Vec3, Vec3, Vec3) {
+    let front = per_channel(a, |a| hg_cone_fraction(COS_45, clamp_a(a)));
+    let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
+    let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
+    (front, side, back)
+}
+
+/// kappa: the light path one iteration stands for, in cell lengths `h` (see the module doc),
+/// from the fractions actually sent front and back; 1 without the diffusion correction.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn path_factor(diffusion_correction: bool, front: Vec3, back: Vec3, a: Vec3, sigma_s: Vec3, sigma_a: Vec3, g: f32, h: f32) -> Vec3 {
+    if !diffusion_correction {
+        return Vec3::ONE;
+    }
+    let sigma_tr = sigma_s * (1.0 - g.abs()) + sigma_a;
+    let iso = (sigma_tr * (0.5 * h)).min(Vec3::splat(64.0));
+    let aa = a.abs().min(Vec3::ONE);
+    // Directional part: the path per step that matches the lattice's drift (front - back) h to
+    // the lobe's a s, between 0.75 (a -> 0) and 1 (a -> 1).
+    let drift = front - back;
+    let ball = Vec3::select(aa.cmpgt(Vec3::splat(1e-3)), drift / aa.max(Vec3::splat(1e-3)), Vec3::splat(0.75));
+    aa * ball + (Vec3::ONE - aa) * iso
 }
 
 pub struct Propagation<'a> {
@@ -101,21 +128,8 @@ pub struct Propagation<'a> {
 impl Propagation<'_> {
     fn emit(&self, c: usize, a: Vec3) -> Emit {
         let grid = self.grid;
-        let front = per_channel(a, |a| hg_cone_fraction(COS_45, clamp_a(a)));
-        let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
-        let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
-        let kappa = if self.diffusion_correction {
-            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c];
-            let iso = (sigma_tr * (0.5 * grid.h)).min(Vec3::splat(64.0));
-            let aa = a.abs().min(Vec3::ONE);
-            // Directional part: the path per step that matches the lattice's drift
-            // (front - back) h to the lobe's a s, between 0.75 (a -> 0) and 1 (a -> 1).
-            let drift = front - back;
-            let ball = Vec3::select(aa.cmpgt(Vec3::splat(1e-3)), drift / aa.max(Vec3::splat(1e-3)), Vec3::splat(0.75));
-            aa * ball + (Vec3::ONE - aa) * iso
-        } else {
-            Vec3::ONE
-        };
+        let (front, side, back) = lobe_fractions(a);
+        let kappa = path_factor(self.diffusion_correction, front, back, a, grid.sigma_s[c], grid.sigma_a[c], self.g, grid.h);
         Emit { front, side, back, path: kappa * grid.h }
     }
 

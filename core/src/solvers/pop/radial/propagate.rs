@@ -30,29 +30,11 @@ use rayon::prelude::*;
 use super::grid::RadialGrid;
 use super::init::RadialInitial;
 use crate::error::{Error, Result};
-use crate::phase::{hg, hg_cone_fraction};
+use crate::phase::hg;
+use crate::solvers::pop::propagate::{clamp_a, lobe_fractions, path_factor, per_channel, Emit};
 use crate::solvers::pop::PropagationStats;
 use crate::solvers::Progress;
 
-const COS_45: f32 = std::f32::consts::FRAC_1_SQRT_2;
-
-#[derive(Clone, Copy, Default)]
-struct Emit {
-    front: Vec3,
-    side: Vec3,
-    back: Vec3,
-    path: Vec3,
-}
-
-#[inline]
-fn per_channel(a: Vec3, f: impl Fn(f32) -> f32) -> Vec3 {
-    Vec3::new(f(a.x), f(a.y), f(a.z))
-}
-
-#[inline]
-fn clamp_a(a: f32) -> f32 {
-    a.clamp(-0.9995, 0.9995)
-}
 
 /// Per cell: cosine between the radial direction and the direction to the camera.
 pub fn view_cosines(grid: &RadialGrid, camera: Vec3) -> Vec<f32> {
@@ -89,9 +71,7 @@ impl RadialPropagation<'_> {
         let grid = self.grid;
         let k = c / grid.slab();
         let h = grid.thickness(k);
-        let front = per_channel(a, |a| hg_cone_fraction(COS_45, clamp_a(a)));
-        let back = Vec3::ONE - per_channel(a, |a| hg_cone_fraction(-COS_45, clamp_a(a)));
-        let side = ((Vec3::ONE - front - back) * 0.25).max(Vec3::ZERO);
+        let (front, side, back) = lobe_fractions(a);
         // Outer faces are larger than inner ones (see the module doc): weights R_out / r_mid
         // and R_in / r_mid (squared without the diffusion correction), renormalised.
         let (r0, r1, rm) = (grid.radii[k], grid.radii[k + 1], grid.mid_radius(k));
@@ -100,16 +80,7 @@ impl RadialPropagation<'_> {
         let z = front * wf + back * wb + side * 4.0;
         let inv = Vec3::select(z.cmpgt(Vec3::ZERO), Vec3::ONE / z.max(Vec3::splat(1e-30)), Vec3::ZERO);
         let (front, back, side) = (front * wf * inv, back * wb * inv, side * inv);
-        let kappa = if self.diffusion_correction {
-            let sigma_tr = grid.sigma_s[c] * (1.0 - self.g.abs()) + grid.sigma_a[c];
-            let iso = (sigma_tr * (0.5 * h)).min(Vec3::splat(64.0));
-            let aa = a.abs().min(Vec3::ONE);
-            let drift = front - back;
-            let ball = Vec3::select(aa.cmpgt(Vec3::splat(1e-3)), drift / aa.max(Vec3::splat(1e-3)), Vec3::splat(0.75));
-            aa * ball + (Vec3::ONE - aa) * iso
-        } else {
-            Vec3::ONE
-        };
+        let kappa = path_factor(self.diffusion_correction, front, back, a, grid.sigma_s[c], grid.sigma_a[c], self.g, h);
         Emit { front, side, back, path: kappa * h }
     }
 
