@@ -83,6 +83,48 @@ pub fn propagate(
     Ok((stats, times))
 }
 
+/// A propagation shader's two kernels (`emit_accumulate`, `gather`) and the explicit layout
+/// they share: `bindings` buffers, binding 0 the uniform parameters, the others storage,
+/// read-only where `read_only` says. Compiled once per context under `key` (propagate.wgsl and
+/// radial.wgsl).
+pub(crate) fn propagation_kernels(
+    ctx: &GpuContext,
+    key: &'static str,
+    wgsl: &'static str,
+    bindings: u32,
+    read_only: fn(u32) -> bool,
+) -> Result<std::sync::Arc<(wgpu::BindGroupLayout, wgpu::ComputePipeline, wgpu::ComputePipeline)>, GpuError> {
+    ctx.cached(key, |device| {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(key), source: wgpu::ShaderSource::Wgsl(wgsl.into()) });
+        let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..bindings)
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: if b == 0 {
+                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
+                } else {
+                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: read_only(b) }, has_dynamic_offset: false, min_binding_size: None }
+                },
+                count: None,
+            })
+            .collect();
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key), entries: &layout_entries });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some(key), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (emit, gather) = (pipeline("emit_accumulate"), pipeline("gather"));
+        (bgl, emit, gather)
+    })
+}
+
 /// The propagation of a light whose packets and J are in device memory (after `init::sweep`):
 /// adds into `light.j` and consumes `light.packets`. Only sums come back: the residual every
 /// `check_every` iterations (one slab of column sums), the escaped energy at the end; with
@@ -118,35 +160,7 @@ pub fn propagate_resident(
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
     // Both kernels share one explicit layout (each uses a subset of the bindings), compiled once
     // per context.
-    let kernels = ctx.cached("propagate.wgsl", |device| {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("propagate.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
-        let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..11)
-            .map(|b| wgpu::BindGroupLayoutEntry {
-                binding: b,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: if b == 0 {
-                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
-                } else {
-                    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 5 }, has_dynamic_offset: false, min_binding_size: None }
-                },
-                count: None,
-            })
-            .collect();
-        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("pop"), entries: &layout_entries });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("pop"), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let (emit, gather) = (pipeline("emit_accumulate"), pipeline("gather"));
-        (bgl, emit, gather)
-    })?;
+    let kernels = propagation_kernels(ctx, "propagate.wgsl", WGSL, 11, |b| b <= 5)?;
     let (bgl, emit_pipe, gather_pipe) = (&kernels.0, &kernels.1, &kernels.2);
     // Bind groups: "even" reads P0/A0 and writes P1/A1, "odd" the reverse.
     let bind = |u: &wgpu::Buffer, pin: &wgpu::Buffer, ain: &wgpu::Buffer, pout: &wgpu::Buffer, aout: &wgpu::Buffer| {

@@ -58,12 +58,7 @@ pub fn propagate_radial(
         flags: [prop.diffusion_correction as u32, prop.vacuum_escape as u32, 0, 0],
         weight: [weight, 0.0, 0.0, 0.0],
     };
-    let uniform = |w: f32| {
-        wgpu::util::DeviceExt::create_buffer_init(
-            device,
-            &wgpu::util::BufferInitDescriptor { label: Some("pop radial params"), contents: bytemuck::bytes_of(&params(w)), usage: wgpu::BufferUsages::UNIFORM },
-        )
-    };
+    let uniform = |w: f32| ctx.uniform("pop radial params", bytemuck::bytes_of(&params(w)));
     let (u_first, u_rest) = (uniform(0.5), uniform(1.0));
     // Shell table as the CPU computes it (RadialPropagation::emit): h, 1/V, face weights.
     let m = if prop.diffusion_correction { 1 } else { 2 };
@@ -82,49 +77,19 @@ pub fn propagate_radial(
     let p0 = ctx.storage_buffer("p0", bytemuck::cast_slice(&vec4s(&init.packets)))?;
     let a_init: Vec<[f32; 4]> = init.a_direct.iter().map(|&a| [a * prop.g, a * prop.g, a * prop.g, 0.0]).collect();
     let a0 = ctx.storage_buffer("a0", bytemuck::cast_slice(&a_init))?;
-    let zeros = |label: &str, bytes: u64| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: bytes.max(16),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false, // wgpu zero-initialises buffers
-        })
-    };
-    let (p1, a1) = (zeros("p1", cell_bytes), zeros("a1", cell_bytes));
-    let emit = zeros("emit", cell_bytes * 4);
+    let (p1, a1) = (ctx.zeroed_storage("p1", cell_bytes)?, ctx.zeroed_storage("a1", cell_bytes)?);
+    let emit = ctx.zeroed_storage("emit", cell_bytes * 4)?;
     let j_buf = ctx.storage_buffer("j", bytemuck::cast_slice(&vec4s(j_acc)))?;
-    let esc = zeros("escapes", cell_bytes * 2);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("radial.wgsl"), source: wgpu::ShaderSource::Wgsl(WGSL.into()) });
-    let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = (0..13)
-        .map(|b| wgpu::BindGroupLayoutEntry {
-            binding: b,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: if b == 0 {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
-            } else {
-                wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: b <= 7 && b != 6 }, has_dynamic_offset: false, min_binding_size: None }
-            },
-            count: None,
-        })
-        .collect();
-    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("pop radial"), entries: &layout_entries });
-    let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("pop radial"), bind_group_layouts: &[&bgl], push_constant_ranges: &[] });
-    let pipeline = |entry: &str| {
-        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
-    let (emit_pipe, gather_pipe) = (pipeline("emit_accumulate"), pipeline("gather"));
+    let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
+    // Bindings 6 (p_in: emit_accumulate removes what escapes from empty cells) and 8 on are
+    // written.
+    let kernels = crate::pop::propagation_kernels(ctx, "radial.wgsl", WGSL, 13, |b| b <= 7 && b != 6)?;
+    let (bgl, emit_pipe, gather_pipe) = (&kernels.0, &kernels.1, &kernels.2);
     let bind = |u: &wgpu::Buffer, pin: &wgpu::Buffer, ain: &wgpu::Buffer, pout: &wgpu::Buffer, aout: &wgpu::Buffer| {
         let bufs = [u, &sigma_s, &sigma_a, &mu, &shells, &columns, pin, ain, &emit, &j_buf, &esc, pout, aout];
         let entries: Vec<wgpu::BindGroupEntry> =
             bufs.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop radial"), layout: &bgl, entries: &entries })
+        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop radial"), layout: bgl, entries: &entries })
     };
     let even_first = bind(&u_first, &p0, &a0, &p1, &a1);
     let even = bind(&u_rest, &p0, &a0, &p1, &a1);
@@ -148,7 +113,7 @@ pub fn propagate_radial(
     let injected: Vec3 = init.packets.iter().copied().sum();
     let target = injected * prop.residual_threshold;
     let mut enc = device.create_command_encoder(&Default::default());
-    dispatch(&mut enc, &emit_pipe, &even_first);
+    dispatch(&mut enc, emit_pipe, &even_first);
     let mut iterations = 0u32;
     let mut in_p1 = false;
     let mut remaining = injected;
@@ -157,8 +122,8 @@ pub fn propagate_radial(
     while iterations < prop.max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
         iterations += 1;
         let (g_bg, e_bg) = if in_p1 { (&odd, &even) } else { (&even, &odd) };
-        dispatch(&mut enc, &gather_pipe, g_bg);
-        dispatch(&mut enc, &emit_pipe, e_bg);
+        dispatch(&mut enc, gather_pipe, g_bg);
+        dispatch(&mut enc, emit_pipe, e_bg);
         in_p1 = !in_p1;
         if iterations.is_multiple_of(check_every) || iterations == prop.max_iterations {
             ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
