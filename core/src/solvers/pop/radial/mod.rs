@@ -41,7 +41,7 @@ use crate::scene::{Light, Scene};
 use crate::solvers::pop::mip::MediumMip;
 use crate::solvers::pop::{PopSettings, PropagationStats};
 use crate::solvers::{Progress, ScatteringGrid, Timings};
-use crate::translate::{self, Profile};
+use crate::translate;
 use grid::RadialGrid;
 use init::Emitter;
 use propagate::RadialPropagation;
@@ -89,20 +89,18 @@ pub struct RadialSource {
 pub fn sources(lights: &[Light], area_k: u32) -> Vec<RadialSource> {
     let mut out = Vec::new();
     for (i, light) in lights.iter().enumerate() {
-        let emitters: Vec<(&'static str, translate::PointEmitter, f32)> = match light {
-            Light::Point { position, intensity, radius } => {
-                let e = translate::PointEmitter { position: *position, intensity: *intensity, radius: *radius, profile: Profile::Isotropic };
-                vec![(if *radius > 0.0 { "sphere" } else { "point" }, e, 0.0)]
-            }
-            Light::Spot(s) => vec![("spot", translate::spot_emitter(s), 0.0)],
+        // The emitters are translate's (the compositor's too); here each also gets its kind
+        // and, for an area light's VPLs, the clamp radius of its share of the area.
+        let (kind, clamp_radius) = match light {
+            Light::Point { radius, .. } => (if *radius > 0.0 { "sphere" } else { "point" }, 0.0),
+            Light::Spot(_) => ("spot", 0.0),
             Light::Area(a) => {
                 let k = area_k.max(1);
-                let r_c = (a.area() / ((k * k) as f32 * std::f32::consts::PI)).sqrt();
-                translate::area_vpls(a, k).into_iter().map(|e| ("area VPL", e, r_c)).collect()
+                ("area VPL", (a.area() / ((k * k) as f32 * std::f32::consts::PI)).sqrt())
             }
-            Light::Distant { .. } | Light::Dome(_) => Vec::new(),
+            Light::Distant { .. } | Light::Dome(_) => continue,
         };
-        for (kind, e, clamp_radius) in emitters {
+        for e in translate::local_emitters(std::slice::from_ref(light), area_k.max(1)) {
             if !(e.intensity.is_finite() && e.position.is_finite()) || e.intensity.max_element() <= 0.0 {
                 continue;
             }
