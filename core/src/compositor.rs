@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::image::Image;
-use crate::medium::Medium;
+use crate::medium::{ball_mean_inverse_square, near_field_radius, optical_depth, ray_box, Medium};
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::ScatteringGrid;
@@ -33,37 +33,6 @@ impl Default for CompositeOptions {
     fn default() -> Self {
         CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 64 }
     }
-}
-
-/// Ray/box intersection; returns the parameter range inside, if any.
-pub(crate) fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
-    let inv = d.recip();
-    let a = (lo - o) * inv;
-    let b = (hi - o) * inv;
-    let tmin = a.min(b);
-    let tmax = a.max(b);
-    let clean = |v: f32, alt: f32| if v.is_nan() { alt } else { v };
-    let t0 = clean(tmin.x, f32::NEG_INFINITY).max(clean(tmin.y, f32::NEG_INFINITY)).max(clean(tmin.z, f32::NEG_INFINITY)).max(0.0);
-    let t1 = clean(tmax.x, f32::INFINITY).min(clean(tmax.y, f32::INFINITY)).min(clean(tmax.z, f32::INFINITY));
-    (t0 < t1).then_some((t0, t1))
-}
-
-/// Deterministic optical depth (RGB) from `x` along unit `d` over at most `t_max`, by midpoint
-/// quadrature with at most `max_steps` steps of at least `min_step`.
-pub fn optical_depth(medium: &Medium, x: Vec3, d: Vec3, t_max: f32, min_step: f32, max_steps: u32) -> Vec3 {
-    let (lo, hi) = medium.world_bounds();
-    let Some((t0, t1)) = ray_box(x, d, lo, hi) else { return Vec3::ZERO };
-    let t1 = t1.min(t_max);
-    if t1 <= t0 {
-        return Vec3::ZERO;
-    }
-    let n = (((t1 - t0) / min_step).ceil() as u32).clamp(1, max_steps);
-    let h = (t1 - t0) / n as f32;
-    let mut tau = 0.0;
-    for i in 0..n {
-        tau += medium.density_world(x + d * (t0 + (i as f32 + 0.5) * h));
-    }
-    medium.density_scale * tau * h
 }
 
 /// Radical inverse in base 2 (Hammersley points for the dome directions).
@@ -104,7 +73,7 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
     let g = medium.g;
     let dome_dirs = dome_directions_of(scene, dome_directions);
     let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
-    let near = near_field_radius(&grid);
+    let near = near_field_radius(&grid.index_to_world);
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {
@@ -138,39 +107,6 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
         }
     });
     Ok(grid)
-}
-
-/// The grid holds point samples of S1 that the march interpolates trilinearly, so a grid
-/// point must carry the mean of S1 around it, not its value at the point, or an emitter inside
-/// the medium (1/d^2) is over- or under-counted by where it falls between grid points. Returns
-/// the radius of the ball with the volume of one grid cell, (3 h^3 / 4 pi)^(1/3).
-pub fn near_field_radius(grid: &ScatteringGrid) -> f32 {
-    let m = grid.index_to_world.matrix3;
-    let volume = glam::Mat3::from(m).determinant().abs();
-    (3.0 * volume / (4.0 * std::f32::consts::PI)).cbrt()
-}
-
-/// The mean of 1/|y|^2 over a ball of radius `r` whose centre is at distance `d` from the
-/// origin: (3 / (2 r^3 d)) ((r^2 - d^2)/2 ln((r + d)/|r - d|) + d r). It is 3/r^2 at d = 0,
-/// bounded, and 1/d^2 (1 + x^2/5 + 3 x^4/35 + x^6/21 + ...), x = r/d, far away (the series is
-/// used for x < 1/4, where the closed form cancels; truncation error < 1e-5). Its integral
-/// over all space equals that of 1/d^2: it spreads a point emitter's near field without losing
-/// energy (a sphere light's radius enters too: outside it the kernel is 1/d^2 within r^2/5d^2).
-#[inline]
-pub fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
-    if r <= 0.0 {
-        return 1.0 / (d * d);
-    }
-    if d < 1e-4 * r {
-        return 3.0 / (r * r);
-    }
-    let x = r / d;
-    if x < 0.25 {
-        let x2 = x * x;
-        return (1.0 + x2 * (0.2 + x2 * (3.0 / 35.0 + x2 / 21.0))) / (d * d);
-    }
-    let gap = (r - d).abs().max(1e-7 * r);
-    1.5 / (r * r * r * d) * (0.5 * (r * r - d * d) * ((r + d) / gap).ln() + d * r)
 }
 
 /// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2

@@ -133,24 +133,8 @@ impl EmissionTerm {
     /// Axis-aligned world box outside which this term is zero.
     pub fn world_bounds(&self) -> (Vec3, Vec3) {
         let (lo, hi) = self.grid.bbox();
-        world_box(&self.index_to_world, (lo - IVec3::ONE).as_vec3(), (hi + IVec3::ONE).as_vec3())
+        super::optics::world_box(&self.index_to_world, (lo - IVec3::ONE).as_vec3(), (hi + IVec3::ONE).as_vec3())
     }
-}
-
-pub(crate) fn world_box(index_to_world: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
-    let mut wmin = Vec3::splat(f32::INFINITY);
-    let mut wmax = Vec3::splat(f32::NEG_INFINITY);
-    for i in 0..8 {
-        let c = Vec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        );
-        let w = index_to_world.transform_point3(c);
-        wmin = wmin.min(w);
-        wmax = wmax.max(w);
-    }
-    (wmin, wmax)
 }
 
 /// Default number of virtual point lights an emissive medium becomes (translate::emission).

@@ -134,20 +134,11 @@ impl DensityGrid {
         }
     }
 
-    /// Trilinear interpolation at continuous index coordinates (voxel centres at integers).
+    /// Trilinear interpolation at continuous index coordinates (voxel centres at integers);
+    /// zero outside the stored voxels' ramp and for NaN or huge coordinates.
     #[inline]
     pub fn sample(&self, p: Vec3) -> f32 {
-        let f = p.floor();
-        let i = f.as_ivec3();
-        let t = p - f;
-        let v = |dx: i32, dy: i32, dz: i32| self.voxel(i + IVec3::new(dx, dy, dz));
-        let c00 = v(0, 0, 0) * (1.0 - t.x) + v(1, 0, 0) * t.x;
-        let c10 = v(0, 1, 0) * (1.0 - t.x) + v(1, 1, 0) * t.x;
-        let c01 = v(0, 0, 1) * (1.0 - t.x) + v(1, 0, 1) * t.x;
-        let c11 = v(0, 1, 1) * (1.0 - t.x) + v(1, 1, 1) * t.x;
-        let c0 = c00 * (1.0 - t.y) + c10 * t.y;
-        let c1 = c01 * (1.0 - t.y) + c11 * t.y;
-        c0 * (1.0 - t.z) + c1 * t.z
+        super::trilinear::trilinear(p, |c| self.voxel(c))
     }
 
     /// Maximum voxel value over the inclusive index box (used for majorants). Constant and

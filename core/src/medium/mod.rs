@@ -7,14 +7,19 @@ mod cie1931;
 pub mod emission;
 pub mod grid;
 pub mod majorant;
+pub mod optics;
 pub mod procedural;
 pub mod raw;
+pub mod tracking;
+pub mod trilinear;
 
 use glam::{Affine3A, IVec3, Vec3};
 
 pub use emission::{Emission, EmissionLaw, EmissionTerm};
 pub use grid::{DensityGrid, DensityGridBuilder, GridLimits};
 pub use majorant::MajorantGrid;
+pub use optics::{ball_mean_inverse_square, near_field_radius, optical_depth, ray_box};
+pub use tracking::{FreeFlight, Tracking};
 
 #[derive(Clone, Debug)]
 pub struct Medium {
@@ -46,19 +51,7 @@ impl Medium {
     /// Axis-aligned world box containing the medium.
     pub fn world_bounds(&self) -> (Vec3, Vec3) {
         let (lo, hi) = self.index_bounds();
-        let mut wmin = Vec3::splat(f32::INFINITY);
-        let mut wmax = Vec3::splat(f32::NEG_INFINITY);
-        for i in 0..8 {
-            let c = Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            );
-            let w = self.index_to_world.transform_point3(c);
-            wmin = wmin.min(w);
-            wmax = wmax.max(w);
-        }
-        (wmin, wmax)
+        optics::world_box(&self.index_to_world, lo, hi)
     }
 
     /// Density (unscaled) at a world point.

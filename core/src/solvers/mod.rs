@@ -70,23 +70,16 @@ impl ScatteringGrid {
         self.index_to_world.transform_point3(Vec3::new(i as f32, j as f32, k as f32))
     }
 
-    /// Trilinear lookup at continuous grid-index coordinates; zero outside.
+    /// Trilinear lookup at continuous grid-index coordinates; zero outside [0, dims - 1] (and
+    /// for NaN).
     #[inline]
     pub fn sample_index(&self, p: Vec3) -> Vec3 {
         let d = IVec3::new(self.dims[0] as i32, self.dims[1] as i32, self.dims[2] as i32);
-        if p.x < 0.0 || p.y < 0.0 || p.z < 0.0 || p.x > (d.x - 1) as f32 || p.y > (d.y - 1) as f32 || p.z > (d.z - 1) as f32 {
+        if !crate::medium::trilinear::inside(p, Vec3::ZERO, (d - IVec3::ONE).as_vec3()) {
             return Vec3::ZERO;
         }
-        let f = p.floor();
-        let i = f.as_ivec3().min(d - IVec3::splat(2)).max(IVec3::ZERO);
-        let t = p - i.as_vec3();
-        let at = |x: i32, y: i32, z: i32| self.data[(x + d.x * (y + d.y * z)) as usize];
-        let lerp = |a: Vec3, b: Vec3, t: f32| a + (b - a) * t;
-        let c00 = lerp(at(i.x, i.y, i.z), at(i.x + 1, i.y, i.z), t.x);
-        let c10 = lerp(at(i.x, i.y + 1, i.z), at(i.x + 1, i.y + 1, i.z), t.x);
-        let c01 = lerp(at(i.x, i.y, i.z + 1), at(i.x + 1, i.y, i.z + 1), t.x);
-        let c11 = lerp(at(i.x, i.y + 1, i.z + 1), at(i.x + 1, i.y + 1, i.z + 1), t.x);
-        lerp(lerp(c00, c10, t.y), lerp(c01, c11, t.y), t.z)
+        // The far corners of points on the last lattice plane have weight 0: clamped fetch.
+        crate::medium::trilinear::trilinear(p, |c| self.data[crate::medium::trilinear::clamped_index(c, d)])
     }
 }
 

@@ -13,7 +13,7 @@
 //! closer than about the stratum's size its 1/d^2 is not the physics. Paper 03 (Sec. 4.3) bounds
 //! the geometry term, G' = min(G, b), which loses the energy above the bound near every VPL.
 //! Here each VPL's `radius` is that of the ball of its stratum's volume, and consumers replace
-//! 1/d^2 by its mean over a ball of that radius (compositor::ball_mean_inverse_square, on CPU and
+//! 1/d^2 by its mean over a ball of that radius (medium::optics::ball_mean_inverse_square, on CPU and
 //! GPU): bounded (3/r^2 at the VPL) like paper 03's clamp, but the irradiance of a uniformly
 //! emitting ball instead of a cut, so nothing is lost: its integral over space equals 1/d^2's.
 //! `clamp_loss` reports what paper 03's hard clamp at the same bound, min(1/d^2, 3/r^2), would
@@ -237,7 +237,7 @@ mod tests {
     /// 1/d^2 far away.
     #[test]
     fn ball_kernel_is_the_mean_of_inverse_square() {
-        use crate::compositor::ball_mean_inverse_square as k;
+        use crate::medium::ball_mean_inverse_square as k;
         let r = 0.3f32;
         assert!((k(0.0, r) - 3.0 / (r * r)).abs() < 1e-4 * k(0.0, r));
         assert!((k(1.2 - 1e-5, r) / k(1.2 + 1e-5, r) - 1.0).abs() < 1e-4);

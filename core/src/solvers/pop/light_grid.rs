@@ -7,7 +7,8 @@ use rayon::prelude::*;
 
 use super::mip::MediumMip;
 use crate::error::{Error, Result};
-use crate::medium::Medium;
+use crate::medium::optics::box_corners;
+use crate::medium::{trilinear, Medium};
 use crate::sampling::orthonormal_basis;
 
 pub struct LightGrid {
@@ -53,19 +54,9 @@ impl LightGrid {
         let rot = Mat3A::from_cols(u.into(), v.into(), d.into());
         // Extent of the medium's index-space box in the (u, v, d) frame.
         let (lo, hi) = medium.index_bounds();
-        let mut pmin = Vec3::splat(f32::INFINITY);
-        let mut pmax = Vec3::splat(f32::NEG_INFINITY);
-        for c in 0..8 {
-            let corner = Vec3::new(
-                if c & 1 == 0 { lo.x } else { hi.x },
-                if c & 2 == 0 { lo.y } else { hi.y },
-                if c & 4 == 0 { lo.z } else { hi.z },
-            );
-            let w = medium.index_to_world.transform_point3(corner);
-            let p = Vec3::new(w.dot(u), w.dot(v), w.dot(d));
-            pmin = pmin.min(p);
-            pmax = pmax.max(p);
-        }
+        let frame = |w: Vec3| Vec3::new(w.dot(u), w.dot(v), w.dot(d));
+        let corners = box_corners(lo, hi, |c| frame(medium.index_to_world.transform_point3(c)));
+        let (mut pmin, mut pmax) = corners.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)));
         let h = (pmax - pmin).max(Vec3::splat(1e-6)).max_element() / resolution as f32;
         pmin -= Vec3::splat(margin as f32 * h);
         pmax += Vec3::splat(margin as f32 * h);
@@ -110,23 +101,12 @@ impl LightGrid {
     pub fn sample(&self, field: &[Vec3], w: Vec3) -> Vec3 {
         let p = self.world_to_index.transform_point3(w);
         let dims = self.dims.as_ivec3();
-        if p.x < -0.5 || p.y < -0.5 || p.z < -0.5 || p.x > dims.x as f32 - 0.5 || p.y > dims.y as f32 - 0.5 || p.z > dims.z as f32 - 0.5 {
+        let edge = (dims - glam::IVec3::ONE).as_vec3();
+        if !trilinear::inside(p, Vec3::splat(-0.5), edge + Vec3::splat(0.5)) {
             return Vec3::ZERO;
         }
         // Clamp to the outermost centres: the outer half cells hold the edge value.
-        let p = p.clamp(Vec3::ZERO, (dims - glam::IVec3::ONE).as_vec3());
-        let f = p.floor();
-        let i = f.as_ivec3();
-        let t = p - f;
-        let at = |x: i32, y: i32, z: i32| {
-            let c = glam::IVec3::new(x, y, z).min(dims - glam::IVec3::ONE);
-            field[(c.x + dims.x * (c.y + dims.y * c.z)) as usize]
-        };
-        let lerp = |a: Vec3, b: Vec3, t: f32| a + (b - a) * t;
-        let c00 = lerp(at(i.x, i.y, i.z), at(i.x + 1, i.y, i.z), t.x);
-        let c10 = lerp(at(i.x, i.y + 1, i.z), at(i.x + 1, i.y + 1, i.z), t.x);
-        let c01 = lerp(at(i.x, i.y, i.z + 1), at(i.x + 1, i.y, i.z + 1), t.x);
-        let c11 = lerp(at(i.x, i.y + 1, i.z + 1), at(i.x + 1, i.y + 1, i.z + 1), t.x);
-        lerp(lerp(c00, c10, t.y), lerp(c01, c11, t.y), t.z)
+        let p = p.clamp(Vec3::ZERO, edge);
+        trilinear::trilinear(p, |c| field[trilinear::clamped_index(c, dims)])
     }
 }

@@ -10,6 +10,7 @@
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
+use crate::medium::trilinear::trilinear;
 use crate::medium::Medium;
 
 struct Level {
@@ -38,15 +39,7 @@ impl Level {
     /// Trilinear between cell centres, zero outside (like the density grid itself).
     #[inline]
     fn sample(&self, q: Vec3) -> f32 {
-        let f = q.floor();
-        let i = f.as_ivec3();
-        let t = q - f;
-        let v = |dx: i32, dy: i32, dz: i32| self.at(i + IVec3::new(dx, dy, dz));
-        let c00 = v(0, 0, 0) * (1.0 - t.x) + v(1, 0, 0) * t.x;
-        let c10 = v(0, 1, 0) * (1.0 - t.x) + v(1, 1, 0) * t.x;
-        let c01 = v(0, 0, 1) * (1.0 - t.x) + v(1, 0, 1) * t.x;
-        let c11 = v(0, 1, 1) * (1.0 - t.x) + v(1, 1, 1) * t.x;
-        (c00 * (1.0 - t.y) + c10 * t.y) * (1.0 - t.z) + (c01 * (1.0 - t.y) + c11 * t.y) * t.z
+        trilinear(q, |c| self.at(c))
     }
 }
 

@@ -1,11 +1,11 @@
 //! The path-tracing kernels of `reference`: free flights, shadow transmittance, next-event
 //! estimation, and the path loop shared by camera paths and scattering-grid estimates.
 
-use glam::{Affine3A, Vec3};
+use glam::Vec3;
 use std::f32::consts::PI;
 
 use super::ReferenceSettings;
-use crate::medium::{MajorantGrid, Medium};
+use crate::medium::{ray_box, FreeFlight, MajorantGrid, Medium, Tracking};
 use crate::phase::{hg, HenyeyGreenstein};
 use crate::rng::Rng;
 use crate::sampling::uniform_cone;
@@ -35,7 +35,6 @@ impl PathRadiance {
 
 pub struct Tracer<'a> {
     medium: &'a Medium,
-    world_to_index: Affine3A,
     majorant: MajorantGrid,
     lights: &'a [Light],
     env: Option<&'a Environment>,
@@ -56,7 +55,6 @@ impl<'a> Tracer<'a> {
         let medium = &scene.medium;
         Tracer {
             medium,
-            world_to_index: medium.world_to_index,
             majorant: MajorantGrid::new(medium, s.majorant_resolution as i32),
             lights: &scene.lights,
             env: scene.environment(),
@@ -66,79 +64,28 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Spectral tracking from `x` along unit `d`. Returns the distance to a real collision, or
-    /// None if the ray leaves the medium; `beta` receives the tracking weights.
+    fn tracking(&self) -> Tracking<'_> {
+        Tracking::new(self.medium, &self.majorant)
+    }
+
+    /// Free flight from `x` along unit `d` to the medium's end (medium::tracking): the distance
+    /// to a real collision, or None if the ray leaves the medium; `beta` takes the weights.
     fn free_flight(&self, x: Vec3, d: Vec3, beta: &mut Vec3, rng: &mut Rng) -> Option<f32> {
-        // Index space keeps the ray parameter: t stays a world distance because d is unit in
-        // world space and the map is affine.
-        let o = self.world_to_index.transform_point3(x);
-        let di = self.world_to_index.transform_vector3(d);
-        let scale = self.medium.density_scale;
-        let grid = &self.medium.grid;
-        let mut hit = None;
-        self.majorant.traverse(o, di, 0.0, f32::INFINITY, |seg| {
-            let m = seg.majorant;
-            if m <= 0.0 {
-                return true;
+        match self.tracking().sample_free_flight(x, d, f32::INFINITY, *beta, rng) {
+            FreeFlight::Scattered { t, weight } => {
+                *beta = weight;
+                Some(t)
             }
-            let mut t = seg.t0;
-            loop {
-                t -= (1.0 - rng.f32()).ln() / m;
-                if t >= seg.t1 {
-                    return true;
-                }
-                let sigma_t = scale * grid.sample(o + di * t);
-                let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
-                let p_real_w = (*beta * sigma_t).max_element();
-                let p_null_w = (*beta * sigma_n).max_element();
-                let total = p_real_w + p_null_w;
-                if total <= 0.0 {
-                    continue;
-                }
-                let p_real = p_real_w / total;
-                if rng.f32() < p_real {
-                    *beta *= sigma_t / (m * p_real);
-                    hit = Some(t);
-                    return false;
-                }
-                *beta *= sigma_n / (m * (1.0 - p_real));
+            FreeFlight::Escaped { weight } => {
+                *beta = weight;
+                None
             }
-        });
-        hit
+        }
     }
 
     /// Ratio-tracking estimate of the RGB transmittance from `x` along unit `d` over `t_max`.
     pub fn transmittance(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Vec3 {
-        let o = self.world_to_index.transform_point3(x);
-        let di = self.world_to_index.transform_vector3(d);
-        let scale = self.medium.density_scale;
-        let grid = &self.medium.grid;
-        let mut tr = Vec3::ONE;
-        self.majorant.traverse(o, di, 0.0, t_max, |seg| {
-            let m = seg.majorant;
-            if m <= 0.0 {
-                return true;
-            }
-            let mut t = seg.t0;
-            loop {
-                t -= (1.0 - rng.f32()).ln() / m;
-                if t >= seg.t1 {
-                    return true;
-                }
-                let sigma_t = scale * grid.sample(o + di * t);
-                tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
-                // Russian roulette on small transmittance keeps thick media cheap, unbiased.
-                let mx = tr.max_element();
-                if mx < 0.1 {
-                    if rng.f32() >= mx * 10.0 {
-                        tr = Vec3::ZERO;
-                        return false;
-                    }
-                    tr /= mx * 10.0;
-                }
-            }
-        });
-        tr
+        self.tracking().ratio_transmittance(x, d, t_max, rng)
     }
 
     /// Next-event estimation at `x` for a path arriving along propagation direction `d`:
@@ -235,7 +182,7 @@ impl<'a> Tracer<'a> {
     fn emission_along(&self, x: Vec3, d: Vec3, rng: &mut Rng) -> Vec3 {
         let Some(em) = &self.medium.emission else { return Vec3::ZERO };
         let (lo, hi) = em.world_bounds();
-        let Some((t0, t1)) = crate::compositor::ray_box(x, d, lo, hi) else { return Vec3::ZERO };
+        let Some((t0, t1)) = ray_box(x, d, lo, hi) else { return Vec3::ZERO };
         let t = t0 + (t1 - t0) * rng.f32();
         let e = em.at(x + d * t);
         if e.max_element() <= 0.0 {

@@ -10,11 +10,12 @@
 //! shells, the innermost ball is left out of the grid (its light is marched exactly, see
 //! init.rs) by raising r_in.
 
-use glam::{Vec2, Vec3};
+use glam::{IVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::octahedral::{self, Columns};
 use crate::error::{Error, Result};
+use crate::medium::trilinear::trilinear;
 use crate::medium::Medium;
 use crate::solvers::pop::mip::MediumMip;
 
@@ -135,17 +136,15 @@ impl RadialGrid {
         let n = self.cols.n as i32;
         let dir = if r > 0.0 { to / r } else { Vec3::Z };
         let p = octahedral::sphere_to_square(dir) * n as f32 - Vec2::splat(0.5);
-        let (fi, fj) = (p.x.floor(), p.y.floor());
-        let (tu, tv) = (p.x - fi, p.y - fj);
         // Continuous shell coordinate: shell k's mid radius sits at k (log-spaced).
         let r_mid0 = self.mid_radius(0);
         let sk = if r <= r_mid0 { 0.0 } else { ((r / r_mid0).ln() / self.q.ln()).min((nk - 1) as f32) };
-        let k0 = sk.floor() as usize;
-        let k1 = (k0 + 1).min(nk - 1);
-        let tk = sk - k0 as f32;
         let slab = self.slab();
-        let at = |di: i32, dj: i32, k: usize| -> Vec3 {
-            let (i, j) = octahedral::wrap(fi as i32 + di, fj as i32 + dj, n);
+        // Bilinear over the folded square (neighbours across its border through `wrap`), linear
+        // between shells: one trilinear lookup with the shell index as third coordinate.
+        let at = |c: IVec3| -> Vec3 {
+            let (i, j) = octahedral::wrap(c.x, c.y, n);
+            let k = (c.z.max(0) as usize).min(nk - 1);
             let v = field[(i + self.cols.n * j) as usize + slab * k];
             if inverse_square {
                 let r_mid = self.mid_radius(k);
@@ -154,12 +153,7 @@ impl RadialGrid {
                 v
             }
         };
-        let bilinear = |k: usize| {
-            let a = at(0, 0, k) * (1.0 - tu) + at(1, 0, k) * tu;
-            let b = at(0, 1, k) * (1.0 - tu) + at(1, 1, k) * tu;
-            a * (1.0 - tv) + b * tv
-        };
-        let v = bilinear(k0) * (1.0 - tk) + bilinear(k1) * tk;
+        let v = trilinear(Vec3::new(p.x, p.y, sk), at);
         if inverse_square {
             let re = r.max(r_clamp).max(1e-6);
             v / (re * re)
