@@ -16,6 +16,7 @@ pub mod device;
 pub mod pop;
 pub mod solve;
 pub mod upload;
+mod wgsl;
 
 #[cfg(test)]
 mod test_support;

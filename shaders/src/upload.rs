@@ -15,7 +15,7 @@ pub fn affine_rows(a: &Affine3A) -> [[f32; 4]; 3] {
 /// box in 8^3 bricks, the bricks of voxels, the constant tiles), in one buffer of u32 words
 /// (floats as their bits): table, then bricks, then constants. Empty space costs one table
 /// word, so a sparse cloud takes its own memory on the GPU, not its bounding box's; lookups
-/// (composite/medium.wgsl) read the same voxels as `DensityGrid::voxel`.
+/// (the prelude wgsl/density.wgsl) read the same voxels as `DensityGrid::voxel`.
 pub struct BrickedDensity {
     /// Table corner in bricks; w = offset of the first brick's voxels in `words`.
     pub brick_min: [i32; 4],
@@ -24,7 +24,7 @@ pub struct BrickedDensity {
     pub words: Vec<u32>,
 }
 
-// medium.wgsl hard-codes the grid's encoding.
+// wgsl/density.wgsl hard-codes the grid's encoding.
 const _: () = assert!(grid::BRICK_LOG2 == 3 && grid::EMPTY == 0 && grid::CONSTANT_BIT == 0x8000_0000);
 
 /// Bytes `bricked_density` will take, to check limits before building it.

@@ -2,13 +2,14 @@
 // L = sum over steps of T * S(x) * (1 - exp(-sigma_t h)) / sigma_t, T *= exp(-sigma_t h),
 // plus the same for the single-scattering grid S1, and the environment through T.
 // Layout of `Params` is mirrored by `CompositeParams` in mod.rs (checked there).
-// `density_at` comes from medium.wgsl.
+// density_at, affine, the trilinear helpers, ray_box and PI come from the preludes
+// (shaders/src/wgsl), prepended.
 
 struct Params {
     density_w2i: array<vec4<f32>, 3>,  // world -> density index, rows of a 3x4 affine
     s_w2i: array<vec4<f32>, 3>,        // world -> S grid index
     s1_w2i: array<vec4<f32>, 3>,       // world -> S1 grid index
-    density_brick_min: vec4<i32>,      // medium.wgsl
+    density_brick_min: vec4<i32>,      // wgsl/density.wgsl
     density_brick_dims: vec4<u32>,
     s_dims: vec4<u32>,
     s1_dims: vec4<u32>,
@@ -33,8 +34,6 @@ struct Params {
 // Three vec4 per pixel: rgba, single scattering, background.
 @group(0) @binding(5) var<storage, read_write> out_pixels: array<vec4<f32>>;
 
-const PI: f32 = 3.14159265358979;
-
 fn grid_at(which: u32, x: vec3<f32>) -> vec3<f32> {
     var p: vec3<f32>;
     var dims: vec3<i32>;
@@ -45,28 +44,21 @@ fn grid_at(which: u32, x: vec3<f32>) -> vec3<f32> {
         p = affine(params.s1_w2i, x);
         dims = vec3<i32>(params.s1_dims.xyz);
     }
-    // ScatteringGrid::sample_index: zero outside [0, dims-1], cell clamped to dims-2.
-    if (any(p < vec3<f32>(0.0)) || any(p > vec3<f32>(dims - vec3<i32>(1)))) {
+    // ScatteringGrid::sample_index: zero outside [0, dims - 1], corners clamped into the grid.
+    if (!inside(p, vec3<f32>(0.0), vec3<f32>(dims - vec3<i32>(1)))) {
         return vec3<f32>(0.0);
     }
-    let i = max(min(vec3<i32>(floor(p)), dims - vec3<i32>(2)), vec3<i32>(0));
-    let t = p - vec3<f32>(i);
+    let l = lattice(p);
     var c: array<vec3<f32>, 8>;
     for (var k = 0; k < 8; k++) {
-        let o = vec3<i32>(k & 1, (k >> 1u) & 1, (k >> 2u) & 1);
-        let j = i + o;
-        let idx = u32(j.x + dims.x * (j.y + dims.y * j.z));
+        let idx = clamped_index(l.base + corner(k), dims);
         if (which == 0u) {
             c[k] = s_grid[idx].xyz;
         } else {
             c[k] = s1_grid[idx].xyz;
         }
     }
-    let c00 = mix(c[0], c[1], t.x);
-    let c10 = mix(c[2], c[3], t.x);
-    let c01 = mix(c[4], c[5], t.x);
-    let c11 = mix(c[6], c[7], t.x);
-    return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
+    return trilinear3(c, l.t);
 }
 
 fn env_radiance(d: vec3<f32>) -> vec3<f32> {
@@ -103,13 +95,9 @@ fn march(o: vec3<f32>, d: vec3<f32>) -> March {
     r.l = vec3<f32>(0.0);
     r.l1 = vec3<f32>(0.0);
     r.tr = vec3<f32>(1.0);
-    let inv = 1.0 / d;
-    let a = (params.bounds_lo.xyz - o) * inv;
-    let b = (params.bounds_hi.xyz - o) * inv;
-    let tmin = min(a, b);
-    let tmax = max(a, b);
-    let t0 = max(max(max(tmin.x, tmin.y), tmin.z), 0.0);
-    let t1 = min(min(tmax.x, tmax.y), tmax.z);
+    let span = ray_box(o, d, params.bounds_lo.xyz, params.bounds_hi.xyz);
+    let t0 = span.x;
+    let t1 = span.y;
     if (!(t0 < t1)) {
         return r;
     }

@@ -13,8 +13,8 @@ use volscatter_core::{Image, ScatteringGrid, Scene};
 
 pub mod single;
 
-/// The kernel with the shared density lookup (medium.wgsl) in front.
-pub const WGSL: &str = concat!(include_str!("medium.wgsl"), include_str!("composite.wgsl"));
+/// The kernel with its preludes (shaders/src/wgsl) in front.
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box", "hg"], "composite/composite.wgsl");
 
 /// Mirrors `struct Params` in composite.wgsl (uniform address space: every member 16-byte
 /// aligned, which vec4/array-of-vec4 members give us).

@@ -12,8 +12,8 @@ use volscatter_core::translate::{scene_emitters, PointEmitter, Profile};
 use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
-/// The kernel with the shared density lookup (medium.wgsl) in front.
-pub const WGSL: &str = concat!(include_str!("medium.wgsl"), include_str!("single.wgsl"));
+/// The kernel with its preludes (shaders/src/wgsl) in front.
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box", "hg"], "composite/single.wgsl");
 
 /// Mirrors `struct Params` in single.wgsl.
 #[repr(C)]

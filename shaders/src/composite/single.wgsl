@@ -5,12 +5,12 @@
 // their weights), kind 1 = point emitter (position, peak intensity, angular profile: volscatter-
 // core `translate::Profile`; spots and area-light VPLs arrive as such). Same order and steps as
 // the CPU.
-// `density_at` comes from medium.wgsl.
+// density_at, affine, ray_box, hg and PI come from the preludes (shaders/src/wgsl), prepended.
 
 struct Params {
     density_w2i: array<vec4<f32>, 3>,
     grid_i2w: array<vec4<f32>, 3>,     // S1 grid index -> world
-    density_brick_min: vec4<i32>,      // medium.wgsl
+    density_brick_min: vec4<i32>,      // wgsl/density.wgsl
     density_brick_dims: vec4<u32>,
     grid_dims: vec4<u32>,              // xyz, w = number of lights
     density_scale: vec4<f32>,
@@ -51,22 +51,11 @@ fn profile_factor(light: Light, w: vec3<f32>) -> f32 {
 @group(0) @binding(2) var<storage, read> lights: array<Light>;
 @group(0) @binding(3) var<storage, read_write> out_grid: array<vec4<f32>>;
 
-const PI: f32 = 3.14159265358979;
-
-fn hg(c: f32, g: f32) -> f32 {
-    let d = 1.0 + g * g - 2.0 * g * c;
-    return (1.0 - g * g) / (4.0 * PI * d * sqrt(max(d, 1e-12)));
-}
-
-// compositor::optical_depth: midpoint quadrature, at most 512 steps of at least min_step.
+// medium::optics::optical_depth: midpoint quadrature, at most 512 steps of at least min_step.
 fn transmittance(x: vec3<f32>, d: vec3<f32>, t_max: f32) -> vec3<f32> {
-    let inv = 1.0 / d;
-    let a = (params.bounds_lo.xyz - x) * inv;
-    let b = (params.bounds_hi.xyz - x) * inv;
-    let tmin = min(a, b);
-    let tmax = max(a, b);
-    let t0 = max(max(max(tmin.x, tmin.y), tmin.z), 0.0);
-    let t1 = min(min(min(tmax.x, tmax.y), tmax.z), t_max);
+    let span = ray_box(x, d, params.bounds_lo.xyz, params.bounds_hi.xyz);
+    let t0 = span.x;
+    let t1 = min(span.y, t_max);
     if (!(t0 < t1)) {
         return vec3<f32>(1.0);
     }
@@ -79,7 +68,7 @@ fn transmittance(x: vec3<f32>, d: vec3<f32>, t_max: f32) -> vec3<f32> {
     return exp(-params.density_scale.xyz * tau * h);
 }
 
-// compositor::ball_mean_inverse_square: the mean of 1/|y|^2 over a ball of radius r at distance d.
+// medium::optics::ball_mean_inverse_square: the mean of 1/|y|^2 over a ball of radius r at distance d.
 fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
     if (r <= 0.0) {
         return 1.0 / (d * d);
@@ -133,7 +122,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     sum += intensity * ball_mean_inverse_square(dist, r) * hg(dot(w, view), g) * transmittance(x, w, dist);
                 }
             } else if (light.power.w == 0.0 && r > 0.0) {
-                sum += light.power.xyz * ball_mean_inverse_square(0.0, r) * (0.25 / 3.14159265358979);
+                sum += light.power.xyz * ball_mean_inverse_square(0.0, r) * (0.25 / PI);
             }
         }
     }

@@ -76,7 +76,7 @@ fn gpu_single_scattering_grid_matches_cpu() {
     check(&scene, "spot + disc");
 }
 
-/// The bricked density upload (upload.rs, medium.wgsl) on what the plume lacks: constant tiles
+/// The bricked density upload (upload.rs, wgsl/density.wgsl) on what the plume lacks: constant tiles
 /// (VDB tiles), empty bricks inside the table, negative indices. The single-scattering grid
 /// reads the density everywhere along its shadow rays; tolerance as above (1e-5).
 #[test]

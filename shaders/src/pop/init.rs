@@ -10,7 +10,7 @@ use crate::context::{GpuContext, GpuError};
 use crate::pop::light::{read_rgb, GpuLight};
 use volscatter_core::solvers::pop::backend::SweepSums;
 
-pub const WGSL: &str = include_str!("init.wgsl");
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["hg", "columns"], "pop/init.wgsl");
 
 /// Mirrors `struct Params` in init.wgsl.
 #[repr(C)]

@@ -5,6 +5,7 @@
 // Outputs: the packets (the propagation's first P buffer), J, and per column the optical
 // depth, the light absorbed before scattering and the packets' sum (the energy report and the
 // propagation's stopping threshold need only these sums, not the cells).
+// hg and column_index come from the preludes (shaders/src/wgsl: hg.wgsl, columns.wgsl).
 
 struct Params {
     dims: vec4<u32>,
@@ -21,21 +22,13 @@ struct Params {
 // Three vec4 per column: optical depth, absorbed, packets' sum.
 @group(0) @binding(6) var<storage, read_write> columns: array<vec4<f32>>;
 
-const PI: f32 = 3.14159265358979;
-
-// phase::hg
-fn hg(c: f32, g: f32) -> f32 {
-    let d = 1.0 + g * g - 2.0 * g * c;
-    return (1.0 - g * g) / (4.0 * PI * d * sqrt(max(d, 1e-12)));
-}
-
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= params.dims.x || gid.y >= params.dims.y) {
+    let column = column_index(gid, params.dims.xyz);
+    if (column == NO_COLUMN) {
         return;
     }
     let slab = params.dims.x * params.dims.y;
-    let column = gid.x + params.dims.x * gid.y;
     let h = params.consts.x;
     let a = params.consts.y;
     let fluence = params.fluence.xyz;

@@ -15,7 +15,7 @@ use volscatter_core::solvers::pop::merge::{footprint, Merged};
 use volscatter_core::solvers::pop::mip::MediumMip;
 use volscatter_core::ScatteringGrid;
 
-pub const WGSL: &str = concat!(include_str!("mip.wgsl"), include_str!("merge.wgsl"));
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip"], "pop/merge.wgsl");
 
 /// Mirrors `struct Params` in merge.wgsl.
 #[repr(C)]

@@ -3,6 +3,7 @@
 // The first dispatch also writes the density guide (mip.wgsl at the merged cells' footprint)
 // and its maximum, which the bilateral filter's range weight needs (positive floats' bit
 // patterns order like their values, so an atomicMax on u32 finds it; zero and -0 count as 0).
+// affine, the trilinear helpers and mip_sample come from the preludes (shaders/src/wgsl).
 
 struct Params {
     merged_i2w: array<vec4<f32>, 3>,
@@ -10,10 +11,7 @@ struct Params {
     density_w2i: array<vec4<f32>, 3>,
     merged_dims: vec4<u32>,     // xyz, w = 1 for the first light (write, not add)
     light_dims: vec4<i32>,      // xyz, w = 1 when there is a light to sample
-    mip_origin: vec4<i32>,
-    mip_a: MipLevel,
-    mip_b: MipLevel,
-    mip_blend: vec4<f32>,
+    mip: MipParams,             // wgsl/mip.wgsl
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -23,34 +21,20 @@ struct Params {
 @group(0) @binding(4) var<storage, read_write> merged_density: array<f32>;
 @group(0) @binding(5) var<storage, read_write> max_density: array<atomic<u32>>;
 
-fn light_at(x: i32, y: i32, z: i32) -> vec3<f32> {
-    let d = params.light_dims.xyz;
-    let c = min(vec3<i32>(x, y, z), d - vec3<i32>(1));
-    return light_j[u32(c.x + d.x * (c.y + d.y * c.z))].xyz;
-}
-
 // LightGrid::sample: trilinear, the outer half cells hold the edge value, zero outside.
 fn light_sample(w: vec3<f32>) -> vec3<f32> {
     let d = params.light_dims.xyz;
-    let df = vec3<f32>(d);
-    var p = affine(params.light_w2i, w);
-    if (any(p < vec3<f32>(-0.5)) || any(p > df - vec3<f32>(0.5))) {
+    let edge = vec3<f32>(d - vec3<i32>(1));
+    let p = affine(params.light_w2i, w);
+    if (!inside(p, vec3<f32>(-0.5), edge + vec3<f32>(0.5))) {
         return vec3<f32>(0.0);
     }
-    p = clamp(p, vec3<f32>(0.0), df - vec3<f32>(1.0));
-    let f = floor(p);
-    let i = vec3<i32>(f);
-    let t = p - f;
-    let c00 = mix3(light_at(i.x, i.y, i.z), light_at(i.x + 1, i.y, i.z), t.x);
-    let c10 = mix3(light_at(i.x, i.y + 1, i.z), light_at(i.x + 1, i.y + 1, i.z), t.x);
-    let c01 = mix3(light_at(i.x, i.y, i.z + 1), light_at(i.x + 1, i.y, i.z + 1), t.x);
-    let c11 = mix3(light_at(i.x, i.y + 1, i.z + 1), light_at(i.x + 1, i.y + 1, i.z + 1), t.x);
-    return mix3(mix3(c00, c10, t.y), mix3(c01, c11, t.y), t.z);
-}
-
-// glam's lerp as the CPU writes it (a + (b - a) t), not WGSL's mix, so they round alike.
-fn mix3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
-    return a + (b - a) * t;
+    let l = lattice(clamp(p, vec3<f32>(0.0), edge));
+    var c: array<vec3<f32>, 8>;
+    for (var k = 0; k < 8; k++) {
+        c[k] = light_j[clamped_index(l.base + corner(k), d)].xyz;
+    }
+    return trilinear3(c, l.t);
 }
 
 @compute @workgroup_size(4, 4, 4)

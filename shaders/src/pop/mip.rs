@@ -1,5 +1,5 @@
 //! The density's mip pyramid in device memory, uploaded once per solve and read by the merge
-//! and upsampling kernels through `mip.wgsl` (a port of `MediumMip::sample`). Every level is
+//! and upsampling kernels through the prelude `wgsl/mip.wgsl` (a port of `MediumMip::sample`). Every level is
 //! bricked like the CPU's density grid: a table of 8^3 bricks, only bricks holding density
 //! stored, so a sparse cloud costs its own memory rather than its bounding box's.
 
@@ -11,13 +11,10 @@ use std::mem::size_of;
 use crate::context::{GpuContext, GpuError};
 use volscatter_core::solvers::pop::mip::MediumMip;
 
-/// The shared density lookup, prepended to the kernels that use it (WGSL has no includes).
-pub const WGSL: &str = include_str!("mip.wgsl");
-
 const BRICK: i32 = 8;
 const BRICK_CELLS: usize = 512;
 
-/// Mirrors `struct MipLevel` in mip.wgsl.
+/// Mirrors `struct MipLevel` in wgsl/mip.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
 pub struct MipLevel {
@@ -29,8 +26,8 @@ pub struct MipLevel {
     pub scale: [f32; 4],
 }
 
-/// The `mip_*` fields that end the parameters of every kernel including mip.wgsl (same order
-/// and types there).
+/// Mirrors `struct MipParams` in wgsl/mip.wgsl, the last field of the parameters of every
+/// kernel that includes it.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
 pub struct MipParams {

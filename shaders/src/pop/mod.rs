@@ -28,9 +28,9 @@ use volscatter_core::solvers::pop::PropagationStats;
 // Local lights' radial grids (radial.wgsl).
 pub mod radial;
 
-pub const WGSL: &str = concat!(include_str!("lobe.wgsl"), include_str!("propagate.wgsl"));
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["hg", "propagation"], "pop/propagate.wgsl");
 
-/// Mirrors `struct Params` in propagate.wgsl.
+/// Mirrors `struct Params` in wgsl/propagation.wgsl (both propagation kernels' parameters).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub struct PropagateParams {
@@ -50,7 +50,7 @@ pub struct GpuPropagationTimes {
     pub readback: f64,
 }
 
-fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
+pub(crate) fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
     v.iter().map(|x| [x.x, x.y, x.z, 0.0]).collect()
 }
 

@@ -6,14 +6,8 @@
 //   gather: each cell collects from its six neighbours with absorption-only transmittance and
 //     anisotropy decay (Eq. 2-6).
 // Cells: x (u) fastest, d (light direction) slowest. RGB in .xyz of each vec4.
-// PI, clamp_a, cone_fraction and hg come from lobe.wgsl, prepended.
-
-struct Params {
-    dims: vec4<u32>,
-    consts: vec4<f32>,  // h, g, ln|g|, 1/escape length
-    flags: vec4<u32>,   // diffusion_correction, drift_matched
-    weight: vec4<f32>,  // J weight of this emission (0.5 for the packets' birth cells), -, -, -
-};
+// Params, the lobe, path factor and gathering helpers come from the preludes (shaders/src/wgsl:
+// hg.wgsl, propagation.wgsl), prepended.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
@@ -42,60 +36,28 @@ fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let h = params.consts.x;
     let g = params.consts.y;
     let a = a_in[c].xyz;
-    let ca = clamp_a(a);
-    let front = cone_fraction(COS_45, ca);
-    let back = vec3<f32>(1.0) - cone_fraction(-COS_45, ca);
-    let side = max((vec3<f32>(1.0) - front - back) * 0.25, vec3<f32>(0.0));
+    let lobe = lobe_fractions(a);
     var kappa = vec3<f32>(1.0);
     if (params.flags.x != 0u) {
         let sigma_tr = sigma_s[c].xyz * (1.0 - abs(g)) + sigma_a[c].xyz + vec3<f32>(params.consts.w);
-        let iso = min(sigma_tr * (0.5 * h), vec3<f32>(64.0));
-        let aa = min(abs(a), vec3<f32>(1.0));
-        var ball = vec3<f32>(1.0);
-        if (params.flags.y != 0u) {
-            ball = select(vec3<f32>(0.75), (front - back) / max(abs(a), vec3<f32>(1e-3)), aa > vec3<f32>(1e-3));
-        }
-        kappa = aa * ball + (vec3<f32>(1.0) - aa) * iso;
+        kappa = path_factor(a, lobe, sigma_tr, h, params.flags.y != 0u);
     }
     let path = kappa * h;
-    emit[4u * c] = vec4<f32>(front, 0.0);
-    emit[4u * c + 1u] = vec4<f32>(side, 0.0);
-    emit[4u * c + 2u] = vec4<f32>(back, 0.0);
-    emit[4u * c + 3u] = vec4<f32>(path, 0.0);
+    store_emit(c, lobe, path);
     let p = p_in[c].xyz;
     let w = p * path / h * params.weight.x;
-    j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg(mu[c], clamp_a(ca * g)), 0.0);
+    j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg3(mu[c], clamp_a(clamp_a(a) * g)), 0.0);
     // The previous emission's escapes have happened; record this emission's.
     let sides = f32(u32(gid.x == 0u) + u32(gid.x == params.dims.x - 1u) + u32(gid.y == 0u) + u32(gid.y == params.dims.y - 1u));
-    var out = side * sides;
+    var out = lobe.side * sides;
     if (gid.z == params.dims.z - 1u) {
-        out += front;
+        out += lobe.front;
     }
     if (gid.z == 0u) {
-        out += back;
+        out += lobe.back;
     }
     esc[2u * c] = vec4<f32>(esc[2u * c].xyz + esc[2u * c + 1u].xyz, 0.0);
     esc[2u * c + 1u] = vec4<f32>(p * out, 0.0);
-}
-
-struct Gathered {
-    l: vec3<f32>,
-    la: vec3<f32>,
-};
-
-fn add_from(acc: ptr<function, Gathered>, src: u32, slot: u32, sa_d: vec3<f32>, ss_d: vec3<f32>) {
-    let ps = p_in[src].xyz;
-    if (all(ps == vec3<f32>(0.0))) {
-        return;
-    }
-    let frac = emit[4u * src + slot].xyz;
-    let path = emit[4u * src + 3u].xyz;
-    let sa = 0.5 * (sigma_a[src].xyz + sa_d);
-    let ss = 0.5 * (sigma_s[src].xyz + ss_d);
-    let dl = ps * frac * exp(-sa * path);
-    let da = a_in[src].xyz * exp(ss * path * params.consts.z);
-    (*acc).l += dl;
-    (*acc).la += dl * da;
 }
 
 @compute @workgroup_size(4, 4, 4)
@@ -108,16 +70,13 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dst = cell_of(gid);
     let sa_d = sigma_a[dst].xyz;
     let ss_d = sigma_s[dst].xyz;
-    var acc: Gathered;
-    acc.l = vec3<f32>(0.0);
-    acc.la = vec3<f32>(0.0);
+    var acc = Gathered(vec3<f32>(0.0), vec3<f32>(0.0));
     // Same neighbour order as the CPU, so the sums round alike.
-    if (gid.z > 0u) { add_from(&acc, dst - slab, 0u, sa_d, ss_d); }
-    if (gid.z + 1u < params.dims.z) { add_from(&acc, dst + slab, 2u, sa_d, ss_d); }
-    if (gid.x > 0u) { add_from(&acc, dst - 1u, 1u, sa_d, ss_d); }
-    if (gid.x + 1u < nx) { add_from(&acc, dst + 1u, 1u, sa_d, ss_d); }
-    if (gid.y > 0u) { add_from(&acc, dst - nx, 1u, sa_d, ss_d); }
-    if (gid.y + 1u < params.dims.y) { add_from(&acc, dst + nx, 1u, sa_d, ss_d); }
-    p_out[dst] = vec4<f32>(acc.l, 0.0);
-    a_out[dst] = vec4<f32>(select(vec3<f32>(0.0), acc.la / max(acc.l, vec3<f32>(1e-30)), acc.l > vec3<f32>(1e-30)), 0.0);
+    if (gid.z > 0u) { add_from(&acc, dst - slab, 0u, 1.0, sa_d, ss_d); }
+    if (gid.z + 1u < params.dims.z) { add_from(&acc, dst + slab, 2u, 1.0, sa_d, ss_d); }
+    if (gid.x > 0u) { add_from(&acc, dst - 1u, 1u, 1.0, sa_d, ss_d); }
+    if (gid.x + 1u < nx) { add_from(&acc, dst + 1u, 1u, 1.0, sa_d, ss_d); }
+    if (gid.y > 0u) { add_from(&acc, dst - nx, 1u, 1.0, sa_d, ss_d); }
+    if (gid.y + 1u < params.dims.y) { add_from(&acc, dst + nx, 1u, 1.0, sa_d, ss_d); }
+    store_gathered(dst, acc);
 }

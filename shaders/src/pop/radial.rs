@@ -2,33 +2,19 @@
 //! `volscatter_core::solvers::pop::radial::propagate::RadialPropagation::run`, in radial.wgsl.
 //! Grid setup, the sweep and the merge stay on the CPU, as for the distant lights' grids.
 
-use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use std::mem::size_of;
 use std::time::Instant;
 
-use super::GpuPropagationTimes;
+use super::{vec4s, GpuPropagationTimes};
 use crate::context::{GpuContext, GpuError};
 use volscatter_core::solvers::pop::radial::init::RadialInitial;
 use volscatter_core::solvers::pop::radial::propagate::RadialPropagation;
 use volscatter_core::solvers::pop::PropagationStats;
 
-pub const WGSL: &str = concat!(include_str!("lobe.wgsl"), include_str!("radial.wgsl"));
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["hg", "propagation"], "pop/radial.wgsl");
 
-/// Mirrors `struct Params` in radial.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-pub struct RadialParams {
-    pub dims: [u32; 4],
-    pub consts: [f32; 4],
-    pub flags: [u32; 4],
-    pub weight: [f32; 4],
-}
-const _: () = assert!(size_of::<RadialParams>() == 64);
-
-fn vec4s(v: &[Vec3]) -> Vec<[f32; 4]> {
-    v.iter().map(|x| [x.x, x.y, x.z, 0.0]).collect()
-}
+/// `struct Params` of wgsl/propagation.wgsl, shared with the rectilinear propagation.
+pub type RadialParams = super::PropagateParams;
 
 const WORKGROUP: u32 = 64;
 
@@ -54,7 +40,7 @@ pub fn propagate_radial(
     let device = &ctx.device;
     let params = |weight: f32| RadialParams {
         dims: [grid.n(), slab as u32, nk as u32, n as u32],
-        consts: [prop.g, prop.g.abs().max(1e-6).ln(), 0.0, 0.0],
+        consts: [0.0, prop.g, prop.g.abs().max(1e-6).ln(), 0.0],
         flags: [prop.diffusion_correction as u32, prop.vacuum_escape as u32, 0, 0],
         weight: [weight, 0.0, 0.0, 0.0],
     };

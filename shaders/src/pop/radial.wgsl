@@ -7,14 +7,8 @@
 //   gather: each cell collects from its radial neighbours, its four angular ones, and (in the
 //     innermost shell) from the opposite column through the centre, with the anisotropy negated.
 // RGB in .xyz of each vec4.
-// PI, clamp_a, cone_fraction and hg come from lobe.wgsl, prepended.
-
-struct Params {
-    dims: vec4<u32>,    // n, columns (n^2), shells, cells
-    consts: vec4<f32>,  // g, ln|g|, -, -
-    flags: vec4<u32>,   // diffusion_correction, vacuum_escape, -, -
-    weight: vec4<f32>,  // J weight of this emission (0.5 for the packets' birth cells), -, -, -
-};
+// Params (consts: -, g, ln|g|, -), the lobe, path factor and gathering helpers come from the
+// preludes (shaders/src/wgsl: hg.wgsl, propagation.wgsl), prepended.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
@@ -44,30 +38,21 @@ fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = c / params.dims.y;
     let shell = shells[k];
     let h = shell.x;
-    let g = params.consts.x;
+    let g = params.consts.y;
     let a = a_in[c].xyz;
-    let ca = clamp_a(a);
-    var front = cone_fraction(COS_45, ca);
-    var back = vec3<f32>(1.0) - cone_fraction(-COS_45, ca);
-    var side = max((vec3<f32>(1.0) - front - back) * 0.25, vec3<f32>(0.0));
-    let z = front * shell.z + back * shell.w + side * 4.0;
+    var lobe = lobe_fractions(a);
+    let z = lobe.front * shell.z + lobe.back * shell.w + lobe.side * 4.0;
     let inv = select(vec3<f32>(0.0), vec3<f32>(1.0) / max(z, vec3<f32>(1e-30)), z > vec3<f32>(0.0));
-    front = front * shell.z * inv;
-    back = back * shell.w * inv;
-    side = side * inv;
+    lobe.front = lobe.front * shell.z * inv;
+    lobe.back = lobe.back * shell.w * inv;
+    lobe.side = lobe.side * inv;
     var kappa = vec3<f32>(1.0);
     if (params.flags.x != 0u) {
         let sigma_tr = sigma_s[c].xyz * (1.0 - abs(g)) + sigma_a[c].xyz;
-        let iso = min(sigma_tr * (0.5 * h), vec3<f32>(64.0));
-        let aa = min(abs(a), vec3<f32>(1.0));
-        let ball = select(vec3<f32>(0.75), (front - back) / max(aa, vec3<f32>(1e-3)), aa > vec3<f32>(1e-3));
-        kappa = aa * ball + (vec3<f32>(1.0) - aa) * iso;
+        kappa = path_factor(a, lobe, sigma_tr, h, true);
     }
     let path = kappa * h;
-    emit[4u * c] = vec4<f32>(front, 0.0);
-    emit[4u * c + 1u] = vec4<f32>(side, 0.0);
-    emit[4u * c + 2u] = vec4<f32>(back, 0.0);
-    emit[4u * c + 3u] = vec4<f32>(path, 0.0);
+    store_emit(c, lobe, path);
     var p = p_in[c].xyz;
     var vac = vec3<f32>(0.0);
     if (params.flags.y != 0u && all(sigma_s[c].xyz == vec3<f32>(0.0)) && all(sigma_a[c].xyz == vec3<f32>(0.0))) {
@@ -79,33 +64,13 @@ fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let w = p * path * (shell.y * params.weight.x);
     let ag = clamp_a(a * g);
-    j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg(mu[c], ag), 0.0);
+    j_acc[c] = vec4<f32>(j_acc[c].xyz + w * hg3(mu[c], ag), 0.0);
     var out = vec3<f32>(0.0);
     if (k == params.dims.z - 1u) {
-        out = front;
+        out = lobe.front;
     }
     esc[2u * c] = vec4<f32>(esc[2u * c].xyz + esc[2u * c + 1u].xyz + vac, 0.0);
     esc[2u * c + 1u] = vec4<f32>(p * out, 0.0);
-}
-
-struct Gathered {
-    l: vec3<f32>,
-    la: vec3<f32>,
-};
-
-fn add_from(acc: ptr<function, Gathered>, src: u32, slot: u32, sign: f32, sa_d: vec3<f32>, ss_d: vec3<f32>) {
-    let ps = p_in[src].xyz;
-    if (all(ps == vec3<f32>(0.0))) {
-        return;
-    }
-    let frac = emit[4u * src + slot].xyz;
-    let path = emit[4u * src + 3u].xyz;
-    let sa = 0.5 * (sigma_a[src].xyz + sa_d);
-    let ss = 0.5 * (sigma_s[src].xyz + ss_d);
-    let dl = ps * frac * exp(-sa * path);
-    let da = a_in[src].xyz * exp(ss * path * params.consts.y);
-    (*acc).l += dl;
-    (*acc).la += dl * da * sign;
 }
 
 @compute @workgroup_size(64)
@@ -119,9 +84,7 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = dst / slab;
     let sa_d = sigma_a[dst].xyz;
     let ss_d = sigma_s[dst].xyz;
-    var acc: Gathered;
-    acc.l = vec3<f32>(0.0);
-    acc.la = vec3<f32>(0.0);
+    var acc = Gathered(vec3<f32>(0.0), vec3<f32>(0.0));
     // Same order as the CPU, so the sums round alike.
     if (k > 0u) {
         add_from(&acc, dst - slab, 0u, 1.0, sa_d, ss_d);
@@ -136,6 +99,5 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     add_from(&acc, nb.y + slab * k, 1u, 1.0, sa_d, ss_d);
     add_from(&acc, nb.z + slab * k, 1u, 1.0, sa_d, ss_d);
     add_from(&acc, nb.w + slab * k, 1u, 1.0, sa_d, ss_d);
-    p_out[dst] = vec4<f32>(acc.l, 0.0);
-    a_out[dst] = vec4<f32>(select(vec3<f32>(0.0), acc.la / max(acc.l, vec3<f32>(1e-30)), acc.l > vec3<f32>(1e-30)), 0.0);
+    store_gathered(dst, acc);
 }

@@ -8,7 +8,7 @@ use std::mem::size_of;
 use crate::context::{GpuContext, GpuError};
 use crate::pop::light::read_rgb;
 
-pub const WGSL: &str = include_str!("sum.wgsl");
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["columns"], "pop/sum.wgsl");
 
 /// Mirrors `struct Params` in sum.wgsl.
 #[repr(C)]

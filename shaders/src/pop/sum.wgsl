@@ -1,6 +1,6 @@
 // Per-column sums of a per-cell field (one vec4 of `stride` per cell, at `offset`), so that the
 // host reads back one slab instead of the whole grid when it only needs a total (the
-// propagation's residual, the escaped energy).
+// propagation's residual, the escaped energy). column_index comes from wgsl/columns.wgsl.
 
 struct Params {
     dims: vec4<u32>,     // xyz, -
@@ -13,11 +13,11 @@ struct Params {
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= params.dims.x || gid.y >= params.dims.y) {
+    let column = column_index(gid, params.dims.xyz);
+    if (column == NO_COLUMN) {
         return;
     }
     let slab = params.dims.x * params.dims.y;
-    let column = gid.x + params.dims.x * gid.y;
     var s = vec4<f32>(0.0);
     for (var k = 0u; k < params.dims.z; k++) {
         s += field[params.stride_offset.x * (column + k * slab) + params.stride_offset.y];

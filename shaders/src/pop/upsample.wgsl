@@ -1,7 +1,8 @@
 // Joint bilateral upsampling of the merged J to the output grid, guided by the density, and
 // S = sigma_s J (volscatter-core solvers/pop/upsample.rs), one invocation per output point,
 // same neighbourhood and order as the CPU. The density comes from mip.wgsl at the output
-// grid's footprint; the coarse density and its maximum from merge.wgsl.
+// grid's footprint; the coarse density and its maximum from merge.wgsl. affine, the trilinear
+// helpers and mip_sample come from the preludes (shaders/src/wgsl).
 
 struct Params {
     out_i2w: array<vec4<f32>, 3>,
@@ -11,10 +12,7 @@ struct Params {
     coarse_dims: vec4<i32>,           // xyz, w = 1: bilateral, 0: trilinear
     bilateral: vec4<f32>,             // range sigma, 1 / (2 spatial sigma^2), radius, -
     sigma_s_per_density: vec4<f32>,   // albedo * density_scale
-    mip_origin: vec4<i32>,
-    mip_a: MipLevel,
-    mip_b: MipLevel,
-    mip_blend: vec4<f32>,
+    mip: MipParams,             // wgsl/mip.wgsl
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -24,28 +22,18 @@ struct Params {
 @group(0) @binding(4) var<storage, read> max_density: array<u32>;
 @group(0) @binding(5) var<storage, read_write> out_s: array<vec4<f32>>;
 
-fn coarse_at(x: i32, y: i32, z: i32) -> vec3<f32> {
-    let d = params.coarse_dims.xyz;
-    return coarse_j[u32(x + d.x * (y + d.y * z))].xyz;
-}
-
-fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
-    return a + (b - a) * t;
-}
-
 // ScatteringGrid::sample_index: trilinear between grid points, zero outside.
 fn coarse_sample(p: vec3<f32>) -> vec3<f32> {
     let d = params.coarse_dims.xyz;
-    if (any(p < vec3<f32>(0.0)) || any(p > vec3<f32>(d - vec3<i32>(1)))) {
+    if (!inside(p, vec3<f32>(0.0), vec3<f32>(d - vec3<i32>(1)))) {
         return vec3<f32>(0.0);
     }
-    let i = max(min(vec3<i32>(floor(p)), d - vec3<i32>(2)), vec3<i32>(0));
-    let t = p - vec3<f32>(i);
-    let c00 = lerp3(coarse_at(i.x, i.y, i.z), coarse_at(i.x + 1, i.y, i.z), t.x);
-    let c10 = lerp3(coarse_at(i.x, i.y + 1, i.z), coarse_at(i.x + 1, i.y + 1, i.z), t.x);
-    let c01 = lerp3(coarse_at(i.x, i.y, i.z + 1), coarse_at(i.x + 1, i.y, i.z + 1), t.x);
-    let c11 = lerp3(coarse_at(i.x, i.y + 1, i.z + 1), coarse_at(i.x + 1, i.y + 1, i.z + 1), t.x);
-    return lerp3(lerp3(c00, c10, t.y), lerp3(c01, c11, t.y), t.z);
+    let l = lattice(p);
+    var c: array<vec3<f32>, 8>;
+    for (var k = 0; k < 8; k++) {
+        c[k] = coarse_j[clamped_index(l.base + corner(k), d)].xyz;
+    }
+    return trilinear3(c, l.t);
 }
 
 @compute @workgroup_size(4, 4, 4)
