@@ -15,6 +15,7 @@ use crate::medium::Medium;
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::ScatteringGrid;
+use crate::translate::dome::dome_directions_of;
 
 #[derive(Clone, Debug)]
 pub struct CompositeOptions {
@@ -64,27 +65,6 @@ pub fn optical_depth(medium: &Medium, x: Vec3, d: Vec3, t_max: f32, min_step: f3
         tau += medium.density_world(x + d * (t0 + (i as f32 + 0.5) * h));
     }
     medium.density_scale * tau * h
-}
-
-/// Radical inverse in base 2 (Hammersley points for the dome directions).
-fn van_der_corput(mut i: u32) -> f32 {
-    i = i.reverse_bits();
-    i as f32 * (1.0 / 4_294_967_296.0)
-}
-
-/// The dome as `n` fixed directions (towards the sky) with their weights L / (pdf n):
-/// importance-sampled on a Hammersley set, so deterministic (no noise, no flicker).
-pub fn dome_directions_of(scene: &Scene, n: u32) -> Vec<(Vec3, Vec3)> {
-    match scene.environment() {
-        Some(env) => (0..n)
-            .filter_map(|i| {
-                let u = [(i as f32 + 0.5) / n as f32, van_der_corput(i)];
-                let (w, pdf) = env.sample(u);
-                (pdf > 0.0).then(|| (w, env.radiance(w) / (pdf * n as f32)))
-            })
-            .collect(),
-        None => Vec::new(),
-    }
 }
 
 /// Area lights enter the single-scattering grid as k x k VPLs (translate::area_vpls): at 8 x 8,
