@@ -15,6 +15,7 @@ use crate::medium::{ball_mean_inverse_square, near_field_radius, optical_depth, 
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::ScatteringGrid;
+use crate::translate::dome::dome_directions_of;
 
 #[derive(Clone, Debug)]
 pub struct CompositeOptions {
@@ -32,27 +33,6 @@ pub struct CompositeOptions {
 impl Default for CompositeOptions {
     fn default() -> Self {
         CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 64 }
-    }
-}
-
-/// Radical inverse in base 2 (Hammersley points for the dome directions).
-fn van_der_corput(mut i: u32) -> f32 {
-    i = i.reverse_bits();
-    i as f32 * (1.0 / 4_294_967_296.0)
-}
-
-/// The dome as `n` fixed directions (towards the sky) with their weights L / (pdf n):
-/// importance-sampled on a Hammersley set, so deterministic (no noise, no flicker).
-pub fn dome_directions_of(scene: &Scene, n: u32) -> Vec<(Vec3, Vec3)> {
-    match scene.environment() {
-        Some(env) => (0..n)
-            .filter_map(|i| {
-                let u = [(i as f32 + 0.5) / n as f32, van_der_corput(i)];
-                let (w, pdf) = env.sample(u);
-                (pdf > 0.0).then(|| (w, env.radiance(w) / (pdf * n as f32)))
-            })
-            .collect(),
-        None => Vec::new(),
     }
 }
 

@@ -1,6 +1,7 @@
 //! Importance propagation (paper 01, Sec. 5.2): how much light arriving from each direction
 //! of the sky reaches the camera after scattering in the medium, as a coarse lat-long map
-//! that weights the choice of the dome's ordinates (dome.rs).
+//! that weights the choice of the dome's ordinates (translate/dome.rs). The map's type and its
+//! normalisation live there; its computation is here because it runs pop's own propagation.
 //!
 //! By the duality of transport, importance emitted by the camera propagates like light. Steps:
 //! 1. A propagation grid (`GRID_RESOLUTION` cells) aligned with the direction from the camera
@@ -24,7 +25,6 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::dome::DirectionalMap;
 use super::init;
 use super::light_grid::LightGrid;
 use super::mip::MediumMip;
@@ -34,6 +34,7 @@ use crate::error::Result;
 use crate::medium::Medium;
 use crate::scene::{Camera, LatLongMap};
 use crate::solvers::NoProgress;
+use crate::translate::dome::DirectionalMap;
 
 /// The paper's resolutions (Sec. 5.2: 16^3 and 32 x 16).
 pub const GRID_RESOLUTION: u32 = 16;
@@ -96,17 +97,5 @@ pub fn directional_importance(medium: &Medium, mip: &MediumMip, camera: &Camera,
         })
         .collect();
     // Normalise to mean 1 per solid angle.
-    let mut total = 0.0f64;
-    let mut omega_sum = 0.0f64;
-    for r in 0..MAP_HEIGHT {
-        let s0 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * r as f64 / MAP_HEIGHT as f64).sin();
-        let s1 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * (r + 1) as f64 / MAP_HEIGHT as f64).sin();
-        for x in 0..MAP_WIDTH {
-            total += texels[r * MAP_WIDTH + x] as f64 * (s0 - s1);
-            omega_sum += s0 - s1;
-        }
-    }
-    let mean = total / omega_sum;
-    let values = if mean > 0.0 { texels.iter().map(|v| (*v as f64 / mean) as f32).collect() } else { vec![1.0; texels.len()] };
-    Ok(DirectionalMap { width: MAP_WIDTH, height: MAP_HEIGHT, values })
+    Ok(DirectionalMap::from_texels(MAP_WIDTH, MAP_HEIGHT, &texels))
 }

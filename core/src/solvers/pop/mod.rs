@@ -28,7 +28,7 @@
 //!
 //! Environment lighting (Sec. 5): a dome becomes `dome_ordinates` distant ordinates, the
 //! sphere cut into regions of equal importance, each ordinate carrying exactly its region's
-//! light with its radiance-weighted mean cosine as initial anisotropy (dome.rs, Sec. 5.1);
+//! light with its radiance-weighted mean cosine as initial anisotropy (translate/dome.rs, Sec. 5.1);
 //! the importance is the dome's luminance times a directional importance map propagated from
 //! the camera (importance.rs, Sec. 5.2). With `isotropic_residuum`, every light (distant or
 //! dome ordinate) stops at its switch iteration m' (Eq. 10) and the energy still travelling in
@@ -40,7 +40,6 @@
 
 pub mod accumulate;
 pub mod backend;
-pub mod dome;
 pub mod importance;
 pub mod init;
 pub mod light_grid;
@@ -57,6 +56,7 @@ use glam::Vec3;
 use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
+use crate::translate::{distant_ordinate, dome};
 use backend::PopBackend;
 use light_grid::LightGrid;
 use mip::MediumMip;
@@ -170,18 +170,14 @@ impl Pop {
         let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
         let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
 
-        // Every light becomes ordinates: (direction of travel, fluence, initial anisotropy,
-        // grid resolution).
+        // Every light becomes ordinates (translate/ordinates.rs, translate/dome.rs): (direction
+        // of travel, fluence, initial anisotropy, grid resolution).
         let mut distant: Vec<(Vec3, Vec3, f32, u32)> = Vec::new();
         for (i, light) in scene.lights.iter().enumerate() {
             match light {
                 Light::Distant { direction, irradiance, half_angle } => {
-                    // A disc of angular radius theta and irradiance E (perpendicular): fluence
-                    // E * 2 / (1 + cos theta), mean cosine (1 + cos theta) / 2 = initial
-                    // anisotropy.
-                    let one_minus_cos = 2.0 * (0.5 * half_angle).sin().powi(2);
-                    let fluence = *irradiance * (2.0 / (2.0 - one_minus_cos));
-                    distant.push((*direction, fluence, 1.0 - 0.5 * one_minus_cos, s.grid_resolution));
+                    let o = distant_ordinate(*direction, *irradiance, *half_angle);
+                    distant.push((o.direction, o.fluence, o.a0, s.grid_resolution));
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
                     let weights = if s.dome_importance {

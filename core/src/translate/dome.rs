@@ -1,9 +1,11 @@
 //! A dome as principal ordinates (paper 01, Sec. 5-5.1): the sphere of directions is cut into
 //! `n` regions of equal *importance*, and each region becomes one distant ordinate carrying
-//! exactly the light of its region.
+//! exactly the light of its region. Also the dome as a fixed set of importance-sampled
+//! directions (`dome_directions_of`, the compositor's single scattering).
 //!
 //! Importance density (per solid angle) = the dome's luminance, times the directional
-//! importance map of Sec. 5.2 when one is given (importance.rs), mixed with a uniform density
+//! importance map of Sec. 5.2 when one is given (`DirectionalMap`; pop computes it by
+//! propagating importance from the camera, solvers/pop/importance.rs), mixed with a uniform density
 //! (`UNIFORM_FRACTION`, see there). Regions:
 //! - Coordinates (u, s): u the lat-long column coordinate, s = sin(latitude) = z. Solid angle
 //!   is uniform there (d omega = 2 pi du ds), and the dome's pixels are rectangles, so the
@@ -35,7 +37,8 @@
 use glam::Vec3;
 use std::f32::consts::PI;
 
-use crate::scene::Environment;
+use super::ordinates::Ordinate;
+use crate::scene::{Environment, Scene};
 
 /// Share of the sampling density that is uniform over the sphere. Without it a bright sun
 /// draws almost every ordinate into a few pixels (where one ordinate with a0 near 1 describes
@@ -43,19 +46,6 @@ use crate::scene::Environment;
 /// it every region is at most 4 pi / (UNIFORM_FRACTION n) steradians, and the cuts stay
 /// continuous (strictly positive density) where the dome or the importance is black.
 pub const UNIFORM_FRACTION: f32 = 0.5;
-
-/// One distant ordinate of a dome.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Ordinate {
-    /// Direction of travel of its light (the negated arriving direction), unit.
-    pub direction: Vec3,
-    /// Integral of the radiance over its region (W/m^2), RGB.
-    pub fluence: Vec3,
-    /// Initial anisotropy: the region's luminance-weighted mean cosine about the direction.
-    pub a0: f32,
-    /// Solid angle of its region (sr).
-    pub solid_angle: f32,
-}
 
 /// A lat-long map of a positive weight per solid angle, in the dome's convention (rows top
 /// to bottom, Z up): the directional importance of Sec. 5.2.
@@ -67,6 +57,25 @@ pub struct DirectionalMap {
 }
 
 impl DirectionalMap {
+    /// A map from raw per-texel weights (rows top to bottom), normalised to mean 1 per solid
+    /// angle over the sphere (texel solid angles from the exact band areas); all ones when the
+    /// weights are all zero.
+    pub fn from_texels(width: usize, height: usize, texels: &[f32]) -> Self {
+        let mut total = 0.0f64;
+        let mut omega_sum = 0.0f64;
+        for r in 0..height {
+            let s0 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * r as f64 / height as f64).sin();
+            let s1 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * (r + 1) as f64 / height as f64).sin();
+            for x in 0..width {
+                total += texels[r * width + x] as f64 * (s0 - s1);
+                omega_sum += s0 - s1;
+            }
+        }
+        let mean = total / omega_sum;
+        let values = if mean > 0.0 { texels.iter().map(|v| (*v as f64 / mean) as f32).collect() } else { vec![1.0; texels.len()] };
+        DirectionalMap { width, height, values }
+    }
+
     /// Bilinear between texel centres (wrapping in u, clamped in v), so that the sampling
     /// density, and with it the ordinates, change continuously with the map.
     pub fn lookup(&self, u: f32, v_from_top: f32) -> f32 {
@@ -289,6 +298,43 @@ pub fn select_ordinates(env: &Environment, n: u32, importance: Option<&Direction
     out
 }
 
+/// Radical inverse in base 2 (Hammersley points for the dome directions).
+fn van_der_corput(mut i: u32) -> f32 {
+    i = i.reverse_bits();
+    i as f32 * (1.0 / 4_294_967_296.0)
+}
+
+/// The scene's dome as `n` fixed directions (towards the sky) with their weights L / (pdf n):
+/// importance-sampled on a Hammersley set, so deterministic (no noise, no flicker). The
+/// weights sum to an estimate of the dome's fluence; the compositor's single scattering uses
+/// them. Empty without a dome.
+pub fn dome_directions_of(scene: &Scene, n: u32) -> Vec<(Vec3, Vec3)> {
+    match scene.environment() {
+        Some(env) => (0..n)
+            .filter_map(|i| {
+                let u = [(i as f32 + 0.5) / n as f32, van_der_corput(i)];
+                let (w, pdf) = env.sample(u);
+                (pdf > 0.0).then(|| (w, env.radiance(w) / (pdf * n as f32)))
+            })
+            .collect(),
+        None => Vec::new(),
+    }
+}
+
+/// The dome's fluence: the exact integral of its radiance over the sphere (W/m^2, RGB), the
+/// map's pixels times their solid angles (a uniform dome: 4 pi x its colour).
+pub fn dome_fluence(env: &Environment) -> Vec3 {
+    let Some(m) = env.map.as_ref() else { return env.color * (4.0 * PI) };
+    let mut sum = glam::DVec3::ZERO;
+    for r in 0..m.height {
+        let s0 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * (r + 1) as f64 / m.height as f64).sin();
+        let s1 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * r as f64 / m.height as f64).sin();
+        let row: glam::DVec3 = m.pixels[r * m.width..(r + 1) * m.width].iter().map(|p| p.as_dvec3()).sum();
+        sum += row * (s1 - s0) * 2.0 * std::f64::consts::PI / m.width as f64;
+    }
+    (sum * env.color.as_dvec3()).as_vec3()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -305,20 +351,6 @@ mod tests {
         LatLongMap::new(w, h, pixels)
     }
 
-    /// Exact integral of a map's radiance over the sphere (per pixel: radiance x solid angle).
-    fn map_fluence(env: &Environment) -> Vec3 {
-        let m = env.map.as_ref().unwrap();
-        let mut sum = glam::DVec3::ZERO;
-        for r in 0..m.height {
-            let s0 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * (r + 1) as f64 / m.height as f64).sin();
-            let s1 = (0.5 * std::f64::consts::PI - std::f64::consts::PI * r as f64 / m.height as f64).sin();
-            for x in 0..m.width {
-                sum += (m.pixels[r * m.width + x] * env.color).as_dvec3() * (s1 - s0) * 2.0 * std::f64::consts::PI / m.width as f64;
-            }
-        }
-        sum.as_vec3()
-    }
-
     /// Regions tile the sphere: solid angles sum to 4 pi and fluences to the dome's own
     /// integral (to float rounding, 1e-4), for a uniform dome and a map with a sun, with and
     /// without an importance map, for several n.
@@ -327,7 +359,7 @@ mod tests {
         let uniform = Environment { color: Vec3::new(0.2, 0.5, 1.0), map: None };
         let sunny = Environment { color: Vec3::ONE, map: Some(sun_map(64, 32, Vec3::new(0.3, 0.5, 0.6).normalize(), 2000.0, Vec3::new(0.3, 0.5, 1.0))) };
         let imp = DirectionalMap { width: 8, height: 4, values: (0..32).map(|i| 0.1 + (i % 5) as f32).collect() };
-        for (env, expected) in [(&uniform, uniform.color * 4.0 * PI), (&sunny, map_fluence(&sunny))] {
+        for (env, expected) in [(&uniform, uniform.color * 4.0 * PI), (&sunny, dome_fluence(&sunny))] {
             for n in [1u32, 6, 16, 64, 125] {
                 for importance in [None, Some(&imp)] {
                     let ords = select_ordinates(env, n, importance);

@@ -1,21 +1,14 @@
-//! Light translation: the scene's lights as what the solvers consume (DESIGN.md, "Data flows").
-//!
-//! - distant lights become directional *ordinates* (direction of travel, fluence, initial
-//!   anisotropy); domes become many of them (pop's dome module);
-//! - point, sphere and spot lights, and rect/disk area lights, become *point emitters*: a
-//!   position, an intensity and an angular profile. A point or spot light is one emitter; an area
-//!   light is a set of virtual point lights (VPLs) spread over its surface, each with a share
-//!   of the area and the Lambertian (cosine) profile, so the set has the light's power and, from
-//!   further than the spacing of the VPLs, its intensity in every direction.
-//!
-//! Every solver and the compositor call these, so a light means the same thing everywhere.
+//! Point emitters: point, sphere and spot lights, and rect/disk area lights, as a position, an
+//! intensity and an angular profile. A point or spot light is one emitter; an area light is a
+//! set of virtual point lights (VPLs) spread over its surface, each with a share of the area and
+//! the Lambertian (cosine) profile, so the set has the light's power and, from further than the
+//! spacing of the VPLs, its intensity in every direction.
 
 use glam::Vec3;
 
 use crate::scene::light::{AreaLight, Spot};
+use super::emission;
 use crate::scene::{Light, Scene};
-
-pub mod emission;
 
 /// How a point emitter's intensity depends on the direction w (unit, away from it).
 #[derive(Clone, Copy, Debug, PartialEq)]
