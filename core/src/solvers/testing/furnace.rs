@@ -1,0 +1,1 @@
+//! White furnace and energy balance, written once and run over every solver.
