@@ -4,6 +4,7 @@
 
 pub mod blackbody;
 mod cie1931;
+pub mod cumulus;
 pub mod emission;
 pub mod grid;
 pub mod majorant;

@@ -28,7 +28,8 @@ fn value_noise(p: Vec3) -> f32 {
     acc
 }
 
-fn fbm(p: Vec3) -> f32 {
+/// Fractal value noise in [0, 1]; shared with the cumulus (cumulus.rs).
+pub(crate) fn fbm(p: Vec3) -> f32 {
     let (mut a, mut f, mut sum, mut norm) = (1.0, 1.0, 0.0, 0.0);
     for _ in 0..4 {
         sum += a * value_noise(p * f);
@@ -39,7 +40,7 @@ fn fbm(p: Vec3) -> f32 {
     sum / norm
 }
 
-fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
+pub(crate) fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
     let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
     t * t * (3.0 - 2.0 * t)
 }
@@ -57,6 +58,12 @@ pub fn plume_density(p: Vec3) -> f32 {
 
 /// The plume on an `n`^3 voxel grid and the index-to-world map placing it in [-1, 1]^3.
 pub fn plume(n: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A)> {
+    on_cube(n, limits, plume_density)
+}
+
+/// `density` sampled at the voxel centres of an `n`^3 grid over [-1, 1]^3 (shared by the
+/// built-in media: plume, cumulus), and the index-to-world map placing it there.
+pub(crate) fn on_cube(n: u32, limits: GridLimits, density: impl Fn(Vec3) -> f32 + Sync) -> Result<(DensityGrid, Affine3A)> {
     let n = n.clamp(4, 1024) as i32;
     let voxel = 2.0 / n as f32;
     let to_world = Affine3A::from_translation(Vec3::splat(-1.0 + 0.5 * voxel)) * Affine3A::from_scale(Vec3::splat(voxel));
@@ -66,7 +73,7 @@ pub fn plume(n: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A)> {
         for y in 0..n {
             for x in 0..n {
                 let p = to_world.transform_point3(Vec3::new(x as f32, y as f32, z as f32));
-                slab[(x + n * y) as usize] = plume_density(p);
+                slab[(x + n * y) as usize] = density(p);
             }
         }
     });

@@ -42,7 +42,7 @@ pub struct MediumJson {
     pub vdb: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grid: Option<String>,
-    /// Built-in procedural medium: "plume".
+    /// Built-in procedural medium: "plume" or "cumulus".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub procedural: Option<String>,
     /// Raw little-endian float32 file, x fastest, with `dims`.

@@ -272,15 +272,17 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
         return Err(Error::scene("medium", "needs exactly one of `vdb`, `procedural`, `raw`"));
     }
     let (grid, index_to_object) = if let Some(name) = &m.procedural {
-        if name != "plume" {
-            return Err(Error::scene("medium.procedural", format!("unknown procedural medium `{name}` (known: plume)")));
-        }
+        let build = match name.as_str() {
+            "plume" => procedural::plume,
+            "cumulus" => crate::medium::cumulus::cumulus,
+            _ => return Err(Error::scene("medium.procedural", format!("unknown procedural medium `{name}` (known: plume, cumulus)"))),
+        };
         let n = match m.dims.as_deref() {
             None => 64,
             Some([n]) if (4..=1024).contains(n) => *n,
             Some(_) => return Err(Error::scene("medium.dims", "for `procedural` must be one number in 4..=1024")),
         };
-        procedural::plume(n, limits)?
+        build(n, limits)?
     } else if let Some(file) = &m.raw {
         let dims = match m.dims.as_deref() {
             Some(&[x, y, z]) => [x, y, z],

@@ -4,6 +4,8 @@
 
 pub mod pop;
 pub mod reference;
+#[cfg(test)]
+pub(crate) mod testing;
 
 use glam::{Affine3A, IVec3, Vec3};
 use std::time::Instant;

@@ -3,21 +3,18 @@
 use super::*;
 use crate::compositor::{composite, CompositeOptions};
 use crate::image::relative_rmse;
-use crate::medium::{procedural, DensityGrid, GridLimits, Medium};
+use crate::medium::{procedural, GridLimits, Medium};
 use crate::scene::Camera;
 use crate::solvers::reference::{Reference, ReferenceSettings};
+use crate::solvers::testing::{env_u32, homogeneous_box, load_fixture, mean, regenerate_fixture, rgb, s_over_sigma_s, selected, Errors, SolverOutput, FIXTURE_GRID};
 use crate::solvers::NoProgress;
-use glam::{Affine3A, IVec3};
+use glam::Affine3A;
 use crate::scene::Light;
 
 /// A homogeneous cube of `n`^3 voxels of density 1 and side 1 m (with its half-voxel ramps),
 /// centred at the origin.
 fn cube(n: i32, sigma_t: f32, albedo: f32, g: f32) -> Medium {
-    let vals = vec![1.0f32; (n * n * n) as usize];
-    let grid = DensityGrid::from_dense(IVec3::ZERO, IVec3::splat(n), &vals, GridLimits::default()).unwrap();
-    let voxel = 1.0 / n as f32;
-    let to_world = Affine3A::from_translation(Vec3::splat(-(n as f32 - 1.0) * 0.5 * voxel)) * Affine3A::from_scale(Vec3::splat(voxel));
-    Medium::new(grid, to_world, Vec3::splat(sigma_t), Vec3::splat(albedo), g)
+    homogeneous_box(n, 1.0 / n as f32, sigma_t, albedo, g)
 }
 
 fn plume(n: u32, density_scale: f32, albedo: f32, g: f32) -> Medium {
@@ -38,9 +35,8 @@ fn scene(medium: Medium, size: u32, cam_dist: f32, fov: f32) -> Scene {
     }
 }
 
-/// Image side and scattering-grid resolution of the reference fixtures.
+/// Image side of the reference fixtures (their grid: `testing::FIXTURE_GRID`).
 const FIXTURE_SIZE: u32 = 16;
-const FIXTURE_GRID: u32 = 10;
 
 /// The scenes POP is measured on: the paper's Fig. 12 cube (sigma_s = 4 m^-1, albedo 1, side
 /// 1 m) at three anisotropies, and the procedural plume with g = 0.9, albedo 0.99.
@@ -56,99 +52,15 @@ fn case(name: &str) -> Scene {
 }
 const CASES: [&str; 4] = ["cube_g0", "cube_g07", "cube_g09", "plume"];
 
-/// A converged reference, computed once by `regenerate_fixtures` (the reference path tracer
-/// needs minutes for these; POP's tests must run in seconds) and stored beside this file.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct Fixture {
-    spp: u32,
-    grid_spp: u32,
-    image: Vec<[f32; 3]>,
-    /// Multiple-scattering AOV of the reference.
-    multiple: Vec<[f32; 3]>,
-    grid_dims: [u32; 3],
-    grid: Vec<[f32; 3]>,
-    /// Relative RMSE of the fixture's own noise (half the rel. RMSE between its two
-    /// independent halves), image and grid.
-    noise_image: f64,
-    noise_grid: f64,
-}
-
-fn fixture_path(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/solvers/pop/fixtures").join(format!("{name}.json"))
-}
-
-fn load_fixture(name: &str) -> Fixture {
-    let text = std::fs::read_to_string(fixture_path(name)).expect("fixture missing: run `cargo test -p volscatter-core regenerate_fixtures -- --ignored`");
-    serde_json::from_str(&text).unwrap()
-}
-
 /// Regenerates the reference fixtures: `FIXTURE_SPP` (default 65536) paths per pixel and
 /// `FIXTURE_GRID_SPP` (default 32768) per grid point, in two independent halves.
 #[test]
 #[ignore]
 fn regenerate_fixtures() {
-    let env = |k: &str, d: u32| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
-    let (spp, grid_spp) = (env("FIXTURE_SPP", 65536), env("FIXTURE_GRID_SPP", 32768));
-    let only = std::env::var("POP_CASE").unwrap_or_default();
-    for name in CASES.iter().filter(|n| only.is_empty() || n.contains(only.as_str())) {
+    let (spp, grid_spp) = (env_u32("FIXTURE_SPP", 65536), env_u32("FIXTURE_GRID_SPP", 32768));
+    for name in selected(&CASES, "POP_CASE") {
         regenerate_fixture(name, &case(name), spp, grid_spp);
     }
-}
-
-/// Renders `sc` with the reference in two independent halves and stores the fixture `name`.
-fn regenerate_fixture(name: &str, sc: &Scene, spp: u32, grid_spp: u32) {
-    let t = std::time::Instant::now();
-    let half = |seed: u64| {
-        let r = Reference::new(ReferenceSettings {
-            spp: spp / 2,
-            seed,
-            grid_resolution: FIXTURE_GRID,
-            grid_spp: grid_spp / 2,
-            transparent: true,
-            ..Default::default()
-        })
-        .unwrap();
-        let img = r.render_image(sc, &NoProgress, &mut Timings::default()).unwrap();
-        let grid = r.scattering_grid(sc, &NoProgress, &mut Timings::default()).unwrap();
-        (img, grid)
-    };
-    let (a, ga) = half(1);
-    let (b, gb) = half(2);
-    let rgb = |i: &crate::Image| i.rgba.iter().map(|p| p.truncate()).collect::<Vec<_>>();
-    let avg = |x: &[Vec3], y: &[Vec3]| x.iter().zip(y).map(|(p, q)| ((*p + *q) * 0.5).to_array()).collect::<Vec<_>>();
-    let fx = Fixture {
-        spp,
-        grid_spp,
-        image: avg(&rgb(&a), &rgb(&b)),
-        multiple: avg(a.aov("multiple").unwrap(), b.aov("multiple").unwrap()),
-        grid_dims: ga.dims,
-        grid: avg(&ga.data, &gb.data),
-        noise_image: 0.5 * relative_rmse(&rgb(&a), &rgb(&b)),
-        noise_grid: 0.5 * relative_rmse(&ga.data, &gb.data),
-    };
-    std::fs::create_dir_all(fixture_path(name).parent().unwrap()).unwrap();
-    std::fs::write(fixture_path(name), serde_json::to_string(&fx).unwrap()).unwrap();
-    eprintln!("{name}: noise image {:.4} grid {:.4} ({:.0} s)", fx.noise_image, fx.noise_grid, t.elapsed().as_secs_f64());
-}
-
-struct Errors {
-    image: f64,
-    grid: f64,
-    /// Mean of POP over mean of the reference, image and grid.
-    image_ratio: f64,
-    grid_ratio: f64,
-    /// Error of the multiple-scattering part of the image alone (image minus the single
-    /// scattering, which the compositor computes exactly for every solver).
-    multiple: f64,
-    multiple_ratio: f64,
-}
-
-fn mean(v: &[Vec3]) -> f64 {
-    v.iter().map(|p| p.x as f64 + p.y as f64 + p.z as f64).sum::<f64>() / v.len().max(1) as f64
-}
-
-fn vecs(v: &[[f32; 3]]) -> Vec<Vec3> {
-    v.iter().map(|a| Vec3::from(*a)).collect()
 }
 
 /// POP (solve + composite) on a case against its reference fixture.
@@ -160,41 +72,19 @@ fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
 fn pop_vs_fixture_scene(name: &str, sc: &Scene, settings: &PopSettings) -> (Errors, PopReport) {
     let fx = load_fixture(name);
     let (out, report) = Pop::new(settings.clone()).unwrap().solve_detailed(sc, &NoProgress).unwrap();
-    let img = composite(sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-    let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
-    let frame = ScatteringGrid::over_medium(&sc.medium, FIXTURE_GRID).unwrap();
-    assert_eq!(frame.dims, fx.grid_dims);
-    let to_pop = out.scattering.index_to_world.inverse();
-    let mut pop_grid = Vec::with_capacity(frame.len());
-    for k in 0..frame.dims[2] {
-        for j in 0..frame.dims[1] {
-            for i in 0..frame.dims[0] {
-                pop_grid.push(out.scattering.sample_index(to_pop.transform_point3(frame.position(i, j, k))));
-            }
-        }
-    }
-    let pop_multiple: Vec<Vec3> = rgb.iter().zip(img.aov("single").unwrap()).map(|(a, b)| *a - *b).collect();
-    let (ref_img, ref_grid, ref_multiple) = (vecs(&fx.image), vecs(&fx.grid), vecs(&fx.multiple));
-    let errors = Errors {
-        image: relative_rmse(&rgb, &ref_img),
-        grid: relative_rmse(&pop_grid, &ref_grid),
-        image_ratio: mean(&rgb) / mean(&ref_img),
-        grid_ratio: mean(&pop_grid) / mean(&ref_grid),
-        multiple: relative_rmse(&pop_multiple, &ref_multiple),
-        multiple_ratio: mean(&pop_multiple) / mean(&ref_multiple),
-    };
+    let pop = SolverOutput::of(sc, &out.scattering);
+    let errors = Errors::against(&pop, &fx);
     if std::env::var("POP_ROWS").is_ok() {
-        let [nx, ny, nz] = frame.dims;
+        let [nx, ny, nz] = pop.frame.dims;
         let s1 = crate::compositor::single_scattering_grid(sc, FIXTURE_GRID, 64).unwrap();
-        for (n, v) in [("pop grid", &pop_grid), ("ref grid", &ref_grid), ("single", &s1.data)] {
+        for (n, v) in [("pop grid", &pop.grid), ("ref grid", &fx.grid()), ("single", &s1.data)] {
             for (lab, jj) in [("y=front", 1u32), ("y=mid", ny / 2), ("y=back", ny - 2)] {
                 let col: Vec<String> = (0..nz).rev().map(|k| format!("{:.3}", v[(nx / 2 + nx * (jj + ny * k)) as usize].x)).collect();
                 eprintln!("{n:10} {lab:8} z down: {}", col.join(" "));
             }
         }
-        let w = img.width as usize;
-        let h = img.height as usize;
-        for (n, v) in [("pop multi", &pop_multiple), ("ref multi", &ref_multiple)] {
+        let (w, h) = (sc.camera.width as usize, sc.camera.height as usize);
+        for (n, v) in [("pop multi", &pop.multiple), ("ref multi", &fx.multiple().unwrap())] {
             let row: Vec<String> = (0..w).map(|x| format!("{:.3}", v[(h / 2) * w + x].x)).collect();
             let col: Vec<String> = (0..h).map(|y| format!("{:.3}", v[y * w + w / 2].x)).collect();
             eprintln!("{n:10} row {}\n{:10} col {}", row.join(" "), "", col.join(" "));
@@ -212,8 +102,7 @@ fn explore() {
         ("res16", PopSettings { grid_resolution: 16, ..Default::default() }),
         ("res32", PopSettings { grid_resolution: 32, ..Default::default() }),
     ];
-    let only = std::env::var("POP_CASE").unwrap_or_default();
-    for name in CASES.iter().filter(|n| only.is_empty() || n.contains(only.as_str())) {
+    for name in selected(&CASES, "POP_CASE") {
         for (vname, v) in &variants {
             let t = std::time::Instant::now();
             let (e, rep) = pop_vs_fixture(name, v);
@@ -223,8 +112,8 @@ fn explore() {
                 e.image_ratio,
                 e.grid,
                 e.grid_ratio,
-                e.multiple,
-                e.multiple_ratio,
+                e.multiple.unwrap(),
+                e.multiple_ratio.unwrap(),
                 rep.lights[0].propagation.iterations,
                 rep.lights[0].energy_balance()[0],
                 t.elapsed().as_secs_f64()
@@ -245,7 +134,7 @@ fn check_case(name: &str, max_image: f64, max_grid: f64) {
     let (e, rep) = pop_vs_fixture(name, &test_settings());
     eprintln!(
         "{name}: image {:.4} (mean x{:.3}), grid {:.4} (mean x{:.3}), multiple {:.4}, iterations {}",
-        e.image, e.image_ratio, e.grid, e.grid_ratio, e.multiple, rep.lights[0].propagation.iterations
+        e.image, e.image_ratio, e.grid, e.grid_ratio, e.multiple.unwrap(), rep.lights[0].propagation.iterations
     );
     assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
     assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
@@ -263,7 +152,7 @@ fn single_scattering_matches_compositor() {
         sc.medium.g = g;
         let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
         let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-        let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
+        let rgb = rgb(&img);
         let single = img.aov("single").unwrap();
         let e = relative_rmse(&rgb, single);
         eprintln!("g {g}: POP vs compositor single scattering {e:.4}, mean x{:.4}", mean(&rgb) / mean(single));
@@ -310,7 +199,7 @@ fn fixtures_match_current_reference() {
     let fx = load_fixture("cube_g07");
     let r = Reference::new(ReferenceSettings { spp: 256, seed: 9, transparent: true, ..Default::default() }).unwrap();
     let img = r.render_image(&sc, &NoProgress, &mut Timings::default()).unwrap();
-    let m = mean(&img.rgba.iter().map(|p| p.truncate()).collect::<Vec<_>>()) / mean(&vecs(&fx.image));
+    let m = mean(&rgb(&img)) / mean(&fx.image());
     assert!((m - 1.0).abs() < 0.05, "reference mean / fixture mean = {m}");
 }
 
@@ -509,18 +398,7 @@ fn dome_ordinates_carry_the_dome() {
             .solve(&sc, &NoProgress)
             .unwrap()
             .scattering;
-        let mut ratios = Vec::new();
-        for k in 0..out.dims[2] {
-            for j in 0..out.dims[1] {
-                for i in 0..out.dims[0] {
-                    let x = out.position(i, j, k);
-                    let dens = sc.medium.density_world(x);
-                    if dens > 0.99 {
-                        ratios.push(out.data[out.index(i, j, k)].x / sc.medium.sigma_s(dens).x);
-                    }
-                }
-            }
-        }
+        let ratios = s_over_sigma_s(&out, &sc.medium, 0.99);
         let m = ratios.iter().sum::<f32>() / ratios.len() as f32;
         let (lo, hi) = ratios.iter().fold((f32::MAX, f32::MIN), |(a, b), &r| (a.min(r), b.max(r)));
         eprintln!("white furnace with {n} ordinates: S / sigma_s mean {m:.3}, range {lo:.3}..{hi:.3} (exact: 1)");

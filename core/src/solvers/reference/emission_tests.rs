@@ -1,6 +1,6 @@
 //! Physical checks of the reference path tracer with an emitting medium.
 
-use super::tests::homogeneous_box;
+use crate::solvers::testing::homogeneous_box;
 use super::*;
 use crate::medium::{Emission, EmissionLaw, EmissionTerm, Medium};
 use crate::scene::Camera;

@@ -2,18 +2,12 @@
 
 use super::*;
 use crate::phase::hg;
-use crate::medium::{DensityGrid, GridLimits, Medium};
+use crate::medium::Medium;
 use crate::scene::{Camera, Environment, Light};
+// Re-exported for the compositor's tests, which import it from here.
+pub(crate) use crate::solvers::testing::homogeneous_box;
+use crate::solvers::testing::s_over_sigma_s;
 use crate::solvers::NoProgress;
-use glam::{Affine3A, IVec3};
-
-/// A homogeneous box of `n`^3 voxels of density 1, voxel size `voxel`, centred at the origin.
-pub(crate) fn homogeneous_box(n: i32, voxel: f32, density_scale: f32, albedo: f32, g: f32) -> Medium {
-    let vals = vec![1.0f32; (n * n * n) as usize];
-    let grid = DensityGrid::from_dense(IVec3::ZERO, IVec3::splat(n), &vals, GridLimits::default()).unwrap();
-    let to_world = Affine3A::from_translation(Vec3::splat(-(n as f32 - 1.0) * 0.5 * voxel)) * Affine3A::from_scale(Vec3::splat(voxel));
-    Medium::new(grid, to_world, Vec3::splat(density_scale), Vec3::splat(albedo), g)
-}
 
 fn scene_with(medium: Medium, lights: Vec<Light>, size: u32) -> Scene {
     Scene {
@@ -79,18 +73,7 @@ fn furnace_scattering_grid_is_sigma_s() {
     let scene = scene_with(medium, vec![Light::Dome(Environment { color: Vec3::ONE, map: None })], 8);
     let r = Reference::new(ReferenceSettings { grid_resolution: 8, grid_spp: 64, ..Default::default() }).unwrap();
     let grid = r.scattering_grid(&scene, &NoProgress, &mut Timings::default()).unwrap();
-    let mut ratios = Vec::new();
-    for k in 0..grid.dims[2] {
-        for j in 0..grid.dims[1] {
-            for i in 0..grid.dims[0] {
-                let x = grid.position(i, j, k);
-                let dens = scene.medium.density_world(x);
-                if dens > 0.5 {
-                    ratios.push(grid.data[grid.index(i, j, k)].x / scene.medium.sigma_s(dens).x);
-                }
-            }
-        }
-    }
+    let ratios = s_over_sigma_s(&grid, &scene.medium, 0.5);
     let mean = ratios.iter().sum::<f32>() / ratios.len() as f32;
     assert!(ratios.len() > 20);
     assert!((mean - 1.0).abs() < 0.01, "mean S / sigma_s = {mean}");

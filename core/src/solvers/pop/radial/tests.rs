@@ -8,8 +8,8 @@ use crate::medium::{procedural, DensityGrid, GridLimits, Medium};
 use crate::scene::light::{AreaLight, AreaShape, Spot};
 use crate::scene::{Camera, Light, Scene};
 use crate::solvers::pop::{Pop, PopReport, PopSettings};
-use crate::solvers::reference::{Reference, ReferenceSettings};
-use crate::solvers::{NoProgress, ScatteringGrid, Solver, Timings};
+use crate::solvers::testing::{env_u32, load_fixture, mean, regenerate_fixture, rgb, selected, Errors, SolverOutput};
+use crate::solvers::{NoProgress, ScatteringGrid, Solver};
 
 /// A uniform sphere of radius `radius` (density 1 inside, antialiased over one voxel) on an
 /// `n`^3 grid, centred at the origin, with sigma_s = `sigma_s`, albedo 1.
@@ -35,7 +35,6 @@ fn plume(g: f32) -> Medium {
 }
 
 const SIZE: u32 = 16;
-const GRID: u32 = 10;
 
 /// The measured cases: paper Fig. 10 (point light at the centre of a uniform sphere of radius
 /// 2.5 m, sigma_s = (0.8, 1, 1.3), albedo 1) at g = 0 and 0.8; a point, a sphere, a spot and a
@@ -69,70 +68,16 @@ fn case(name: &str) -> Scene {
 }
 const CASES: [&str; 6] = ["fig10_g0", "fig10_g08", "plume_point", "plume_sphere", "plume_spot", "plume_rect"];
 
-#[derive(serde::Serialize, serde::Deserialize)]
-struct Fixture {
-    spp: u32,
-    grid_spp: u32,
-    image: Vec<[f32; 3]>,
-    grid_dims: [u32; 3],
-    grid: Vec<[f32; 3]>,
-    noise_image: f64,
-    noise_grid: f64,
-}
-
-fn fixture_path(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/solvers/pop/radial/fixtures").join(format!("{name}.json"))
-}
-
-fn vecs(v: &[[f32; 3]]) -> Vec<Vec3> {
-    v.iter().map(|a| Vec3::from(*a)).collect()
-}
-
-fn mean(v: &[Vec3]) -> f64 {
-    v.iter().map(|p| (p.x + p.y + p.z) as f64).sum::<f64>() / v.len().max(1) as f64
-}
-
 /// Regenerates the reference fixtures (`RADIAL_SPP`, default 16384 paths per pixel,
 /// `RADIAL_GRID_SPP` default 8192 per grid point, in two independent halves; `RADIAL_CASE`
 /// selects cases): `cargo test -p volscatter-core --release radial::tests::regenerate -- --ignored`.
 #[test]
 #[ignore]
 fn regenerate_radial_fixtures() {
-    let env = |k: &str, d: u32| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
-    let (spp, grid_spp) = (env("RADIAL_SPP", 16384), env("RADIAL_GRID_SPP", 8192));
-    let only = std::env::var("RADIAL_CASE").unwrap_or_default();
-    for name in CASES.iter().filter(|n| only.is_empty() || n.contains(only.as_str())) {
-        let t = std::time::Instant::now();
-        let sc = case(name);
-        let half = |seed: u64| {
-            let r = Reference::new(ReferenceSettings { spp: spp / 2, seed, grid_resolution: GRID, grid_spp: grid_spp / 2, transparent: true, ..Default::default() }).unwrap();
-            let img = r.render_image(&sc, &NoProgress, &mut Timings::default()).unwrap();
-            let grid = r.scattering_grid(&sc, &NoProgress, &mut Timings::default()).unwrap();
-            (img.rgba.iter().map(|p| p.truncate()).collect::<Vec<_>>(), grid)
-        };
-        let (a, ga) = half(1);
-        let (b, gb) = half(2);
-        let avg = |x: &[Vec3], y: &[Vec3]| x.iter().zip(y).map(|(p, q)| ((*p + *q) * 0.5).to_array()).collect::<Vec<_>>();
-        let fx = Fixture {
-            spp,
-            grid_spp,
-            image: avg(&a, &b),
-            grid_dims: ga.dims,
-            grid: avg(&ga.data, &gb.data),
-            noise_image: 0.5 * relative_rmse(&a, &b),
-            noise_grid: 0.5 * relative_rmse(&ga.data, &gb.data),
-        };
-        std::fs::create_dir_all(fixture_path(name).parent().unwrap()).unwrap();
-        std::fs::write(fixture_path(name), serde_json::to_string(&fx).unwrap()).unwrap();
-        eprintln!("{name}: noise image {:.4} grid {:.4} ({:.0} s)", fx.noise_image, fx.noise_grid, t.elapsed().as_secs_f64());
+    let (spp, grid_spp) = (env_u32("RADIAL_SPP", 16384), env_u32("RADIAL_GRID_SPP", 8192));
+    for name in selected(&CASES, "RADIAL_CASE") {
+        regenerate_fixture(name, &case(name), spp, grid_spp);
     }
-}
-
-struct Errors {
-    image: f64,
-    grid: f64,
-    image_ratio: f64,
-    grid_ratio: f64,
 }
 
 fn test_settings() -> PopSettings {
@@ -141,23 +86,11 @@ fn test_settings() -> PopSettings {
 
 fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
     let sc = case(name);
-    let text = std::fs::read_to_string(fixture_path(name)).expect("fixture missing: run regenerate_radial_fixtures");
-    let fx: Fixture = serde_json::from_str(&text).unwrap();
+    let fx = load_fixture(name);
     let (out, report) = Pop::new(settings.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
-    let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-    let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
-    let frame = ScatteringGrid::over_medium(&sc.medium, GRID).unwrap();
+    let SolverOutput { image: rgb, multiple, frame, grid: pop_grid } = SolverOutput::of(&sc, &out.scattering);
     assert_eq!(frame.dims, fx.grid_dims);
-    let to_pop = out.scattering.index_to_world.inverse();
-    let mut pop_grid = Vec::with_capacity(frame.len());
-    for k in 0..frame.dims[2] {
-        for j in 0..frame.dims[1] {
-            for i in 0..frame.dims[0] {
-                pop_grid.push(out.scattering.sample_index(to_pop.transform_point3(frame.position(i, j, k))));
-            }
-        }
-    }
-    let (mut ref_img, mut ref_grid) = (vecs(&fx.image), vecs(&fx.grid));
+    let (mut ref_img, mut ref_grid) = (fx.image(), fx.grid());
     let (mut rgb, mut pop_grid) = (rgb, pop_grid);
     if name.starts_with("fig10") {
         // The scene is symmetric about the camera's axis (the y axis): both sides are averaged
@@ -180,13 +113,8 @@ fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
             eprintln!("{n:9} x row: {}", col.join(" "));
         }
     }
-    let e = Errors {
-        image: relative_rmse(&rgb, &ref_img),
-        grid: relative_rmse(&pop_grid, &ref_grid),
-        image_ratio: mean(&rgb) / mean(&ref_img),
-        grid_ratio: mean(&pop_grid) / mean(&ref_grid),
-    };
-    (e, report)
+    // The radial fixtures have no multiple-scattering AOV (`Errors::multiple` is None).
+    (Errors::between(&rgb, &pop_grid, &multiple, &ref_img, &ref_grid, fx.multiple().as_deref()), report)
 }
 
 /// Ring of each pixel about the image centre (one pixel wide).
@@ -228,8 +156,7 @@ fn symmetrise(v: &mut [Vec3], key: &[u32]) {
 #[test]
 #[ignore]
 fn explore() {
-    let only = std::env::var("RADIAL_CASE").unwrap_or_default();
-    for name in CASES.iter().filter(|n| only.is_empty() || n.contains(only.as_str())) {
+    for name in selected(&CASES, "RADIAL_CASE") {
         let iters = std::env::var("RADIAL_ITERS").ok().and_then(|v| v.parse().ok()).unwrap_or(400);
         let variants = [("test", PopSettings { max_iterations: iters, ..test_settings() }), ("default", PopSettings { max_iterations: iters, ..Default::default() })];
         for (vname, s) in variants {
@@ -384,7 +311,7 @@ fn single_scattering_matches_compositor() {
         sc.medium.albedo = Vec3::splat(0.02);
         let out = Pop::new(PopSettings { grid_resolution: 32, radial_resolution: 48, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
         let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-        let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
+        let rgb = rgb(&img);
         let single = img.aov("single").unwrap();
         let e = relative_rmse(&rgb, single);
         eprintln!("{name}: POP vs compositor single scattering {e:.4}, mean x{:.4}", mean(&rgb) / mean(single));
@@ -411,7 +338,7 @@ fn emission_matches_compositor_single_scattering() {
     sc.medium.emission = Some(Emission { terms: vec![term], vpl_count: 128 });
     let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
     let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-    let rgb: Vec<Vec3> = img.rgba.iter().map(|p| p.truncate()).collect();
+    let rgb = rgb(&img);
     let single = img.aov("single").unwrap();
     let e = relative_rmse(&rgb, single);
     let ratio = mean(&rgb) / mean(single);

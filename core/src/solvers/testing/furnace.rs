@@ -1,0 +1,200 @@
+//! Physical checks written once and run over every solver (pbrt-v4's `integrators_test.cpp`
+//! idea, DESIGN.md "A shape that six solvers fit"): the white furnace and the energy balance.
+//! Each solver states its own tolerance in `expectation`, with the reason; a solver added to
+//! the list without one fails here, by name.
+
+use glam::Vec3;
+
+use super::{homogeneous_box, mean, rgb, s_over_sigma_s};
+use crate::compositor::{composite, CompositeOptions};
+use crate::medium::Medium;
+use crate::scene::{Camera, Environment, Light, Scene};
+use crate::solvers::{NoProgress, ScatteringGrid};
+
+/// The solvers these checks run over. The only line that names where the list lives: with the
+/// solver registry (solvers/registry.rs) it becomes the registry's names.
+fn solver_names() -> Vec<&'static str> {
+    crate::solvers::SOLVER_NAMES.to_vec()
+}
+
+/// How a solver is run by these checks (its `solver` settings block: small and fast) and the
+/// bounds it must meet, each with its reason.
+struct Expectation {
+    settings: serde_json::Value,
+    /// Largest |mean S / sigma_s - 1| over the furnace box's interior, and largest |mean
+    /// composited radiance - 1| over its image (background 1).
+    furnace: [f64; 2],
+    /// Largest |mean S / sigma_s - 1| over the white dense cloud's core. (Its image is not
+    /// checked: S on the coarse grid of these checks smears sigma_s past the cloud's sharp
+    /// edges into thin medium, which the composite then adds nearly unattenuated, measured
+    /// 1.43 for the reference's own converged S; the box's grid is its voxel grid, exact.)
+    furnace_cloud: f64,
+    /// Largest |scattered power leaving / power intercepted - 1| in `energy_balance`.
+    energy: f64,
+}
+
+fn expectation(name: &str) -> Expectation {
+    match name {
+        // Unbiased: only its Monte Carlo noise and the energy integral's quadrature. Measured:
+        // furnace box S / sigma_s 1.0003, image 0.9999; cloud S / sigma_s 0.9954 (256 paths
+        // per point, through optical depth 30); energy 1.0072 (the 20^3-point quadrature of a
+        // box whose S drops over one voxel at its faces, and noise).
+        "reference" => Expectation {
+            settings: serde_json::json!({"name": "reference", "grid_resolution": 10, "grid_spp": 256}),
+            furnace: [0.01, 0.01],
+            furnace_cloud: 0.02,
+            energy: 0.02,
+        },
+        // Biased by design: the dome is 16 ordinates whose HG lobes do not add up to a uniform
+        // sphere (pop's own furnace test), its lattice loses light at a box's faces and gains
+        // it where the g 0.9 lobes pile up in the cloud, and the energy's 7.6% excess is that
+        // lattice's bias too. Measured: box S / sigma_s 0.960, image 0.933; cloud S / sigma_s
+        // 1.112; energy 1.076. Bounds: measured deviation + 10% + 0.01 (a ratchet, as in
+        // pop/tests.rs).
+        "pop" => Expectation {
+            settings: serde_json::json!({"name": "pop", "grid_resolution": 12, "dome_ordinates": 16, "dome_grid_resolution": 12}),
+            furnace: [0.055, 0.084],
+            furnace_cloud: 0.134,
+            energy: 0.094,
+        },
+        other => panic!("solver `{other}` has no stated furnace / energy tolerance: add it to testing/furnace.rs `expectation`"),
+    }
+}
+
+fn solve(name: &str, sc: &Scene) -> ScatteringGrid {
+    let settings = expectation(name).settings;
+    let solver = crate::solvers::by_name(name, settings.as_object().unwrap()).unwrap();
+    solver.solve(sc, &NoProgress).unwrap().scattering
+}
+
+/// White furnace: a non-absorbing medium under a uniform dome of radiance 1. The radiance is 1
+/// everywhere inside, whatever the density and g, so S = sigma_s * 1 at every point, and the
+/// composite of S over the dome is 1 in every pixel (what the medium scatters in replaces
+/// exactly what it removes). Run on a box (8^3 voxels of 0.125 m, optical thickness 4 across,
+/// g 0.6) and on the dense cloud made white (optical depth over 30, g 0.9).
+#[test]
+fn white_furnace_every_solver() {
+    let dome = vec![Light::Dome(Environment { color: Vec3::ONE, map: None })];
+    let box_scene = Scene {
+        medium: homogeneous_box(8, 0.125, 4.0, 1.0, 0.6),
+        lights: dome.clone(),
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.5), Vec3::ZERO, Vec3::Z, 22.0, 12, 12),
+        solver: Default::default(),
+    };
+    let mut cloud = super::cloud::cloud_scene();
+    cloud.medium.albedo = Vec3::ONE;
+    cloud.lights = dome;
+    cloud.camera = Camera::look_at(cloud.camera.position, Vec3::new(0.0, 0.0, 0.1), Vec3::Z, 21.0, 12, 12);
+    for name in solver_names() {
+        let exp = expectation(name);
+        for (scene_name, sc, max_grid, max_image) in [("box", &box_scene, exp.furnace[0], Some(exp.furnace[1])), ("cloud", &cloud, exp.furnace_cloud, None)] {
+            let t = std::time::Instant::now();
+            let grid = solve(name, sc);
+            let ratios = s_over_sigma_s(&grid, &sc.medium, 0.99);
+            assert!(ratios.len() > 8, "{name}, {scene_name}: {} interior points", ratios.len());
+            let m = ratios.iter().map(|&r| r as f64).sum::<f64>() / ratios.len() as f64;
+            let img = composite(sc, &grid, &CompositeOptions::default()).unwrap();
+            let radiance = mean(&rgb(&img)) / 3.0;
+            let coverage = img.stats().mean_alpha;
+            eprintln!(
+                "{name}, {scene_name}: white furnace S / sigma_s mean {m:.4}, image mean {radiance:.4} (exact: 1; medium covers {:.0}% of it) {:.1} s",
+                100.0 * coverage,
+                t.elapsed().as_secs_f64()
+            );
+            assert!(coverage > 0.2, "{name}, {scene_name}: the medium covers {coverage} of the image");
+            assert!((m - 1.0).abs() <= max_grid, "{name}, {scene_name}: mean S / sigma_s {m} (bound {max_grid})");
+            if let Some(max_image) = max_image {
+                assert!((radiance - 1.0).abs() <= max_image, "{name}, {scene_name}: mean radiance {radiance} (bound {max_image})");
+            }
+        }
+    }
+}
+
+/// `count` directions spread evenly over the sphere (Fibonacci lattice).
+fn sphere_directions(count: u32) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..count)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / count as f32;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * i as f32;
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+/// Transmittance from `x` along `d` out of the medium (midpoint rule, steps of a quarter voxel).
+fn transmittance_out(medium: &Medium, x: Vec3, d: Vec3, length: f32, step: f32) -> f32 {
+    let n = (length / step).ceil() as u32;
+    let tau: f32 = (0..n).map(|i| medium.density_world(x + d * ((i as f32 + 0.5) * step))).sum::<f32>() * step * medium.density_scale.x;
+    (-tau).exp()
+}
+
+/// Energy balance: a non-absorbing box with isotropic scattering (g 0) lit by a sun. All the
+/// power the box intercepts from the beam, E * integral (1 - T) dA over the beam's section,
+/// leaves it again by scattering. With g = 0 the scattered radiance is the same in every
+/// direction, S(x), so the power leaving is integral over the volume of 4 pi S(x) P(x), P the
+/// transmittance from x out of the box averaged over directions: a measurable form of "what
+/// leaves equals what enters" through the scattering grid alone (g = 0 because with g != 0 the
+/// grid holds S towards the camera only). Both integrals by quadrature: the beam on a 64 x 64
+/// lattice, the volume on 20^3 points with 48 directions each (the reference's quadrature
+/// error is part of its measured ratio, see `expectation`).
+#[test]
+fn energy_balance_every_solver() {
+    let medium = homogeneous_box(8, 0.125, 4.0, 1.0, 0.0);
+    let light_dir = Vec3::new(0.3, -0.4, -0.866).normalize();
+    let irradiance = 2.0f32;
+    let sc = Scene {
+        medium,
+        lights: vec![Light::Distant { direction: light_dir, irradiance: Vec3::splat(irradiance), half_angle: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.5), Vec3::ZERO, Vec3::Z, 22.0, 8, 8),
+        solver: Default::default(),
+    };
+    let m = &sc.medium;
+    let (lo, hi) = m.world_bounds();
+    let (centre, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+    let step = 0.125 / 4.0;
+    // Intercepted: E (1 - T) over the beam's section, a disc of the bounding sphere's radius.
+    let (u, v) = (light_dir.any_orthonormal_pair().0, light_dir.any_orthonormal_pair().1);
+    let n = 64;
+    let cell = 2.0 * radius / n as f32;
+    let mut intercepted = 0.0f64;
+    for j in 0..n {
+        for i in 0..n {
+            let a = -radius + (i as f32 + 0.5) * cell;
+            let b = -radius + (j as f32 + 0.5) * cell;
+            let start = centre + u * a + v * b - light_dir * radius;
+            intercepted += (1.0 - transmittance_out(m, start, light_dir, 2.0 * radius, step)) as f64 * (cell * cell) as f64;
+        }
+    }
+    intercepted *= irradiance as f64;
+    // Escape probability on a lattice over the box's bounds.
+    let dirs = sphere_directions(48);
+    let k = 20;
+    let h = (hi - lo) / k as f32;
+    let points: Vec<(Vec3, f32)> = (0..k * k * k)
+        .map(|c| {
+            let x = lo + h * Vec3::new((c % k) as f32 + 0.5, ((c / k) % k) as f32 + 0.5, (c / (k * k)) as f32 + 0.5);
+            let p = if m.density_world(x) > 0.0 {
+                dirs.iter().map(|d| transmittance_out(m, x, *d, 2.0 * radius, step)).sum::<f32>() / dirs.len() as f32
+            } else {
+                0.0
+            };
+            (x, p)
+        })
+        .collect();
+    let cell_volume = (h.x * h.y * h.z) as f64;
+    for name in solver_names() {
+        let exp = expectation(name);
+        let grid = solve(name, &sc);
+        let to_grid = grid.index_to_world.inverse();
+        let leaving: f64 = points
+            .iter()
+            .map(|(x, p)| 4.0 * std::f64::consts::PI * grid.sample_index(to_grid.transform_point3(*x)).x as f64 * *p as f64)
+            .sum::<f64>()
+            * cell_volume;
+        let ratio = leaving / intercepted;
+        eprintln!("{name}: energy balance: intercepted {intercepted:.4} W, scattered out {leaving:.4} W, ratio {ratio:.4} (exact: 1)");
+        assert!((ratio - 1.0).abs() <= exp.energy, "{name}: scattered out / intercepted = {ratio} (bound {})", exp.energy);
+    }
+}
