@@ -61,3 +61,23 @@ fn cpu_choice_and_errors_need_no_gpu() {
     };
     assert!(e.to_string().contains("magic"), "{e}");
 }
+
+/// The GPU dispatch follows the registry: every solver flagged `gpu` has a backend here, and
+/// none without the flag does.
+#[test]
+fn every_gpu_flagged_solver_has_a_backend_and_only_those() {
+    for entry in registry::SOLVERS {
+        assert_eq!(gpu_backend(entry.name).is_some(), entry.gpu, "{}: registry gpu flag and GPU dispatch disagree", entry.name);
+    }
+}
+
+/// Settings errors come before any adapter is opened, the same on every device.
+#[test]
+fn bad_settings_fail_alike_on_every_device() {
+    let scene = Scene::default_scene();
+    let bad = serde_json::json!({"grid_resolution": 1}).as_object().unwrap().clone();
+    for choice in [DeviceChoice::Cpu, DeviceChoice::Gpu, DeviceChoice::Auto] {
+        let Err(e) = solve(choice, &scene, "pop", &bad, &NoProgress) else { panic!("{choice:?}: grid_resolution 1 accepted") };
+        assert!(matches!(e, Error::Scene { ref field, .. } if field == "solver.grid_resolution"), "{choice:?}: {e}");
+    }
+}
