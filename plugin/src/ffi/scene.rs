@@ -487,9 +487,9 @@ pub unsafe extern "C" fn vs_scene_set_camera(
 /// Mesa's lavapipe included; fail with `VS_STATUS_DEVICE` when none works) or `VS_DEVICE_AUTO`
 /// (2: a hardware GPU adapter when one works, else the CPU; never a software adapter, which is
 /// slower than the CPU solvers). A GPU that is lost or runs out of memory mid-way falls back to
-/// the CPU under AUTO. On the
-/// GPU run: pop's propagation (`vs_scene_solve`) and the compositor (`vs_result_composite`).
-/// Other values are refused.
+/// the CPU under AUTO. On the GPU run: the stages of solvers with a GPU backend (the "gpu" flag
+/// of `vs_solvers_json`; today pop's propagation, `vs_scene_solve`) and the compositor
+/// (`vs_result_composite`). Other values are refused.
 ///
 /// Thread safety: any thread; calls on one scene are serialised.
 #[no_mangle]
