@@ -81,3 +81,18 @@ fn bad_settings_fail_alike_on_every_device() {
         assert!(matches!(e, Error::Scene { ref field, .. } if field == "solver.grid_resolution"), "{choice:?}: {e}");
     }
 }
+
+/// `auto` never runs on a software adapter (lavapipe is ~2x slower than the CPU path on pop):
+/// with one, it solves on the CPU; with a hardware adapter, on the GPU.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn auto_leaves_a_software_adapter_for_the_cpu() {
+    let software = GpuContext::with_shared(|ctx| ctx.is_software()).expect("GPU test run without a usable adapter");
+    let scene = Scene::default_scene();
+    let (_, used) = solve(DeviceChoice::Auto, &scene, "pop", &pop_settings(), &NoProgress).unwrap();
+    if software {
+        assert_eq!(used, DeviceUsed::Cpu, "auto ran on a software adapter");
+    } else {
+        assert!(matches!(used, DeviceUsed::Gpu(_)), "auto ran on {used} with a hardware adapter");
+    }
+}

@@ -177,6 +177,8 @@ impl Preset {
 #[derive(Clone, Copy)]
 pub struct SolverEntry {
     pub name: &'static str,
+    /// The name in hosts' menus.
+    pub label: &'static str,
     pub help: &'static str,
     pub settings: &'static [SettingSpec],
     /// The settings struct's `Default`, serialised (the defaults the registry reports).
@@ -198,7 +200,7 @@ impl SolverEntry {
         self.presets.iter().find(|p| p.name == name)
     }
 
-    /// The JSON form: name, help, gpu, lights, settings (with defaults), presets.
+    /// The JSON form: name, label, help, gpu, lights, settings (with defaults), presets.
     pub fn to_json(&self) -> Value {
         let defaults = (self.defaults)();
         let settings: Vec<Value> = self
@@ -226,6 +228,7 @@ impl SolverEntry {
             self.presets.iter().map(|p| serde_json::json!({"name": p.name, "help": p.help, "settings": p.settings()})).collect();
         serde_json::json!({
             "name": self.name,
+            "label": self.label,
             "help": self.help,
             "gpu": self.gpu,
             "lights": self.lights,
@@ -242,6 +245,7 @@ const FINAL: &str = "fine grids, many iterations or samples";
 
 const REFERENCE: SolverEntry = SolverEntry {
     name: "reference",
+    label: "Reference",
     help: "unbiased volumetric path tracer (slow, the ground truth)",
     settings: &[
         SettingSpec::int("spp", "samples per pixel for images").range(1.0, (1u32 << 20) as f64),
@@ -266,6 +270,7 @@ const REFERENCE: SolverEntry = SolverEntry {
 
 const POP: SolverEntry = SolverEntry {
     name: "pop",
+    label: "Principal Ordinates",
     help: "principal-ordinates propagation (paper 01): fast, grids aligned with each light",
     settings: &[
         SettingSpec::int("grid_resolution", "cells along the longest side of each light's propagation grid").range(2.0, 512.0),
