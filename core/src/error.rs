@@ -25,6 +25,12 @@ pub enum Error {
 
     #[error("cancelled")]
     Cancelled,
+
+    /// The device asked for failed: no adapter, a device request refused, out of device
+    /// memory, a lost device, a kernel that failed. Hosts recognise GPU failures by this
+    /// variant (never by the message), e.g. to fall back to the CPU.
+    #[error("device: {0}")]
+    Device(String),
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -35,6 +41,9 @@ impl Error {
     }
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io { path: path.into(), source }
+    }
+    pub fn device(message: impl Into<String>) -> Self {
+        Error::Device(message.into())
     }
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Error::Format { path: path.into(), message: message.into() }

@@ -119,6 +119,12 @@ typedef enum {
    * A bug in volscatter (a caught panic). The handle stays usable; please report the message.
    */
   VS_STATUS_INTERNAL = 11,
+  /**
+   * The GPU asked for with `VS_DEVICE_GPU` failed: no adapter, a device request refused, out
+   * of device memory, a lost device. Under `VS_DEVICE_AUTO` such failures run on the CPU
+   * instead and are not reported. Retrying with `VS_DEVICE_CPU` works.
+   */
+  VS_STATUS_DEVICE = 12,
 } VsStatus;
 
 /**
@@ -408,11 +414,13 @@ VsStatus vs_scene_set_camera(VsScene *scene,
 
 /**
  * Chooses where GPU-capable stages run for this scene and the results solved from it:
- * `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: fail with `VS_STATUS_UNSUPPORTED` when
- * no GPU adapter works) or `VS_DEVICE_AUTO` (2: a GPU adapter when one works, else the CPU).
- * A GPU that is lost or runs out of memory mid-way falls back to the CPU under AUTO. On the
- * GPU run: pop's propagation (`vs_scene_solve`) and the compositor (`vs_result_composite`).
- * Other values are refused.
+ * `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: any adapter, a software one such as
+ * Mesa's lavapipe included; fail with `VS_STATUS_DEVICE` when none works) or `VS_DEVICE_AUTO`
+ * (2: a hardware GPU adapter when one works, else the CPU; never a software adapter, which is
+ * slower than the CPU solvers). A GPU that is lost or runs out of memory mid-way falls back to
+ * the CPU under AUTO. On the GPU run: the stages of solvers with a GPU backend (the "gpu" flag
+ * of `vs_solvers_json`; today pop's propagation, `vs_scene_solve`) and the compositor
+ * (`vs_result_composite`). Other values are refused.
  *
  * Thread safety: any thread; calls on one scene are serialised.
  */
@@ -567,6 +575,20 @@ VsStatus vs_image_copy_aov(const VsImage *image, const char *name, float *rgb, s
  * Thread safety: any thread; calls on one image are serialised.
  */
 VsStatus vs_image_write_exr(const VsImage *image, const char *path);
+
+/**
+ * Sets `*out` to the solver registry as JSON (UTF-8, NUL-terminated):
+ * `{"format": 1, "solvers": [{"name", "help", "gpu", "lights", "settings", "presets"}, ...],
+ * "light_types": [{"name", "help"}, ...]}`. Each setting has "name", "type" ("int", "float",
+ * "bool", "choice"), "default", "help" and, where limited, "range" ({"min", "max",
+ * "min_exclusive", "max_exclusive"}), "zero" (what 0 stands for) or "choices". "lights" names
+ * the scene JSON light types the solver handles ("emission": an emissive medium). The first
+ * solver is the default of hosts' menus. The string is static: valid as long as the library is
+ * loaded, never to be freed. `*out` is NULL on failure.
+ *
+ * Thread safety: may be called from any thread at any time.
+ */
+VsStatus vs_solvers_json(const char **out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -21,6 +21,24 @@ pub enum GpuError {
     TooLarge(String),
 }
 
+/// A GPU failure as a core error: its own variant (`Error::Device`), on which callers fall back
+/// to the CPU under `auto` and the C ABI returns `VS_STATUS_DEVICE`.
+impl From<GpuError> for volscatter_core::Error {
+    fn from(e: GpuError) -> Self {
+        volscatter_core::Error::Device(e.to_string())
+    }
+}
+
+/// Whether an adapter runs its kernels on the CPU: wgpu's `DeviceType::Cpu`, or by name a
+/// known software rasteriser (Mesa's lavapipe/llvmpipe/softpipe, SwiftShader, Microsoft's WARP "Basic Render Driver")
+/// whatever type its driver reports. On such an adapter POP is about 2x slower than the CPU
+/// solvers (issue 14), so `auto` does not choose it.
+pub fn is_software_adapter(info: &wgpu::AdapterInfo) -> bool {
+    const SOFTWARE: [&str; 5] = ["llvmpipe", "lavapipe", "softpipe", "swiftshader", "microsoft basic render"];
+    let text = format!("{} {} {}", info.name, info.driver, info.driver_info).to_lowercase();
+    info.device_type == wgpu::DeviceType::Cpu || SOFTWARE.iter().any(|s| text.contains(s))
+}
+
 /// A device and queue, with the adapter's description and the errors wgpu reported.
 pub struct GpuContext {
     pub device: wgpu::Device,
@@ -224,6 +242,11 @@ impl GpuContext {
         self.queue.submit([enc.finish()]);
         self.device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
         self.check()
+    }
+
+    /// Whether this context's adapter is a software one (`is_software_adapter`).
+    pub fn is_software(&self) -> bool {
+        is_software_adapter(&self.info)
     }
 
     /// One line naming the adapter, for logs and benchmark tables.

@@ -1,20 +1,34 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
-//! Solvers with GPU stages (today: `pop`: sweep, propagation, merge, upsampling) run them on
-//! the GPU; the others, and every solver under `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a GPU failure (no
-//! adapter, out of memory, lost device) falls back to the CPU with a note on stderr.
+//! A solver whose registry entry has `gpu` set (today: `pop`: sweep, propagation, merge,
+//! upsampling) runs its GPU backend from `gpu_backend`; the others, and every solver under
+//! `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a software adapter or a GPU failure (no
+//! adapter, out of memory, lost device: `Error::Device`) runs the CPU solver instead, with a
+//! note on stderr.
 
-use crate::device::{DeviceChoice, DeviceUsed};
-use crate::pop::backend::{gpu_error, GpuBackend};
-use crate::{GpuContext, GpuError};
+use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
+use crate::pop::backend::GpuBackend;
+use crate::GpuContext;
 use volscatter_core::solvers::pop::Pop;
-use volscatter_core::solvers::{self, Progress, SolveOutput};
+use volscatter_core::solvers::{self, registry, Progress, SolveOutput};
 use volscatter_core::{Error, Result, Scene};
 
 /// Residual checks of the GPU propagation happen every this many iterations (one readback).
 const CHECK_EVERY: u32 = 8;
 
+/// A solver's GPU backend: (context, scene, settings, progress) -> its output.
+type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Value>, &dyn Progress) -> Result<SolveOutput>;
+
+/// The GPU backend of solver `name`; every registry entry with `gpu` set has one (tested).
+fn gpu_backend(name: &str) -> Option<GpuSolve> {
+    match name {
+        "pop" => Some(pop_on_gpu),
+        _ => None,
+    }
+}
+
 /// `pop` with its sweep, propagation, merge and upsampling on the GPU.
-fn pop_on_gpu(ctx: &GpuContext, pop_solver: &Pop, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
+fn pop_on_gpu(ctx: &GpuContext, scene: &Scene, settings: &serde_json::Map<String, serde_json::Value>, progress: &dyn Progress) -> Result<SolveOutput> {
+    let pop_solver = Pop::from_settings(settings)?;
     let (out, _report) = pop_solver.solve_with(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY))?;
     Ok(out)
 }
@@ -27,25 +41,22 @@ pub fn solve(
     settings: &serde_json::Map<String, serde_json::Value>,
     progress: &dyn Progress,
 ) -> Result<(SolveOutput, DeviceUsed)> {
+    let entry = registry::get(name)?;
     let cpu = || solvers::by_name(name, settings)?.solve(scene, progress);
-    if name != "pop" || choice == DeviceChoice::Cpu {
-        return Ok((cpu()?, DeviceUsed::Cpu));
-    }
-    let pop_solver = Pop::from_settings(settings)?;
-    let attempt = GpuContext::with_shared(|ctx| {
-        let name = ctx.describe();
-        // A panic inside wgpu must not reach the host (nor poison the shared context).
-        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pop_on_gpu(ctx, &pop_solver, scene, progress)))
-            .unwrap_or_else(|_| Err(gpu_error(GpuError::Internal("a GPU kernel panicked".into()))))
-            .map(|out| (out, DeviceUsed::Gpu(name)))
-    })
-    .map_err(gpu_error)
-    .and_then(|r| r);
-    match attempt {
-        Ok(r) => Ok(r),
-        Err(Error::Cancelled) => Err(Error::Cancelled),
-        Err(e) if choice == DeviceChoice::Auto => {
-            eprintln!("note: solving on the CPU ({e})");
+    let backend = match gpu_backend(name) {
+        Some(b) if entry.gpu && choice != DeviceChoice::Cpu => b,
+        _ => return Ok((cpu()?, DeviceUsed::Cpu)),
+    };
+    // Settings errors are the same on every device: reported before any adapter is opened.
+    (entry.cpu)(settings)?;
+    match try_gpu(choice, |ctx| backend(ctx, scene, settings, progress)) {
+        Ok(Attempt::Ran(out, used)) => Ok((out, used)),
+        Ok(Attempt::Declined(why)) => {
+            eprintln!("note: solving on the CPU: {why}");
+            Ok((cpu()?, DeviceUsed::Cpu))
+        }
+        Err(Error::Device(e)) if choice == DeviceChoice::Auto => {
+            eprintln!("note: solving on the CPU (device: {e})");
             Ok((cpu()?, DeviceUsed::Cpu))
         }
         Err(e) => Err(e),

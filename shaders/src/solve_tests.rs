@@ -61,3 +61,38 @@ fn cpu_choice_and_errors_need_no_gpu() {
     };
     assert!(e.to_string().contains("magic"), "{e}");
 }
+
+/// The GPU dispatch follows the registry: every solver flagged `gpu` has a backend here, and
+/// none without the flag does.
+#[test]
+fn every_gpu_flagged_solver_has_a_backend_and_only_those() {
+    for entry in registry::SOLVERS {
+        assert_eq!(gpu_backend(entry.name).is_some(), entry.gpu, "{}: registry gpu flag and GPU dispatch disagree", entry.name);
+    }
+}
+
+/// Settings errors come before any adapter is opened, the same on every device.
+#[test]
+fn bad_settings_fail_alike_on_every_device() {
+    let scene = Scene::default_scene();
+    let bad = serde_json::json!({"grid_resolution": 1}).as_object().unwrap().clone();
+    for choice in [DeviceChoice::Cpu, DeviceChoice::Gpu, DeviceChoice::Auto] {
+        let Err(e) = solve(choice, &scene, "pop", &bad, &NoProgress) else { panic!("{choice:?}: grid_resolution 1 accepted") };
+        assert!(matches!(e, Error::Scene { ref field, .. } if field == "solver.grid_resolution"), "{choice:?}: {e}");
+    }
+}
+
+/// `auto` never runs on a software adapter (lavapipe is ~2x slower than the CPU path on pop):
+/// with one, it solves on the CPU; with a hardware adapter, on the GPU.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn auto_leaves_a_software_adapter_for_the_cpu() {
+    let software = GpuContext::with_shared(|ctx| ctx.is_software()).expect("GPU test run without a usable adapter");
+    let scene = Scene::default_scene();
+    let (_, used) = solve(DeviceChoice::Auto, &scene, "pop", &pop_settings(), &NoProgress).unwrap();
+    if software {
+        assert_eq!(used, DeviceUsed::Cpu, "auto ran on a software adapter");
+    } else {
+        assert!(matches!(used, DeviceUsed::Gpu(_)), "auto ran on {used} with a hardware adapter");
+    }
+}

@@ -150,6 +150,16 @@ int main(int argc, char **argv) {
   }
   printf("libvolscatter %s, ABI %u\n", vs_version(), vs_abi_version());
 
+  /* ---- the solver registry: the JSON hosts build their menus from ------------------- */
+  {
+    const char *solvers = NULL;
+    if (vs_solvers_json(&solvers) != VS_STATUS_OK || solvers == NULL || strstr(solvers, "\"name\":\"pop\"") == NULL) {
+      fprintf(stderr, "vs_solvers_json failed or does not list pop\n");
+      return 1;
+    }
+    printf("solvers: %lu bytes of JSON\n", (unsigned long)strlen(solvers));
+  }
+
   /* ---- A: scene file ---------------------------------------------------------------- */
   REQUIRE_OK(vs_scene_new(&a), vs_scene_last_error, a);
   REQUIRE_OK(vs_scene_load_file(a, scene_path), vs_scene_last_error, a);

@@ -926,3 +926,105 @@ def test_emission_export_warnings(fresh):
     assert "emission" not in doc["medium"]
     assert any("constant Emission Strength" in w for w in warnings), warnings
     assert any("temperature grid" in w for w in warnings), warnings
+
+
+# ---------------------------------------------------------------------------------------------
+# the solver registry and the device (issue 14)
+
+
+def test_menus_presets_and_custom_fields_come_from_the_library(fresh):
+    """The Solver and Quality menus, the presets' values and the Custom fields are the library's
+    registry (vs_solvers_json), not lists in the add-on."""
+    native, props = _native(), sys.modules[MODULE + ".properties"]
+    reg = native.solvers()
+    ob = bs.noise_volume(res=4)
+    s = ob.volscatter
+    rna = s.bl_rna.properties
+    solver_ids = [i.identifier for i in rna["solver"].enum_items_static] or \
+        [i[0] for i in props._solver_items(s, bpy.context)]
+    assert solver_ids == [e["name"] for e in reg["solvers"]]
+    assert s.solver == reg["solvers"][0]["name"] == "reference"  # the registry's first is the default
+    quality_ids = [i[0] for i in props._quality_items(s, bpy.context)]
+    assert quality_ids == [p["name"].upper() for p in reg["solvers"][0]["presets"]] + ["CUSTOM"]
+    assert s.quality == "PREVIEW"
+    for entry in reg["solvers"]:
+        s.solver = entry["name"]
+        assert entry["label"] in [i[1] for i in props._solver_items(s, bpy.context)]
+        for p in entry["presets"]:
+            s.quality = p["name"].upper()
+            want = dict(p["settings"])
+            if any(x["name"] == "seed" for x in entry["settings"]):
+                want["seed"] = s.seed
+            assert s.solver_settings() == want, (entry["name"], p["name"])
+        s.quality = 'CUSTOM'
+        names = {x["name"] for x in entry["settings"]}
+        custom = s.solver_settings()
+        assert set(custom) == {k for _, k in props.CUSTOM_FIELDS if k in names} | ({"seed"} & names), custom
+    # pop's light note is built from the registry's "lights"
+    se = sys.modules[MODULE + ".scene_export"]
+    assert se.solver_light_types("pop") == tuple(native.solver("pop")["lights"])
+
+
+def _record_devices(monkeypatch):
+    """Records every value vs_scene_set_device receives, calling the library's own function."""
+    L = _native().lib()
+    real = L.vs_scene_set_device
+    seen = []
+
+    def spy(scene, device):
+        seen.append(device)
+        return real(scene, device)
+    monkeypatch.setattr(L, "vs_scene_set_device", spy)
+    return seen
+
+
+def test_device_menu_reaches_the_library(fresh, monkeypatch):
+    """The Device menu's choice is passed to vs_scene_set_device as VS_DEVICE_* (CPU 0, GPU 1,
+    AUTO 2) before the solve, and the solve succeeds on each."""
+    seen = _record_devices(monkeypatch)
+    ob = bs.standard_scene(res=6)
+    _tiny(ob, fresh)
+    for device, value in (('CPU', 0), ('AUTO', 2), ('GPU', 1)):
+        del seen[:]
+        assert _run(bpy.ops.volscatter.compute_scattering, ob, device=device) == {'FINISHED'}, device
+        assert seen == [value], (device, seen)
+
+
+def test_gpu_failure_falls_back_to_the_cpu_with_a_warning(fresh, monkeypatch):
+    """Device GPU when the GPU fails (status DEVICE, as without an adapter): the operator solves
+    again on the CPU and says so in its report."""
+    native = _native()
+    seen = _record_devices(monkeypatch)
+    real_solve = native.Scene.solve
+    devices = {}
+
+    def solve(self, progress=None):
+        if devices.get(id(self)) == 'GPU':
+            raise native.VolscatterError(native.STATUS_DEVICE, "device: no GPU adapter found")
+        return real_solve(self, progress)
+
+    real_set = native.Scene.set_device
+
+    def set_device(self, device):
+        devices[id(self)] = device
+        return real_set(self, device)
+    monkeypatch.setattr(native.Scene, "solve", solve)
+    monkeypatch.setattr(native.Scene, "set_device", set_device)
+    ob = bs.standard_scene(res=6)
+    _tiny(ob, fresh)
+    ob.volscatter.device = 'GPU'
+    H = _modal_harness()
+    op, ctx = H(), _UIContext(ob)
+    op.reports = []
+    assert _drive(op, ctx) == {'FINISHED'}, op.reports
+    assert seen == [1, 0], seen
+    assert any('WARNING' in k and "GPU failed" in m and "solved on the CPU" in m for k, m in op.reports), op.reports
+    assert "Smoke_scattering" in bpy.data.objects
+    # Any other failure is not retried: it is the operator's error.
+    devices.clear()
+    monkeypatch.setattr(native.Scene, "solve", lambda self, progress=None: (_ for _ in ()).throw(
+        native.VolscatterError(5, "scene: camera: broken")))
+    op, ctx = H(), _UIContext(ob)
+    op.reports = []
+    assert _drive(op, ctx) == {'CANCELLED'}
+    assert any("camera: broken" in m for k, m in op.reports), op.reports

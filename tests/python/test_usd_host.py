@@ -483,3 +483,45 @@ def test_ctrl_c_cancels_the_native_work(tmp_path):
     rest = p.communicate(timeout=120)[1]
     assert p.returncode == 130, seen + rest
     assert "interrupted" in rest and "Traceback" not in rest and not (tmp_path / "c.exr").exists()
+
+
+# ------------------------------------------------------------------------------------------------
+# the solver registry and the device (issue 14)
+
+def test_solver_choices_and_lights_come_from_the_library(tmp_path, monkeypatch):
+    """--solver and the light warnings read the library's registry (vs_solvers_json), the same
+    document `volscatter solvers` prints."""
+    from types import SimpleNamespace
+    from volscatter import _native as N
+    doc = json.loads(subprocess.run([str(volscatter_bin()), "solvers"], capture_output=True, text=True, check=True).stdout)
+    assert N.solvers() == doc
+    assert N.solver_names() == [s["name"] for s in doc["solvers"]] and N.solver_names()[:2] == ["reference", "pop"]
+    assert R.solver_lights() == {s["name"]: set(s["lights"]) for s in doc["solvers"]}
+    sky = SimpleNamespace(lights=[SimpleNamespace(json={"type": "dome"}, path="/World/Sky")])
+    assert R.solver_warnings(sky, "pop") == []  # pop handles domes, by the registry
+    # a registry where pop lacks domes: the warning follows it
+    monkeypatch.setattr(N, "_solvers", {"solvers": [{"name": "pop", "lights": ["distant"]}]})
+    assert [w for w in R.solver_warnings(sky, "pop") if "/World/Sky" in w and "dome" in w], R.solver_warnings(sky, "pop")
+    monkeypatch.undo()
+    stage, path = make_stage(tmp_path)
+    r = cli("render", path, "--solver", "popp", "--out", tmp_path / "x.exr", "-q")
+    assert r.returncode == 2 and "unknown solver 'popp'" in r.stderr and "reference, pop" in r.stderr, r.stderr
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_set_device_reaches_the_library():
+    """Scene.set_device is declared (vs_scene_set_device(VsScene *, uint32_t)) and each choice
+    is accepted; an unknown number is refused by the library with status INVALID_ARGUMENT."""
+    doc = {"format": 1, "medium": {"procedural": "plume", "dims": [8], "density_scale": 5.0},
+           "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": 1.0}],
+           "camera": {"position": [0, -6, 0], "look_at": [0, 0, 0], "width": 8, "height": 8},
+           "solver": {"name": "reference", "grid_resolution": 4, "grid_spp": 2}}
+    with Scene.from_json(doc) as s:
+        for d in ("cpu", "auto", "gpu", "CPU", 0, 2):
+            s.set_device(d)
+        with pytest.raises(VolscatterError) as e:
+            s.set_device(7)
+        assert e.value.status == 2 and "device 7" in str(e.value)
+        s.set_device("cpu")
+        with s.solve() as r:
+            assert all(d > 0 for d in r.dims())

@@ -23,7 +23,8 @@ pub mod status {
     pub const UNSUPPORTED: i32 = 9;
     pub const CANCELLED: i32 = 10;
     pub const INTERNAL: i32 = 11;
-    pub const ALL: [(&str, i32); 12] = [
+    pub const DEVICE: i32 = 12;
+    pub const ALL: [(&str, i32); 13] = [
         ("VS_STATUS_OK", OK),
         ("VS_STATUS_NULL_ARGUMENT", NULL_ARGUMENT),
         ("VS_STATUS_INVALID_ARGUMENT", INVALID_ARGUMENT),
@@ -36,6 +37,7 @@ pub mod status {
         ("VS_STATUS_UNSUPPORTED", UNSUPPORTED),
         ("VS_STATUS_CANCELLED", CANCELLED),
         ("VS_STATUS_INTERNAL", INTERNAL),
+        ("VS_STATUS_DEVICE", DEVICE),
     ];
 }
 
@@ -117,6 +119,8 @@ api! {
     vs_image_copy_rgba: fn(Img, *mut f32, usize) -> S;
     vs_image_copy_aov: fn(Img, Cs, *mut f32, usize) -> S;
     vs_image_write_exr: fn(Img, Cs) -> S;
+    // The solver registry (issue 14).
+    vs_solvers_json: fn(*mut Cs) -> S;
 }
 
 /// Copies a C string returned by the library (NULL becomes "<NULL>").

@@ -131,6 +131,9 @@ fn c_host_renders_and_matches_the_rust_api() {
     println!("{}", String::from_utf8_lossy(&run.stdout));
     assert!(run.status.success(), "smoke.c failed ({}):\n{}", run.status, String::from_utf8_lossy(&run.stderr));
     assert!(String::from_utf8_lossy(&run.stdout).contains("smoke: ok"));
+    // The registry JSON the C host read is the Rust registry's, byte for byte in length.
+    let registry_len = solvers::registry::to_json().to_string().len();
+    assert!(String::from_utf8_lossy(&run.stdout).contains(&format!("solvers: {registry_len} bytes of JSON")), "registry JSON length differs from {registry_len}");
 
     // A: scene file -> grid, composite, reference render; grid files read back.
     let grid_a = check_grid(&dir, "grid_a.bin", &scene_a);

@@ -69,7 +69,8 @@ fn abi_version_version_string_and_status_messages() {
     assert_eq!(text(unsafe { (a.vs_version)() }), env!("CARGO_PKG_VERSION"));
     assert_eq!(a.status_message(OK), "ok");
     assert!(a.status_message(INVALID_HANDLE).contains("destroyed"));
-    for bad in [-1, 12, 1000, i32::MIN, i32::MAX] {
+    // The first value past the last status is unknown (was the literal 12 before VS_STATUS_DEVICE).
+    for bad in [-1, ALL.len() as i32, 1000, i32::MIN, i32::MAX] {
         assert_eq!(a.status_message(bad), "unknown status", "status {bad}");
     }
     for (_, v) in ALL {
@@ -577,6 +578,36 @@ fn device_auto_composites_like_the_cpu() {
         let num: f64 = cpu.iter().zip(&auto).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
         let den: f64 = cpu.iter().map(|x| (*x as f64).powi(2)).sum();
         assert!((num / den).sqrt() < 1e-5, "relative RMSE {}", (num / den).sqrt());
+        assert_eq!((a.vs_scene_destroy)(s), OK);
+    }
+}
+
+// ---- the solver registry (issue 14) ---------------------------------------------------------
+
+/// `vs_solvers_json`: the registry of the Rust API as JSON, one static string (the same pointer
+/// on every call), and NULL `out` refused without a crash.
+#[test]
+fn solvers_json_is_the_registry_and_static() {
+    let a = api();
+    unsafe {
+        assert_eq!((a.vs_solvers_json)(null_mut()), NULL_ARGUMENT);
+        let (mut p1, mut p2) = (null(), null());
+        assert_eq!((a.vs_solvers_json)(&mut p1), OK);
+        assert_eq!((a.vs_solvers_json)(&mut p2), OK);
+        assert!(!p1.is_null() && p1 == p2, "not one static string");
+        let doc: serde_json::Value = serde_json::from_str(&text(p1)).expect("registry JSON parses");
+        assert_eq!(doc, volscatter_core::solvers::registry::to_json());
+        let names: Vec<&str> = doc["solvers"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+        assert_eq!(names, volscatter_core::solvers::SOLVER_NAMES);
+        // Every solver it lists is accepted by vs_scene_set_solver with each of its presets.
+        let s = small_scene();
+        for solver in doc["solvers"].as_array().unwrap() {
+            let name = cstr(solver["name"].as_str().unwrap());
+            for p in solver["presets"].as_array().unwrap() {
+                let settings = cstr(&p["settings"].to_string());
+                assert_eq!((a.vs_scene_set_solver)(s, name.as_ptr(), settings.as_ptr()), OK, "{}", a.scene_error(s));
+            }
+        }
         assert_eq!((a.vs_scene_destroy)(s), OK);
     }
 }

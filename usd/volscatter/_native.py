@@ -31,9 +31,14 @@ ABI_VERSION = 1
 STATUS_NAMES = {
     0: "ok", 1: "null argument", 2: "invalid argument", 3: "invalid handle", 4: "buffer size",
     5: "invalid scene", 6: "io", 7: "format", 8: "too large", 9: "unsupported", 10: "cancelled",
-    11: "internal",
+    11: "internal", 12: "device",
 }
 STATUS_CANCELLED = 10
+#: The GPU asked for failed (no adapter, out of memory, lost); the CPU still works.
+STATUS_DEVICE = 12
+
+#: ``vs_scene_set_device`` values (``VS_DEVICE_*``).
+DEVICES = {"cpu": 0, "gpu": 1, "auto": 2}
 
 #: ``VsGridFormat`` values for :meth:`Result.write_grid`.
 GRID_FORMAT_EXR = 1
@@ -119,6 +124,9 @@ _SIGNATURES = {
     "vs_image_copy_rgba": (c_int32, [_ImagePtr, _F, c_size_t]),
     "vs_image_copy_aov": (c_int32, [_ImagePtr, c_char_p, _F, c_size_t]),
     "vs_image_write_exr": (c_int32, [_ImagePtr, c_char_p]),
+    # device and solver registry (issue 14)
+    "vs_scene_set_device": (c_int32, [_ScenePtr, c_uint32]),
+    "vs_solvers_json": (c_int32, [POINTER(c_char_p)]),
 }
 
 _lib = None
@@ -177,6 +185,27 @@ def version() -> str:
 
 def abi_version() -> int:
     return int(lib().vs_abi_version())
+
+
+_solvers: Optional[dict] = None
+
+
+def solvers() -> dict:
+    """The library's solver registry (``vs_solvers_json``), parsed once: ``{"solvers": [{"name",
+    "label", "help", "gpu", "lights", "settings", "presets"}, ...], "light_types": [...]}``."""
+    global _solvers
+    if _solvers is None:
+        out = c_char_p()
+        status = lib().vs_solvers_json(ctypes.byref(out))
+        if status != 0:
+            raise _status_error(status, "", "solver registry")
+        _solvers = json.loads(_decode(out.value))
+    return _solvers
+
+
+def solver_names() -> list:
+    """The solvers' names, the default (the reference) first."""
+    return [s["name"] for s in solvers()["solvers"]]
 
 
 def _decode(b: Optional[bytes]) -> str:
@@ -357,6 +386,13 @@ class Scene(_Handle):
         self._check(lib().vs_scene_set_camera(self._p(), _floats(position, 3, "position"), _floats(look_at, 3, "look_at"),
                                               _floats(up, 3, "up") if up is not None else None, float(fov_deg),
                                               int(width), int(height)), "camera")
+
+    def set_device(self, device):
+        """Where solves and composites run: "cpu" (the default), "gpu" (any adapter; fails with
+        status ``STATUS_DEVICE`` when none works) or "auto" (a hardware GPU when one works, else
+        the CPU); or a ``VS_DEVICE_*`` number."""
+        value = DEVICES[device.lower()] if isinstance(device, str) else int(device)
+        self._check(lib().vs_scene_set_device(self._p(), value), f"device {device}")
 
     def set_solver(self, name: str, settings: Optional[dict] = None):
         text = json.dumps(settings).encode() if settings else None

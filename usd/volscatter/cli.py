@@ -139,6 +139,19 @@ def _settings(args) -> dict:
     return s
 
 
+def _solver_arg(name: str) -> str:
+    """--solver: one of the library's solvers (its registry), checked when the command line is
+    parsed so that a typo never reaches a stage read."""
+    from ._native import solver_names
+    try:
+        names = solver_names()
+    except VolscatterError as e:
+        raise argparse.ArgumentTypeError(f"cannot list the library's solvers: {e}")
+    if name not in names:
+        raise argparse.ArgumentTypeError(f"unknown solver {name!r} (the library has: {', '.join(names)})")
+    return name
+
+
 def _medium_defaults(args) -> dict:
     return {"density_scale": args.density_scale, "albedo": args.albedo, "g": args.g}
 
@@ -150,7 +163,9 @@ def _common(p: argparse.ArgumentParser, what: str):
     t.add_argument("--time", type=float, metavar="T",
                    help="time code to read (default: the stage's start time code, else the default time)")
     t.add_argument("--frames", metavar="A-B", help=f"{what} every frame A..B (inclusive; A-B:STEP for a step)")
-    p.add_argument("--solver", default="reference", help="reference (path-traced, default) or pop")
+    p.add_argument("--solver", default="reference", type=_solver_arg,
+                   help="a solver of the library's registry (`volscatter solvers` lists them): "
+                        "reference (path-traced, default), pop, ...")
     p.add_argument("--width", type=int, default=320, help="image width in pixels (default 320)")
     p.add_argument("--height", type=int, help="image height (default: width / the camera's aperture ratio)")
     p.add_argument("--spp", type=int, help="samples per pixel (reference)")

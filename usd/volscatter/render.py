@@ -23,14 +23,15 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import stage as stage_mod
-from ._native import Scene, VolscatterError
+from ._native import Scene, VolscatterError, solvers
 from .vdbwrite import write_grids
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
 
-#: Solvers and the light types they use (both handle every type the stage reader produces).
-SOLVER_LIGHTS = {"reference": {"distant", "point", "spot", "rect", "disk", "dome"},
-                 "pop": {"distant", "point", "spot", "rect", "disk", "dome"}}
+
+def solver_lights() -> Dict[str, set]:
+    """Each solver's light types (scene JSON types), from the library's solver registry."""
+    return {s["name"]: set(s["lights"]) for s in solvers()["solvers"]}
 
 
 @dataclass
@@ -46,7 +47,7 @@ class FrameResult:
 
 def solver_warnings(scene: stage_mod.StageScene, solver: str) -> List[str]:
     """Lights in the scene the chosen solver leaves out (warned, never dropped silently)."""
-    handled = SOLVER_LIGHTS.get(solver)
+    handled = solver_lights().get(solver)
     if handled is None:
         return []
     out = []

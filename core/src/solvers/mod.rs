@@ -4,6 +4,7 @@
 
 pub mod pop;
 pub mod reference;
+pub mod registry;
 #[cfg(test)]
 pub(crate) mod testing;
 
@@ -122,15 +123,12 @@ pub trait Solver: Send + Sync {
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput>;
 }
 
-pub const SOLVER_NAMES: &[&str] = &["reference", "pop"];
+pub use registry::SOLVER_NAMES;
 
-/// Builds a solver from its name and the scene's `solver` settings block.
+/// Builds a solver from its name and the scene's `solver` settings block (through the
+/// registry: unknown names are refused with the list of known ones).
 pub fn by_name(name: &str, settings: &serde_json::Map<String, serde_json::Value>) -> Result<Box<dyn Solver>> {
-    match name {
-        "reference" => Ok(Box::new(reference::Reference::from_settings(settings)?)),
-        "pop" => Ok(Box::new(pop::Pop::from_settings(settings)?)),
-        other => Err(Error::InvalidArgument(format!("unknown solver `{other}` (known: {})", SOLVER_NAMES.join(", ")))),
-    }
+    (registry::get(name)?.cpu)(settings)
 }
 
 /// Parses a solver's settings struct from the `solver` block, ignoring `name` and naming the

@@ -19,11 +19,15 @@ ABI_VERSION = 1
 
 STATUS_OK = 0
 STATUS_CANCELLED = 10
+STATUS_DEVICE = 12
 STATUS_NAMES = {
     0: "OK", 1: "NULL_ARGUMENT", 2: "INVALID_ARGUMENT", 3: "INVALID_HANDLE", 4: "BUFFER_SIZE",
     5: "INVALID_SCENE", 6: "IO", 7: "FORMAT", 8: "TOO_LARGE", 9: "UNSUPPORTED",
-    10: "CANCELLED", 11: "INTERNAL",
+    10: "CANCELLED", 11: "INTERNAL", 12: "DEVICE",
 }
+
+#: ``vs_scene_set_device`` values (VS_DEVICE_*), by the add-on's Device menu identifiers.
+DEVICES = {"CPU": 0, "GPU": 1, "AUTO": 2}
 
 GRID_FORMAT_EXR = 1
 GRID_FORMAT_VDB = 2
@@ -63,6 +67,9 @@ _SIGNATURES = {
     "vs_image_size": (_st, [_vp, _u32p, _u32p]),
     "vs_image_copy_rgba": (_st, [_vp, _f32p, ctypes.c_size_t]),
     "vs_image_copy_aov": (_st, [_vp, ctypes.c_char_p, _f32p, ctypes.c_size_t]),
+    # device and solver registry (issue 14)
+    "vs_scene_set_device": (_st, [_vp, _u32]),
+    "vs_solvers_json": (_st, [ctypes.POINTER(ctypes.c_char_p)]),
 }
 
 
@@ -148,6 +155,25 @@ def version():
     return lib().vs_version().decode()
 
 
+_solvers = None
+
+
+def solvers():
+    """The library's solver registry (``vs_solvers_json``), parsed once: ``{"solvers": [{"name",
+    "label", "help", "gpu", "lights", "settings", "presets"}, ...], "light_types": [...]}``."""
+    global _solvers
+    if _solvers is None:
+        out = ctypes.c_char_p()
+        _check(lib().vs_solvers_json(ctypes.byref(out)), None, None)
+        _solvers = json.loads(out.value.decode())
+    return _solvers
+
+
+def solver(name):
+    """The registry entry of solver `name`, or None."""
+    return next((s for s in solvers()["solvers"] if s["name"] == name), None)
+
+
 def _check(status, message_fn, handle):
     if status == STATUS_OK:
         return
@@ -225,6 +251,12 @@ class Scene(_Handle):
     def set_solver(self, name, settings=None):
         text = json.dumps(settings) if settings else None
         self._call("vs_scene_set_solver", name.encode(), text.encode() if text else None)
+
+    def set_device(self, device):
+        """Where solves run: "CPU", "GPU" (fails with status DEVICE when no adapter works) or
+        "AUTO" (a hardware GPU when one works, else the CPU); or a VS_DEVICE_* number."""
+        value = DEVICES[device] if isinstance(device, str) else int(device)
+        self._call("vs_scene_set_device", value)
 
     def light_count(self):
         n = ctypes.c_size_t()

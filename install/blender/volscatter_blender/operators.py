@@ -37,6 +37,22 @@ def _unique_name(base):
     return name
 
 
+def _solve_on(sc, device, progress, notes):
+    """Solves scene `sc` on the Device menu's choice, passed to the library as it is. AUTO: the
+    library uses a hardware GPU when one works, else the CPU. GPU: when the GPU fails (status
+    DEVICE: no adapter, out of memory, lost), solves again on the CPU and adds a note saying so
+    to `notes`."""
+    sc.set_device(device)
+    try:
+        return sc.solve(progress)
+    except native.VolscatterError as e:
+        if device != 'GPU' or e.status != native.STATUS_DEVICE:
+            raise
+        notes.append("volscatter: the GPU failed (%s); solved on the CPU instead" % e)
+        sc.set_device('CPU')
+        return sc.solve(progress)
+
+
 class _State:
     """Shared between the main thread and the worker."""
 
@@ -48,6 +64,7 @@ class _State:
         self.done = False
         self.error = None
         self.value = None
+        self.notes = []  # warnings from the worker (the GPU fallback), reported on the main thread
 
 
 class _JobOperator:
@@ -102,8 +119,6 @@ class _JobOperator:
             native.lib()
         except native.LibraryNotFound as e:
             raise ExportError(str(e))
-        if self._settings.device == 'GPU':
-            self._warn("the GPU device cannot be chosen through libvolscatter's C API yet; solving on the CPU")
 
     def _warn(self, msg):
         if msg not in self._warned:
@@ -121,13 +136,12 @@ class _JobOperator:
         self._inputs.extend(generated)
         for w in warnings:
             self._warn(w)
-        if self._solver["name"] == "pop":
-            kinds = [l["type"] for l in doc["lights"]] + (["emission"] if doc["medium"].get("emission") else [])
-            error, warning = scene_export.pop_light_messages(kinds)
-            if error:
-                raise ExportError(error)
-            if warning:
-                self._warn(warning)
+        kinds = [l["type"] for l in doc["lights"]] + (["emission"] if doc["medium"].get("emission") else [])
+        error, warning = scene_export.light_messages(self._solver["name"], kinds)
+        if error:
+            raise ExportError(error)
+        if warning:
+            self._warn(warning)
         return doc
 
     def image_size(self, context):
@@ -142,7 +156,7 @@ class _JobOperator:
                 return not state.cancel
         try:
             with native.Scene.from_json(doc) as sc:
-                with sc.solve(progress) as result:
+                with _solve_on(sc, self._settings.device, progress, state.notes) as result:
                     state.value = self.per_frame(result, frame)
         except BaseException as e:  # reported on the main thread
             state.error = e
@@ -199,6 +213,8 @@ class _JobOperator:
                     doc = self._export(context, frame)
                     state = _State()
                     self._work(doc, frame, state)
+                    for note in state.notes:
+                        self._warn(note)
                     if state.error is not None:
                         raise state.error
                     self._values.append(state.value)
@@ -270,6 +286,8 @@ class _JobOperator:
             self._status(context)
             return {'RUNNING_MODAL'}
         self._thread.join()
+        for note in self._state.notes:
+            self._warn(note)
         if self._state.error is not None:
             self._end_modal(context)
             return self._fail(context, self._state.error)

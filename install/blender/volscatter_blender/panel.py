@@ -2,6 +2,8 @@
 
 import bpy
 
+from . import properties
+
 
 class VOLSCATTER_PT_volume(bpy.types.Panel):
     bl_label = "volscatter"
@@ -23,11 +25,11 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         col.prop(s, "quality")
         sub = col.column()
         sub.active = s.quality == 'CUSTOM'
-        sub.prop(s, "grid_resolution")
-        if s.solver == 'pop':
-            sub.prop(s, "iterations")
-        else:
-            sub.prop(s, "samples")
+        # The Custom fields the chosen solver has a setting for (by the library's registry).
+        for field, setting in properties.CUSTOM_FIELDS:
+            if properties.solver_has(s.solver, setting):
+                sub.prop(s, field)
+        if properties.solver_has(s.solver, "seed"):
             col.prop(s, "seed")
         col.prop(s, "device")
         col.separator()

@@ -3,42 +3,60 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
 
-from . import scene_export
+from . import native, scene_export
 
 # Blender 5 warns about "//" paths in properties that do not declare support for them (the
 # option does not exist in older versions).
 _BLEND_RELATIVE = {'PATH_SUPPORTS_BLEND_RELATIVE'} if bpy.app.version >= (5, 0, 0) else set()
 
-# quality preset -> (solver settings for "pop", for "reference")
-PRESETS = {
-    'DRAFT': ({"grid_resolution": 16, "max_iterations": 100, "output_resolution": 64},
-              {"grid_resolution": 16, "grid_spp": 16}),
-    'PREVIEW': ({"grid_resolution": 32, "max_iterations": 400, "output_resolution": 128},
-                {"grid_resolution": 32, "grid_spp": 64}),
-    'FINAL': ({"grid_resolution": 64, "max_iterations": 1000, "output_resolution": 256},
-              {"grid_resolution": 64, "grid_spp": 256}),
-}
+# The solver menu, the Quality presets and the Custom fields come from the library's solver
+# registry (native.solvers()), read when a menu is first drawn or set, never at registration
+# (the library is loaded lazily). Blender keeps only the strings of dynamic enum items that
+# Python keeps alive: the item lists are cached here.
+_ITEMS = {}
+
+#: Custom-quality fields -> the solver setting each sets, where the chosen solver has it.
+CUSTOM_FIELDS = (("grid_resolution", "grid_resolution"), ("iterations", "max_iterations"),
+                 ("samples", "grid_spp"))
+CUSTOM = 'CUSTOM'
+
+
+def _registry_items(key, build):
+    if key not in _ITEMS:
+        try:
+            _ITEMS[key] = build(native.solvers()["solvers"])
+        except Exception as e:  # no library: a one-item menu that says why (operators report it too)
+            return [('reference', "Reference", "libvolscatter not loaded: %s" % e, 0)]
+    return _ITEMS[key]
+
+
+def _solver_items(self, context):
+    # Numbered by registry order: the first solver (the reference) is the default.
+    return _registry_items("solvers", lambda solvers: [
+        (s["name"], s["label"], "%s (%s)" % (s["help"], scene_export.lights_note(s["lights"])), i)
+        for i, s in enumerate(solvers)])
+
+
+def _quality_items(self, context):
+    # The registry gives every solver the same preset names (tested there), numbered in order;
+    # Custom after them.
+    def build(solvers):
+        presets = solvers[0]["presets"]
+        return [(p["name"].upper(), p["name"].title(), p["help"].capitalize(), i) for i, p in enumerate(presets)] + [
+            (CUSTOM, "Custom", "Use the values below", 100)]
+    return _registry_items("quality", build)
+
+
+def solver_has(name, setting):
+    """Whether solver `name` has `setting` (by the registry)."""
+    entry = native.solver(name)
+    return entry is not None and any(s["name"] == setting for s in entry["settings"])
 
 
 class VolscatterSettings(bpy.types.PropertyGroup):
-    solver: EnumProperty(
-        name="Solver",
-        items=[
-            ('pop', "Principal Ordinates", "Fast propagation solver (%s)" % scene_export.pop_lights_note()),
-            ('reference', "Reference", "Unbiased volumetric path tracer (slow, ground truth)"),
-        ],
-        default='reference',
-    )
-    quality: EnumProperty(
-        name="Quality",
-        items=[
-            ('DRAFT', "Draft", "Coarse grids, few iterations or samples"),
-            ('PREVIEW', "Preview", "Default settings"),
-            ('FINAL', "Final", "Fine grids, many iterations or samples"),
-            ('CUSTOM', "Custom", "Use the values below"),
-        ],
-        default='PREVIEW',
-    )
+    solver: EnumProperty(name="Solver", items=_solver_items, default=0)
+    # default 1: the registry's second preset, "preview"
+    quality: EnumProperty(name="Quality", items=_quality_items, default=1)
     grid_resolution: IntProperty(name="Grid Resolution", default=32, min=2, max=512,
                                  description="Cells along the longest side of the solver's grid")
     iterations: IntProperty(name="Iterations", default=400, min=1, max=100000,
@@ -48,9 +66,11 @@ class VolscatterSettings(bpy.types.PropertyGroup):
     seed: IntProperty(name="Seed", default=0, min=0)
     device: EnumProperty(
         name="Device",
-        items=[('CPU', "CPU", "Solve on the CPU"),
-               ('GPU', "GPU", "Solve on the GPU (not selectable through the library's C API yet: runs on the CPU)")],
-        default='CPU',
+        items=[('AUTO', "Auto", "A hardware GPU when one works, else the CPU (never a software GPU such as "
+                                "lavapipe, which is slower than the CPU)"),
+               ('GPU', "GPU", "Solve on the GPU, any adapter; if it fails, solve on the CPU with a warning"),
+               ('CPU', "CPU", "Solve on the CPU")],
+        default='AUTO',
     )
     use_frame_range: BoolProperty(name="Frame Range", default=False,
                                   description="Compute one scattering VDB per frame of the range")
@@ -63,16 +83,15 @@ class VolscatterSettings(bpy.types.PropertyGroup):
                                             "(the new volume carries its extinction)")
 
     def solver_settings(self):
-        """The JSON settings for the chosen solver."""
-        if self.quality == 'CUSTOM':
-            if self.solver == 'pop':
-                s = {"grid_resolution": self.grid_resolution, "max_iterations": self.iterations}
-            else:
-                s = {"grid_resolution": self.grid_resolution, "grid_spp": self.samples}
+        """The JSON settings for the chosen solver: its registry preset, or under Custom the
+        fields whose setting the solver has; the seed wherever the solver has one."""
+        if self.quality == CUSTOM:
+            s = {setting: getattr(self, field) for field, setting in CUSTOM_FIELDS if solver_has(self.solver, setting)}
         else:
-            pop, ref = PRESETS[self.quality]
-            s = dict(pop if self.solver == 'pop' else ref)
-        if self.solver == 'reference':
+            entry = native.solver(self.solver)
+            preset = next((p for p in entry["presets"] if p["name"].upper() == self.quality), None) if entry else None
+            s = dict(preset["settings"]) if preset else {}
+        if solver_has(self.solver, "seed"):
             s["seed"] = self.seed
         return s
 

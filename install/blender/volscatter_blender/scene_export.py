@@ -27,7 +27,7 @@ import os
 
 import bpy
 
-from . import emission_export
+from . import emission_export, native
 
 FORMAT = 1
 
@@ -297,20 +297,26 @@ def _light_color(light, warnings):
     return col
 
 
-#: The scene JSON light types the Principal Ordinates solver handles. The one place to change
-#: when pop handles more: the operator's error and warning and the solver's tooltip are made
-#: from it.
-POP_LIGHT_TYPES = ("distant", "point", "spot", "rect", "disk", "dome", "emission")
+# Which light types a solver handles comes from the library's solver registry
+# (native.solvers(): each solver's "lights", in scene JSON light types, "emission" for an
+# emissive medium). The operator's error and warning and the solver menu's tooltips are made
+# from it.
 
 _BLENDER_LIGHT_NAMES = {"distant": "sun", "point": "point", "spot": "spot", "rect": "area", "disk": "area",
                         "dome": "world", "emission": "volume emission"}
 
 
-def pop_lights_note():
-    """What pop handles, for messages: "sun, point, spot and area lights, the world and volume
-    emission"."""
+def solver_light_types(name):
+    """The scene JSON light types solver `name` handles (empty for an unknown solver)."""
+    entry = native.solver(name)
+    return tuple(entry["lights"]) if entry else ()
+
+
+def lights_note(types):
+    """Light types `types` in Blender's words, for messages: "sun, point, spot and area lights,
+    the world and volume emission"."""
     names = []
-    for k in POP_LIGHT_TYPES:
+    for k in types:
         n = _BLENDER_LIGHT_NAMES.get(k, k)
         if n not in names:
             names.append(n)
@@ -319,26 +325,44 @@ def pop_lights_note():
     if lamps:
         items.append((", ".join(lamps[:-1]) + " and " + lamps[-1] if len(lamps) > 1 else lamps[0]) + " lights")
     items += ["the world" if n == "world" else n for n in names if n in ("world", "volume emission")]
+    if not items:
+        return "no lights"
     return ", ".join(items[:-1]) + " and " + items[-1] if len(items) > 1 else items[0]
 
 
-def pop_light_messages(kinds):
-    """(error, warning) for a pop solve of lights of scene JSON types `kinds`; None for none."""
-    if not any(k in POP_LIGHT_TYPES for k in kinds):
-        return ("the Principal Ordinates solver handles %s, and the scene has none; choose the Reference solver"
-                % pop_lights_note(), None)
+def light_messages(solver, kinds):
+    """(error, warning) for a solve by `solver` of lights of scene JSON types `kinds`; None for
+    none. The reference (the registry's first solver, the ground truth) renders a scene it has
+    no light for as it is (black); the others refuse it."""
+    handled = solver_light_types(solver)
+    entry = native.solver(solver) or {"label": solver}
+    reference = native.solvers()["solvers"][0]
+    note = lights_note(handled)
+    if solver != reference["name"] and not any(k in handled for k in kinds):
+        return ("the %s solver handles %s, and the scene has none; choose the %s solver"
+                % (entry["label"], note, reference["label"]), None)
     left = []
     for k in kinds:
         n = _BLENDER_LIGHT_NAMES.get(k, k)
-        if k not in POP_LIGHT_TYPES and n not in left:
+        if k not in handled and n not in left:
             left.append(n)
     if not left:
         return None, None
     items = ["the world" if n == "world" else n + " lights" for n in left]
     what = items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
     verb = "is" if items == ["the world"] else "are"
-    return None, ("the Principal Ordinates solver handles %s: %s %s left out (choose Reference to include them)"
-                  % (pop_lights_note(), what, verb))
+    return None, ("the %s solver handles %s: %s %s left out (choose %s to include them)"
+                  % (entry["label"], note, what, verb, reference["label"]))
+
+
+def pop_lights_note():
+    """What pop handles, in Blender's words (from the registry)."""
+    return lights_note(solver_light_types("pop"))
+
+
+def pop_light_messages(kinds):
+    """`light_messages` for pop."""
+    return light_messages("pop", kinds)
 
 
 def _axis_lengths(m3):

@@ -2,6 +2,8 @@
 //! (`reference`: path-traced image; others: solve, then the compositor), and reports the
 //! relative RMSE of each image and scattering grid against the baseline (`reference` when it
 //! is listed, else the last solver), with the time each took. `--json FILE` writes the same.
+//! Solver names and settings come from the registry; `--device` says where GPU-capable solvers
+//! and the compositor run (default cpu, so that benchmark times stay those of the CPU path).
 
 use clap::Args;
 use serde_json::json;
@@ -11,7 +13,7 @@ use std::time::Instant;
 use super::progress::StderrProgress;
 use volscatter_core::compositor::{self, CompositeOptions};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::{self, reference::Reference, ScatteringGrid, Timings};
+use volscatter_core::solvers::{reference::Reference, registry, ScatteringGrid, Timings};
 use volscatter_core::{Error, Image, Result, Scene};
 
 #[derive(Args)]
@@ -49,6 +51,10 @@ pub struct CompareArgs {
     /// Write each image as EXR into this directory (SOLVER.exr).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    /// Where solvers with a GPU backend and the compositor run: cpu (default), gpu, or auto (a
+    /// hardware GPU when one works, else the CPU). The reference always runs on the CPU.
+    #[arg(long, default_value = "cpu")]
+    pub device: volscatter_gpu::DeviceChoice,
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -61,6 +67,7 @@ struct Run {
     grid_seconds: f64,
     phases: Timings,
     settings: serde_json::Map<String, serde_json::Value>,
+    device: String,
 }
 
 fn settings_for(scene: &Scene, name: &str, args: &CompareArgs) -> Result<serde_json::Map<String, serde_json::Value>> {
@@ -74,9 +81,7 @@ fn settings_for(scene: &Scene, name: &str, args: &CompareArgs) -> Result<serde_j
         let (solver, key) = k
             .split_once('.')
             .ok_or_else(|| Error::InvalidArgument(format!("--set {kv}: name the solver, as in pop.{k}=...")))?;
-        if !solvers::SOLVER_NAMES.contains(&solver.split('#').next().unwrap_or("")) {
-            return Err(Error::InvalidArgument(format!("--set {kv}: unknown solver `{solver}`")));
-        }
+        registry::get(solver.split('#').next().unwrap_or("")).map_err(|e| Error::InvalidArgument(format!("--set {kv}: {e}")))?;
         if solver == name {
             map.insert(key.to_string(), serde_json::from_str(v).unwrap_or_else(|_| json!(v)));
         }
@@ -128,8 +133,10 @@ pub fn run(args: CompareArgs) -> Result<()> {
             if spp.parse::<u32>().map_or(true, |v| v == 0) {
                 return Err(Error::InvalidArgument(format!("`{n}`: expected reference@SPP with SPP > 0")));
             }
-        } else if !solvers::SOLVER_NAMES.contains(&base_name) || n.contains('@') || (n.contains('#') && base_name == "reference") {
-            return Err(Error::InvalidArgument(format!("unknown solver `{n}` (known: {})", solvers::SOLVER_NAMES.join(", "))));
+        } else if n.contains('@') || (n.contains('#') && base_name == "reference") {
+            return Err(Error::InvalidArgument(format!("`{n}`: only reference@SPP and NAME#LABEL (NAME not reference) are variants")));
+        } else {
+            registry::get(base_name)?;
         }
     }
     // The frame every scattering grid is compared on.
@@ -148,6 +155,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
             settings.insert("seed".into(), json!(1000 + index as u64));
         }
         let mut phases = Timings::default();
+        let mut device = volscatter_gpu::DeviceUsed::Cpu;
         let (image, grid, image_seconds, grid_seconds) = if sweep_spp.is_some() {
             let r = Reference::from_settings(&settings)?;
             let t = Instant::now();
@@ -170,13 +178,23 @@ pub fn run(args: CompareArgs) -> Result<()> {
             };
             (image, grid, image_seconds, grid_seconds)
         } else {
-            let solver = solvers::by_name(solver_name, &settings)?;
             let t = Instant::now();
-            let out = solver.solve(&scene, &progress)?;
+            let (out, used) = volscatter_gpu::solve(args.device, &scene, solver_name, &settings, &progress)?;
+            device = used;
             let grid_seconds = t.elapsed().as_secs_f64();
             phases.0.extend(out.timings.0);
             let t = Instant::now();
-            let image = phases.time("composite", || compositor::composite(&scene, &out.scattering, &CompositeOptions::default()))?;
+            let opts = CompositeOptions::default();
+            let (image, _) = phases
+                .time("composite", || {
+                    volscatter_gpu::run_on(
+                        args.device,
+                        |ctx| volscatter_gpu::composite::composite(ctx, &scene, &out.scattering, &opts).map(Ok),
+                        || compositor::composite(&scene, &out.scattering, &opts),
+                    )
+                })
+                .map_err(Error::from)?;
+            let image = image?;
             let composite_seconds = t.elapsed().as_secs_f64();
             (image, Some(out.scattering), grid_seconds + composite_seconds, grid_seconds)
         };
@@ -185,7 +203,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             volscatter_core::io::exr::write_image(&dir.join(format!("{name}.exr")), &image)?;
         }
-        runs.push(Run { name: name.clone(), image, grid, image_seconds, grid_seconds, phases, settings });
+        runs.push(Run { name: name.clone(), image, grid, image_seconds, grid_seconds, phases, settings, device: device.to_string() });
     }
     let base = names.iter().position(|n| n == "reference").unwrap_or(names.len() - 1);
     let base_rgb: Vec<glam::Vec3> = runs[base].image.rgba.iter().map(|p| p.truncate()).collect();
@@ -218,6 +236,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
         rows.push(json!({
             "solver": r.name,
             "settings": r.settings,
+            "device": r.device,
             "image_relative_rmse": img_err,
             "scattered_relative_rmse": scat_err,
             "grid_relative_rmse": grid_err,

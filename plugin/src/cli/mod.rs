@@ -4,6 +4,7 @@ mod compare;
 mod gpu_info;
 mod progress;
 mod render;
+mod solvers;
 mod vdb_info;
 
 use clap::{Parser, Subcommand};
@@ -21,7 +22,10 @@ enum Command {
     Render(render::RenderArgs),
     /// Render a scene with several solvers and print relative RMSE against the first.
     Compare(compare::CompareArgs),
-    /// Describe the GPU adapter volscatter would use; exit code 1 when there is none.
+    /// List the solvers with their settings, lights and presets, as JSON.
+    Solvers,
+    /// Describe the GPU adapter volscatter would use (and whether it is a software one, which
+    /// `--device auto` leaves for the CPU); exit code 1 when there is none.
     GpuInfo,
     /// Print the grids of an OpenVDB file as JSON.
     VdbInfo(vdb_info::VdbInfoArgs),
@@ -33,6 +37,7 @@ pub fn main() -> i32 {
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Solvers => solvers::run(),
         Command::GpuInfo => gpu_info::run(),
         Command::VdbInfo(args) => vdb_info::run(args),
     };

@@ -6,14 +6,15 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::progress::StderrProgress;
-use volscatter_core::solvers::{reference::Reference, Timings};
+use volscatter_core::solvers::{reference::Reference, registry, Timings};
 use volscatter_core::{compositor, io, Error, Result, Scene};
 
 #[derive(Args)]
 pub struct RenderArgs {
     /// Scene JSON (docs/scene-format.md). Without it: the embedded default scene.
     pub scene: Option<PathBuf>,
-    /// Solver: reference (path-traced image) or a scattering solver composited by ray marching.
+    /// Solver (`volscatter solvers` lists them): reference (path-traced image) or a scattering
+    /// solver composited by ray marching.
     #[arg(long)]
     pub solver: Option<String>,
     #[arg(long, default_value = "out/render.exr")]
@@ -88,6 +89,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => Ok(Scene::default_scene()),
     })?;
     let name = args.solver.clone().or_else(|| scene.solver_name().map(String::from)).unwrap_or_else(|| "reference".into());
+    // Unknown names are refused before anything runs, with the registry's list.
+    registry::get(&name)?;
     let settings = solver_settings(&scene, &name, &args)?;
     let progress = StderrProgress::new(args.quiet);
     let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
@@ -110,7 +113,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 || compositor::composite(&scene, &out.scattering, &opts),
             )
         })
-        .map_err(|e| Error::InvalidArgument(format!("--device gpu: {e}")))?;
+        .map_err(Error::from)?;
         device_used = used;
         img?
     };

@@ -13,6 +13,8 @@ pub mod progress;
 pub mod scene;
 pub mod result;
 pub mod image;
+// The solver registry (issue 14).
+pub mod solvers;
 pub mod guard;
 mod grid_exr;
 mod handle;

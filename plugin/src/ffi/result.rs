@@ -198,7 +198,7 @@ pub unsafe extern "C" fn vs_result_composite(result: *const VsResult, flags: u32
             |ctx| volscatter_gpu::composite::composite(ctx, &r.scene, &r.grid, &opts).map(Ok),
             || compositor::composite(&r.scene, &r.grid, &opts),
         )
-        .map_err(|e| FfiError::new(VsStatus::Unsupported, format!("device GPU: {e}")))?;
+        .map_err(|e| FfiError::from(volscatter_core::Error::from(e)))?;
         let image = image?;
         write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
     })

@@ -483,11 +483,13 @@ pub unsafe extern "C" fn vs_scene_set_camera(
 }
 
 /// Chooses where GPU-capable stages run for this scene and the results solved from it:
-/// `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: fail with `VS_STATUS_UNSUPPORTED` when
-/// no GPU adapter works) or `VS_DEVICE_AUTO` (2: a GPU adapter when one works, else the CPU).
-/// A GPU that is lost or runs out of memory mid-way falls back to the CPU under AUTO. On the
-/// GPU run: pop's propagation (`vs_scene_solve`) and the compositor (`vs_result_composite`).
-/// Other values are refused.
+/// `VS_DEVICE_CPU` (0, the default), `VS_DEVICE_GPU` (1: any adapter, a software one such as
+/// Mesa's lavapipe included; fail with `VS_STATUS_DEVICE` when none works) or `VS_DEVICE_AUTO`
+/// (2: a hardware GPU adapter when one works, else the CPU; never a software adapter, which is
+/// slower than the CPU solvers). A GPU that is lost or runs out of memory mid-way falls back to
+/// the CPU under AUTO. On the GPU run: the stages of solvers with a GPU backend (the "gpu" flag
+/// of `vs_solvers_json`; today pop's propagation, `vs_scene_solve`) and the compositor
+/// (`vs_result_composite`). Other values are refused.
 ///
 /// Thread safety: any thread; calls on one scene are serialised.
 #[no_mangle]
@@ -552,10 +554,8 @@ pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgres
         };
         let name = snapshot.solver_name().unwrap_or("reference").to_string();
         let progress = CProgress::new(progress, user);
-        let (output, _used) = volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress).map_err(|e| match (device, e) {
-            (DeviceChoice::Gpu, volscatter_core::Error::InvalidArgument(m)) if m.starts_with("GPU") => FfiError::new(VsStatus::Unsupported, m),
-            (_, e) => e.into(),
-        })?;
+        // A GPU failure is `Error::Device`, hence VS_STATUS_DEVICE (under AUTO it ran on the CPU).
+        let (output, _used) = volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress)?;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }

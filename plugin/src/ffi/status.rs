@@ -38,10 +38,14 @@ pub enum VsStatus {
     Cancelled = 10,
     /// A bug in volscatter (a caught panic). The handle stays usable; please report the message.
     Internal = 11,
+    /// The GPU asked for with `VS_DEVICE_GPU` failed: no adapter, a device request refused, out
+    /// of device memory, a lost device. Under `VS_DEVICE_AUTO` such failures run on the CPU
+    /// instead and are not reported. Retrying with `VS_DEVICE_CPU` works.
+    Device = 12,
 }
 
 impl VsStatus {
-    pub(crate) const ALL: [VsStatus; 12] = [
+    pub(crate) const ALL: [VsStatus; 13] = [
         VsStatus::Ok,
         VsStatus::NullArgument,
         VsStatus::InvalidArgument,
@@ -54,6 +58,7 @@ impl VsStatus {
         VsStatus::Unsupported,
         VsStatus::Cancelled,
         VsStatus::Internal,
+        VsStatus::Device,
     ];
 
     /// Converts a C integer, never by transmute: unknown values give `None`.
@@ -76,6 +81,7 @@ impl VsStatus {
             VsStatus::Unsupported => c"not supported by this build",
             VsStatus::Cancelled => c"cancelled",
             VsStatus::Internal => c"internal error",
+            VsStatus::Device => c"the GPU device failed (no adapter, out of memory, or lost)",
         }
     }
 }
@@ -116,6 +122,7 @@ impl From<Error> for FfiError {
             Error::TooLarge(_) => VsStatus::TooLarge,
             Error::InvalidArgument(_) => VsStatus::InvalidArgument,
             Error::Cancelled => VsStatus::Cancelled,
+            Error::Device(_) => VsStatus::Device,
         };
         FfiError { status, message: e.to_string() }
     }

@@ -23,9 +23,10 @@ use volscatter_core::solvers::pop::{PopSettings, PropagationStats};
 use volscatter_core::solvers::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result};
 
-/// A GPU failure as a solver error; `solve` falls back to the CPU on it under `auto`.
+/// A GPU failure as a solver error (`Error::Device`); `solve` falls back to the CPU on it
+/// under `auto`.
 pub fn gpu_error(e: GpuError) -> Error {
-    Error::InvalidArgument(format!("GPU: {e}"))
+    e.into()
 }
 
 /// One per solve (as `Pop::solve_with` is called): it holds that solve's density mip.
@@ -58,7 +59,7 @@ impl<'a> GpuBackend<'a> {
     }
 
     fn mip(&self, mip: &MediumMip) -> Result<Arc<GpuMip>> {
-        let mut slot = self.mip.lock().map_err(|_| Error::InvalidArgument("GPU: mip lock poisoned".into()))?;
+        let mut slot = self.mip.lock().map_err(|_| Error::Device("mip lock poisoned".into()))?;
         let key = mip as *const MediumMip as usize;
         if let Some((k, m)) = slot.as_ref() {
             if *k == key {

@@ -1,0 +1,359 @@
+//! The one table of solvers: for each its name, one line of help, its settings (type, range,
+//! help; the defaults are read from the settings struct's `Default`, so they cannot drift), the
+//! light types it handles, the hosts' quality presets, its CPU constructor and whether a GPU
+//! backend exists (volscatter-gpu dispatches on that flag). The CLI (`volscatter solvers`,
+//! `render`, `compare`), the C ABI (`vs_solvers_json`) and the hosts (Blender add-on, USD) read
+//! it, in Rust or as the JSON of `to_json`.
+//!
+//! Adding a solver is one `SolverEntry` in `SOLVERS`; the tests below check its settings table
+//! against its struct (keys, types, defaults, every range check of `validate()`) and its presets
+//! against its constructor.
+
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use super::{pop, reference, Solver};
+use crate::error::{Error, Result};
+
+/// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
+/// named as there so that hosts can compare their exported scenes with a solver's list.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightType {
+    Distant,
+    /// A point light, or a sphere light when its `radius` > 0.
+    Point,
+    Spot,
+    Rect,
+    Disk,
+    Dome,
+    /// The medium's own emission (`medium.emission`).
+    Emission,
+}
+
+impl LightType {
+    pub const ALL: [LightType; 7] =
+        [LightType::Distant, LightType::Point, LightType::Spot, LightType::Rect, LightType::Disk, LightType::Dome, LightType::Emission];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            LightType::Distant => "distant",
+            LightType::Point => "point",
+            LightType::Spot => "spot",
+            LightType::Rect => "rect",
+            LightType::Disk => "disk",
+            LightType::Dome => "dome",
+            LightType::Emission => "emission",
+        }
+    }
+
+    pub fn help(self) -> &'static str {
+        match self {
+            LightType::Distant => "distant light (sun), optionally with an angular diameter",
+            LightType::Point => "point light, or sphere light with a radius",
+            LightType::Spot => "spot light (point or sphere with a cone)",
+            LightType::Rect => "one-sided rectangle of uniform radiance",
+            LightType::Disk => "one-sided disc of uniform radiance",
+            LightType::Dome => "environment: uniform colour or lat-long texture",
+            LightType::Emission => "emissive medium (medium.emission)",
+        }
+    }
+}
+
+/// The JSON type of a setting's value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SettingType {
+    /// A non-negative integer.
+    Int,
+    Float,
+    Bool,
+    /// One string of `choices`.
+    Choice,
+}
+
+/// The values `validate()` accepts: [min, max], each end open when marked exclusive, an end
+/// absent when unbounded (an `Int` is never below 0).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Range {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
+    #[serde(skip_serializing_if = "is_false")]
+    pub min_exclusive: bool,
+    #[serde(skip_serializing_if = "is_false")]
+    pub max_exclusive: bool,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+impl Range {
+    /// [min, max], both ends included.
+    pub const fn closed(min: f64, max: f64) -> Range {
+        Range { min: Some(min), max: Some(max), min_exclusive: false, max_exclusive: false }
+    }
+
+    /// Whether `v` lies in the range.
+    pub fn contains(&self, v: f64) -> bool {
+        let above = match self.min {
+            Some(m) if self.min_exclusive => v > m,
+            Some(m) => v >= m,
+            None => true,
+        };
+        let below = match self.max {
+            Some(m) if self.max_exclusive => v < m,
+            Some(m) => v <= m,
+            None => true,
+        };
+        above && below
+    }
+}
+
+/// One setting of a solver, as the `solver` block of the scene JSON and `--set` name it.
+#[derive(Clone, Copy, Debug)]
+pub struct SettingSpec {
+    pub name: &'static str,
+    pub kind: SettingType,
+    pub range: Option<Range>,
+    /// When 0 is accepted outside `range` and stands for a value derived from other settings:
+    /// what it stands for.
+    pub zero: Option<&'static str>,
+    /// For `Choice`: the accepted strings.
+    pub choices: &'static [&'static str],
+    pub help: &'static str,
+}
+
+impl SettingSpec {
+    const fn new(name: &'static str, kind: SettingType, help: &'static str) -> Self {
+        SettingSpec { name, kind, range: None, zero: None, choices: &[], help }
+    }
+    const fn range(mut self, min: f64, max: f64) -> Self {
+        self.range = Some(Range::closed(min, max));
+        self
+    }
+    const fn open_range(mut self, range: Range) -> Self {
+        self.range = Some(range);
+        self
+    }
+    const fn zero(mut self, means: &'static str) -> Self {
+        self.zero = Some(means);
+        self
+    }
+    const fn int(name: &'static str, help: &'static str) -> Self {
+        SettingSpec::new(name, SettingType::Int, help)
+    }
+    const fn float(name: &'static str, help: &'static str) -> Self {
+        SettingSpec::new(name, SettingType::Float, help)
+    }
+    const fn bool(name: &'static str, help: &'static str) -> Self {
+        SettingSpec::new(name, SettingType::Bool, help)
+    }
+}
+
+/// Named settings a host offers as one choice (the Blender add-on's Quality menu). Values not
+/// named keep the solver's defaults.
+#[derive(Clone, Copy, Debug)]
+pub struct Preset {
+    pub name: &'static str,
+    pub help: &'static str,
+    /// A JSON object of settings (checked against the constructor by a test).
+    pub settings_json: &'static str,
+}
+
+impl Preset {
+    pub fn settings(&self) -> Map<String, Value> {
+        match serde_json::from_str(self.settings_json) {
+            Ok(Value::Object(m)) => m,
+            // The registry's own tests parse every preset: unreachable in a tested build.
+            _ => Map::new(),
+        }
+    }
+}
+
+/// One solver.
+#[derive(Clone, Copy)]
+pub struct SolverEntry {
+    pub name: &'static str,
+    /// The name in hosts' menus.
+    pub label: &'static str,
+    pub help: &'static str,
+    pub settings: &'static [SettingSpec],
+    /// The settings struct's `Default`, serialised (the defaults the registry reports).
+    pub defaults: fn() -> Value,
+    pub lights: &'static [LightType],
+    pub presets: &'static [Preset],
+    /// Builds the CPU solver from a `solver` settings block (validated; unknown keys refused).
+    pub cpu: fn(&Map<String, Value>) -> Result<Box<dyn Solver>>,
+    /// Whether volscatter-gpu has a backend for it (its dispatch table is tested against this).
+    pub gpu: bool,
+}
+
+impl SolverEntry {
+    pub fn handles(&self, light: LightType) -> bool {
+        self.lights.contains(&light)
+    }
+
+    pub fn preset(&self, name: &str) -> Option<&'static Preset> {
+        self.presets.iter().find(|p| p.name == name)
+    }
+
+    /// The JSON form: name, label, help, gpu, lights, settings (with defaults), presets.
+    pub fn to_json(&self) -> Value {
+        let defaults = (self.defaults)();
+        let settings: Vec<Value> = self
+            .settings
+            .iter()
+            .map(|s| {
+                let mut m = Map::new();
+                m.insert("name".into(), s.name.into());
+                m.insert("type".into(), serde_json::to_value(s.kind).unwrap_or(Value::Null));
+                m.insert("default".into(), defaults.get(s.name).cloned().unwrap_or(Value::Null));
+                if let Some(r) = s.range {
+                    m.insert("range".into(), serde_json::to_value(r).unwrap_or(Value::Null));
+                }
+                if let Some(z) = s.zero {
+                    m.insert("zero".into(), z.into());
+                }
+                if !s.choices.is_empty() {
+                    m.insert("choices".into(), s.choices.into());
+                }
+                m.insert("help".into(), s.help.into());
+                Value::Object(m)
+            })
+            .collect();
+        let presets: Vec<Value> =
+            self.presets.iter().map(|p| serde_json::json!({"name": p.name, "help": p.help, "settings": p.settings()})).collect();
+        serde_json::json!({
+            "name": self.name,
+            "label": self.label,
+            "help": self.help,
+            "gpu": self.gpu,
+            "lights": self.lights,
+            "settings": settings,
+            "presets": presets,
+        })
+    }
+}
+
+/// The hosts' quality presets (the Blender add-on's Draft / Preview / Final).
+const DRAFT: &str = "coarse grids, few iterations or samples";
+const PREVIEW: &str = "the interactive default";
+const FINAL: &str = "fine grids, many iterations or samples";
+
+const REFERENCE: SolverEntry = SolverEntry {
+    name: "reference",
+    label: "Reference",
+    help: "unbiased volumetric path tracer (slow, the ground truth)",
+    settings: &[
+        SettingSpec::int("spp", "samples per pixel for images").range(1.0, (1u32 << 20) as f64),
+        SettingSpec::int("seed", "random seed (deterministic for a seed, any thread count)"),
+        SettingSpec::int("max_depth", "most scattering events on a path"),
+        SettingSpec::int("rr_depth", "scattering events before Russian roulette starts"),
+        SettingSpec::bool("transparent", "leave the environment seen directly through the medium out of the image"),
+        SettingSpec::int("grid_resolution", "largest side of the scattering grid").range(2.0, 1024.0),
+        SettingSpec::int("grid_spp", "paths per scattering-grid point").range(1.0, (1u32 << 20) as f64),
+        SettingSpec::int("majorant_resolution", "cells per axis of the majorant grid used for free-flight sampling").range(1.0, 512.0),
+    ],
+    defaults: || serde_json::to_value(reference::ReferenceSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"grid_resolution": 16, "grid_spp": 16}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "grid_spp": 64}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "grid_spp": 256}"# },
+    ],
+    cpu: |m| Ok(Box::new(reference::Reference::from_settings(m)?)),
+    gpu: false,
+};
+
+const POP: SolverEntry = SolverEntry {
+    name: "pop",
+    label: "Principal Ordinates",
+    help: "principal-ordinates propagation (paper 01): fast, grids aligned with each light",
+    settings: &[
+        SettingSpec::int("grid_resolution", "cells along the longest side of each light's propagation grid").range(2.0, 512.0),
+        SettingSpec::int("max_iterations", "cap on propagation iterations per light").range(1.0, 100_000.0),
+        SettingSpec::float("residual_threshold", "stop when the travelling energy falls below this fraction of the scattered")
+            .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: false, max_exclusive: true }),
+        SettingSpec::int("merge_resolution", "largest side of the medium-aligned grid the lights are merged into")
+            .range(2.0, 1024.0)
+            .zero("twice grid_resolution"),
+        SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
+        SettingSpec::bool("upsample", "joint bilateral upsampling guided by the density (off: trilinear)"),
+        SettingSpec::float("range_sigma", "range sigma of the bilateral filter, a fraction of the largest density")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }),
+        SettingSpec::float("spatial_sigma", "spatial sigma of the bilateral filter, in merged-grid cells")
+            .open_range(Range { min: Some(0.0), max: Some(4.0), min_exclusive: true, max_exclusive: false }),
+        SettingSpec::bool("diffusion_correction", "match the lattice's diffusion to the physical one where light is isotropic"),
+        SettingSpec::bool("vacuum_escape", "isotropic light leaving the medium escapes instead of random-walking back"),
+        SettingSpec::int("dome_ordinates", "distant ordinates a dome is approximated by (0: the dome is left out)").range(0.0, 1024.0),
+        SettingSpec::int("dome_grid_resolution", "propagation grid resolution of each dome ordinate")
+            .range(2.0, 512.0)
+            .zero("half of grid_resolution, at least 8"),
+        SettingSpec::bool("dome_importance", "place the dome's ordinates by how much of their light reaches the camera"),
+        SettingSpec::bool("isotropic_residuum", "finish nearly isotropic light in one shared isotropic grid"),
+        SettingSpec::float("residuum_anisotropy", "anisotropy below which light counts as isotropic")
+            .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
+        SettingSpec::int("residuum_iterations", "iterations per light before the residuum takes over").zero("Eq. 10 per light"),
+        SettingSpec::int("residuum_grid_resolution", "cells along the longest side of the residuum grid")
+            .range(2.0, 512.0)
+            .zero("dome_grid_resolution"),
+        SettingSpec::int("radial_resolution", "angular cells per side of each local light's octahedral grid (even)")
+            .range(4.0, 256.0)
+            .zero("grid_resolution"),
+        SettingSpec::int("radial_max_shells", "most shells per radial grid").range(1.0, 1024.0),
+        SettingSpec::int("area_vpls", "an area light becomes area_vpls x area_vpls VPLs").range(1.0, 16.0),
+        SettingSpec::int("emission_vpls", "VPLs an emissive medium becomes").range(1.0, 256.0),
+        SettingSpec::bool("radial_vacuum_escape", "vacuum_escape for the local lights' radial grids"),
+    ],
+    defaults: || serde_json::to_value(pop::PopSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"grid_resolution": 16, "max_iterations": 100, "output_resolution": 64}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "max_iterations": 400, "output_resolution": 128}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "max_iterations": 1000, "output_resolution": 256}"# },
+    ],
+    cpu: |m| Ok(Box::new(pop::Pop::from_settings(m)?)),
+    gpu: true,
+};
+
+/// Every solver, in menu order (the first is the hosts' default).
+pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP];
+
+/// The solvers' names, in `SOLVERS` order.
+pub const SOLVER_NAMES: &[&str] = &names::<{ SOLVERS.len() }>();
+
+const fn names<const N: usize>() -> [&'static str; N] {
+    let mut out = [""; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = SOLVERS[i].name;
+        i += 1;
+    }
+    out
+}
+
+/// The entry of solver `name`, or an error listing the known ones.
+pub fn get(name: &str) -> Result<&'static SolverEntry> {
+    SOLVERS
+        .iter()
+        .find(|s| s.name == name)
+        .ok_or_else(|| Error::InvalidArgument(format!("unknown solver `{name}` (known: {})", SOLVER_NAMES.join(", "))))
+}
+
+/// The registry as JSON: `{"format": 1, "solvers": [...], "light_types": [...]}` (the form of
+/// `volscatter solvers` and `vs_solvers_json`, documented in docs/solvers.md).
+pub fn to_json() -> Value {
+    let lights: Vec<Value> = LightType::ALL.iter().map(|l| serde_json::json!({"name": l.name(), "help": l.help()})).collect();
+    serde_json::json!({
+        "format": 1,
+        "solvers": SOLVERS.iter().map(SolverEntry::to_json).collect::<Vec<_>>(),
+        "light_types": lights,
+    })
+}
+
+#[cfg(test)]
+#[path = "registry_tests.rs"]
+mod tests;

@@ -1,0 +1,163 @@
+//! The registry against the settings structs and constructors it describes: a table that
+//! drifted from a struct (a key added, a default or a range changed in `validate()` only)
+//! fails here.
+
+use super::*;
+
+fn defaults_of(entry: &SolverEntry) -> Map<String, Value> {
+    match (entry.defaults)() {
+        Value::Object(m) => m,
+        other => panic!("{}: defaults are not an object: {other}", entry.name),
+    }
+}
+
+/// The defaults with `key` set to `value`, through the entry's constructor (parse + validate).
+fn accepts(entry: &SolverEntry, key: &str, value: Value) -> bool {
+    let mut m = defaults_of(entry);
+    m.insert(key.into(), value.clone());
+    match (entry.cpu)(&m) {
+        Ok(_) => true,
+        Err(Error::Scene { field, .. }) => {
+            // A refusal must name the setting it refuses, not another one.
+            assert_eq!(field, format!("solver.{key}"), "{}: {key} = {value} refused for another field", entry.name);
+            false
+        }
+        Err(e) => panic!("{}: {key} = {value}: unexpected error {e}", entry.name),
+    }
+}
+
+fn number(kind: SettingType, v: f64) -> Value {
+    match kind {
+        SettingType::Int => Value::from(v as u64),
+        _ => Value::from(v),
+    }
+}
+
+#[test]
+fn settings_tables_name_every_field_of_their_struct_with_its_type() {
+    for entry in SOLVERS {
+        let defaults = defaults_of(entry);
+        let mut table: Vec<&str> = entry.settings.iter().map(|s| s.name).collect();
+        let mut fields: Vec<&str> = defaults.keys().map(String::as_str).collect();
+        table.sort_unstable();
+        fields.sort_unstable();
+        assert_eq!(table, fields, "{}: registry settings and the settings struct's fields differ", entry.name);
+        for s in entry.settings {
+            let d = &defaults[s.name];
+            let type_ok = match s.kind {
+                SettingType::Int => d.is_u64(),
+                SettingType::Float => d.is_f64(),
+                SettingType::Bool => d.is_boolean(),
+                SettingType::Choice => d.as_str().is_some_and(|v| s.choices.contains(&v)),
+            };
+            assert!(type_ok, "{}.{}: default {d} is not of type {:?}", entry.name, s.name, s.kind);
+            assert!(!s.help.is_empty() && !s.help.contains('\n'), "{}.{}: help must be one line", entry.name, s.name);
+        }
+        // The defaults themselves build a solver.
+        (entry.cpu)(&defaults).unwrap_or_else(|e| panic!("{}: defaults refused: {e}", entry.name));
+    }
+}
+
+/// Every range in the table is the one `validate()` applies: both ends (and 0 where it stands
+/// for a derived value) are accepted, the first values outside refused. Settings without a
+/// range accept 0 and a large value: a check in `validate()` the table lacks fails here.
+#[test]
+fn ranges_match_validate() {
+    for entry in SOLVERS {
+        for s in entry.settings {
+            let what = format!("{}.{}", entry.name, s.name);
+            match (s.kind, s.range) {
+                (SettingType::Bool, _) => {
+                    assert!(accepts(entry, s.name, Value::Bool(false)) && accepts(entry, s.name, Value::Bool(true)), "{what}");
+                }
+                (SettingType::Choice, _) => {
+                    for c in s.choices {
+                        assert!(accepts(entry, s.name, Value::from(*c)), "{what}: choice {c} refused");
+                    }
+                    assert!(!accepts(entry, s.name, Value::from("no such choice")), "{what}");
+                }
+                (kind, None) => {
+                    let big = if kind == SettingType::Int { u32::MAX as f64 } else { 1e30 };
+                    for v in [0.0, 1.0, big] {
+                        assert!(accepts(entry, s.name, number(kind, v)), "{what}: {v} refused but the table has no range");
+                    }
+                }
+                (kind, Some(r)) => {
+                    // The step to the first value outside: 1 for integers, a relative 1e-3
+                    // for floats (far above f32 rounding, far below any range's width).
+                    let step = |v: f64| if kind == SettingType::Int { 1.0 } else { (v.abs() * 1e-3).max(1e-6) };
+                    if let Some(min) = r.min {
+                        let inside = if r.min_exclusive { min + step(min) } else { min };
+                        assert!(accepts(entry, s.name, number(kind, inside)), "{what}: {inside} (lower end) refused");
+                        let outside = if r.min_exclusive { min } else { min - step(min) };
+                        let zero_allowed = s.zero.is_some() && outside == 0.0;
+                        if outside >= 0.0 || kind == SettingType::Float {
+                            assert_eq!(accepts(entry, s.name, number(kind, outside)), zero_allowed, "{what}: {outside} (below the range)");
+                        }
+                    }
+                    if let Some(max) = r.max {
+                        let inside = if r.max_exclusive { max - step(max) } else { max };
+                        assert!(accepts(entry, s.name, number(kind, inside)), "{what}: {inside} (upper end) refused");
+                        let outside = if r.max_exclusive { max } else { max + step(max) };
+                        assert!(!accepts(entry, s.name, number(kind, outside)), "{what}: {outside} (above the range) accepted");
+                    } else {
+                        assert!(accepts(entry, s.name, number(kind, 1e30)), "{what}: unbounded above, yet 1e30 refused");
+                    }
+                    if s.zero.is_some() {
+                        assert!(accepts(entry, s.name, number(kind, 0.0)), "{what}: 0 ({}) refused", s.zero.unwrap());
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn presets_build_their_solver_and_name_only_its_settings() {
+    for entry in SOLVERS {
+        assert!(!entry.presets.is_empty(), "{}: no presets", entry.name);
+        for p in entry.presets {
+            let parsed: Value = serde_json::from_str(p.settings_json).unwrap_or_else(|e| panic!("{}/{}: {e}", entry.name, p.name));
+            assert!(parsed.is_object() && !p.settings().is_empty(), "{}/{}: not a settings object", entry.name, p.name);
+            (entry.cpu)(&p.settings()).unwrap_or_else(|e| panic!("{}/{}: refused: {e}", entry.name, p.name));
+        }
+    }
+    // The hosts offer one Quality menu for every solver: the same preset names everywhere.
+    let names = |e: &SolverEntry| e.presets.iter().map(|p| p.name).collect::<Vec<_>>();
+    for e in SOLVERS {
+        assert_eq!(names(e), names(&SOLVERS[0]), "{}: preset names differ from {}", e.name, SOLVERS[0].name);
+    }
+}
+
+#[test]
+fn names_lookup_and_json_form() {
+    assert_eq!(SOLVER_NAMES, SOLVERS.iter().map(|s| s.name).collect::<Vec<_>>().as_slice());
+    assert_eq!(SOLVER_NAMES[..2], ["reference", "pop"]);
+    assert_eq!(get("pop").unwrap().name, "pop");
+    let e = get("pops").err().expect("unknown name accepted").to_string();
+    assert!(e.contains("pops") && e.contains("reference, pop"), "{e}");
+    assert!(super::super::by_name("nope", &Map::new()).is_err());
+    let j = to_json();
+    assert_eq!(j["format"], 1);
+    let pop = j["solvers"].as_array().unwrap().iter().find(|s| s["name"] == "pop").expect("pop listed");
+    assert_eq!(pop["gpu"], true);
+    assert_eq!(pop["lights"], serde_json::json!(["distant", "point", "spot", "rect", "disk", "dome", "emission"]));
+    let grid = pop["settings"].as_array().unwrap().iter().find(|s| s["name"] == "grid_resolution").unwrap();
+    assert_eq!(grid["default"], 32);
+    assert_eq!(grid["type"], "int");
+    assert_eq!(grid["range"], serde_json::json!({"min": 2.0, "max": 512.0}));
+    let merge = pop["settings"].as_array().unwrap().iter().find(|s| s["name"] == "merge_resolution").unwrap();
+    assert_eq!(merge["zero"], "twice grid_resolution");
+    assert_eq!(pop["presets"][2]["settings"]["max_iterations"], 1000);
+    let types: Vec<&str> = j["light_types"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(types, LightType::ALL.map(LightType::name));
+    // The serde names of LightType are the scene JSON's names.
+    assert_eq!(serde_json::to_value(LightType::ALL).unwrap(), serde_json::json!(types));
+}
+
+#[test]
+fn range_contains_respects_open_ends() {
+    let r = Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: false };
+    assert!(!r.contains(0.0) && r.contains(1e-9) && r.contains(1.0) && !r.contains(1.0 + 1e-9));
+    assert!(Range::closed(2.0, 4.0).contains(2.0) && !Range::closed(2.0, 4.0).contains(4.5));
+}
