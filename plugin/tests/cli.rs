@@ -96,3 +96,54 @@ fn bad_scenes_fail_cleanly_naming_the_field() {
     let o = bin().args(["render", "/nonexistent/scene.json", "-q"]).output().unwrap();
     assert_clean_failure(&o, "/nonexistent/scene.json");
 }
+
+/// `volscatter solvers` prints the registry, exactly the document of `registry::to_json` (and
+/// of `vs_solvers_json`).
+#[test]
+fn solvers_prints_the_registry_as_json() {
+    let o = bin().arg("solvers").output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is JSON");
+    assert_eq!(doc, volscatter_core::solvers::registry::to_json());
+    let names: Vec<&str> = doc["solvers"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["reference", "pop"]);
+}
+
+/// `compare --device`: pop solves (and composites) on the device asked for, recorded per run in
+/// the JSON. No adapter is visible with WGPU_BACKEND=metal (none on Linux): `gpu` is then a
+/// device error (exit 1), `auto` runs on the CPU. Unknown solvers are refused with the
+/// registry's list.
+#[test]
+fn compare_runs_on_the_device_asked_for() {
+    if cfg!(target_os = "macos") {
+        println!("SKIPPED: Metal exists on macOS, so WGPU_BACKEND=metal does not hide the adapter");
+        return;
+    }
+    let dir = tmp("compare-device");
+    let scene = dir.join("scene.json");
+    std::fs::write(&scene, serde_json::to_string(&small_scene()).unwrap()).unwrap();
+    let compare = |device: &str, solvers: &str| {
+        let json = dir.join(format!("{device}.json"));
+        let o = bin()
+            .env("WGPU_BACKEND", "metal")
+            .args(["compare", "--solvers", solvers, "--no-grid", "-q", "--width", "8", "--height", "6", "--device", device])
+            .args(["--set", "pop.grid_resolution=8", "--set", "pop.max_iterations=20", "--set", "pop.output_resolution=16"])
+            .arg("--json")
+            .arg(&json)
+            .arg(&scene)
+            .output()
+            .unwrap();
+        (o, json)
+    };
+    for device in ["cpu", "auto"] {
+        let (o, json) = compare(device, "pop,reference@1");
+        assert!(o.status.success(), "--device {device}: {}", stderr(&o));
+        let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        assert_eq!(doc["runs"][0]["solver"], "pop");
+        assert_eq!(doc["runs"][0]["device"], "cpu", "--device {device} without an adapter");
+    }
+    let (o, _) = compare("gpu", "pop,reference@1");
+    assert_clean_failure(&o, "device: no GPU adapter");
+    let (o, _) = compare("cpu", "popp,reference@1");
+    assert_clean_failure(&o, "unknown solver `popp` (known: reference, pop)");
+}

@@ -173,6 +173,9 @@ impl Preset {
     }
 }
 
+/// Builds a CPU solver from a `solver` settings block.
+pub type CpuConstructor = fn(&Map<String, Value>) -> Result<Box<dyn Solver>>;
+
 /// One solver.
 #[derive(Clone, Copy)]
 pub struct SolverEntry {
@@ -186,7 +189,7 @@ pub struct SolverEntry {
     pub lights: &'static [LightType],
     pub presets: &'static [Preset],
     /// Builds the CPU solver from a `solver` settings block (validated; unknown keys refused).
-    pub cpu: fn(&Map<String, Value>) -> Result<Box<dyn Solver>>,
+    pub cpu: CpuConstructor,
     /// Whether volscatter-gpu has a backend for it (its dispatch table is tested against this).
     pub gpu: bool,
 }
