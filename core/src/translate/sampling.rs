@@ -218,11 +218,12 @@ fn cone_profile(s: &Spot) -> Profile {
 }
 
 /// A direction with density proportional to the spot's falloff smoothstep(cos_outer,
-/// cos_inner, cos theta): solid angle is uniform in cos theta, so the cap inside the inner cone
-/// (full intensity) is drawn with probability (1 - cos_inner) / ((1 - cos_inner) + (cos_inner
-/// - cos_outer) / 2), uniform in cos theta, and the blend band otherwise, with t = (cos theta -
-/// cos_outer) / (cos_inner - cos_outer) of density 2 smoothstep(t) = 6t^2 - 4t^3, CDF 2t^3 -
-/// t^4 (inverted by bisection; it is monotone). u[0] picks the part and then the angle.
+/// cos_inner, cos theta). Solid angle is uniform in cos theta, so: the cap inside the inner
+/// cone (full intensity) is drawn with probability cap / (cap + band / 2), where cap =
+/// 1 - cos_inner and band = cos_inner - cos_outer, uniform in cos theta; otherwise the blend
+/// band, where t = (cos theta - cos_outer) / band has density 2 smoothstep(t) = 6t^2 - 4t^3
+/// and CDF 2t^3 - t^4, inverted by bisection (it is monotone). u[0] picks the part and then
+/// the angle.
 fn sample_cone_profile(s: &Spot, u: [f32; 2]) -> Vec3 {
     let axis = s.axis.normalize();
     let cap = (1.0 - s.cos_inner).max(0.0);
