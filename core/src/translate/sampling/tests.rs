@@ -293,7 +293,8 @@ fn emission_rays() {
 
 /// Every kind at once: each light's tally (its rays' power summed, over all N rays) estimates
 /// its own power within 5 standard errors, the lights are drawn in proportion to their power
-/// (chi-square), and the same uniforms give the same ray.
+/// (chi-square), a spot with a radius starts its rays on its sphere, and the same uniforms give
+/// the same ray.
 #[test]
 fn lights_are_chosen_by_power() {
     let spot = Spot { position: Vec3::new(0.0, 0.0, 2.0), axis: -Vec3::Z, intensity: Vec3::splat(30.0), radius: 0.1, cos_outer: 0.8, cos_inner: 0.9 };
@@ -322,6 +323,8 @@ fn lights_are_chosen_by_power() {
     let probs: Vec<f64> = (0..kinds).map(|k| sampler.light_power(k).element_sum() as f64 / total).collect();
     let chi2 = chi_square(&counts, &probs);
     assert!(chi2 < chi_square_quantile_999(kinds - 1), "light choice: chi-square {chi2}");
+    // The spot has a radius: its rays leave its sphere along their direction.
+    assert!(rs.iter().filter(|x| x.light == 2).all(|x| ((x.origin - spot.position) - x.direction * spot.radius).length() < 1e-5));
     let u = [0.3, 0.1, 0.7, 0.2, 0.9, 0.4];
     assert_eq!(sampler.sample(u), sampler.sample(u));
     assert!(LightSampler::new(&scene_with(Vec::new())).is_empty());
