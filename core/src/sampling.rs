@@ -205,6 +205,28 @@ pub fn chi_square(counts: &[u64], probs: &[f64]) -> f64 {
         .sum()
 }
 
+/// `chi_square` after pooling the bins that expect fewer than `min_expected` samples into one
+/// (the statistic is only chi-square distributed when every bin expects a few): returns the
+/// statistic and its degrees of freedom (bins after pooling, minus one).
+pub fn chi_square_pooled(counts: &[u64], probs: &[f64], min_expected: f64) -> (f64, usize) {
+    let n: u64 = counts.iter().sum();
+    let (mut c, mut p, mut rest_c, mut rest_p) = (Vec::new(), Vec::new(), 0u64, 0.0f64);
+    for (&o, &q) in counts.iter().zip(probs) {
+        if q * n as f64 >= min_expected {
+            c.push(o);
+            p.push(q);
+        } else {
+            rest_c += o;
+            rest_p += q;
+        }
+    }
+    if rest_p > 0.0 || rest_c > 0 {
+        c.push(rest_c);
+        p.push(rest_p);
+    }
+    (chi_square(&c, &p), c.len().saturating_sub(1))
+}
+
 /// The 99.9% quantile of the chi-square distribution with `dof` degrees of freedom, by the
 /// Wilson-Hilferty approximation (within 1% of the tables for dof >= 10): a correct sampler
 /// fails a test at this bound once in a thousand seeds.
@@ -247,6 +269,18 @@ mod tests {
             let q = chi_square_quantile_999(dof);
             assert!((q / table - 1.0).abs() < 0.01, "{dof}: {q} vs {table}");
         }
+    }
+
+    /// Pooling: bins expecting fewer than 5 samples become one bin (here the last two, which
+    /// expect 2 each of 103), and the statistic is Pearson's over what is left (by hand: 3
+    /// bins, 2 dof).
+    #[test]
+    fn chi_square_pools_small_bins() {
+        let (chi2, dof) = chi_square_pooled(&[50, 50, 1, 2], &[0.48, 0.48, 0.02, 0.02], 5.0);
+        let e: [f64; 3] = [103.0 * 0.48, 103.0 * 0.48, 103.0 * 0.04];
+        let by_hand = (50.0 - e[0]).powi(2) / e[0] * 2.0 + (3.0 - e[2]).powi(2) / e[2];
+        assert_eq!(dof, 2);
+        assert!((chi2 - by_hand).abs() < 1e-9, "{chi2} vs {by_hand}");
     }
 
     /// Frequencies follow the weights (chi-square at 99.9%), zero weights are never drawn, the

@@ -5,8 +5,8 @@
 //!
 //! Importance density (per solid angle) = the dome's luminance, times the directional
 //! importance map of Sec. 5.2 when one is given (`DirectionalMap`; pop computes it by
-//! propagating importance from the camera, solvers/pop/importance.rs), mixed with a uniform density
-//! (`UNIFORM_FRACTION`, see there). Regions:
+//! propagating importance from the camera, solvers/pop/importance.rs), mixed with a uniform
+//! density (`UNIFORM_FRACTION`, see there). Regions:
 //! - Coordinates (u, s): u the lat-long column coordinate, s = sin(latitude) = z. Solid angle
 //!   is uniform there (d omega = 2 pi du ds), and the dome's pixels are rectangles, so the
 //!   importance is piecewise constant on rectangles and its cumulative mass piecewise linear:

@@ -95,7 +95,8 @@ struct EmittingCell {
 }
 
 enum Source<'a> {
-    Distant { direction: Vec3, half_angle: f32 },
+    /// `one_minus_cos` of the angular radius, as 2 sin^2(theta / 2) (ordinates.rs).
+    Distant { direction: Vec3, one_minus_cos: f32 },
     Dome(&'a Environment),
     Point { position: Vec3, radius: f32 },
     Spot(Spot),
@@ -121,7 +122,8 @@ impl<'a> LightSampler<'a> {
             let (source, power) = match light {
                 Light::Distant { direction, irradiance, half_angle } => {
                     let fluence = distant_ordinate(*direction, *irradiance, *half_angle).fluence;
-                    (Source::Distant { direction: direction.normalize(), half_angle: *half_angle }, fluence * sphere.disc_area())
+                    let one_minus_cos = 2.0 * (0.5 * half_angle).sin().powi(2);
+                    (Source::Distant { direction: direction.normalize(), one_minus_cos }, fluence * sphere.disc_area())
                 }
                 Light::Dome(env) => (Source::Dome(env), dome_fluence(env) * sphere.disc_area()),
                 Light::Point { position, intensity, radius } => (Source::Point { position: *position, radius: *radius }, *intensity * (4.0 * PI)),
@@ -171,9 +173,8 @@ impl<'a> LightSampler<'a> {
         let pos = [u[1], u[2]];
         let dir = [u[4], u[5]];
         let (origin, direction, power) = match source {
-            Source::Distant { direction, half_angle } => {
-                let one_minus_cos = 2.0 * (0.5 * half_angle).sin().powi(2);
-                let w = if one_minus_cos > 0.0 { uniform_cone(*direction, one_minus_cos, dir) } else { *direction };
+            Source::Distant { direction, one_minus_cos } => {
+                let w = if *one_minus_cos > 0.0 { uniform_cone(*direction, *one_minus_cos, dir) } else { *direction };
                 (self.sphere.disc_origin(w, pos), w, self.sources[k].2)
             }
             Source::Dome(env) => {
@@ -218,11 +219,12 @@ fn cone_profile(s: &Spot) -> Profile {
 }
 
 /// A direction with density proportional to the spot's falloff smoothstep(cos_outer,
-/// cos_inner, cos theta): solid angle is uniform in cos theta, so the cap inside the inner cone
-/// (full intensity) is drawn with probability (1 - cos_inner) / ((1 - cos_inner) + (cos_inner
-/// - cos_outer) / 2), uniform in cos theta, and the blend band otherwise, with t = (cos theta -
-/// cos_outer) / (cos_inner - cos_outer) of density 2 smoothstep(t) = 6t^2 - 4t^3, CDF 2t^3 -
-/// t^4 (inverted by bisection; it is monotone). u[0] picks the part and then the angle.
+/// cos_inner, cos theta). Solid angle is uniform in cos theta, so: the cap inside the inner
+/// cone (full intensity) is drawn with probability cap / (cap + band / 2), where cap =
+/// 1 - cos_inner and band = cos_inner - cos_outer, uniform in cos theta; otherwise the blend
+/// band, where t = (cos theta - cos_outer) / band has density 2 smoothstep(t) = 6t^2 - 4t^3
+/// and CDF 2t^3 - t^4, inverted by bisection (it is monotone). u[0] picks the part and then
+/// the angle.
 fn sample_cone_profile(s: &Spot, u: [f32; 2]) -> Vec3 {
     let axis = s.axis.normalize();
     let cap = (1.0 - s.cos_inner).max(0.0);

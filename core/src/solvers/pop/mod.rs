@@ -28,9 +28,9 @@
 //!
 //! Environment lighting (Sec. 5): a dome becomes `dome_ordinates` distant ordinates, the
 //! sphere cut into regions of equal importance, each ordinate carrying exactly its region's
-//! light with its radiance-weighted mean cosine as initial anisotropy (translate/dome.rs, Sec. 5.1);
-//! the importance is the dome's luminance times a directional importance map propagated from
-//! the camera (importance.rs, Sec. 5.2). With `isotropic_residuum`, every light (distant or
+//! light with its radiance-weighted mean cosine as initial anisotropy (translate/dome.rs,
+//! Sec. 5.1); the importance is the dome's luminance times a directional importance map
+//! propagated from the camera (importance.rs, Sec. 5.2). With `isotropic_residuum`, every light (distant or
 //! dome ordinate) stops at its switch iteration m' (Eq. 10) and the energy still travelling in
 //! all of them is propagated isotropically in one medium-aligned grid (residuum.rs, Sec. 5.4),
 //! with the same backend as the lights (CPU or GPU).

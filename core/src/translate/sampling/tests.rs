@@ -8,7 +8,7 @@
 
 use super::*;
 use crate::medium::{Emission, EmissionLaw, EmissionTerm};
-use crate::sampling::{chi_square, chi_square_quantile_999};
+use crate::sampling::{chi_square, chi_square_pooled, chi_square_quantile_999};
 use crate::scene::{AreaShape, LatLongMap};
 
 const N: usize = 200_000;
@@ -246,21 +246,8 @@ fn dome_rays() {
         let (x, row) = (((u * w as f32) as usize).min(w - 1), (((1.0 - v) * h as f32) as usize).min(h - 1));
         counts[row * w + x] += 1;
     }
-    // Merge the bins expecting fewer than 5 rays into one.
-    let (mut c2, mut p2, mut rest_c, mut rest_p) = (Vec::new(), Vec::new(), 0u64, 0.0f64);
-    for (cnt, p) in counts.iter().zip(&probs) {
-        if *p * N as f64 >= 5.0 {
-            c2.push(*cnt);
-            p2.push(*p);
-        } else {
-            rest_c += cnt;
-            rest_p += p;
-        }
-    }
-    c2.push(rest_c);
-    p2.push(rest_p);
-    let chi2 = chi_square(&c2, &p2);
-    assert!(chi2 < chi_square_quantile_999(c2.len() - 1), "dome: chi-square {chi2} over {} dof", c2.len() - 1);
+    let (chi2, dof) = chi_square_pooled(&counts, &probs, 5.0);
+    assert!(chi2 < chi_square_quantile_999(dof), "dome: chi-square {chi2} over {dof} dof");
 }
 
 /// The default plume glowing with a linear and a blackbody term: (a) P = `Emission::power()`;
@@ -297,27 +284,17 @@ fn emission_rays() {
             *counts.entry(block(ijk)).or_default() += 1;
         }
         let total: f64 = expected.values().sum();
-        let (mut c2, mut p2, mut rest_c, mut rest_p) = (Vec::new(), Vec::new(), 0u64, 0.0f64);
-        for (b, e) in &expected {
-            let (p, c) = (e / total, counts.get(b).copied().unwrap_or(0));
-            if p * N as f64 >= 5.0 {
-                c2.push(c);
-                p2.push(p);
-            } else {
-                rest_c += c;
-                rest_p += p;
-            }
-        }
-        c2.push(rest_c);
-        p2.push(rest_p);
-        let chi2 = chi_square(&c2, &p2);
-        assert!(chi2 < chi_square_quantile_999(c2.len() - 1), "emission blocks: chi-square {chi2} over {} dof", c2.len() - 1);
+        let blocks: Vec<(u64, f64)> = expected.iter().map(|(b, e)| (counts.get(b).copied().unwrap_or(0), e / total)).collect();
+        let (c, p): (Vec<u64>, Vec<f64>) = blocks.into_iter().unzip();
+        let (chi2, dof) = chi_square_pooled(&c, &p, 5.0);
+        assert!(chi2 < chi_square_quantile_999(dof), "emission blocks: chi-square {chi2} over {dof} dof");
     }
 }
 
 /// Every kind at once: each light's tally (its rays' power summed, over all N rays) estimates
 /// its own power within 5 standard errors, the lights are drawn in proportion to their power
-/// (chi-square), and the same uniforms give the same ray.
+/// (chi-square), a spot with a radius starts its rays on its sphere, and the same uniforms give
+/// the same ray.
 #[test]
 fn lights_are_chosen_by_power() {
     let spot = Spot { position: Vec3::new(0.0, 0.0, 2.0), axis: -Vec3::Z, intensity: Vec3::splat(30.0), radius: 0.1, cos_outer: 0.8, cos_inner: 0.9 };
@@ -335,16 +312,19 @@ fn lights_are_chosen_by_power() {
     let sampler = LightSampler::new(&scene);
     let rs = rays(&sampler, N, 9);
     let kinds = scene.lights.len() + 1;
-    let mut counts = vec![0u64; kinds];
-    for k in 0..kinds {
-        let tally: Vec<LightRay> = rs.iter().map(|x| LightRay { power: if x.light == k { x.power } else { Vec3::ZERO }, ..*x }).collect();
-        assert_mean_power(&tally, sampler.light_power(k), &format!("light {k}"));
-        counts[k] = rs.iter().filter(|x| x.light == k).count() as u64;
-    }
+    let counts: Vec<u64> = (0..kinds)
+        .map(|k| {
+            let tally: Vec<LightRay> = rs.iter().map(|x| LightRay { power: if x.light == k { x.power } else { Vec3::ZERO }, ..*x }).collect();
+            assert_mean_power(&tally, sampler.light_power(k), &format!("light {k}"));
+            rs.iter().filter(|x| x.light == k).count() as u64
+        })
+        .collect();
     let total = sampler.total_power().element_sum() as f64;
     let probs: Vec<f64> = (0..kinds).map(|k| sampler.light_power(k).element_sum() as f64 / total).collect();
     let chi2 = chi_square(&counts, &probs);
     assert!(chi2 < chi_square_quantile_999(kinds - 1), "light choice: chi-square {chi2}");
+    // The spot has a radius: its rays leave its sphere along their direction.
+    assert!(rs.iter().filter(|x| x.light == 2).all(|x| ((x.origin - spot.position) - x.direction * spot.radius).length() < 1e-5));
     let u = [0.3, 0.1, 0.7, 0.2, 0.9, 0.4];
     assert_eq!(sampler.sample(u), sampler.sample(u));
     assert!(LightSampler::new(&scene_with(Vec::new())).is_empty());
