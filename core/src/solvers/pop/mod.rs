@@ -49,11 +49,13 @@ pub mod mip;
 pub mod propagate;
 pub mod radial;
 pub mod residuum;
+pub mod reuse;
 pub mod settings;
 pub mod upsample;
 
 use glam::Vec3;
 
+use super::session::SessionState;
 use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
@@ -157,6 +159,18 @@ impl Pop {
     /// As `solve_detailed`, with the stages that touch every cell (sweep, propagation, merge,
     /// upsampling) run by `backend`: `backend::CpuBackend`, or the GPU port (volscatter-gpu).
     pub fn solve_with<B: PopBackend>(&self, scene: &Scene, progress: &dyn Progress, backend: &B) -> Result<(SolveOutput, PopReport)> {
+        self.solve_reusing(scene, progress, backend, None)
+    }
+
+    /// As `solve_with`, one frame of a session: the light-independent stages come from
+    /// `reuse` when the medium (and camera) they were made for did not change (reuse.rs).
+    pub fn solve_reusing<B: PopBackend>(
+        &self,
+        scene: &Scene,
+        progress: &dyn Progress,
+        backend: &B,
+        mut reuse: Option<&mut reuse::PopReuse>,
+    ) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -168,7 +182,12 @@ impl Pop {
         let (wlo, whi) = medium.world_bounds();
         let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
         let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
-        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
+        // In a session, the medium's key decides what may be reused (one pass over its voxels).
+        let key = reuse.is_some().then(|| timings.time("pop medium key", || reuse::MediumKey::of(medium)));
+        let mip = timings.time("pop mip", || match (reuse.as_deref_mut(), &key) {
+            (Some(r), Some(k)) => r.mip(k, medium, min_fp),
+            _ => std::sync::Arc::new(MediumMip::new(medium, min_fp)),
+        });
 
         // Every light becomes ordinates: (direction of travel, fluence, initial anisotropy,
         // grid resolution).
@@ -185,11 +204,15 @@ impl Pop {
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
                     let weights = if s.dome_importance {
-                        Some(timings.time("pop importance", || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction))?)
+                        let build = || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction);
+                        Some(timings.time("pop importance", || match (reuse.as_deref_mut(), &key) {
+                            (Some(r), Some(k)) => r.importance(k, scene.camera.position, s.diffusion_correction, build),
+                            _ => build().map(std::sync::Arc::new),
+                        })?)
                     } else {
                         None
                     };
-                    for o in dome::select_ordinates(env, s.dome_ordinates, weights.as_ref()) {
+                    for o in dome::select_ordinates(env, s.dome_ordinates, weights.as_deref()) {
                         distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
@@ -329,6 +352,10 @@ impl Solver for Pop {
     }
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
         self.solve_detailed(scene, progress).map(|(out, _)| out)
+    }
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
+        let reuse = state.kept(reuse::PopReuse::default);
+        self.solve_reusing(scene, progress, &backend::CpuBackend, Some(reuse)).map(|(out, _)| out)
     }
 }
 
