@@ -1,7 +1,8 @@
 """Operators: Compute Scattering and Render Preview.
 
 Both run the same job: for each frame, export the scene (main thread, reads bpy), then solve in
-a worker thread (the library releases nothing but its own locks; ctypes drops the GIL while it
+one native session for the whole frame range (the solver reuses between frames what did not
+change) in a worker thread (the library releases nothing but its own locks; ctypes drops the GIL while it
 runs), reporting progress through a shared state read by a modal timer. Invoked from the UI they
 are modal (status bar progress, Esc cancels); `execute` (scripts, tests) runs the same steps
 blocking. Blender data is created only after every frame succeeded, so a failure or a
@@ -85,6 +86,7 @@ class _JobOperator:
         # first what _fail needs, so that a failure anywhere below is reported cleanly
         self._files = []
         self._inputs = []  # generated input VDBs: only the solver reads them
+        self._session = None  # made from the first frame's scene, closed when the job ends
         self._frame0 = context.scene.frame_current
         self._obj = context.object
         src = self._obj.get(RESULT_TAG)
@@ -142,7 +144,9 @@ class _JobOperator:
                 return not state.cancel
         try:
             with native.Scene.from_json(doc) as sc:
-                with sc.solve(progress) as result:
+                if self._session is None:
+                    self._session = native.Session(sc)
+                with self._session.solve(sc, progress) as result:
                     state.value = self.per_frame(result, frame)
         except BaseException as e:  # reported on the main thread
             state.error = e
@@ -158,8 +162,14 @@ class _JobOperator:
             return str(e)
         return "volscatter: unexpected error: %s: %s" % (type(e).__name__, e)
 
+    def _close_session(self):
+        session, self._session = getattr(self, "_session", None), None
+        if session is not None:
+            session.close()
+
     def _fail(self, context, e):
         try:
+            self._close_session()
             self.cleanup_files()
             self._restore_frame(context)
         except Exception as cleanup_error:  # never let the report itself fail
@@ -176,6 +186,7 @@ class _JobOperator:
             context.scene.frame_set(self._frame0)
 
     def _complete(self, context):
+        self._close_session()
         self._restore_frame(context)
         try:
             self.finish(context, self._values)
@@ -290,6 +301,7 @@ class _JobOperator:
             self._state.cancel = True
         self._thread.join()
         self._end_modal(context)
+        self._close_session()
         self.cleanup_files()
 
 

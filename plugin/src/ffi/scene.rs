@@ -29,11 +29,11 @@ pub struct VsScene {
 }
 
 pub(crate) struct SceneState {
-    scene: Arc<Scene>,
+    pub(crate) scene: Arc<Scene>,
     has_medium: bool,
     has_camera: bool,
     /// Where GPU-capable stages run (`vs_scene_set_device`); the CPU unless the host asks.
-    device: DeviceChoice,
+    pub(crate) device: DeviceChoice,
 }
 
 pub(crate) static SCENES: Registry<SceneState, VsScene> = Registry::new("VsScene");
@@ -63,7 +63,7 @@ impl SceneState {
         Arc::make_mut(&mut self.scene)
     }
     /// A snapshot of a complete scene.
-    fn snapshot(&self) -> FfiResult<Arc<Scene>> {
+    pub(crate) fn snapshot(&self) -> FfiResult<Arc<Scene>> {
         if !self.has_medium {
             return Err(FfiError::scene("the scene has no medium: load a scene or call vs_scene_set_medium_vdb / vs_scene_set_medium_dense"));
         }
@@ -552,16 +552,21 @@ pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgres
         };
         let name = snapshot.solver_name().unwrap_or("reference").to_string();
         let progress = CProgress::new(progress, user);
-        let (output, _used) = volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress).map_err(|e| match (device, e) {
-            (DeviceChoice::Gpu, volscatter_core::Error::InvalidArgument(m)) if m.starts_with("GPU") => FfiError::new(VsStatus::Unsupported, m),
-            (_, e) => e.into(),
-        })?;
+        let (output, _used) = volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress).map_err(|e| solve_failure(device, e))?;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
         let state = ResultState::new(output, snapshot, device)?;
         write_out(out, RESULTS.insert(state)?, "out")
     })
+}
+
+/// A solve's error as the host sees it: no GPU when one was required is `Unsupported`.
+pub(crate) fn solve_failure(device: DeviceChoice, e: volscatter_core::Error) -> FfiError {
+    match (device, e) {
+        (DeviceChoice::Gpu, volscatter_core::Error::InvalidArgument(m)) if m.starts_with("GPU") => FfiError::new(VsStatus::Unsupported, m),
+        (_, e) => e.into(),
+    }
 }
 
 /// Path-traces the scene's image directly with the reference solver (RGBA plus AOVs
