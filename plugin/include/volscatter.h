@@ -6,8 +6,9 @@
  *   message is available from the handle's vs_<type>_last_error(); calls that fail before a
  *   handle exists (NULL or dead handle, vs_scene_new) have only the status, described by
  *   vs_status_message().
- * - Handles (VsScene, VsResult, VsImage) are opaque and created and destroyed in pairs:
- *   vs_scene_new / vs_scene_destroy; vs_scene_solve / vs_result_destroy;
+ * - Handles (VsScene, VsSession, VsResult, VsImage) are opaque and created and destroyed in
+ *   pairs: vs_scene_new / vs_scene_destroy; vs_session_new / vs_session_destroy;
+ *   vs_scene_solve or vs_session_solve / vs_result_destroy;
  *   vs_result_composite or vs_scene_render_reference / vs_image_destroy. They are numbers
  *   looked up in a registry, never dereferenced: a destroyed, twice-destroyed or made-up
  *   handle gives VS_STATUS_INVALID_HANDLE instead of a crash.
