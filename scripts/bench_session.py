@@ -84,7 +84,9 @@ def main() -> None:
         "dome's importance map (an importance propagation from the camera). Both are keyed on the medium's voxels,",
         "transform and material (and the camera for the importance), so a changed medium or camera recomputes them.",
         "The sun's own grid, every dome ordinate's propagation, the residuum, merge and upsampling are solved again",
-        "each frame.",
+        "each frame. Not tried: warm-starting the propagation from the previous frame's accumulation (its answer",
+        "would differ from the one-off solve's), and keeping the dome ordinates' propagated grids (exact, but each",
+        "backend would have to hand its lights' state across solves).",
     ]
     write_section("session", "\n".join(lines))
     print("wrote BENCHMARKS.md section `session`", file=sys.stderr)
