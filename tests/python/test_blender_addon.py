@@ -418,19 +418,25 @@ def test_usd_exported_vdb(fresh):
     assert not [f for f in os.listdir(str(fresh / "out")) if "_input_" in f]
 
 
-def test_frame_range_pop(fresh):
+def _moving_volume_over_frames(out, last):
+    """A small noise volume under a sun, moving from frame 1 to `last` (so that the frames
+    differ), set up for pop over the frame range 1..`last`."""
     ob = bs.noise_volume(res=8)
     bs.principled_material(ob)
     bs.sun()
     bs.camera()
-    # animate the volume so the frames differ
     ob.location = (0, 0, 0)
     ob.keyframe_insert("location", frame=1)
     ob.location = (0.3, 0, 0)
-    ob.keyframe_insert("location", frame=2)
-    _tiny(ob, fresh, solver="pop")
+    ob.keyframe_insert("location", frame=last)
+    _tiny(ob, out, solver="pop")
     s = ob.volscatter
-    s.use_frame_range, s.frame_start, s.frame_end = True, 1, 2
+    s.use_frame_range, s.frame_start, s.frame_end = True, 1, last
+    return ob
+
+
+def test_frame_range_pop(fresh):
+    ob = _moving_volume_over_frames(fresh, 2)
     bpy.context.scene.frame_set(1)
     assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
     assert bpy.context.scene.frame_current == 1
@@ -466,17 +472,7 @@ def test_frame_range_goes_through_one_session(fresh, monkeypatch):
             super().close()
 
     monkeypatch.setattr(native, "Session", Recording)
-    ob = bs.noise_volume(res=8)
-    bs.principled_material(ob)
-    bs.sun()
-    bs.camera()
-    ob.location = (0, 0, 0)
-    ob.keyframe_insert("location", frame=1)
-    ob.location = (0.3, 0, 0)
-    ob.keyframe_insert("location", frame=3)
-    _tiny(ob, fresh, solver="pop")
-    s = ob.volscatter
-    s.use_frame_range, s.frame_start, s.frame_end = True, 1, 3
+    ob = _moving_volume_over_frames(fresh, 3)
     assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
     assert len(made) == 1, "one session for the whole range"
     assert made[0].frames_at_close == 3, "every frame solved in it"

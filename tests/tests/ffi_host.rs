@@ -38,10 +38,9 @@ fn small_scene() -> Scene {
     api().scene_from_json(&small_json(1))
 }
 
-/// Asserts a status and that the handle's message contains every `words`.
+/// Asserts a status and that the handle's message `msg` contains every `words`.
 #[track_caller]
-fn expect_scene(s: Scene, got: i32, want: i32, words: &[&str]) {
-    let msg = api().scene_error(s);
+fn expect_message(msg: String, got: i32, want: i32, words: &[&str]) {
     assert_eq!(got, want, "status {got} (want {want}); message: {msg}");
     for w in words {
         assert!(msg.contains(w), "message {msg:?} lacks {w:?}");
@@ -49,12 +48,18 @@ fn expect_scene(s: Scene, got: i32, want: i32, words: &[&str]) {
 }
 
 #[track_caller]
+fn expect_scene(s: Scene, got: i32, want: i32, words: &[&str]) {
+    expect_message(api().scene_error(s), got, want, words)
+}
+
+#[track_caller]
 fn expect_result(r: Res, got: i32, want: i32, words: &[&str]) {
-    let msg = api().result_error(r);
-    assert_eq!(got, want, "status {got} (want {want}); message: {msg}");
-    for w in words {
-        assert!(msg.contains(w), "message {msg:?} lacks {w:?}");
-    }
+    expect_message(api().result_error(r), got, want, words)
+}
+
+#[track_caller]
+fn expect_session(s: Sess, got: i32, want: i32, words: &[&str]) {
+    expect_message(api().session_error(s), got, want, words)
 }
 
 fn light_count(s: Scene) -> usize {
@@ -589,15 +594,6 @@ unsafe fn move_sun(s: Scene, frame: usize) {
     assert_eq!((a.vs_scene_clear_lights)(s), OK);
     assert_eq!((a.vs_scene_add_distant_light)(s, d.as_ptr(), [4.0f32; 3].as_ptr(), 0.0), OK, "{}", a.scene_error(s));
     assert_eq!((a.vs_scene_add_dome_light)(s, [0.1f32, 0.15, 0.25].as_ptr()), OK);
-}
-
-#[track_caller]
-fn expect_session(s: Sess, got: i32, want: i32, words: &[&str]) {
-    let msg = api().session_error(s);
-    assert_eq!(got, want, "status {got} (want {want}); message: {msg}");
-    for w in words {
-        assert!(msg.contains(w), "message {msg:?} lacks {w:?}");
-    }
 }
 
 #[test]
