@@ -80,13 +80,14 @@ def main() -> None:
         lines.append(f"| {p} | {a:.3f} | {b:.3f} | {a - b:+.3f} |")
     lines += [
         "",
-        "What a session reuses while only the lights move (core/src/solvers/pop/reuse.rs): the density mip and the",
-        "dome's importance map (an importance propagation from the camera). Both are keyed on the medium's voxels,",
-        "transform and material (and the camera for the importance), so a changed medium or camera recomputes them.",
-        "The sun's own grid, every dome ordinate's propagation, the residuum, merge and upsampling are solved again",
-        "each frame. Not tried: warm-starting the propagation from the previous frame's accumulation (its answer",
-        "would differ from the one-off solve's), and keeping the dome ordinates' propagated grids (exact, but each",
-        "backend would have to hand its lights' state across solves).",
+        "What a session reuses while only the sun moves (core/src/solvers/pop/reuse.rs): the density mip, the dome's",
+        "importance map (an importance propagation from the camera) and the dome's ordinates (grid, sweep and",
+        "propagation: `light grid`, `init`, `propagation`; `reused lights` is the cost of copying them in and out).",
+        "All are keyed on the medium's voxels, transform and material, the camera (importance, ordinates) and the",
+        "ordinate itself, so a changed medium or camera recomputes them. The sun's grid, the residuum (it gathers the",
+        "sun's rest), merge and upsampling are solved again each frame. Kept lights are the CPU backend's; on the GPU",
+        "only the mip and the importance are reused. Not tried: warm-starting the propagation from the previous",
+        "frame's accumulation (its answer would differ from the one-off solve's).",
     ]
     write_section("session", "\n".join(lines))
     print("wrote BENCHMARKS.md section `session`", file=sys.stderr)

@@ -650,7 +650,7 @@ fn sessions_refuse_nulls_and_dead_handles() {
 
 /// A session over three frames of a moving sun gives, frame by frame, exactly the grid of a
 /// one-off `vs_scene_solve`: for the reference with a fixed seed (it keeps nothing) and for
-/// pop (which reuses its density mip and dome importance).
+/// pop (which reuses its density mip, dome importance and the dome's ordinates).
 #[test]
 fn a_session_over_three_frames_equals_one_off_solves() {
     let a = api();

@@ -71,8 +71,8 @@ def native_scene(doc: dict, solver: str, settings: Optional[dict]) -> Scene:
 class FrameSessions:
     """The native sessions of a frame range (``--frames``): one :class:`Session` per volume,
     made from its first frame and kept for the rest, so that the solver reuses between frames
-    what did not change (pop: the density mip and the dome importance while only the lights
-    move). ``close()`` or ``with`` destroys them."""
+    what did not change (pop: the density mip, the dome importance and the dome's ordinates
+    while only the sun or the local lights move). ``close()`` or ``with`` destroys them."""
 
     def __init__(self):
         self._sessions: Dict[str, Session] = {}

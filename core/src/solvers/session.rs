@@ -1,6 +1,7 @@
 //! Sessions (issue 14): one solver kept across the solves of a sequence (the frames of a VDB
 //! sequence, a moving light or camera), so that it may reuse between frames what did not
-//! change — POP its density mip and its dome importance (pop/reuse.rs); later, the photon
+//! change — POP its density mip, its dome importance and its unchanged distant ordinates
+//! (pop/reuse.rs); later, the photon
 //! grid's ring of partial caches (paper 04) or the network's warm start (paper 02).
 //!
 //! The scene may change in any way between solves. A solver keeps only what it can key on
@@ -161,7 +162,8 @@ mod tests {
     }
 
     /// POP across frames where nothing is reusable (the medium's voxels and the camera change
-    /// every frame, so neither the density mip nor the dome importance may be reused) and
+    /// every frame, so neither the density mip, the dome importance nor any ordinate may be
+    /// reused) and
     /// where only the sun moves (both reused): bit-identical to one-off solves either way.
     #[test]
     fn pop_in_a_session_is_bit_identical_to_one_off() {

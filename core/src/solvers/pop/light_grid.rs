@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 use crate::medium::Medium;
 use crate::sampling::orthonormal_basis;
 
+#[derive(Clone)]
 pub struct LightGrid {
     /// Cells along (u, v, d); x (u) fastest, d slowest so that a slab is one depth slice.
     pub dims: UVec3,

@@ -37,6 +37,9 @@
 //!
 //! Local lights: each point, sphere or spot light, and each VPL of an area light, propagates in
 //! its own radial grid (radial/), whose J is added into the merged grid before upsampling.
+//!
+//! In a session (solvers/session.rs), what the medium, the camera and an ordinate alone decide
+//! is kept between frames and reused while it still applies (reuse.rs).
 
 pub mod accumulate;
 pub mod backend;
@@ -238,9 +241,25 @@ impl Pop {
         let g = medium.g;
         let mut lights = Vec::with_capacity(distant.len() + 1);
         let mut residuum = if s.isotropic_residuum { Some(residuum::Residuum::new(medium, &mip, s.residuum_grid_resolution())?) } else { None };
+        // In a session, lights solved for this medium, camera and settings are reused (reuse.rs).
+        let mut kept = match (reuse, &key) {
+            (Some(r), Some(k)) => {
+                r.begin_lights(k, scene.camera.position, s);
+                Some(r)
+            }
+            _ => None,
+        };
         for (direction, fluence, a0, resolution) in distant {
             if fluence.max_element() <= 0.0 {
                 continue;
+            }
+            let okey = reuse::OrdinateKey::new(direction, fluence, a0, resolution);
+            if let Some(r) = kept.as_deref_mut() {
+                if let Some((grid, light, rep)) = timings.time("pop reused lights", || r.reuse_light(&okey, backend, residuum.as_mut())) {
+                    report.lights.push(rep);
+                    lights.push((grid, light));
+                    continue;
+                }
             }
             let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
@@ -262,19 +281,27 @@ impl Pop {
             let t0 = std::time::Instant::now();
             let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
             let mut stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
+            let remaining = std::mem::take(&mut stats.remaining);
             if let Some(r) = residuum.as_mut() {
-                r.gather(&grid, &std::mem::take(&mut stats.remaining));
+                r.gather(&grid, &remaining);
             }
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
-            report.lights.push(LightReport {
+            let rep = LightReport {
                 dims: grid.dims.to_array(),
                 cell_size: grid.h,
                 entering: sweep.entering.to_array(),
                 transmitted: sweep.transmitted.to_array(),
                 absorbed_direct: sweep.absorbed.to_array(),
                 propagation: stats,
-            });
+            };
+            if let Some(r) = kept.as_deref_mut() {
+                timings.time("pop reused lights", || r.keep_light(okey, backend, &grid, &light, &rep, remaining));
+            }
+            report.lights.push(rep);
             lights.push((grid, light));
+        }
+        if let Some(r) = kept {
+            r.end_lights();
         }
         // The residuum runs only when the lights handed over more than the residual threshold
         // of all the energy they scattered, and iterates until what is left falls below that

@@ -4,7 +4,12 @@
 //! - the density mip (mip.rs), keyed on the density grid's voxels and the finest footprint
 //!   asked of it (which follows from the medium's transform and the settings);
 //! - the dome's directional importance map (importance.rs), keyed on the whole medium (voxels,
-//!   transform, material), the camera position and `diffusion_correction`.
+//!   transform, material), the camera position and `diffusion_correction`;
+//! - each distant ordinate's propagated light (its grid, J, energy report and the packets it
+//!   hands to the residuum), keyed on the ordinate (direction, fluence, initial anisotropy,
+//!   grid resolution) for the medium, camera position and settings they were solved with: while
+//!   the sun moves, the dome's ordinates stay. Only backends that can copy their lights out
+//!   (the CPU's; `PopBackend::keep_light`) keep them.
 //!
 //! Keys are exact (bit patterns and a hash of every stored voxel), so a reused value is the
 //! one a recompute would give: a session is bit-identical to one-off solves. The hash costs one
@@ -15,8 +20,15 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use std::any::Any;
+
+use super::backend::PopBackend;
 use super::dome::DirectionalMap;
+use super::light_grid::LightGrid;
 use super::mip::MediumMip;
+use super::residuum::Residuum;
+use super::settings::PopSettings;
+use super::LightReport;
 use crate::medium::{DensityGrid, Medium};
 
 /// A hash of every value a density grid stores (layout, bricks, tiles), FNV-1a over 32-bit
@@ -68,12 +80,44 @@ pub struct ReuseCounts {
     pub mip_built: u32,
     pub importance_reused: u32,
     pub importance_built: u32,
+    pub lights_reused: u32,
+    pub lights_solved: u32,
 }
+
+/// A distant ordinate as `Pop::solve_reusing` builds its grid: direction of travel, fluence,
+/// initial anisotropy (bits) and grid resolution.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OrdinateKey([u32; 8]);
+
+impl OrdinateKey {
+    pub fn new(direction: Vec3, fluence: Vec3, a0: f32, resolution: u32) -> Self {
+        let d = direction.to_array().map(f32::to_bits);
+        let f = fluence.to_array().map(f32::to_bits);
+        OrdinateKey([d[0], d[1], d[2], f[0], f[1], f[2], a0.to_bits(), resolution])
+    }
+}
+
+/// One ordinate's solved light, as it went into the residuum and the merge.
+struct KeptLight {
+    grid: LightGrid,
+    light: Box<dyn Any + Send>,
+    report: LightReport,
+    /// The packets handed to the residuum (empty without it).
+    remaining: Vec<Vec3>,
+}
+
+/// What the kept lights were solved for: the medium, the camera position (the view cosines of
+/// the accumulation) and the settings.
+type LightsFor = (MediumKey, [u32; 3], PopSettings);
 
 #[derive(Default)]
 pub struct PopReuse {
     mip: Option<(u64, u32, Arc<MediumMip>)>,
     importance: Option<(MediumKey, [u32; 3], bool, Arc<DirectionalMap>)>,
+    lights_for: Option<LightsFor>,
+    /// The previous frame's lights, and this frame's so far.
+    lights: Vec<(OrdinateKey, KeptLight)>,
+    next: Vec<(OrdinateKey, KeptLight)>,
     pub counts: ReuseCounts,
 }
 
@@ -117,6 +161,54 @@ impl PopReuse {
         self.counts.importance_built += 1;
         Ok(map)
     }
+
+    /// Starts a frame's distant lights: the kept ones stay reusable only when solved for this
+    /// medium, camera position and settings.
+    pub fn begin_lights(&mut self, key: &MediumKey, camera: Vec3, settings: &PopSettings) {
+        let now = (key.clone(), camera.to_array().map(f32::to_bits), settings.clone());
+        if self.lights_for.as_ref() != Some(&now) {
+            self.lights.clear();
+            self.next.clear();
+            self.lights_for = Some(now);
+        }
+        // A frame that failed part-way left its lights in `next`: still valid.
+        let unfinished = std::mem::take(&mut self.next);
+        self.lights.extend(unfinished);
+    }
+
+    /// The kept light of ordinate `key` as `backend`'s light, with its grid and report, its
+    /// residuum packets gathered into `residuum` as a fresh solve would; kept for the next
+    /// frame again. `None` when there is none (or the backend cannot take it back).
+    pub fn reuse_light<B: PopBackend>(
+        &mut self,
+        key: &OrdinateKey,
+        backend: &B,
+        residuum: Option<&mut Residuum>,
+    ) -> Option<(LightGrid, B::Light, LightReport)> {
+        let i = self.lights.iter().position(|(k, _)| k == key)?;
+        let light = backend.reuse_light(&*self.lights[i].1.light)?;
+        let (key, kept) = self.lights.swap_remove(i);
+        if let Some(r) = residuum {
+            r.gather(&kept.grid, &kept.remaining);
+        }
+        let out = (kept.grid.clone(), light, kept.report.clone());
+        self.next.push((key, kept));
+        self.counts.lights_reused += 1;
+        Some(out)
+    }
+
+    /// Keeps a freshly solved light for the next frame (when the backend can copy it).
+    pub fn keep_light<B: PopBackend>(&mut self, key: OrdinateKey, backend: &B, grid: &LightGrid, light: &B::Light, report: &LightReport, remaining: Vec<Vec3>) {
+        self.counts.lights_solved += 1;
+        if let Some(light) = backend.keep_light(light) {
+            self.next.push((key, KeptLight { grid: grid.clone(), light, report: report.clone(), remaining }));
+        }
+    }
+
+    /// Ends a frame's distant lights: the ones it used are the ones kept.
+    pub fn end_lights(&mut self) {
+        self.lights = std::mem::take(&mut self.next);
+    }
 }
 
 #[cfg(test)]
@@ -141,8 +233,9 @@ mod tests {
         assert_ne!(MediumKey::of(&a), MediumKey::of(&shifted), "the transform is part of the key");
     }
 
-    /// Over a session where only the sun moves, the mip and the importance are built once
-    /// and reused after; a new density grid or camera position rebuilds them.
+    /// Over a session where only the sun moves, the mip, the importance and the dome's
+    /// ordinates are built once and reused after; a new density grid or camera position
+    /// rebuilds them.
     #[test]
     fn session_reuses_what_only_the_medium_and_camera_decide() {
         let pop = super::super::Pop::from_settings(
@@ -160,11 +253,14 @@ mod tests {
             pop.solve_in_session(&scene, &NoProgress, &mut state).unwrap();
         }
         let counts = state.kept(PopReuse::default).counts;
-        assert_eq!(counts, ReuseCounts { mip_reused: 2, mip_built: 1, importance_reused: 2, importance_built: 1 });
+        // 4 dome ordinates solved once and reused twice; the sun solved every frame.
+        let want = ReuseCounts { mip_reused: 2, mip_built: 1, importance_reused: 2, importance_built: 1, lights_reused: 8, lights_solved: 7 };
+        assert_eq!(counts, want);
         scene.camera.position.z += 0.5;
         pop.solve_in_session(&scene, &NoProgress, &mut state).unwrap();
         let c = state.kept(PopReuse::default).counts;
         assert_eq!((c.mip_reused, c.importance_built), (3, 2), "a moved camera keeps the mip, rebuilds the importance");
+        assert_eq!((c.lights_reused, c.lights_solved), (8, 12), "and solves every light again");
         let (lo, _) = scene.medium.grid.bbox();
         scene.medium.grid = DensityGrid::from_dense(lo, glam::IVec3::splat(8), &[0.5; 512], Default::default()).unwrap();
         pop.solve_in_session(&scene, &NoProgress, &mut state).unwrap();
