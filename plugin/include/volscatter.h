@@ -6,8 +6,9 @@
  *   message is available from the handle's vs_<type>_last_error(); calls that fail before a
  *   handle exists (NULL or dead handle, vs_scene_new) have only the status, described by
  *   vs_status_message().
- * - Handles (VsScene, VsResult, VsImage) are opaque and created and destroyed in pairs:
- *   vs_scene_new / vs_scene_destroy; vs_scene_solve / vs_result_destroy;
+ * - Handles (VsScene, VsSession, VsResult, VsImage) are opaque and created and destroyed in
+ *   pairs: vs_scene_new / vs_scene_destroy; vs_session_new / vs_session_destroy;
+ *   vs_scene_solve or vs_session_solve / vs_result_destroy;
  *   vs_result_composite or vs_scene_render_reference / vs_image_destroy. They are numbers
  *   looked up in a registry, never dereferenced: a destroyed, twice-destroyed or made-up
  *   handle gives VS_STATUS_INVALID_HANDLE instead of a crash.
@@ -159,6 +160,11 @@ typedef struct VsResult VsResult;
  * Opaque scene handle. Create with `vs_scene_new`, destroy with `vs_scene_destroy`.
  */
 typedef struct VsScene VsScene;
+
+/**
+ * Opaque session handle. Create with `vs_session_new`, destroy with `vs_session_destroy`.
+ */
+typedef struct VsSession VsSession;
 
 /**
  * Progress callback: `stage` names the current phase (valid only during the call), `fraction`
@@ -529,6 +535,60 @@ VsStatus vs_result_composite(const VsResult *result,
                              uint32_t subpixels,
                              float step_voxels,
                              VsImage **out);
+
+/**
+ * Creates a session in `*out` (NULL on failure; destroy with `vs_session_destroy`) with the
+ * solver, settings and device of `scene` as they are now (`vs_scene_set_solver`,
+ * `vs_scene_set_device`, or the scene JSON; default "reference"). They stay the session's for
+ * its life; later changes to the scene's solver or device do not affect it. On failure the
+ * message is on `scene` (`vs_scene_last_error`).
+ *
+ * Thread safety: any thread.
+ */
+VsStatus vs_session_new(const VsScene *scene, VsSession **out);
+
+/**
+ * Destroys a session and what it kept. NULL is ignored; a dead handle gives
+ * `VS_STATUS_INVALID_HANDLE`. Results solved in it stay valid. A solve running on another
+ * thread finishes normally.
+ *
+ * Thread safety: any thread; the handle must not be used afterwards.
+ */
+VsStatus vs_session_destroy(VsSession *session);
+
+/**
+ * The message of the last call on this session that failed, or "" if it succeeded; valid
+ * until the next call on the session or its destruction. For a NULL or dead handle, a static
+ * description.
+ *
+ * Thread safety: meaningful only when no other thread calls functions on this session.
+ */
+const char *vs_session_last_error(const VsSession *session);
+
+/**
+ * Solves `scene` as it is now (medium, lights, camera: any of them may have changed since
+ * the last frame) with the session's solver, reusing what earlier frames computed and still
+ * applies, and puts the scattering grid in a new result `*out` (NULL on failure; destroy
+ * with `vs_result_destroy`). The result equals what `vs_scene_solve` gives for the same scene
+ * with the session's solver and device. `progress` and cancelling as for `vs_scene_solve`.
+ * Errors (including the scene's: no medium, NULL or dead scene handle) are on the session.
+ *
+ * Thread safety: any thread. Calls on one session are serialised (a frame waits for the one
+ * before); the scene is not kept locked during the solve.
+ */
+VsStatus vs_session_solve(VsSession *session,
+                          const VsScene *scene,
+                          VsProgressCallback progress,
+                          void *user,
+                          VsResult **out);
+
+/**
+ * Writes the number of solves run in this session so far (failed and cancelled ones
+ * included) to `*out`.
+ *
+ * Thread safety: any thread; waits for a solve running on the session.
+ */
+VsStatus vs_session_frame_count(const VsSession *session, uint64_t *out);
 
 /**
  * Destroys an image. NULL is ignored; a dead handle gives `VS_STATUS_INVALID_HANDLE`.

@@ -23,4 +23,4 @@ mod test_support;
 
 pub use context::{GpuContext, GpuError};
 pub use device::{run_on, DeviceChoice, DeviceUsed};
-pub use solve::solve;
+pub use solve::{solve, solve_session};

@@ -8,15 +8,17 @@
 use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
 use crate::pop::backend::GpuBackend;
 use crate::GpuContext;
+use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
+use volscatter_core::solvers::session::{Session, SessionState};
 use volscatter_core::solvers::{self, registry, Progress, SolveOutput};
 use volscatter_core::{Error, Result, Scene};
 
 /// Residual checks of the GPU propagation happen every this many iterations (one readback).
 const CHECK_EVERY: u32 = 8;
 
-/// A solver's GPU backend: (context, scene, settings, progress) -> its output.
-type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Value>, &dyn Progress) -> Result<SolveOutput>;
+/// A solver's GPU backend: (context, scene, settings, progress, the session's state) -> its output.
+type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Value>, &dyn Progress, &mut SessionState) -> Result<SolveOutput>;
 
 /// The GPU backend of solver `name`; every registry entry with `gpu` set has one (tested).
 fn gpu_backend(name: &str) -> Option<GpuSolve> {
@@ -26,10 +28,18 @@ fn gpu_backend(name: &str) -> Option<GpuSolve> {
     }
 }
 
-/// `pop` with its sweep, propagation, merge and upsampling on the GPU.
-fn pop_on_gpu(ctx: &GpuContext, scene: &Scene, settings: &serde_json::Map<String, serde_json::Value>, progress: &dyn Progress) -> Result<SolveOutput> {
+/// `pop` with its sweep, propagation, merge and upsampling on the GPU; what it keeps between
+/// the frames of a session (density mip, dome importance) lives in `state`.
+fn pop_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+) -> Result<SolveOutput> {
     let pop_solver = Pop::from_settings(settings)?;
-    let (out, _report) = pop_solver.solve_with(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY))?;
+    let reuse = state.kept(PopReuse::default);
+    let (out, _report) = pop_solver.solve_reusing(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY), Some(reuse))?;
     Ok(out)
 }
 
@@ -41,23 +51,43 @@ pub fn solve(
     settings: &serde_json::Map<String, serde_json::Value>,
     progress: &dyn Progress,
 ) -> Result<(SolveOutput, DeviceUsed)> {
+    solve_in_session(choice, scene, name, settings, progress, &mut SessionState::new())
+}
+
+/// One frame of `session` on `choice`: as `solve`, with the session's solver and settings and
+/// the state it keeps between frames (volscatter_core::solvers::session).
+pub fn solve_session(choice: DeviceChoice, session: &mut Session, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, DeviceUsed)> {
+    let (name, settings) = (session.name().to_string(), session.settings().clone());
+    let state = session.state_mut();
+    state.begin_frame();
+    solve_in_session(choice, scene, &name, &settings, progress, state)
+}
+
+fn solve_in_session(
+    choice: DeviceChoice,
+    scene: &Scene,
+    name: &str,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+) -> Result<(SolveOutput, DeviceUsed)> {
     let entry = registry::get(name)?;
-    let cpu = || solvers::by_name(name, settings)?.solve(scene, progress);
+    let cpu = |state: &mut SessionState| solvers::by_name(name, settings)?.solve_in_session(scene, progress, state);
     let backend = match gpu_backend(name) {
         Some(b) if entry.gpu && choice != DeviceChoice::Cpu => b,
-        _ => return Ok((cpu()?, DeviceUsed::Cpu)),
+        _ => return Ok((cpu(state)?, DeviceUsed::Cpu)),
     };
     // Settings errors are the same on every device: reported before any adapter is opened.
     (entry.cpu)(settings)?;
-    match try_gpu(choice, |ctx| backend(ctx, scene, settings, progress)) {
+    match try_gpu(choice, |ctx| backend(ctx, scene, settings, progress, state)) {
         Ok(Attempt::Ran(out, used)) => Ok((out, used)),
         Ok(Attempt::Declined(why)) => {
             eprintln!("note: solving on the CPU: {why}");
-            Ok((cpu()?, DeviceUsed::Cpu))
+            Ok((cpu(state)?, DeviceUsed::Cpu))
         }
         Err(Error::Device(e)) if choice == DeviceChoice::Auto => {
             eprintln!("note: solving on the CPU (device: {e})");
-            Ok((cpu()?, DeviceUsed::Cpu))
+            Ok((cpu(state)?, DeviceUsed::Cpu))
         }
         Err(e) => Err(e),
     }

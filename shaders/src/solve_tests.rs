@@ -96,3 +96,24 @@ fn auto_leaves_a_software_adapter_for_the_cpu() {
         assert!(matches!(used, DeviceUsed::Gpu(_)), "auto ran on {used} with a hardware adapter");
     }
 }
+
+/// A session of three frames of a moving sun on the GPU gives each frame's one-off GPU answer
+/// (the mip and importance it reuses are the values a one-off solve computes; the GPU stages
+/// are the same kernels on the same inputs, which run deterministically: no float atomics).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn gpu_session_matches_one_off_gpu_solves() {
+    let settings = serde_json::json!({"name": "pop", "grid_resolution": 16, "dome_ordinates": 4}).as_object().unwrap().clone();
+    let mut session = Session::new("pop", &settings).unwrap();
+    for f in 0..3 {
+        let mut scene = Scene::default_scene();
+        if let volscatter_core::scene::Light::Distant { direction, .. } = &mut scene.lights[0] {
+            *direction = glam::Quat::from_rotation_z(0.3 * f as f32) * *direction;
+        }
+        let (one_off, _) = solve(DeviceChoice::Gpu, &scene, "pop", &settings, &NoProgress).unwrap();
+        let (kept, used) = solve_session(DeviceChoice::Gpu, &mut session, &scene, &NoProgress).unwrap();
+        assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: ran on {used}");
+        assert_eq!(kept.scattering.data, one_off.scattering.data, "frame {f}");
+    }
+    assert_eq!(session.frames(), 3);
+}

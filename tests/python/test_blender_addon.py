@@ -418,19 +418,25 @@ def test_usd_exported_vdb(fresh):
     assert not [f for f in os.listdir(str(fresh / "out")) if "_input_" in f]
 
 
-def test_frame_range_pop(fresh):
+def _moving_volume_over_frames(out, last):
+    """A small noise volume under a sun, moving from frame 1 to `last` (so that the frames
+    differ), set up for pop over the frame range 1..`last`."""
     ob = bs.noise_volume(res=8)
     bs.principled_material(ob)
     bs.sun()
     bs.camera()
-    # animate the volume so the frames differ
     ob.location = (0, 0, 0)
     ob.keyframe_insert("location", frame=1)
     ob.location = (0.3, 0, 0)
-    ob.keyframe_insert("location", frame=2)
-    _tiny(ob, fresh, solver="pop")
+    ob.keyframe_insert("location", frame=last)
+    _tiny(ob, out, solver="pop")
     s = ob.volscatter
-    s.use_frame_range, s.frame_start, s.frame_end = True, 1, 2
+    s.use_frame_range, s.frame_start, s.frame_end = True, 1, last
+    return ob
+
+
+def test_frame_range_pop(fresh):
+    ob = _moving_volume_over_frames(fresh, 2)
     bpy.context.scene.frame_set(1)
     assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
     assert bpy.context.scene.frame_current == 1
@@ -445,6 +451,51 @@ def test_frame_range_pop(fresh):
         ev = res.evaluated_get(dg).data
         assert ev.grids.frame_filepath.endswith("Smoke_scattering_%04d.vdb" % frame)
         assert "scattering_r" in [g.name for g in ev.grids]
+
+
+def test_frame_range_goes_through_one_session(fresh, monkeypatch):
+    """The frame-range operator solves every frame in one native session, made from the first
+    frame and closed when the job ends (that a session's frames equal one-off solves is tested
+    on the library: core/src/solvers/session.rs, tests/tests/ffi_host.rs)."""
+    native = _native()
+    made = []
+
+    class Recording(native.Session):
+        def __init__(self, scene):
+            super().__init__(scene)
+            made.append(self)
+            self.frames_at_close = None
+
+        def close(self):
+            if self._ptr and self.frames_at_close is None:
+                self.frames_at_close = self.frame_count
+            super().close()
+
+    monkeypatch.setattr(native, "Session", Recording)
+    ob = _moving_volume_over_frames(fresh, 3)
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    assert len(made) == 1, "one session for the whole range"
+    assert made[0].frames_at_close == 3, "every frame solved in it"
+    assert made[0]._ptr is None, "closed at the end"
+    files = sorted(f for f in os.listdir(str(fresh)) if f.startswith("Smoke_scattering_"))
+    assert files == ["Smoke_scattering_%04d.vdb" % f for f in (1, 2, 3)]
+
+
+def test_native_session_close_and_context_manager(installed, fresh):
+    native = _native()
+    doc = {"format": 1, "medium": {"procedural": "plume", "dims": [8]},
+           "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": [1, 1, 1]}],
+           "camera": {"position": [0, -6, 0], "look_at": [0, 0, 0], "width": 8, "height": 8},
+           "solver": {"name": "pop", "grid_resolution": 8, "output_resolution": 12}}
+    with native.Scene.from_json(doc) as sc:
+        with native.Session(sc) as session:
+            with session.solve(sc) as a, sc.solve() as b:
+                assert list(a.rgb()) == list(b.rgb())
+            assert session.frame_count == 1
+        assert session._ptr is None
+        with pytest.raises(native.VolscatterError, match="closed"):
+            session.solve(sc)
+        session.close()  # twice is fine
 
 
 def test_render_preview(fresh):

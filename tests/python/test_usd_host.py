@@ -127,6 +127,65 @@ def test_local_lights_through_the_binding():
         assert s.light_count() == 4
 
 
+def test_session_through_the_binding():
+    """volscatter.Session: each frame equals Scene.solve of the same scene (pop, a moving sun),
+    frames are counted, errors carry the library's message, close() and `with` work."""
+    doc = {"format": 1, "medium": {"procedural": "plume", "dims": [12], "density_scale": 8.0, "g": 0.5},
+           "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": [2, 2, 2]},
+                      {"type": "dome", "color": [0.1, 0.1, 0.2]}],
+           "camera": {"position": [0, -6, 0], "look_at": [0, 0, 0], "width": 8, "height": 8},
+           "solver": {"name": "pop", "grid_resolution": 10, "output_resolution": 16, "dome_ordinates": 4}}
+    with Scene.from_json(doc) as sc, volscatter.Session(sc) as session:
+        for k in range(3):
+            sc.clear_lights()
+            sc.add_distant_light([0.3 * k, 0.1, -1.0], [2, 2, 2])
+            sc.add_dome_light([0.1, 0.1, 0.2])
+            with session.solve(sc) as a, sc.solve() as b:
+                assert np.array_equal(a.rgb(), b.rgb()), f"frame {k}"
+        assert session.frame_count == 3
+        with Scene() as empty, pytest.raises(VolscatterError, match="medium") as e:
+            session.solve(empty)
+        assert e.value.status == 5
+    assert session.closed
+    session.close()  # twice is fine
+    with pytest.raises(VolscatterError, match="closed"):
+        session.solve(sc)
+
+
+def test_frame_range_goes_through_one_session(tmp_path, monkeypatch):
+    """`volscatter-usd render --frames` and `bake --frames` solve the range in one native session
+    per volume, closed at the end."""
+    from volscatter import cli as C
+    made = []
+
+    class Recording(volscatter.Session):
+        def __init__(self, scene):
+            super().__init__(scene)
+            made.append(self)
+            self.frames_at_close = None
+
+        def close(self):
+            if not self.closed and self.frames_at_close is None:
+                self.frames_at_close = self.frame_count
+            super().close()
+
+    monkeypatch.setattr(R, "Session", Recording)
+    stage, path = make_stage(tmp_path)
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Sun")).AddRotateYOp()
+    op.Set(-30.0, 1.0)
+    op.Set(30.0, 3.0)
+    stage.Save()
+    fast = sum((["--set", f"{k}={v}"] for k, v in POP_FAST.items()), [])
+    assert C.main(["render", str(path), "--frames", "1-3", "--solver", "pop", "--width", "16", "--height", "12", "-q",
+                   *fast, "--out", str(tmp_path / "o.####.exr")]) == 0
+    assert [m.frames_at_close for m in made] == [3], "one session, three frames"
+    assert all((tmp_path / f"o.000{f}.exr").exists() for f in (1, 2, 3))
+    made.clear()
+    assert C.main(["bake", str(path), "--frames", "1-3", "--solver", "pop", "--out-layer", str(tmp_path / "b.usda"),
+                   "-q", *fast]) == 0
+    assert [m.frames_at_close for m in made] == [3]
+
+
 def test_wrong_library_is_refused(tmp_path):
     code = ("import os, sys; sys.path.insert(0, %r); os.environ['VOLSCATTER_LIB'] = %r\n"
             "import volscatter\n"

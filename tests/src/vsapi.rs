@@ -50,6 +50,7 @@ pub const COMPOSITE_TRANSPARENT: u32 = 1;
 pub type Scene = *mut c_void;
 pub type Res = *mut c_void;
 pub type Img = *mut c_void;
+pub type Sess = *mut c_void;
 pub type Progress = Option<unsafe extern "C" fn(user: *mut c_void, stage: *const c_char, fraction: f32) -> i32>;
 
 type S = i32;
@@ -113,6 +114,11 @@ api! {
     vs_result_copy_rgb: fn(Res, *mut f32, usize) -> S;
     vs_result_write_grid: fn(Res, Cs, u32) -> S;
     vs_result_composite: fn(Res, u32, u32, f32, *mut Img) -> S;
+    vs_session_new: fn(Scene, *mut Sess) -> S;
+    vs_session_destroy: fn(Sess) -> S;
+    vs_session_last_error: fn(Sess) -> Cs;
+    vs_session_solve: fn(Sess, Scene, Progress, *mut c_void, *mut Res) -> S;
+    vs_session_frame_count: fn(Sess, *mut u64) -> S;
     vs_image_destroy: fn(Img) -> S;
     vs_image_last_error: fn(Img) -> Cs;
     vs_image_size: fn(Img, *mut u32, *mut u32) -> S;
@@ -142,6 +148,9 @@ impl Api {
     }
     pub fn result_error(&self, r: Res) -> String {
         text(unsafe { (self.vs_result_last_error)(r) })
+    }
+    pub fn session_error(&self, s: Sess) -> String {
+        text(unsafe { (self.vs_session_last_error)(s) })
     }
     pub fn image_error(&self, i: Img) -> String {
         text(unsafe { (self.vs_image_last_error)(i) })

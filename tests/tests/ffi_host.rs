@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
 use volscatter_tests::cdylib::{cdylib, scratch_dir};
-use volscatter_tests::vsapi::{cstr, status::*, text, Api, Res, Scene, ABI_VERSION, COMPOSITE_TRANSPARENT, GRID_FORMAT_EXR, GRID_FORMAT_VDB};
+use volscatter_tests::vsapi::{cstr, status::*, text, Api, Res, Scene, Sess, ABI_VERSION, COMPOSITE_TRANSPARENT, GRID_FORMAT_EXR, GRID_FORMAT_VDB};
 
 fn api() -> &'static Api {
     static API: OnceLock<Api> = OnceLock::new();
@@ -38,10 +38,9 @@ fn small_scene() -> Scene {
     api().scene_from_json(&small_json(1))
 }
 
-/// Asserts a status and that the handle's message contains every `words`.
+/// Asserts a status and that the handle's message `msg` contains every `words`.
 #[track_caller]
-fn expect_scene(s: Scene, got: i32, want: i32, words: &[&str]) {
-    let msg = api().scene_error(s);
+fn expect_message(msg: String, got: i32, want: i32, words: &[&str]) {
     assert_eq!(got, want, "status {got} (want {want}); message: {msg}");
     for w in words {
         assert!(msg.contains(w), "message {msg:?} lacks {w:?}");
@@ -49,12 +48,18 @@ fn expect_scene(s: Scene, got: i32, want: i32, words: &[&str]) {
 }
 
 #[track_caller]
+fn expect_scene(s: Scene, got: i32, want: i32, words: &[&str]) {
+    expect_message(api().scene_error(s), got, want, words)
+}
+
+#[track_caller]
 fn expect_result(r: Res, got: i32, want: i32, words: &[&str]) {
-    let msg = api().result_error(r);
-    assert_eq!(got, want, "status {got} (want {want}); message: {msg}");
-    for w in words {
-        assert!(msg.contains(w), "message {msg:?} lacks {w:?}");
-    }
+    expect_message(api().result_error(r), got, want, words)
+}
+
+#[track_caller]
+fn expect_session(s: Sess, got: i32, want: i32, words: &[&str]) {
+    expect_message(api().session_error(s), got, want, words)
 }
 
 fn light_count(s: Scene) -> usize {
@@ -609,5 +614,101 @@ fn solvers_json_is_the_registry_and_static() {
             }
         }
         assert_eq!((a.vs_scene_destroy)(s), OK);
+    }
+}
+
+/// Sets the small scene's lights to a sun turned by `0.3 * frame` radians about z, and a sky.
+unsafe fn move_sun(s: Scene, frame: usize) {
+    let a = api();
+    let (sin, cos) = (0.3 * frame as f32).sin_cos();
+    let d = [-0.5 * cos - 0.6 * sin, -0.5 * sin + 0.6 * cos, -0.62];
+    assert_eq!((a.vs_scene_clear_lights)(s), OK);
+    assert_eq!((a.vs_scene_add_distant_light)(s, d.as_ptr(), [4.0f32; 3].as_ptr(), 0.0), OK, "{}", a.scene_error(s));
+    assert_eq!((a.vs_scene_add_dome_light)(s, [0.1f32, 0.15, 0.25].as_ptr()), OK);
+}
+
+#[test]
+fn sessions_refuse_nulls_and_dead_handles() {
+    let a = api();
+    unsafe {
+        let s = small_scene();
+        assert_eq!((a.vs_session_new)(s, null_mut()), NULL_ARGUMENT);
+        let mut sess: Sess = 0x10 as Sess; // cleared to NULL on failure
+        assert_eq!((a.vs_session_new)(null_mut(), &mut sess), NULL_ARGUMENT);
+        assert!(sess.is_null());
+        assert_eq!((a.vs_session_solve)(null_mut(), s, None, null_mut(), &mut null_mut()), NULL_ARGUMENT);
+        assert_eq!((a.vs_session_frame_count)(null_mut(), &mut 0), NULL_ARGUMENT);
+        assert_eq!((a.vs_session_destroy)(null_mut()), OK);
+        assert_eq!(a.session_error(null_mut()), a.status_message(NULL_ARGUMENT));
+
+        // A session is made from the scene's solver; its errors land on the session.
+        assert_eq!((a.vs_session_new)(s, &mut sess), OK, "{}", a.scene_error(s));
+        expect_session(sess, (a.vs_session_solve)(sess, s, None, null_mut(), null_mut()), NULL_ARGUMENT, &["out"]);
+        expect_session(sess, (a.vs_session_solve)(sess, null_mut(), None, null_mut(), &mut null_mut()), NULL_ARGUMENT, &["VsScene"]);
+        expect_session(sess, (a.vs_session_frame_count)(sess, null_mut()), NULL_ARGUMENT, &["out"]);
+        // Handles of another type, both ways.
+        assert_eq!((a.vs_scene_load_default)(sess), INVALID_HANDLE);
+        expect_session(sess, (a.vs_session_solve)(sess, sess, None, null_mut(), &mut null_mut()), INVALID_HANDLE, &["VsScene"]);
+        assert_eq!((a.vs_session_solve)(s, s, None, null_mut(), &mut null_mut()), INVALID_HANDLE);
+        // An empty scene has no medium: refused with the scene's message, on the session.
+        let empty = a.new_scene();
+        let mut r: Res = null_mut();
+        expect_session(sess, (a.vs_session_solve)(sess, empty, None, null_mut(), &mut r), INVALID_SCENE, &["medium"]);
+        assert!(r.is_null());
+        // The scene destroyed: the session lives on and reports it.
+        assert_eq!((a.vs_scene_destroy)(empty), OK);
+        expect_session(sess, (a.vs_session_solve)(sess, empty, None, null_mut(), &mut r), INVALID_HANDLE, &["VsScene"]);
+        // A result outlives its session.
+        assert_eq!((a.vs_session_solve)(sess, s, None, null_mut(), &mut r), OK, "{}", a.session_error(sess));
+        assert_eq!(a.session_error(sess), "");
+        let mut frames = 0u64;
+        assert_eq!((a.vs_session_frame_count)(sess, &mut frames), OK);
+        assert_eq!(frames, 1, "refused calls are not frames");
+        assert_eq!((a.vs_session_destroy)(sess), OK);
+        assert_eq!((a.vs_session_destroy)(sess), INVALID_HANDLE, "double destroy");
+        assert_eq!((a.vs_session_solve)(sess, s, None, null_mut(), &mut null_mut()), INVALID_HANDLE);
+        assert_eq!(a.session_error(sess), a.status_message(INVALID_HANDLE));
+        let (dims, data) = a.grid(r);
+        assert_eq!(data.len(), dims.iter().product::<u32>() as usize * 3);
+        assert_eq!((a.vs_result_destroy)(r), OK);
+        // A destroyed scene makes no session.
+        let mut sess2: Sess = null_mut();
+        assert_eq!((a.vs_scene_destroy)(s), OK);
+        assert_eq!((a.vs_session_new)(s, &mut sess2), INVALID_HANDLE);
+        assert!(sess2.is_null());
+    }
+}
+
+/// A session over three frames of a moving sun gives, frame by frame, exactly the grid of a
+/// one-off `vs_scene_solve`: for the reference with a fixed seed (it keeps nothing) and for
+/// pop (which reuses its density mip, dome importance and the dome's ordinates).
+#[test]
+fn a_session_over_three_frames_equals_one_off_solves() {
+    let a = api();
+    for (solver, settings) in [("reference", r#"{"spp": 2, "seed": 3, "grid_resolution": 8, "grid_spp": 4}"#), ("pop", r#"{"grid_resolution": 12, "dome_ordinates": 4}"#)] {
+        unsafe {
+            let s = small_scene();
+            assert_eq!((a.vs_scene_set_solver)(s, cstr(solver).as_ptr(), cstr(settings).as_ptr()), OK, "{}", a.scene_error(s));
+            let mut sess: Sess = null_mut();
+            assert_eq!((a.vs_session_new)(s, &mut sess), OK, "{}", a.scene_error(s));
+            for frame in 0..3 {
+                move_sun(s, frame);
+                let one_off = a.solve(s);
+                let mut r: Res = null_mut();
+                assert_eq!((a.vs_session_solve)(sess, s, None, null_mut(), &mut r), OK, "{}", a.session_error(sess));
+                let (want_dims, want) = a.grid(one_off);
+                let (dims, got) = a.grid(r);
+                assert_eq!(dims, want_dims);
+                assert!(got.iter().any(|v| *v > 0.0), "{solver} frame {frame}: lit");
+                assert_eq!(got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "{solver} frame {frame}");
+                assert_eq!((a.vs_result_destroy)(r), OK);
+                assert_eq!((a.vs_result_destroy)(one_off), OK);
+            }
+            let mut frames = 0u64;
+            assert_eq!((a.vs_session_frame_count)(sess, &mut frames), OK);
+            assert_eq!(frames, 3);
+            assert_eq!((a.vs_session_destroy)(sess), OK);
+            assert_eq!((a.vs_scene_destroy)(s), OK);
+        }
     }
 }

@@ -20,7 +20,7 @@ import json
 import os
 import sys
 import threading
-from ctypes import (CFUNCTYPE, POINTER, c_char_p, c_float, c_int32, c_size_t, c_uint32, c_void_p)
+from ctypes import (CFUNCTYPE, POINTER, c_char_p, c_float, c_int32, c_size_t, c_uint32, c_uint64, c_void_p)
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
@@ -75,9 +75,14 @@ class _VsImage(ctypes.Structure):
     pass
 
 
+class _VsSession(ctypes.Structure):
+    pass
+
+
 _ScenePtr = POINTER(_VsScene)
 _ResultPtr = POINTER(_VsResult)
 _ImagePtr = POINTER(_VsImage)
+_SessionPtr = POINTER(_VsSession)
 _F = POINTER(c_float)
 
 #: int32_t (*)(void *user, const char *stage, float fraction)
@@ -118,6 +123,11 @@ _SIGNATURES = {
     "vs_result_copy_rgb": (c_int32, [_ResultPtr, _F, c_size_t]),
     "vs_result_write_grid": (c_int32, [_ResultPtr, c_char_p, c_uint32]),
     "vs_result_composite": (c_int32, [_ResultPtr, c_uint32, c_uint32, c_float, POINTER(_ImagePtr)]),
+    "vs_session_new": (c_int32, [_ScenePtr, POINTER(_SessionPtr)]),
+    "vs_session_destroy": (c_int32, [_SessionPtr]),
+    "vs_session_last_error": (c_char_p, [_SessionPtr]),
+    "vs_session_solve": (c_int32, [_SessionPtr, _ScenePtr, PROGRESS_CALLBACK, c_void_p, POINTER(_ResultPtr)]),
+    "vs_session_frame_count": (c_int32, [_SessionPtr, POINTER(c_uint64)]),
     "vs_image_destroy": (c_int32, [_ImagePtr]),
     "vs_image_last_error": (c_char_p, [_ImagePtr]),
     "vs_image_size": (c_int32, [_ImagePtr, POINTER(c_uint32), POINTER(c_uint32)]),
@@ -416,6 +426,36 @@ class Scene(_Handle):
         cb.reraise()
         self._check(status, "reference render")
         return Image(out)
+
+
+class Session(_Handle):
+    """A solver kept across the frames of a sequence (``VsSession``): each :meth:`solve` takes
+    a scene as it is now (medium, lights, camera may change) and gives what
+    :meth:`Scene.solve` would, reusing what earlier frames computed and still applies.
+    The solver, its settings and the device are those of the scene it was made from."""
+
+    _destroy, _last_error, _kind = "vs_session_destroy", "vs_session_last_error", "session"
+
+    def __init__(self, scene: Scene):
+        out = _SessionPtr()
+        scene._check(lib().vs_session_new(scene._p(), ctypes.byref(out)), "vs_session_new")
+        super().__init__(out)
+
+    def solve(self, scene: Scene, progress: Optional[Callable[[str, float], Optional[bool]]] = None) -> "Result":
+        """One frame: solves ``scene``; ``progress`` as for :meth:`Scene.solve`."""
+        cb = _Progress(progress)
+        out = _ResultPtr()
+        status = lib().vs_session_solve(self._p(), scene._p(), cb.c, None, ctypes.byref(out))
+        cb.reraise()
+        self._check(status, "session solve")
+        return Result(out)
+
+    @property
+    def frame_count(self) -> int:
+        """Solves run in this session so far."""
+        n = c_uint64()
+        self._check(lib().vs_session_frame_count(self._p(), ctypes.byref(n)), "session frame count")
+        return int(n.value)
 
 
 class Result(_Handle):

@@ -232,24 +232,31 @@ def cmd_render(args) -> int:
                 bar.finish()
             _warn(w)
 
-    for k, t in enumerate(frames):
-        out = R.frame_path(args.out, t) if t is not None else args.out
-        png = (R.frame_path(args.png, t) if t is not None else args.png) if args.png else None
-        bar.prefix = f"frame {t:g} ({k + 1}/{len(frames)}) " if len(frames) > 1 else ""
-        try:
-            res = run_cancellable(lambda: R.render(
-                args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver, settings=settings,
-                width=args.width, height=args.height, volume=args.volume, light_convention=args.light_convention,
-                medium_defaults=_medium_defaults(args), progress=bar, png_exposure=args.exposure, stage=stage,
-                warn=warn, transparent=args.transparent), bar)
-        finally:
-            bar.finish()
-        if not args.quiet:
-            sys.stderr.write(f"{res.out}: {res.width}x{res.height} with {args.solver}"
-                             f"{'' if math.isnan(res.time) else f' at time {res.time:g}'}, mean RGB "
-                             f"({res.mean_rgb[0]:.4g}, {res.mean_rgb[1]:.4g}, {res.mean_rgb[2]:.4g}), "
-                             f"mean alpha {res.mean_alpha:.3f}\n")
+    # The whole range goes through one session per volume (the solver reuses across frames).
+    with R.FrameSessions() as sessions:
+        for k, t in enumerate(frames):
+            _render_frame(args, R, stage, settings, bar, warn, sessions, t, k, len(frames))
     return 0
+
+
+def _render_frame(args, R, stage, settings, bar, warn, sessions, t, k: int, n: int):
+    """Renders frame ``t`` (the ``k``-th of ``n``) of ``cmd_render``'s range in ``sessions``."""
+    out = R.frame_path(args.out, t) if t is not None else args.out
+    png = (R.frame_path(args.png, t) if t is not None else args.png) if args.png else None
+    bar.prefix = f"frame {t:g} ({k + 1}/{n}) " if n > 1 else ""
+    try:
+        res = run_cancellable(lambda: R.render(
+            args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver, settings=settings,
+            width=args.width, height=args.height, volume=args.volume, light_convention=args.light_convention,
+            medium_defaults=_medium_defaults(args), progress=bar, png_exposure=args.exposure, stage=stage,
+            warn=warn, transparent=args.transparent, sessions=sessions), bar)
+    finally:
+        bar.finish()
+    if not args.quiet:
+        sys.stderr.write(f"{res.out}: {res.width}x{res.height} with {args.solver}"
+                         f"{'' if math.isnan(res.time) else f' at time {res.time:g}'}, mean RGB "
+                         f"({res.mean_rgb[0]:.4g}, {res.mean_rgb[1]:.4g}, {res.mean_rgb[2]:.4g}), "
+                         f"mean alpha {res.mean_alpha:.3f}\n")
 
 
 def cmd_bake(args) -> int:

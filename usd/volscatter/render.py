@@ -23,7 +23,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import stage as stage_mod
-from ._native import Scene, VolscatterError, solvers
+from ._native import Result, Scene, Session, VolscatterError, solvers
 from .vdbwrite import write_grids
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
@@ -69,6 +69,39 @@ def native_scene(doc: dict, solver: str, settings: Optional[dict]) -> Scene:
     return s
 
 
+class FrameSessions:
+    """The native sessions of a frame range (``--frames``): one :class:`Session` per volume,
+    made from its first frame and kept for the rest, so that the solver reuses between frames
+    what did not change (pop: the density mip, the dome importance and the dome's ordinates
+    while only the sun or the local lights move). ``close()`` or ``with`` destroys them."""
+
+    def __init__(self):
+        self._sessions: Dict[str, Session] = {}
+
+    def solve(self, scene: Scene, progress: Progress = None, key: str = "") -> Result:
+        """Solves ``scene`` as the next frame of the session ``key`` (a volume's path)."""
+        session = self._sessions.get(key)
+        if session is None:
+            session = self._sessions[key] = Session(scene)
+        return session.solve(scene, progress)
+
+    def frame_counts(self) -> Dict[str, int]:
+        """Frames solved so far in each session."""
+        return {k: s.frame_count for k, s in self._sessions.items()}
+
+    def close(self):
+        for s in self._sessions.values():
+            s.close()
+        self._sessions.clear()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
 def frame_path(pattern: str, frame: float) -> str:
     """``out.####.exr`` -> ``out.0012.exr``; ``out_{frame}.exr`` / ``out_{frame:04d}.exr`` ->
     Python formatting with the (integer when whole) frame number."""
@@ -96,9 +129,11 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
            solver: str = "reference", settings: Optional[dict] = None, width: int = 320, height: Optional[int] = None,
            volume: Optional[str] = None, light_convention: str = "auto", medium_defaults: Optional[dict] = None,
            progress: Progress = None, png_exposure: float = 1.0, stage=None,
-           warn: Optional[Callable[[str], None]] = None, transparent: bool = False) -> FrameResult:
+           warn: Optional[Callable[[str], None]] = None, transparent: bool = False,
+           sessions: Optional[FrameSessions] = None) -> FrameResult:
     """Renders one frame of a stage into ``out`` (EXR: RGBA + AOVs) and optionally ``png``.
-    ``transparent`` leaves the directly seen environment out (alpha from the medium only)."""
+    ``transparent`` leaves the directly seen environment out (alpha from the medium only).
+    ``sessions``: the frame range's sessions, to solve this frame in (see :class:`FrameSessions`)."""
     sc = stage_mod.read_stage(stage_path, time=time, camera=camera, light_convention=light_convention,
                               medium_defaults=medium_defaults, stage=stage)
     warnings = list(sc.warnings) + solver_warnings(sc, solver)
@@ -113,7 +148,8 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
         if solver == "reference":
             image = scene.render_reference(progress)
         else:
-            with scene.solve(progress) as result:
+            solved = sessions.solve(scene, progress, sc.volumes[vi].path) if sessions else scene.solve(progress)
+            with solved as result:
                 image = result.composite(transparent=transparent)
         with image:
             _ensure_parent(out)
@@ -214,11 +250,17 @@ def _safe_name(path: str) -> str:
 def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = None, camera: Optional[str] = None,
          solver: str = "reference", settings: Optional[dict] = None, width: int = 320, height: Optional[int] = None,
          light_convention: str = "auto", medium_defaults: Optional[dict] = None, progress: Progress = None,
-         warn: Optional[Callable[[str], None]] = None) -> BakeResult:
+         warn: Optional[Callable[[str], None]] = None, sessions: Optional[FrameSessions] = None) -> BakeResult:
     """Solves every Volume of the stage (at each time in ``times``; default: one solve at the
     default time) and writes ``out_layer``: a layer that sublayers the stage and adds the
     scattering fields. The VDBs go beside the layer, named ``<layer stem>.<volume>[.<frame>].vdb``.
-    The scattering is computed towards the stage's camera (S is view-dependent for g != 0)."""
+    The scattering is computed towards the stage's camera (S is view-dependent for g != 0).
+    Each volume's frames go through one native session (of ``sessions`` when given, else of
+    sessions made here and closed on return)."""
+    if sessions is None:
+        with FrameSessions() as own:
+            return bake(stage_path, out_layer, times, camera, solver, settings, width, height, light_convention,
+                        medium_defaults, progress, warn, own)
     from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
     src_stage = stage_mod.open_stage(stage_path)
     out_layer = os.path.abspath(out_layer)
@@ -260,7 +302,7 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             if animated and t is not None:
                 name += f".{int(t) if float(t).is_integer() else t}"
             fname = f"{name}.vdb"
-            with native_scene(doc, solver, settings) as scene, scene.solve(progress) as result:
+            with native_scene(doc, solver, settings) as scene, sessions.solve(scene, progress, v.path) as result:
                 rgb = result.rgb()
                 i2w = np.asarray(result.index_to_world(), dtype=np.float64).reshape(4, 4)
             # the grid in the Volume prim's local space (USD applies the prim's transform to

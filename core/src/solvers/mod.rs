@@ -5,6 +5,7 @@
 pub mod pop;
 pub mod reference;
 pub mod registry;
+pub mod session;
 #[cfg(test)]
 pub(crate) mod testing;
 
@@ -121,6 +122,14 @@ pub struct SolveOutput {
 pub trait Solver: Send + Sync {
     fn name(&self) -> &'static str;
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput>;
+
+    /// As `solve`, one frame of a sequence: the solver may read what it kept in `state` from
+    /// the previous frames and keep more, but must return exactly what `solve` would for this
+    /// scene (session.rs). The default keeps nothing.
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut session::SessionState) -> Result<SolveOutput> {
+        let _ = state;
+        self.solve(scene, progress)
+    }
 }
 
 pub use registry::SOLVER_NAMES;

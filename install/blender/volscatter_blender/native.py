@@ -62,6 +62,11 @@ _SIGNATURES = {
     "vs_result_copy_rgb": (_st, [_vp, _f32p, ctypes.c_size_t]),
     "vs_result_write_grid": (_st, [_vp, ctypes.c_char_p, _u32]),
     "vs_result_composite": (_st, [_vp, _u32, _u32, ctypes.c_float, ctypes.POINTER(_vp)]),
+    "vs_session_new": (_st, [_vp, ctypes.POINTER(_vp)]),
+    "vs_session_destroy": (_st, [_vp]),
+    "vs_session_last_error": (ctypes.c_char_p, [_vp]),
+    "vs_session_solve": (_st, [_vp, _vp, PROGRESS_CALLBACK, _vp, ctypes.POINTER(_vp)]),
+    "vs_session_frame_count": (_st, [_vp, ctypes.POINTER(ctypes.c_uint64)]),
     "vs_image_destroy": (_st, [_vp]),
     "vs_image_last_error": (ctypes.c_char_p, [_vp]),
     "vs_image_size": (_st, [_vp, _u32p, _u32p]),
@@ -266,26 +271,58 @@ class Scene(_Handle):
     def solve(self, progress=None):
         """Runs the solver; `progress(stage, fraction) -> bool` (False cancels) is called from
         worker threads. Raises `Cancelled` when cancelled. Returns a `Result`."""
-        errors = []
+        return _solve(lambda cb, out: lib().vs_scene_solve(self.ptr, cb, None, out), progress,
+                      lib().vs_scene_last_error, self.ptr)
 
-        def cb(_user, stage, fraction):
-            if progress is None:
-                return 1
-            try:
-                return 1 if progress(stage.decode("utf-8", "replace") if stage else "", float(fraction)) else 0
-            except BaseException as e:  # must not unwind through the library
-                errors.append(e)
-                return 0
 
-        c_cb = PROGRESS_CALLBACK(cb)
+def _solve(call, progress, last_error, handle):
+    """Runs `call(c_callback, byref(out))` with `progress` adapted to the C callback (its
+    exceptions are re-raised here, never unwound through the library); returns a `Result`."""
+    errors = []
+
+    def cb(_user, stage, fraction):
+        if progress is None:
+            return 1
+        try:
+            return 1 if progress(stage.decode("utf-8", "replace") if stage else "", float(fraction)) else 0
+        except BaseException as e:  # must not unwind through the library
+            errors.append(e)
+            return 0
+
+    c_cb = PROGRESS_CALLBACK(cb)
+    out = _vp()
+    status = call(c_cb, ctypes.byref(out))
+    if errors:
+        if out:
+            lib().vs_result_destroy(out)
+        raise errors[0]
+    _check(status, last_error, handle)
+    return Result(out)
+
+
+class Session(_Handle):
+    """A solver kept across the frames of a sequence (`VsSession`): `solve(scene)` gives what
+    `scene.solve()` would, reusing what earlier frames computed and still applies. Solver,
+    settings and device are those of the scene it is made from."""
+    _destroy = "vs_session_destroy"
+    _last_error = "vs_session_last_error"
+
+    def __init__(self, scene):
         out = _vp()
-        status = lib().vs_scene_solve(self.ptr, c_cb, None, ctypes.byref(out))
-        if errors:
-            if out:
-                lib().vs_result_destroy(out)
-            raise errors[0]
-        _check(status, lib().vs_scene_last_error, self.ptr)
-        return Result(out)
+        L = lib()
+        _check(L.vs_session_new(scene.ptr, ctypes.byref(out)), L.vs_scene_last_error, scene.ptr)
+        super().__init__(out)
+
+    def solve(self, scene, progress=None):
+        """One frame: solves `scene`; `progress` as for `Scene.solve`."""
+        return _solve(lambda cb, out: lib().vs_session_solve(self.ptr, scene.ptr, cb, None, out), progress,
+                      lib().vs_session_last_error, self.ptr)
+
+    @property
+    def frame_count(self):
+        n = ctypes.c_uint64()
+        self._call("vs_session_frame_count", ctypes.byref(n))
+        return n.value
 
 
 class Result(_Handle):

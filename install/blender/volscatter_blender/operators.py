@@ -1,7 +1,8 @@
 """Operators: Compute Scattering and Render Preview.
 
 Both run the same job: for each frame, export the scene (main thread, reads bpy), then solve in
-a worker thread (the library releases nothing but its own locks; ctypes drops the GIL while it
+one native session for the whole frame range (the solver reuses between frames what did not
+change) in a worker thread (the library releases nothing but its own locks; ctypes drops the GIL while it
 runs), reporting progress through a shared state read by a modal timer. Invoked from the UI they
 are modal (status bar progress, Esc cancels); `execute` (scripts, tests) runs the same steps
 blocking. Blender data is created only after every frame succeeded, so a failure or a
@@ -37,20 +38,33 @@ def _unique_name(base):
     return name
 
 
-def _solve_on(sc, device, progress, notes):
+def _solve_on(sc, device, progress, notes, job=None):
     """Solves scene `sc` on the Device menu's choice, passed to the library as it is. AUTO: the
     library uses a hardware GPU when one works, else the CPU. GPU: when the GPU fails (status
     DEVICE: no adapter, out of memory, lost), solves again on the CPU and adds a note saying so
-    to `notes`."""
+    to `notes`. With `job` (an operator over several frames), every frame goes through the job's
+    one native session, made from the first frame's scene on this device, so the solver keeps
+    what does not change between frames; after a GPU failure the session is made anew on the
+    CPU for the rest of the range."""
     sc.set_device(device)
+
+    def solve():
+        if job is None:
+            return sc.solve(progress)
+        if job._session is None:
+            job._session = native.Session(sc)
+        return job._session.solve(sc, progress)
+
     try:
-        return sc.solve(progress)
+        return solve()
     except native.VolscatterError as e:
         if device != 'GPU' or e.status != native.STATUS_DEVICE:
             raise
         notes.append("volscatter: the GPU failed (%s); solved on the CPU instead" % e)
         sc.set_device('CPU')
-        return sc.solve(progress)
+        if job is not None:
+            job._close_session()
+        return solve()
 
 
 class _State:
@@ -102,6 +116,7 @@ class _JobOperator:
         # first what _fail needs, so that a failure anywhere below is reported cleanly
         self._files = []
         self._inputs = []  # generated input VDBs: only the solver reads them
+        self._session = None  # made from the first frame's scene, closed when the job ends
         self._frame0 = context.scene.frame_current
         self._obj = context.object
         src = self._obj.get(RESULT_TAG)
@@ -156,7 +171,8 @@ class _JobOperator:
                 return not state.cancel
         try:
             with native.Scene.from_json(doc) as sc:
-                with _solve_on(sc, self._settings.device, progress, state.notes) as result:
+                job = self if len(self._frames) > 1 else None  # a range: one session
+                with _solve_on(sc, self._settings.device, progress, state.notes, job) as result:
                     state.value = self.per_frame(result, frame)
         except BaseException as e:  # reported on the main thread
             state.error = e
@@ -172,8 +188,14 @@ class _JobOperator:
             return str(e)
         return "volscatter: unexpected error: %s: %s" % (type(e).__name__, e)
 
+    def _close_session(self):
+        session, self._session = getattr(self, "_session", None), None
+        if session is not None:
+            session.close()
+
     def _fail(self, context, e):
         try:
+            self._close_session()
             self.cleanup_files()
             self._restore_frame(context)
         except Exception as cleanup_error:  # never let the report itself fail
@@ -190,6 +212,7 @@ class _JobOperator:
             context.scene.frame_set(self._frame0)
 
     def _complete(self, context):
+        self._close_session()
         self._restore_frame(context)
         try:
             self.finish(context, self._values)
@@ -308,6 +331,7 @@ class _JobOperator:
             self._state.cancel = True
         self._thread.join()
         self._end_modal(context)
+        self._close_session()
         self.cleanup_files()
 
 

@@ -12,6 +12,7 @@ pub mod status;
 pub mod progress;
 pub mod scene;
 pub mod result;
+pub mod session;
 pub mod image;
 // The solver registry (issue 14).
 pub mod solvers;
@@ -23,5 +24,6 @@ pub use image::VsImage;
 pub use progress::VsProgressCallback;
 pub use result::{VsGridFormat, VsResult};
 pub use scene::VsScene;
+pub use session::VsSession;
 pub use status::VsStatus;
 pub use version::{VS_ABI_VERSION, VS_COMPOSITE_TRANSPARENT};

@@ -29,11 +29,11 @@ pub struct VsScene {
 }
 
 pub(crate) struct SceneState {
-    scene: Arc<Scene>,
+    pub(crate) scene: Arc<Scene>,
     has_medium: bool,
     has_camera: bool,
     /// Where GPU-capable stages run (`vs_scene_set_device`); the CPU unless the host asks.
-    device: DeviceChoice,
+    pub(crate) device: DeviceChoice,
 }
 
 pub(crate) static SCENES: Registry<SceneState, VsScene> = Registry::new("VsScene");
@@ -63,7 +63,7 @@ impl SceneState {
         Arc::make_mut(&mut self.scene)
     }
     /// A snapshot of a complete scene.
-    fn snapshot(&self) -> FfiResult<Arc<Scene>> {
+    pub(crate) fn snapshot(&self) -> FfiResult<Arc<Scene>> {
         if !self.has_medium {
             return Err(FfiError::scene("the scene has no medium: load a scene or call vs_scene_set_medium_vdb / vs_scene_set_medium_dense"));
         }

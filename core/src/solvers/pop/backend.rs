@@ -4,6 +4,8 @@
 //! volscatter-gpu, which keeps each light's data in device memory from the sweep through merge
 //! and upsampling (hence the associated types: a backend decides where a light's state lives).
 
+use std::any::Any;
+
 use glam::Vec3;
 
 use super::light_grid::LightGrid;
@@ -59,12 +61,24 @@ pub trait PopBackend: Sync {
 
     /// upsample.rs: the scattering grid S.
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Self::Merged, settings: &PopSettings) -> Result<ScatteringGrid>;
+
+    /// A copy of a propagated light that a later solve of a session may reuse (reuse.rs), or
+    /// `None`: the default keeps nothing (the GPU's lights live in device memory).
+    fn keep_light(&self, _light: &Self::Light) -> Option<Box<dyn Any + Send>> {
+        None
+    }
+
+    /// A light kept by `keep_light`, as this backend's light again.
+    fn reuse_light(&self, _kept: &(dyn Any + Send)) -> Option<Self::Light> {
+        None
+    }
 }
 
 /// The CPU pipeline.
 pub struct CpuBackend;
 
 /// A light on the CPU: its sweep (packets) and accumulation.
+#[derive(Clone)]
 pub struct CpuLight {
     pub initial: init::Initial,
     pub j: Vec<Vec3>,
@@ -108,5 +122,13 @@ impl PopBackend for CpuBackend {
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
         upsample::upsample(medium, mip, merged, settings)
+    }
+
+    fn keep_light(&self, light: &CpuLight) -> Option<Box<dyn Any + Send>> {
+        Some(Box::new(light.clone()))
+    }
+
+    fn reuse_light(&self, kept: &(dyn Any + Send)) -> Option<CpuLight> {
+        kept.downcast_ref::<CpuLight>().cloned()
     }
 }

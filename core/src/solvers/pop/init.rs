@@ -22,6 +22,7 @@ use rayon::prelude::*;
 
 use super::light_grid::LightGrid;
 
+#[derive(Clone)]
 pub struct Initial {
     /// Fluence of the unscattered light at each cell centre (W/m^2).
     pub direct: Vec<Vec3>,

@@ -11,6 +11,7 @@ use crate::medium::optics::box_corners;
 use crate::medium::{trilinear, Medium};
 use crate::sampling::orthonormal_basis;
 
+#[derive(Clone)]
 pub struct LightGrid {
     /// Cells along (u, v, d); x (u) fastest, d slowest so that a slab is one depth slice.
     pub dims: UVec3,

@@ -37,6 +37,9 @@
 //!
 //! Local lights: each point, sphere or spot light, and each VPL of an area light, propagates in
 //! its own radial grid (radial/), whose J is added into the merged grid before upsampling.
+//!
+//! In a session (solvers/session.rs), what the medium, the camera and an ordinate alone decide
+//! is kept between frames and reused while it still applies (reuse.rs).
 
 pub mod accumulate;
 pub mod backend;
@@ -48,11 +51,13 @@ pub mod mip;
 pub mod propagate;
 pub mod radial;
 pub mod residuum;
+pub mod reuse;
 pub mod settings;
 pub mod upsample;
 
 use glam::Vec3;
 
+use super::session::SessionState;
 use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
@@ -157,6 +162,18 @@ impl Pop {
     /// As `solve_detailed`, with the stages that touch every cell (sweep, propagation, merge,
     /// upsampling) run by `backend`: `backend::CpuBackend`, or the GPU port (volscatter-gpu).
     pub fn solve_with<B: PopBackend>(&self, scene: &Scene, progress: &dyn Progress, backend: &B) -> Result<(SolveOutput, PopReport)> {
+        self.solve_reusing(scene, progress, backend, None)
+    }
+
+    /// As `solve_with`, one frame of a session: the light-independent stages come from
+    /// `reuse` when the medium (and camera) they were made for did not change (reuse.rs).
+    pub fn solve_reusing<B: PopBackend>(
+        &self,
+        scene: &Scene,
+        progress: &dyn Progress,
+        backend: &B,
+        mut reuse: Option<&mut reuse::PopReuse>,
+    ) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -168,7 +185,12 @@ impl Pop {
         let (wlo, whi) = medium.world_bounds();
         let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
         let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
-        let mip = timings.time("pop mip", || MediumMip::new(medium, min_fp));
+        // In a session, the medium's key decides what may be reused (one pass over its voxels).
+        let key = reuse.is_some().then(|| timings.time("pop medium key", || reuse::MediumKey::of(medium)));
+        let mip = timings.time("pop mip", || match (reuse.as_deref_mut(), &key) {
+            (Some(r), Some(k)) => r.mip(k, medium, min_fp),
+            _ => std::sync::Arc::new(MediumMip::new(medium, min_fp)),
+        });
 
         // Every light becomes ordinates (translate/ordinates.rs, translate/dome.rs): (direction
         // of travel, fluence, initial anisotropy, grid resolution).
@@ -181,11 +203,15 @@ impl Pop {
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
                     let weights = if s.dome_importance {
-                        Some(timings.time("pop importance", || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction))?)
+                        let build = || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction);
+                        Some(timings.time("pop importance", || match (reuse.as_deref_mut(), &key) {
+                            (Some(r), Some(k)) => r.importance(k, scene.camera.position, s.diffusion_correction, build),
+                            _ => build().map(std::sync::Arc::new),
+                        })?)
                     } else {
                         None
                     };
-                    for o in dome::select_ordinates(env, s.dome_ordinates, weights.as_ref()) {
+                    for o in dome::select_ordinates(env, s.dome_ordinates, weights.as_deref()) {
                         distant.push((o.direction, o.fluence, o.a0, s.dome_grid_resolution()));
                     }
                 }
@@ -211,9 +237,25 @@ impl Pop {
         let g = medium.g;
         let mut lights = Vec::with_capacity(distant.len() + 1);
         let mut residuum = if s.isotropic_residuum { Some(residuum::Residuum::new(medium, &mip, s.residuum_grid_resolution())?) } else { None };
+        // In a session, lights solved for this medium, camera and settings are reused (reuse.rs).
+        let mut kept = match (reuse, &key) {
+            (Some(r), Some(k)) => {
+                r.begin_lights(k, scene.camera.position, s);
+                Some(r)
+            }
+            _ => None,
+        };
         for (direction, fluence, a0, resolution) in distant {
             if fluence.max_element() <= 0.0 {
                 continue;
+            }
+            let okey = reuse::OrdinateKey::new(direction, fluence, a0, resolution);
+            if let Some(r) = kept.as_deref_mut() {
+                if let Some((grid, light, rep)) = timings.time("pop reused lights", || r.reuse_light(&okey, backend, residuum.as_mut())) {
+                    report.lights.push(rep);
+                    lights.push((grid, light));
+                    continue;
+                }
             }
             let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
@@ -235,19 +277,27 @@ impl Pop {
             let t0 = std::time::Instant::now();
             let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
             let mut stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
+            let remaining = std::mem::take(&mut stats.remaining);
             if let Some(r) = residuum.as_mut() {
-                r.gather(&grid, &std::mem::take(&mut stats.remaining));
+                r.gather(&grid, &remaining);
             }
             timings.0.push(("pop propagation".into(), t0.elapsed().as_secs_f64()));
-            report.lights.push(LightReport {
+            let rep = LightReport {
                 dims: grid.dims.to_array(),
                 cell_size: grid.h,
                 entering: sweep.entering.to_array(),
                 transmitted: sweep.transmitted.to_array(),
                 absorbed_direct: sweep.absorbed.to_array(),
                 propagation: stats,
-            });
+            };
+            if let Some(r) = kept.as_deref_mut() {
+                timings.time("pop reused lights", || r.keep_light(okey, backend, &grid, &light, &rep, remaining));
+            }
+            report.lights.push(rep);
             lights.push((grid, light));
+        }
+        if let Some(r) = kept {
+            r.end_lights();
         }
         // The residuum runs only when the lights handed over more than the residual threshold
         // of all the energy they scattered, and iterates until what is left falls below that
@@ -325,6 +375,10 @@ impl Solver for Pop {
     }
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
         self.solve_detailed(scene, progress).map(|(out, _)| out)
+    }
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
+        let reuse = state.kept(reuse::PopReuse::default);
+        self.solve_reusing(scene, progress, &backend::CpuBackend, Some(reuse)).map(|(out, _)| out)
     }
 }
 

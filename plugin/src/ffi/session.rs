@@ -1,0 +1,115 @@
+//! `VsSession`: one solver kept across the solves of a sequence (frames of a VDB sequence, a
+//! moving light or camera), so that it reuses between frames what did not change
+//! (`volscatter_core::solvers::session`). Thin over `Session` and the GPU dispatch.
+
+use std::ffi::{c_char, c_void};
+
+use volscatter_core::solvers::session::Session;
+use volscatter_gpu::DeviceChoice;
+
+use super::guard::{self, clear_out, on_handle, write_out};
+use super::handle::lock;
+use super::handle::Registry;
+use super::progress::{CProgress, VsProgressCallback};
+use super::result::{ResultState, VsResult, RESULTS};
+use super::scene::{VsScene, SCENES};
+use super::status::{FfiError, VsStatus};
+
+/// Opaque session handle. Create with `vs_session_new`, destroy with `vs_session_destroy`.
+pub struct VsSession {
+    _private: [u8; 0],
+}
+
+pub(crate) struct SessionState {
+    session: Session,
+    device: DeviceChoice,
+}
+
+pub(crate) static SESSIONS: Registry<SessionState, VsSession> = Registry::new("VsSession");
+
+/// Creates a session in `*out` (NULL on failure; destroy with `vs_session_destroy`) with the
+/// solver, settings and device of `scene` as they are now (`vs_scene_set_solver`,
+/// `vs_scene_set_device`, or the scene JSON; default "reference"). They stay the session's for
+/// its life; later changes to the scene's solver or device do not affect it. On failure the
+/// message is on `scene` (`vs_scene_last_error`).
+///
+/// Thread safety: any thread.
+#[no_mangle]
+pub unsafe extern "C" fn vs_session_new(scene: *const VsScene, out: *mut *mut VsSession) -> VsStatus {
+    let cleared = guard::call(|| clear_out(out, "out"));
+    if cleared != VsStatus::Ok {
+        return cleared;
+    }
+    on_handle(&SCENES, scene, |h| {
+        let (scene, device) = {
+            let st = lock(&h.state);
+            (st.scene.clone(), st.device)
+        };
+        let session = Session::for_scene(&scene)?;
+        write_out(out, SESSIONS.insert(SessionState { session, device })?, "out")
+    })
+}
+
+/// Destroys a session and what it kept. NULL is ignored; a dead handle gives
+/// `VS_STATUS_INVALID_HANDLE`. Results solved in it stay valid. A solve running on another
+/// thread finishes normally.
+///
+/// Thread safety: any thread; the handle must not be used afterwards.
+#[no_mangle]
+pub unsafe extern "C" fn vs_session_destroy(session: *mut VsSession) -> VsStatus {
+    guard::call(|| if session.is_null() { Ok(()) } else { SESSIONS.remove(session) })
+}
+
+/// The message of the last call on this session that failed, or "" if it succeeded; valid
+/// until the next call on the session or its destruction. For a NULL or dead handle, a static
+/// description.
+///
+/// Thread safety: meaningful only when no other thread calls functions on this session.
+#[no_mangle]
+pub unsafe extern "C" fn vs_session_last_error(session: *const VsSession) -> *const c_char {
+    guard::value(VsStatus::Internal.description().as_ptr().cast(), || match SESSIONS.get(session) {
+        Ok(h) => h.error.as_ptr(),
+        Err(e) => e.status.description().as_ptr().cast(),
+    })
+}
+
+/// Solves `scene` as it is now (medium, lights, camera: any of them may have changed since
+/// the last frame) with the session's solver, reusing what earlier frames computed and still
+/// applies, and puts the scattering grid in a new result `*out` (NULL on failure; destroy
+/// with `vs_result_destroy`). The result equals what `vs_scene_solve` gives for the same scene
+/// with the session's solver and device. `progress` and cancelling as for `vs_scene_solve`.
+/// Errors (including the scene's: no medium, NULL or dead scene handle) are on the session.
+///
+/// Thread safety: any thread. Calls on one session are serialised (a frame waits for the one
+/// before); the scene is not kept locked during the solve.
+#[no_mangle]
+pub unsafe extern "C" fn vs_session_solve(
+    session: *mut VsSession,
+    scene: *const VsScene,
+    progress: VsProgressCallback,
+    user: *mut c_void,
+    out: *mut *mut VsResult,
+) -> VsStatus {
+    on_handle(&SESSIONS, session, |h| {
+        clear_out(out, "out")?;
+        let snapshot = lock(&SCENES.get(scene)?.state).snapshot()?;
+        let progress = CProgress::new(progress, user);
+        let mut st = lock(&h.state);
+        let device = st.device;
+        let (output, _used) = volscatter_gpu::solve_session(device, &mut st.session, &snapshot, &progress)?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
+        if progress.cancelled() {
+            return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
+        }
+        let state = ResultState::new(output, snapshot, device)?;
+        write_out(out, RESULTS.insert(state)?, "out")
+    })
+}
+
+/// Writes the number of solves run in this session so far (failed and cancelled ones
+/// included) to `*out`.
+///
+/// Thread safety: any thread; waits for a solve running on the session.
+#[no_mangle]
+pub unsafe extern "C" fn vs_session_frame_count(session: *const VsSession, out: *mut u64) -> VsStatus {
+    on_handle(&SESSIONS, session, |h| write_out(out, lock(&h.state).session.frames(), "out"))
+}
