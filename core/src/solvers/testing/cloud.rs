@@ -170,3 +170,25 @@ fn pop_on_dense_cloud() {
         );
     }
 }
+
+/// `"procedural": "cumulus"` in a scene file builds the same medium as `cloud_medium` (same
+/// density at every voxel), and an unknown name is an error that lists the known ones.
+#[test]
+fn cumulus_from_scene_json() {
+    let json = |name: &str| {
+        format!(
+            r#"{{"format": 1, "medium": {{"procedural": "{name}", "dims": [{CLOUD_VOXELS}], "density_scale": {CLOUD_SIGMA_T}, "albedo": 0.99, "g": 0.9}},
+               "lights": [{{"type": "distant", "direction": [0, 0, -1], "irradiance": 1}}],
+               "camera": {{"position": [0, -6, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 30, "width": 8, "height": 8}}}}"#
+        )
+    };
+    let sc = Scene::from_json_str(&json("cumulus"), std::path::Path::new(".")).unwrap();
+    let m = cloud_medium();
+    assert_eq!(sc.medium.grid.bbox(), m.grid.bbox());
+    for p in [Vec3::ZERO, Vec3::new(0.3, -0.2, 0.4), Vec3::new(-0.6, 0.1, -0.3), Vec3::new(0.0, 0.0, 0.95)] {
+        assert_eq!(sc.medium.density_world(p), m.density_world(p), "at {p}");
+    }
+    assert!(sc.medium.density_world(Vec3::new(0.0, 0.0, -0.2)) > 0.99, "the core is dense");
+    let e = Scene::from_json_str(&json("cumulonimbus"), std::path::Path::new(".")).err().unwrap().to_string();
+    assert!(e.contains("plume, cumulus"), "{e}");
+}
