@@ -18,10 +18,10 @@ use crate::medium::{cumulus, GridLimits, Medium};
 use crate::scene::{Camera, Light, Scene};
 
 /// Image side of the cloud fixture. The reference is slow to converge here (measured: a fixture
-/// of 512 paths per pixel has 39% image noise, from NEE weights of the g = 0.9 lobe that vary
-/// 190x between a vertex facing the sun and one facing away), and the noise per pixel does not
-/// depend on the pixel count: 24 pixels (the other fixtures have 16) resolve the lit top, the
-/// flat base and the towers, at a quarter of the cost of 48.
+/// of 2048 paths per pixel has 22% image noise, from next-event weights of the g = 0.9 lobe,
+/// up to 190x their mean where a vertex's direction happens to face the sun), and the noise per
+/// pixel does not depend on the pixel count: 24 pixels (the other fixtures have 16) resolve
+/// the lit top, the flat base and the towers, at a quarter of the cost of 48.
 pub(crate) const CLOUD_SIZE: u32 = 24;
 /// Voxels per side of the cumulus (2 m box: 4 cm voxels, finer than its eroded rim).
 const CLOUD_VOXELS: u32 = 64;
@@ -96,15 +96,15 @@ fn cloud_rate() {
     eprintln!("noise of a fixture of {} + {} paths: image {:.4}, grid {:.4}", 2 * spp, 2 * grid_spp, noise(&a, &b), noise(&ga, &gb));
 }
 
-/// Regenerates the dense-cloud fixture (`CLOUD_SPP`, default 196608 paths per pixel,
-/// `CLOUD_GRID_SPP`, default 262144 per grid point, in two independent halves; sized from
-/// `cloud_rate`: noise 0.39 (image) and 0.26 (grid) at 512 and 2048 paths, falling as
-/// 1/sqrt(paths) to about 0.02 and 0.023): `cargo nextest
+/// Regenerates the dense-cloud fixture (`CLOUD_SPP`, default 262144 paths per pixel,
+/// `CLOUD_GRID_SPP`, default 131072 per grid point, in two independent halves): `cargo nextest
 /// run -p volscatter-core --cargo-profile release regenerate_cloud_fixture --run-ignored only`.
+/// Sized from `cloud_rate`: noise 0.22 (image) and 0.21 (grid) at 2048 and 4096 paths, falling
+/// as 1/sqrt(paths) to the 0.022 and 0.042 recorded, in about 430 s of CPU.
 #[test]
 #[ignore]
 fn regenerate_cloud_fixture() {
-    regenerate_fixture("cloud", &cloud_scene(), env_u32("CLOUD_SPP", 196_608), env_u32("CLOUD_GRID_SPP", 262_144));
+    regenerate_fixture("cloud", &cloud_scene(), env_u32("CLOUD_SPP", 262_144), env_u32("CLOUD_GRID_SPP", 131_072));
 }
 
 /// The cloud is as dense as the fixture promises: optical depth over 30 through the core,
