@@ -166,24 +166,23 @@ fn single_scattering_matches_compositor() {
 // 0.271 / 0.251, g 0.9: 0.395 / 0.384, plume: 0.394 / 0.334; mean brightness within 10% (g 0,
 // 0.7) and 18% (g 0.9) of the reference.
 
-#[test]
-fn cube_g0_against_reference() {
-    check_case("cube_g0", 0.21, 0.195);
+/// One test per case: `name: case, image bound, grid bound;`.
+macro_rules! against_reference {
+    ($($test:ident: $case:literal, $image:literal, $grid:literal;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                check_case($case, $image, $grid);
+            }
+        )*
+    };
 }
 
-#[test]
-fn cube_g07_against_reference() {
-    check_case("cube_g07", 0.31, 0.29);
-}
-
-#[test]
-fn cube_g09_against_reference() {
-    check_case("cube_g09", 0.445, 0.43);
-}
-
-#[test]
-fn plume_against_reference() {
-    check_case("plume", 0.445, 0.38);
+against_reference! {
+    cube_g0_against_reference: "cube_g0", 0.21, 0.195;
+    cube_g07_against_reference: "cube_g07", 0.31, 0.29;
+    cube_g09_against_reference: "cube_g09", 0.445, 0.43;
+    plume_against_reference: "plume", 0.445, 0.38;
 }
 
 /// The fixtures still describe what the reference renders for these scenes (a scene helper or

@@ -202,34 +202,25 @@ fn check_case(name: &str, settings: PopSettings, max_image: f64, max_grid: f64) 
 //   has 0.394 / 0.334. With the default settings (32 columns, merged grid 64): 0.300 / 0.321,
 //   0.297 / 0.313, 0.333 / 0.340, 0.296 / 0.309.
 
-#[test]
-fn fig10_point_in_sphere_g0_against_reference() {
-    check_case("fig10_g0", PopSettings { max_iterations: 4000, ..test_settings() }, 0.19, 0.15);
+/// One test per case: `name: case, settings, image bound, grid bound;`.
+macro_rules! against_reference {
+    ($($test:ident: $case:literal, $settings:expr, $image:literal, $grid:literal;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                check_case($case, $settings, $image, $grid);
+            }
+        )*
+    };
 }
 
-#[test]
-fn fig10_point_in_sphere_g08_against_reference() {
-    check_case("fig10_g08", test_settings(), 0.50, 0.37);
-}
-
-#[test]
-fn point_light_beside_plume_against_reference() {
-    check_case("plume_point", test_settings(), 0.37, 0.375);
-}
-
-#[test]
-fn sphere_light_beside_plume_against_reference() {
-    check_case("plume_sphere", test_settings(), 0.365, 0.37);
-}
-
-#[test]
-fn spot_light_beside_plume_against_reference() {
-    check_case("plume_spot", test_settings(), 0.43, 0.41);
-}
-
-#[test]
-fn rect_light_beside_plume_against_reference() {
-    check_case("plume_rect", test_settings(), 0.37, 0.37);
+against_reference! {
+    fig10_point_in_sphere_g0_against_reference: "fig10_g0", PopSettings { max_iterations: 4000, ..test_settings() }, 0.19, 0.15;
+    fig10_point_in_sphere_g08_against_reference: "fig10_g08", test_settings(), 0.50, 0.37;
+    point_light_beside_plume_against_reference: "plume_point", test_settings(), 0.37, 0.375;
+    sphere_light_beside_plume_against_reference: "plume_sphere", test_settings(), 0.365, 0.37;
+    spot_light_beside_plume_against_reference: "plume_spot", test_settings(), 0.43, 0.41;
+    rect_light_beside_plume_against_reference: "plume_rect", test_settings(), 0.37, 0.37;
 }
 
 /// An area light is `area_vpls`^2 radial grids whose powers add up to the light's; a VPL
