@@ -105,6 +105,23 @@ pub(crate) fn regenerate_fixture(name: &str, sc: &Scene, spp: u32, grid_spp: u32
     fx
 }
 
+/// Regenerates the fixtures of the `cases` selected by the environment variable `select_key`
+/// (`selected`), each from its scene `case(name)`.
+pub(crate) fn regenerate_selected(cases: &[&str], select_key: &str, case: impl Fn(&str) -> Scene, spp: u32, grid_spp: u32) {
+    for name in selected(cases, select_key) {
+        regenerate_fixture(name, &case(name), spp, grid_spp);
+    }
+}
+
+/// A solver's composite against the compositor's own single-scattering AOV of the same image
+/// (rel. RMSE, mean ratio): with a tiny albedo a solver's S is its single scattering, which the
+/// compositor computes independently (ray-marched shadow rays).
+pub(crate) fn against_single_scattering(sc: &Scene, scattering: &ScatteringGrid) -> (f64, f64) {
+    let img = composite(sc, scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
+    let (image, single) = (rgb(&img), img.aov("single").unwrap());
+    (relative_rmse(&image, single), mean(&image) / mean(single))
+}
+
 /// The RGB of an image, without alpha.
 pub(crate) fn rgb(img: &Image) -> Vec<Vec3> {
     img.rgba.iter().map(|p| p.truncate()).collect()

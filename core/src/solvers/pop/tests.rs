@@ -6,7 +6,7 @@ use crate::image::relative_rmse;
 use crate::medium::{procedural, GridLimits, Medium};
 use crate::scene::Camera;
 use crate::solvers::reference::{Reference, ReferenceSettings};
-use crate::solvers::testing::{env_u32, homogeneous_box, load_fixture, mean, regenerate_fixture, rgb, s_over_sigma_s, selected, Errors, SolverOutput, FIXTURE_GRID};
+use crate::solvers::testing::{against_single_scattering, env_u32, homogeneous_box, load_fixture, mean, regenerate_selected, rgb, s_over_sigma_s, selected, Errors, SolverOutput, FIXTURE_GRID};
 use crate::solvers::NoProgress;
 use glam::Affine3A;
 use crate::scene::Light;
@@ -58,9 +58,7 @@ const CASES: [&str; 4] = ["cube_g0", "cube_g07", "cube_g09", "plume"];
 #[ignore]
 fn regenerate_fixtures() {
     let (spp, grid_spp) = (env_u32("FIXTURE_SPP", 65536), env_u32("FIXTURE_GRID_SPP", 32768));
-    for name in selected(&CASES, "POP_CASE") {
-        regenerate_fixture(name, &case(name), spp, grid_spp);
-    }
+    regenerate_selected(&CASES, "POP_CASE", case, spp, grid_spp);
 }
 
 /// POP (solve + composite) on a case against its reference fixture.
@@ -151,11 +149,8 @@ fn single_scattering_matches_compositor() {
         sc.medium.albedo = Vec3::splat(0.02);
         sc.medium.g = g;
         let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
-        let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-        let rgb = rgb(&img);
-        let single = img.aov("single").unwrap();
-        let e = relative_rmse(&rgb, single);
-        eprintln!("g {g}: POP vs compositor single scattering {e:.4}, mean x{:.4}", mean(&rgb) / mean(single));
+        let (e, ratio) = against_single_scattering(&sc, &out.scattering);
+        eprintln!("g {g}: POP vs compositor single scattering {e:.4}, mean x{ratio:.4}");
         assert!(e < 0.1, "g {g}: {e}");
     }
 }
@@ -171,24 +166,23 @@ fn single_scattering_matches_compositor() {
 // 0.271 / 0.251, g 0.9: 0.395 / 0.384, plume: 0.394 / 0.334; mean brightness within 10% (g 0,
 // 0.7) and 18% (g 0.9) of the reference.
 
-#[test]
-fn cube_g0_against_reference() {
-    check_case("cube_g0", 0.21, 0.195);
+/// One test per case: `name: case, image bound, grid bound;`.
+macro_rules! against_reference {
+    ($($test:ident: $case:literal, $image:literal, $grid:literal;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                check_case($case, $image, $grid);
+            }
+        )*
+    };
 }
 
-#[test]
-fn cube_g07_against_reference() {
-    check_case("cube_g07", 0.31, 0.29);
-}
-
-#[test]
-fn cube_g09_against_reference() {
-    check_case("cube_g09", 0.445, 0.43);
-}
-
-#[test]
-fn plume_against_reference() {
-    check_case("plume", 0.445, 0.38);
+against_reference! {
+    cube_g0_against_reference: "cube_g0", 0.21, 0.195;
+    cube_g07_against_reference: "cube_g07", 0.31, 0.29;
+    cube_g09_against_reference: "cube_g09", 0.445, 0.43;
+    plume_against_reference: "plume", 0.445, 0.38;
 }
 
 /// The fixtures still describe what the reference renders for these scenes (a scene helper or

@@ -59,9 +59,7 @@ const DOME_CASES: [&str; 3] = ["dome_uniform", "dome_sun", "dome_milk"];
 #[ignore]
 fn regenerate_dome_fixtures() {
     let (spp, grid_spp) = (env_u32("FIXTURE_SPP", 16384), env_u32("FIXTURE_GRID_SPP", 4096));
-    for name in selected(&DOME_CASES, "POP_CASE") {
-        regenerate_fixture(name, &dome_case(name), spp, grid_spp);
-    }
+    regenerate_selected(&DOME_CASES, "POP_CASE", dome_case, spp, grid_spp);
 }
 
 /// Settings of the dome tests: 12-cell ordinate grids, so that 125 ordinates solve in seconds.
