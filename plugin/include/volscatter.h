@@ -638,7 +638,7 @@ VsStatus vs_image_write_exr(const VsImage *image, const char *path);
 
 /**
  * Sets `*out` to the solver registry as JSON (UTF-8, NUL-terminated):
- * `{"format": 1, "solvers": [{"name", "help", "gpu", "lights", "settings", "presets"}, ...],
+ * `{"format": 1, "solvers": [{"name", "label", "help", "gpu", "lights", "settings", "presets"}, ...],
  * "light_types": [{"name", "help"}, ...]}`. Each setting has "name", "type" ("int", "float",
  * "bool", "choice"), "default", "help" and, where limited, "range" ({"min", "max",
  * "min_exclusive", "max_exclusive"}), "zero" (what 0 stands for) or "choices". "lights" names
