@@ -47,14 +47,13 @@ impl<'a> Tracking<'a> {
         (m.transform_point3(x), m.transform_vector3(d))
     }
 
-    /// Samples a free flight from `x` along unit `d` over at most `t_max` (f32::INFINITY: to
-    /// the medium's end) for a path of throughput `throughput` (Vec3::ONE for a fresh photon).
-    pub fn sample_free_flight(&self, x: Vec3, d: Vec3, t_max: f32, throughput: Vec3, rng: &mut Rng) -> FreeFlight {
+    /// The tentative collisions of the ray from `x` along unit `d` over [0, t_max]: exponential
+    /// steps at each majorant cell's rate, `visit(t, sigma_t, majorant, rng)` at each (RGB
+    /// extinction at the point), which returns false to stop.
+    fn tentative_collisions(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng, mut visit: impl FnMut(f32, Vec3, f32, &mut Rng) -> bool) {
         let (o, di) = self.to_index(x, d);
         let scale = self.medium.density_scale;
         let grid = &self.medium.grid;
-        let mut beta = throughput;
-        let mut hit = None;
         self.majorant.traverse(o, di, 0.0, t_max, |seg| {
             let m = seg.majorant;
             if m <= 0.0 {
@@ -66,22 +65,34 @@ impl<'a> Tracking<'a> {
                 if t >= seg.t1 {
                     return true;
                 }
-                let sigma_t = scale * grid.sample(o + di * t);
-                let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
-                let p_real_w = (beta * sigma_t).max_element();
-                let p_null_w = (beta * sigma_n).max_element();
-                let total = p_real_w + p_null_w;
-                if total <= 0.0 {
-                    continue;
-                }
-                let p_real = p_real_w / total;
-                if rng.f32() < p_real {
-                    beta *= sigma_t / (m * p_real);
-                    hit = Some(t);
+                if !visit(t, scale * grid.sample(o + di * t), m, rng) {
                     return false;
                 }
-                beta *= sigma_n / (m * (1.0 - p_real));
             }
+        });
+    }
+
+    /// Samples a free flight from `x` along unit `d` over at most `t_max` (f32::INFINITY: to
+    /// the medium's end) for a path of throughput `throughput` (Vec3::ONE for a fresh photon).
+    pub fn sample_free_flight(&self, x: Vec3, d: Vec3, t_max: f32, throughput: Vec3, rng: &mut Rng) -> FreeFlight {
+        let mut beta = throughput;
+        let mut hit = None;
+        self.tentative_collisions(x, d, t_max, rng, |t, sigma_t, m, rng| {
+            let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
+            let p_real_w = (beta * sigma_t).max_element();
+            let p_null_w = (beta * sigma_n).max_element();
+            let total = p_real_w + p_null_w;
+            if total <= 0.0 {
+                return true;
+            }
+            let p_real = p_real_w / total;
+            if rng.f32() < p_real {
+                beta *= sigma_t / (m * p_real);
+                hit = Some(t);
+                return false;
+            }
+            beta *= sigma_n / (m * (1.0 - p_real));
+            true
         });
         match hit {
             Some(t) => FreeFlight::Scattered { t, weight: beta },
@@ -91,33 +102,19 @@ impl<'a> Tracking<'a> {
 
     /// Ratio-tracking estimate of the RGB transmittance from `x` along unit `d` over `t_max`.
     pub fn ratio_transmittance(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Vec3 {
-        let (o, di) = self.to_index(x, d);
-        let scale = self.medium.density_scale;
-        let grid = &self.medium.grid;
         let mut tr = Vec3::ONE;
-        self.majorant.traverse(o, di, 0.0, t_max, |seg| {
-            let m = seg.majorant;
-            if m <= 0.0 {
-                return true;
-            }
-            let mut t = seg.t0;
-            loop {
-                t -= (1.0 - rng.f32()).ln() / m;
-                if t >= seg.t1 {
-                    return true;
+        self.tentative_collisions(x, d, t_max, rng, |_, sigma_t, m, rng| {
+            tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
+            // Russian roulette on small transmittance keeps thick media cheap, unbiased.
+            let mx = tr.max_element();
+            if mx < 0.1 {
+                if rng.f32() >= mx * 10.0 {
+                    tr = Vec3::ZERO;
+                    return false;
                 }
-                let sigma_t = scale * grid.sample(o + di * t);
-                tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
-                // Russian roulette on small transmittance keeps thick media cheap, unbiased.
-                let mx = tr.max_element();
-                if mx < 0.1 {
-                    if rng.f32() >= mx * 10.0 {
-                        tr = Vec3::ZERO;
-                        return false;
-                    }
-                    tr /= mx * 10.0;
-                }
+                tr /= mx * 10.0;
             }
+            true
         });
         tr
     }
