@@ -83,6 +83,13 @@ pub fn propagate(
     Ok((stats, times))
 }
 
+/// Which of the bindings 0-10 that both propagation kernels share (wgsl/propagation.wgsl) are
+/// read-only: the uniform (0, never storage), sigma_s, sigma_a, mu and A in. P in (4) is
+/// written by the radial kernel's vacuum escape.
+pub(crate) fn propagation_read_only(b: u32) -> bool {
+    b <= 5 && b != 4
+}
+
 /// A propagation shader's two kernels (`emit_accumulate`, `gather`) and the explicit layout
 /// they share: `bindings` buffers, binding 0 the uniform parameters, the others storage,
 /// read-only where `read_only` says. Compiled once per context under `key` (propagate.wgsl and
@@ -159,7 +166,7 @@ pub fn propagate_resident(
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
     // Both kernels share one explicit layout (each uses a subset of the bindings), compiled once
     // per context.
-    let kernels = propagation_kernels(ctx, "propagate.wgsl", WGSL, 11, |b| b <= 5)?;
+    let kernels = propagation_kernels(ctx, "propagate.wgsl", WGSL, 11, propagation_read_only)?;
     let bgl = &kernels.0;
     let groups = ping_pong_groups(ctx, bgl, "pop", [&u_first, &u_rest], [p0, &p1], [&a0, &a1], |u, pin, ain, pout, aout| {
         vec![u, sigma_s, sigma_a, mu, pin, ain, &emit, j_buf, &esc, pout, aout]

@@ -5,7 +5,7 @@
 use glam::Vec3;
 use std::time::Instant;
 
-use super::{iterate, ping_pong_groups, vec4s, GpuPropagationTimes};
+use super::{iterate, ping_pong_groups, propagation_read_only, vec4s, GpuPropagationTimes};
 use crate::context::{GpuContext, GpuError};
 use volscatter_core::solvers::pop::radial::init::RadialInitial;
 use volscatter_core::solvers::pop::radial::propagate::RadialPropagation;
@@ -66,11 +66,10 @@ pub fn propagate_radial(
     let emit = ctx.zeroed_storage("emit", cell_bytes * 4)?;
     let j_buf = ctx.storage_buffer("j", bytemuck::cast_slice(&vec4s(j_acc)))?;
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
-    // Bindings 6 (p_in: emit_accumulate removes what escapes from empty cells) and 8 on are
-    // written.
-    let kernels = crate::pop::propagation_kernels(ctx, "radial.wgsl", WGSL, 13, |b| b <= 7 && b != 6)?;
+    // Bindings 0-10 as the rectilinear propagation's; 11 and 12 (shells, columns) read-only.
+    let kernels = crate::pop::propagation_kernels(ctx, "radial.wgsl", WGSL, 13, |b| b >= 11 || propagation_read_only(b))?;
     let groups = ping_pong_groups(ctx, &kernels.0, "pop radial", [&u_first, &u_rest], [&p0, &p1], [&a0, &a1], |u, pin, ain, pout, aout| {
-        vec![u, &sigma_s, &sigma_a, &mu, &shells, &columns, pin, ain, &emit, &j_buf, &esc, pout, aout]
+        vec![u, &sigma_s, &sigma_a, &mu, pin, ain, &emit, &j_buf, &esc, pout, aout, &shells, &columns]
     });
     // 1-D dispatch, split over y when one dimension would exceed the device's limit.
     let workgroups = (n as u32).div_ceil(WORKGROUP);
