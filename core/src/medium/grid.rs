@@ -118,7 +118,7 @@ impl DensityGrid {
     }
 
     /// Value at an integer voxel; zero outside.
-    #[inline]
+    #[inline(always)]
     pub fn voxel(&self, ijk: IVec3) -> f32 {
         let b = (ijk >> BRICK_LOG2) - self.brick_min;
         if b.x < 0 || b.y < 0 || b.z < 0 || b.x >= self.brick_dims.x || b.y >= self.brick_dims.y || b.z >= self.brick_dims.z {
@@ -138,7 +138,7 @@ impl DensityGrid {
     /// zero outside the stored voxels' ramp and for NaN or huge coordinates.
     #[inline]
     pub fn sample(&self, p: Vec3) -> f32 {
-        super::trilinear::trilinear(p, |c| self.voxel(c))
+        super::trilinear::trilinear(p, self)
     }
 
     /// Maximum voxel value over the inclusive index box (used for majorants). Constant and
@@ -461,6 +461,13 @@ impl DensityGridBuilder {
             bbox_max: self.bbox_max,
             max_value,
         })
+    }
+}
+
+impl super::trilinear::Lattice<f32> for &DensityGrid {
+    #[inline(always)]
+    fn at(&self, c: IVec3) -> f32 {
+        self.voxel(c)
     }
 }
 

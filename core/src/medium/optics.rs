@@ -14,15 +14,11 @@ pub fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
     let inv = d.recip();
     let a = (lo - o) * inv;
     let b = (hi - o) * inv;
-    // Per axis, before any min/max (glam's min and max drop a NaN operand, which would turn
-    // the NaN slab into a bound of -inf or +inf instead of no bound).
-    let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
-    for k in 0..3 {
-        if !(a[k].is_nan() || b[k].is_nan()) {
-            t0 = t0.max(a[k].min(b[k]));
-            t1 = t1.min(a[k].max(b[k]));
-        }
-    }
+    // Masked before any min/max: glam's min and max drop a NaN operand, which would turn the
+    // NaN slab into a bound of -inf or +inf instead of no bound.
+    let nan = a.is_nan_mask() | b.is_nan_mask();
+    let t0 = Vec3::select(nan, Vec3::NEG_INFINITY, a.min(b)).max_element().max(0.0);
+    let t1 = Vec3::select(nan, Vec3::INFINITY, a.max(b)).min_element();
     (t0 < t1).then_some((t0, t1))
 }
 
@@ -56,10 +52,18 @@ pub fn box_corners(lo: Vec3, hi: Vec3, map: impl Fn(Vec3) -> Vec3) -> [Vec3; 8] 
 }
 
 /// Axis-aligned world box containing the index-space box [lo, hi] placed by `index_to_world`.
+/// A plain loop rather than `box_corners`: optical_depth asks for the medium's box on every
+/// shadow ray, millions of times per single-scattering grid.
 pub fn world_box(index_to_world: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
-    box_corners(lo, hi, |c| index_to_world.transform_point3(c))
-        .into_iter()
-        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(a, b), w| (a.min(w), b.max(w)))
+    let mut wmin = Vec3::splat(f32::INFINITY);
+    let mut wmax = Vec3::splat(f32::NEG_INFINITY);
+    for i in 0..8 {
+        let c = Vec3::select(glam::BVec3::new(i & 1 != 0, i & 2 != 0, i & 4 != 0), hi, lo);
+        let w = index_to_world.transform_point3(c);
+        wmin = wmin.min(w);
+        wmax = wmax.max(w);
+    }
+    (wmin, wmax)
 }
 
 /// A grid holding point samples of a field that is interpolated trilinearly must carry, at a

@@ -42,19 +42,18 @@ impl<'a> Tracking<'a> {
     }
 
     #[inline]
-    fn to_index(&self, x: Vec3, d: Vec3) -> (Vec3, Vec3) {
+    fn index_ray(&self, x: Vec3, d: Vec3) -> (Vec3, Vec3) {
         let m: &Affine3A = &self.medium.world_to_index;
         (m.transform_point3(x), m.transform_vector3(d))
     }
 
-    /// Samples a free flight from `x` along unit `d` over at most `t_max` (f32::INFINITY: to
-    /// the medium's end) for a path of throughput `throughput` (Vec3::ONE for a fresh photon).
-    pub fn sample_free_flight(&self, x: Vec3, d: Vec3, t_max: f32, throughput: Vec3, rng: &mut Rng) -> FreeFlight {
-        let (o, di) = self.to_index(x, d);
+    /// The tentative collisions of the ray from `x` along unit `d` over [0, t_max]: exponential
+    /// steps at each majorant cell's rate, `visit(t, sigma_t, majorant, rng)` at each (RGB
+    /// extinction at the point), which returns false to stop.
+    fn tentative_collisions(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng, mut visit: impl FnMut(f32, Vec3, f32, &mut Rng) -> bool) {
+        let (o, di) = self.index_ray(x, d);
         let scale = self.medium.density_scale;
         let grid = &self.medium.grid;
-        let mut beta = throughput;
-        let mut hit = None;
         self.majorant.traverse(o, di, 0.0, t_max, |seg| {
             let m = seg.majorant;
             if m <= 0.0 {
@@ -66,22 +65,34 @@ impl<'a> Tracking<'a> {
                 if t >= seg.t1 {
                     return true;
                 }
-                let sigma_t = scale * grid.sample(o + di * t);
-                let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
-                let p_real_w = (beta * sigma_t).max_element();
-                let p_null_w = (beta * sigma_n).max_element();
-                let total = p_real_w + p_null_w;
-                if total <= 0.0 {
-                    continue;
-                }
-                let p_real = p_real_w / total;
-                if rng.f32() < p_real {
-                    beta *= sigma_t / (m * p_real);
-                    hit = Some(t);
+                if !visit(t, scale * grid.sample(o + di * t), m, rng) {
                     return false;
                 }
-                beta *= sigma_n / (m * (1.0 - p_real));
             }
+        });
+    }
+
+    /// Samples a free flight from `x` along unit `d` over at most `t_max` (f32::INFINITY: to
+    /// the medium's end) for a path of throughput `throughput` (Vec3::ONE for a fresh photon).
+    pub fn sample_free_flight(&self, x: Vec3, d: Vec3, t_max: f32, throughput: Vec3, rng: &mut Rng) -> FreeFlight {
+        let mut beta = throughput;
+        let mut hit = None;
+        self.tentative_collisions(x, d, t_max, rng, |t, sigma_t, m, rng| {
+            let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
+            let p_real_w = (beta * sigma_t).max_element();
+            let p_null_w = (beta * sigma_n).max_element();
+            let total = p_real_w + p_null_w;
+            if total <= 0.0 {
+                return true;
+            }
+            let p_real = p_real_w / total;
+            if rng.f32() < p_real {
+                beta *= sigma_t / (m * p_real);
+                hit = Some(t);
+                return false;
+            }
+            beta *= sigma_n / (m * (1.0 - p_real));
+            true
         });
         match hit {
             Some(t) => FreeFlight::Scattered { t, weight: beta },
@@ -91,33 +102,19 @@ impl<'a> Tracking<'a> {
 
     /// Ratio-tracking estimate of the RGB transmittance from `x` along unit `d` over `t_max`.
     pub fn ratio_transmittance(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Vec3 {
-        let (o, di) = self.to_index(x, d);
-        let scale = self.medium.density_scale;
-        let grid = &self.medium.grid;
         let mut tr = Vec3::ONE;
-        self.majorant.traverse(o, di, 0.0, t_max, |seg| {
-            let m = seg.majorant;
-            if m <= 0.0 {
-                return true;
-            }
-            let mut t = seg.t0;
-            loop {
-                t -= (1.0 - rng.f32()).ln() / m;
-                if t >= seg.t1 {
-                    return true;
+        self.tentative_collisions(x, d, t_max, rng, |_, sigma_t, m, rng| {
+            tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
+            // Russian roulette on small transmittance keeps thick media cheap, unbiased.
+            let mx = tr.max_element();
+            if mx < 0.1 {
+                if rng.f32() >= mx * 10.0 {
+                    tr = Vec3::ZERO;
+                    return false;
                 }
-                let sigma_t = scale * grid.sample(o + di * t);
-                tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
-                // Russian roulette on small transmittance keeps thick media cheap, unbiased.
-                let mx = tr.max_element();
-                if mx < 0.1 {
-                    if rng.f32() >= mx * 10.0 {
-                        tr = Vec3::ZERO;
-                        return false;
-                    }
-                    tr /= mx * 10.0;
-                }
+                tr /= mx * 10.0;
             }
+            true
         });
         tr
     }
@@ -141,7 +138,7 @@ mod tests {
         (m, maj)
     }
     /// Start and length of the test segment: x from 2/N to 2/N + 0.8 along +x, at y = z = 0.5.
-    const START: f32 = 2.0 / N as f32;
+    const ORIGIN: Vec3 = Vec3::new(2.0 / N as f32, 0.5, 0.5);
     const LENGTH: f32 = 0.8;
 
     /// Mean and standard error of the mean of `n` samples, per channel.
@@ -166,9 +163,8 @@ mod tests {
         let sigma = Vec3::new(1.0, 2.5, 5.0);
         let (m, maj) = cube(sigma);
         let tracking = Tracking::new(&m, &maj);
-        let o = Vec3::new(START, 0.5, 0.5);
         let mut rng = Rng::new(7, 0);
-        let (mean, se) = mean_se(40_000, |_| tracking.ratio_transmittance(o, Vec3::X, LENGTH, &mut rng));
+        let (mean, se) = mean_se(40_000, |_| tracking.ratio_transmittance(ORIGIN, Vec3::X, LENGTH, &mut rng));
         let exact = (-sigma * LENGTH).exp();
         assert!(se.max_element() < 0.005, "standard error {se}");
         assert!(((mean - exact).abs()).cmplt(4.0 * se).all(), "mean {mean} vs exp(-sigma d) {exact} (se {se})");
@@ -183,13 +179,12 @@ mod tests {
         let sigma = 3.0;
         let (m, maj) = cube(Vec3::splat(sigma));
         let tracking = Tracking::new(&m, &maj);
-        let o = Vec3::new(START, 0.5, 0.5);
         let mut rng = Rng::new(11, 0);
         const BINS: usize = 10;
         let n = 50_000;
         let mut counts = [0u32; BINS + 1];
         for _ in 0..n {
-            match tracking.sample_free_flight(o, Vec3::X, LENGTH, Vec3::ONE, &mut rng) {
+            match tracking.sample_free_flight(ORIGIN, Vec3::X, LENGTH, Vec3::ONE, &mut rng) {
                 FreeFlight::Scattered { t, weight } => {
                     assert!((weight - Vec3::ONE).abs().max_element() < 1e-5, "grey weight {weight}");
                     assert!((0.0..LENGTH).contains(&t), "t {t}");
@@ -222,12 +217,11 @@ mod tests {
         let sigma = Vec3::new(1.0, 3.0, 6.0);
         let (m, maj) = cube(sigma);
         let tracking = Tracking::new(&m, &maj);
-        let o = Vec3::new(START, 0.5, 0.5);
         const BINS: usize = 4;
         let n = 60_000;
         let flights: Vec<FreeFlight> = {
             let mut rng = Rng::new(5, 0);
-            (0..n).map(|_| tracking.sample_free_flight(o, Vec3::X, LENGTH, Vec3::splat(2.0), &mut rng)).collect()
+            (0..n).map(|_| tracking.sample_free_flight(ORIGIN, Vec3::X, LENGTH, Vec3::splat(2.0), &mut rng)).collect()
         };
         for k in 0..=BINS {
             let (mean, se) = mean_se(n, |i| match flights[i] {

@@ -82,8 +82,7 @@ impl ScatteringGrid {
         if !crate::medium::trilinear::inside(p, Vec3::ZERO, (d - IVec3::ONE).as_vec3()) {
             return Vec3::ZERO;
         }
-        // The far corners of points on the last lattice plane have weight 0: clamped fetch.
-        crate::medium::trilinear::trilinear(p, |c| self.data[crate::medium::trilinear::clamped_index(c, d)])
+        crate::medium::trilinear::dense_inside(p, d, &self.data)
     }
 }
 

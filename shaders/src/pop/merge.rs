@@ -15,7 +15,7 @@ use volscatter_core::solvers::pop::merge::{footprint, Merged};
 use volscatter_core::solvers::pop::mip::MediumMip;
 use volscatter_core::ScatteringGrid;
 
-pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip"], "pop/merge.wgsl");
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip", "j_grid"], "pop/merge.wgsl");
 
 /// Mirrors `struct Params` in merge.wgsl.
 #[repr(C)]

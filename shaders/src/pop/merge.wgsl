@@ -3,7 +3,8 @@
 // The first dispatch also writes the density guide (mip.wgsl at the merged cells' footprint)
 // and its maximum, which the bilateral filter's range weight needs (positive floats' bit
 // patterns order like their values, so an atomicMax on u32 finds it; zero and -0 count as 0).
-// affine, the trilinear helpers and mip_sample come from the preludes (shaders/src/wgsl).
+// affine, the trilinear helpers, mip_sample and j_sample come from the preludes
+// (shaders/src/wgsl).
 
 struct Params {
     merged_i2w: array<vec4<f32>, 3>,
@@ -16,26 +17,10 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> mip: array<u32>;
-@group(0) @binding(2) var<storage, read> light_j: array<vec4<f32>>;
+// Binding 2, the light's J (`j_grid`), is declared in wgsl/j_grid.wgsl.
 @group(0) @binding(3) var<storage, read_write> merged_j: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> merged_density: array<f32>;
 @group(0) @binding(5) var<storage, read_write> max_density: array<atomic<u32>>;
-
-// LightGrid::sample: trilinear, the outer half cells hold the edge value, zero outside.
-fn light_sample(w: vec3<f32>) -> vec3<f32> {
-    let d = params.light_dims.xyz;
-    let edge = vec3<f32>(d - vec3<i32>(1));
-    let p = affine(params.light_w2i, w);
-    if (!inside(p, vec3<f32>(-0.5), edge + vec3<f32>(0.5))) {
-        return vec3<f32>(0.0);
-    }
-    let l = lattice(clamp(p, vec3<f32>(0.0), edge));
-    var c: array<vec3<f32>, 8>;
-    for (var k = 0; k < 8; k++) {
-        c[k] = light_j[clamped_index(l.base + corner(k), d)].xyz;
-    }
-    return trilinear3(c, l.t);
-}
 
 @compute @workgroup_size(4, 4, 4)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -55,7 +40,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         j = merged_j[o].xyz;
     }
     if (params.light_dims.w != 0) {
-        j += light_sample(x);
+        // LightGrid::sample: the outer half cells hold the edge value.
+        j += j_sample(affine(params.light_w2i, x), params.light_dims.xyz, 0.5);
     }
     merged_j[o] = vec4<f32>(j, 0.0);
 }

@@ -83,6 +83,13 @@ pub fn propagate(
     Ok((stats, times))
 }
 
+/// Which of the bindings 0-10 that both propagation kernels share (wgsl/propagation.wgsl) are
+/// read-only: the uniform (0, never storage), sigma_s, sigma_a, mu and A in. P in (4) is
+/// written by the radial kernel's vacuum escape.
+pub(crate) fn propagation_read_only(b: u32) -> bool {
+    b <= 5 && b != 4
+}
+
 /// A propagation shader's two kernels (`emit_accumulate`, `gather`) and the explicit layout
 /// they share: `bindings` buffers, binding 0 the uniform parameters, the others storage,
 /// read-only where `read_only` says. Compiled once per context under `key` (propagate.wgsl and
@@ -143,7 +150,6 @@ pub fn propagate_resident(
     let n = grid.len();
     let cell_bytes = n as u64 * 16;
     ctx.check_storage_size("pop emission buffer", cell_bytes * 4)?;
-    let device = &ctx.device;
     let params = |weight: f32| PropagateParams {
         dims: [grid.dims.x, grid.dims.y, grid.dims.z, 0],
         consts: [grid.h, prop.g, prop.g.abs().max(1e-6).ln(), 0.0],
@@ -160,52 +166,20 @@ pub fn propagate_resident(
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
     // Both kernels share one explicit layout (each uses a subset of the bindings), compiled once
     // per context.
-    let kernels = propagation_kernels(ctx, "propagate.wgsl", WGSL, 11, |b| b <= 5)?;
-    let (bgl, emit_pipe, gather_pipe) = (&kernels.0, &kernels.1, &kernels.2);
-    // Bind groups: "even" reads P0/A0 and writes P1/A1, "odd" the reverse.
-    let bind = |u: &wgpu::Buffer, pin: &wgpu::Buffer, ain: &wgpu::Buffer, pout: &wgpu::Buffer, aout: &wgpu::Buffer| {
-        let bufs = [u, sigma_s, sigma_a, mu, pin, ain, &emit, j_buf, &esc, pout, aout];
-        let entries: Vec<wgpu::BindGroupEntry> =
-            bufs.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop"), layout: bgl, entries: &entries })
-    };
-    let even_first = bind(&u_first, p0, &a0, &p1, &a1);
-    let even = bind(&u_rest, p0, &a0, &p1, &a1);
-    let odd = bind(&u_rest, &p1, &a1, p0, &a0);
-    let groups = [grid.dims.x.div_ceil(4), grid.dims.y.div_ceil(4), grid.dims.z.div_ceil(4)];
-    let dispatch = |enc: &mut wgpu::CommandEncoder, pipe: &wgpu::ComputePipeline, bg: &wgpu::BindGroup| {
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        pass.set_pipeline(pipe);
-        pass.set_bind_group(0, bg, &[]);
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-    };
+    let kernels = propagation_kernels(ctx, "propagate.wgsl", WGSL, 11, propagation_read_only)?;
+    let bgl = &kernels.0;
+    let groups = ping_pong_groups(ctx, bgl, "pop", [&u_first, &u_rest], [p0, &p1], [&a0, &a1], |u, pin, ain, pout, aout| {
+        vec![u, sigma_s, sigma_a, mu, pin, ain, &emit, j_buf, &esc, pout, aout]
+    });
     ctx.check()?;
     let upload = t_start.elapsed().as_secs_f64();
 
     let t_iter = Instant::now();
     let injected = light.injected;
-    let target = injected * prop.residual_threshold;
-    let mut enc = device.create_command_encoder(&Default::default());
-    dispatch(&mut enc, emit_pipe, &even_first);
-    let mut iterations = 0u32;
-    // Where the current packets live: false = P0/A0, true = P1/A1.
-    let mut in_p1 = false;
-    let mut remaining = injected;
-    let check_every = check_every.max(1);
-    while iterations < prop.max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
-        iterations += 1;
-        let (g_bg, e_bg) = if in_p1 { (&odd, &even) } else { (&even, &odd) };
-        dispatch(&mut enc, gather_pipe, g_bg);
-        dispatch(&mut enc, emit_pipe, e_bg);
-        in_p1 = !in_p1;
-        if iterations % check_every == 0 || iterations == prop.max_iterations {
-            ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
-            if prop.residual_threshold > 0.0 && iterations < prop.max_iterations {
-                remaining = sum::total(ctx, if in_p1 { &p1 } else { p0 }, grid.dims, 1, 0)?;
-            }
-        }
-    }
-    ctx.submit_and_wait(enc)?;
+    let workgroups = [grid.dims.x.div_ceil(4), grid.dims.y.div_ceil(4), grid.dims.z.div_ceil(4)];
+    let (iterations, in_p1) = iterate(ctx, &kernels, &groups, workgroups, prop.max_iterations, prop.residual_threshold, injected, check_every, |in_p1| {
+        sum::total(ctx, if in_p1 { &p1 } else { p0 }, grid.dims, 1, 0)
+    })?;
     let iterations_s = t_iter.elapsed().as_secs_f64();
 
     let t_read = Instant::now();
@@ -234,6 +208,82 @@ pub fn propagate_resident(
         },
         times,
     ))
+}
+
+/// A propagation's three bind groups: the first emission's (uniforms[0]: its J weight) and
+/// the "even" one, which read P0/A0 and write P1/A1, and the "odd" one, the reverse. `order`
+/// lists a bind group's buffers by binding from (uniform, P in, A in, P out, A out).
+#[allow(clippy::type_complexity)]
+pub(crate) fn ping_pong_groups<'a>(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    label: &str,
+    uniforms: [&'a wgpu::Buffer; 2],
+    p: [&'a wgpu::Buffer; 2],
+    a: [&'a wgpu::Buffer; 2],
+    order: impl Fn(&'a wgpu::Buffer, &'a wgpu::Buffer, &'a wgpu::Buffer, &'a wgpu::Buffer, &'a wgpu::Buffer) -> Vec<&'a wgpu::Buffer>,
+) -> [wgpu::BindGroup; 3] {
+    let bind = |u: &'a wgpu::Buffer, pin, ain, pout, aout| {
+        let entries: Vec<wgpu::BindGroupEntry> = order(u, pin, ain, pout, aout)
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+    };
+    [bind(uniforms[0], p[0], a[0], p[1], a[1]), bind(uniforms[1], p[0], a[0], p[1], a[1]), bind(uniforms[1], p[1], a[1], p[0], a[0])]
+}
+
+/// The iteration loop of both propagations (CPU: `Propagation::run`, `RadialPropagation::run`):
+/// the first emission, then per iteration a gather and an emission, ping-ponging between the
+/// `ping_pong_groups`, until `max_iterations` or until the packets still travelling, summed by
+/// `remaining(in_p1)` every `check_every` iterations (one readback), fall to
+/// `residual_threshold` of `injected` in every channel. Waits for the device; returns the
+/// iterations run and where the packets ended (true: P1/A1).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn iterate(
+    ctx: &GpuContext,
+    kernels: &(wgpu::BindGroupLayout, wgpu::ComputePipeline, wgpu::ComputePipeline),
+    groups: &[wgpu::BindGroup; 3],
+    workgroups: [u32; 3],
+    max_iterations: u32,
+    residual_threshold: f32,
+    injected: Vec3,
+    check_every: u32,
+    mut remaining_in: impl FnMut(bool) -> Result<Vec3, GpuError>,
+) -> Result<(u32, bool), GpuError> {
+    let device = &ctx.device;
+    let (emit_pipe, gather_pipe) = (&kernels.1, &kernels.2);
+    let [even_first, even, odd] = groups;
+    let dispatch = |enc: &mut wgpu::CommandEncoder, pipe: &wgpu::ComputePipeline, bg: &wgpu::BindGroup| {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(pipe);
+        pass.set_bind_group(0, bg, &[]);
+        pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
+    };
+    let target = injected * residual_threshold;
+    let mut enc = device.create_command_encoder(&Default::default());
+    dispatch(&mut enc, emit_pipe, even_first);
+    let mut iterations = 0u32;
+    // Where the current packets live: false = P0/A0, true = P1/A1.
+    let mut in_p1 = false;
+    let mut remaining = injected;
+    let check_every = check_every.max(1);
+    while iterations < max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
+        iterations += 1;
+        let (g_bg, e_bg) = if in_p1 { (odd, even) } else { (even, odd) };
+        dispatch(&mut enc, gather_pipe, g_bg);
+        dispatch(&mut enc, emit_pipe, e_bg);
+        in_p1 = !in_p1;
+        if iterations.is_multiple_of(check_every) || iterations == max_iterations {
+            ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
+            if residual_threshold > 0.0 && iterations < max_iterations {
+                remaining = remaining_in(in_p1)?;
+            }
+        }
+    }
+    ctx.submit_and_wait(enc)?;
+    Ok((iterations, in_p1))
 }
 
 #[cfg(test)]

@@ -6,22 +6,8 @@
 //   gather: each cell collects from its six neighbours with absorption-only transmittance and
 //     anisotropy decay (Eq. 2-6).
 // Cells: x (u) fastest, d (light direction) slowest. RGB in .xyz of each vec4.
-// Params, the lobe, path factor and gathering helpers come from the preludes (shaders/src/wgsl:
-// hg.wgsl, propagation.wgsl), prepended.
-
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> sigma_a: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> mu: array<f32>;
-@group(0) @binding(4) var<storage, read> p_in: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read> a_in: array<vec4<f32>>;
-// Four vec4 per cell: front, side, back fractions and path length.
-@group(0) @binding(6) var<storage, read_write> emit: array<vec4<f32>>;
-@group(0) @binding(7) var<storage, read_write> j_acc: array<vec4<f32>>;
-// Two vec4 per cell: escapes realised so far, escapes of the current emission.
-@group(0) @binding(8) var<storage, read_write> esc: array<vec4<f32>>;
-@group(0) @binding(9) var<storage, read_write> p_out: array<vec4<f32>>;
-@group(0) @binding(10) var<storage, read_write> a_out: array<vec4<f32>>;
+// Params, the bindings, the lobe, path factor and gathering helpers come from the preludes
+// (shaders/src/wgsl: hg.wgsl, propagation.wgsl), prepended.
 
 fn cell_of(gid: vec3<u32>) -> u32 {
     return gid.x + params.dims.x * (gid.y + params.dims.y * gid.z);

@@ -5,7 +5,7 @@
 use glam::Vec3;
 use std::time::Instant;
 
-use super::{vec4s, GpuPropagationTimes};
+use super::{iterate, ping_pong_groups, propagation_read_only, vec4s, GpuPropagationTimes};
 use crate::context::{GpuContext, GpuError};
 use volscatter_core::solvers::pop::radial::init::RadialInitial;
 use volscatter_core::solvers::pop::radial::propagate::RadialPropagation;
@@ -37,7 +37,6 @@ pub fn propagate_radial(
     }
     let cell_bytes = n as u64 * 16;
     ctx.check_storage_size("pop radial emission buffer", cell_bytes * 4)?;
-    let device = &ctx.device;
     let params = |weight: f32| RadialParams {
         dims: [grid.n(), slab as u32, nk as u32, n as u32],
         consts: [0.0, prop.g, prop.g.abs().max(1e-6).ln(), 0.0],
@@ -67,60 +66,26 @@ pub fn propagate_radial(
     let emit = ctx.zeroed_storage("emit", cell_bytes * 4)?;
     let j_buf = ctx.storage_buffer("j", bytemuck::cast_slice(&vec4s(j_acc)))?;
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
-    // Bindings 6 (p_in: emit_accumulate removes what escapes from empty cells) and 8 on are
-    // written.
-    let kernels = crate::pop::propagation_kernels(ctx, "radial.wgsl", WGSL, 13, |b| b <= 7 && b != 6)?;
-    let (bgl, emit_pipe, gather_pipe) = (&kernels.0, &kernels.1, &kernels.2);
-    let bind = |u: &wgpu::Buffer, pin: &wgpu::Buffer, ain: &wgpu::Buffer, pout: &wgpu::Buffer, aout: &wgpu::Buffer| {
-        let bufs = [u, &sigma_s, &sigma_a, &mu, &shells, &columns, pin, ain, &emit, &j_buf, &esc, pout, aout];
-        let entries: Vec<wgpu::BindGroupEntry> =
-            bufs.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("pop radial"), layout: bgl, entries: &entries })
-    };
-    let even_first = bind(&u_first, &p0, &a0, &p1, &a1);
-    let even = bind(&u_rest, &p0, &a0, &p1, &a1);
-    let odd = bind(&u_rest, &p1, &a1, &p0, &a0);
+    // Bindings 0-10 as the rectilinear propagation's; 11 and 12 (shells, columns) read-only.
+    let kernels = crate::pop::propagation_kernels(ctx, "radial.wgsl", WGSL, 13, |b| b >= 11 || propagation_read_only(b))?;
+    let groups = ping_pong_groups(ctx, &kernels.0, "pop radial", [&u_first, &u_rest], [&p0, &p1], [&a0, &a1], |u, pin, ain, pout, aout| {
+        vec![u, &sigma_s, &sigma_a, &mu, pin, ain, &emit, &j_buf, &esc, pout, aout, &shells, &columns]
+    });
     // 1-D dispatch, split over y when one dimension would exceed the device's limit.
-    let groups = (n as u32).div_ceil(WORKGROUP);
+    let workgroups = (n as u32).div_ceil(WORKGROUP);
     let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1);
-    if groups > max_x {
-        return Err(GpuError::Internal(format!("radial grid of {n} cells needs {groups} workgroups (limit {max_x})")));
+    if workgroups > max_x {
+        return Err(GpuError::Internal(format!("radial grid of {n} cells needs {workgroups} workgroups (limit {max_x})")));
     }
-    let dispatch = |enc: &mut wgpu::CommandEncoder, pipe: &wgpu::ComputePipeline, bg: &wgpu::BindGroup| {
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        pass.set_pipeline(pipe);
-        pass.set_bind_group(0, bg, &[]);
-        pass.dispatch_workgroups(groups, 1, 1);
-    };
     ctx.check()?;
     let upload = t_start.elapsed().as_secs_f64();
 
     let t_iter = Instant::now();
     let injected: Vec3 = init.packets.iter().copied().sum();
-    let target = injected * prop.residual_threshold;
-    let mut enc = device.create_command_encoder(&Default::default());
-    dispatch(&mut enc, emit_pipe, &even_first);
-    let mut iterations = 0u32;
-    let mut in_p1 = false;
-    let mut remaining = injected;
-    let check_every = check_every.max(1);
     let sum_p = |bytes: &[u8]| -> Vec3 { bytemuck::cast_slice::<u8, [f32; 4]>(bytes).iter().map(|v| Vec3::new(v[0], v[1], v[2])).sum() };
-    while iterations < prop.max_iterations && remaining.cmpgt(target).any() && remaining.max_element() > 0.0 {
-        iterations += 1;
-        let (g_bg, e_bg) = if in_p1 { (&odd, &even) } else { (&even, &odd) };
-        dispatch(&mut enc, gather_pipe, g_bg);
-        dispatch(&mut enc, emit_pipe, e_bg);
-        in_p1 = !in_p1;
-        if iterations.is_multiple_of(check_every) || iterations == prop.max_iterations {
-            ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
-            if prop.residual_threshold > 0.0 && iterations < prop.max_iterations {
-                remaining = sum_p(&ctx.read_buffer(if in_p1 { &p1 } else { &p0 }, cell_bytes)?);
-            }
-        }
-    }
-    ctx.queue.submit([enc.finish()]);
-    device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
-    ctx.check()?;
+    let (iterations, in_p1) = iterate(ctx, &kernels, &groups, [workgroups, 1, 1], prop.max_iterations, prop.residual_threshold, injected, check_every, |in_p1| {
+        Ok(sum_p(&ctx.read_buffer(if in_p1 { &p1 } else { &p0 }, cell_bytes)?))
+    })?;
     let iterations_s = t_iter.elapsed().as_secs_f64();
 
     let t_read = Instant::now();

@@ -7,27 +7,14 @@
 //   gather: each cell collects from its radial neighbours, its four angular ones, and (in the
 //     innermost shell) from the opposite column through the centre, with the anisotropy negated.
 // RGB in .xyz of each vec4.
-// Params (consts: -, g, ln|g|, -), the lobe, path factor and gathering helpers come from the
-// preludes (shaders/src/wgsl: hg.wgsl, propagation.wgsl), prepended.
+// Params (consts: -, g, ln|g|, -), bindings 0-10, the lobe, path factor and gathering helpers
+// come from the preludes (shaders/src/wgsl: hg.wgsl, propagation.wgsl), prepended.
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> sigma_a: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> mu: array<f32>;
+// Bindings 0-10 are declared in propagation.wgsl.
 // Per shell: radial length h, 1 / cell volume, front and back face weights.
-@group(0) @binding(4) var<storage, read> shells: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read> shells: array<vec4<f32>>;
 // Per column, two entries: the four angular neighbours; the opposite column, -, -, -.
-@group(0) @binding(5) var<storage, read> columns: array<vec4<u32>>;
-// Read-write: emit_accumulate removes what escapes from empty cells (vacuum_escape).
-@group(0) @binding(6) var<storage, read_write> p_in: array<vec4<f32>>;
-@group(0) @binding(7) var<storage, read> a_in: array<vec4<f32>>;
-// Four vec4 per cell: front, side, back fractions and path length.
-@group(0) @binding(8) var<storage, read_write> emit: array<vec4<f32>>;
-@group(0) @binding(9) var<storage, read_write> j_acc: array<vec4<f32>>;
-// Two vec4 per cell: escapes realised so far, escapes of the current emission.
-@group(0) @binding(10) var<storage, read_write> esc: array<vec4<f32>>;
-@group(0) @binding(11) var<storage, read_write> p_out: array<vec4<f32>>;
-@group(0) @binding(12) var<storage, read_write> a_out: array<vec4<f32>>;
+@group(0) @binding(12) var<storage, read> columns: array<vec4<u32>>;
 
 @compute @workgroup_size(64)
 fn emit_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {

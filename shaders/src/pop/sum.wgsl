@@ -11,16 +11,20 @@ struct Params {
 @group(0) @binding(1) var<storage, read> field: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> sums: array<vec4<f32>>;
 
-@compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let column = column_index(gid, params.dims.xyz);
-    if (column == NO_COLUMN) {
-        return;
-    }
+// The column's field summed over its depth slices, in order.
+fn column_sum(column: u32) -> vec4<f32> {
     let slab = params.dims.x * params.dims.y;
     var s = vec4<f32>(0.0);
     for (var k = 0u; k < params.dims.z; k++) {
         s += field[params.stride_offset.x * (column + k * slab) + params.stride_offset.y];
     }
-    sums[column] = s;
+    return s;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let column = column_index(gid, params.dims.xyz);
+    if (column != NO_COLUMN) {
+        sums[column] = column_sum(column);
+    }
 }

@@ -16,7 +16,7 @@ use volscatter_core::solvers::pop::mip::MediumMip;
 use volscatter_core::solvers::pop::PopSettings;
 use volscatter_core::ScatteringGrid;
 
-pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip"], "pop/upsample.wgsl");
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip", "j_grid"], "pop/upsample.wgsl");
 
 /// Mirrors `struct Params` in upsample.wgsl.
 #[repr(C)]

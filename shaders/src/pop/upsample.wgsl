@@ -2,7 +2,8 @@
 // S = sigma_s J (volscatter-core solvers/pop/upsample.rs), one invocation per output point,
 // same neighbourhood and order as the CPU. The density comes from mip.wgsl at the output
 // grid's footprint; the coarse density and its maximum from merge.wgsl. affine, the trilinear
-// helpers and mip_sample come from the preludes (shaders/src/wgsl).
+// helpers, mip_sample and j_sample (ScatteringGrid::sample_index with margin 0) come from the
+// preludes (shaders/src/wgsl).
 
 struct Params {
     out_i2w: array<vec4<f32>, 3>,
@@ -17,24 +18,10 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> mip: array<u32>;
-@group(0) @binding(2) var<storage, read> coarse_j: array<vec4<f32>>;
+// Binding 2, the merged J (`j_grid`), is declared in wgsl/j_grid.wgsl.
 @group(0) @binding(3) var<storage, read> coarse_density: array<f32>;
 @group(0) @binding(4) var<storage, read> max_density: array<u32>;
 @group(0) @binding(5) var<storage, read_write> out_s: array<vec4<f32>>;
-
-// ScatteringGrid::sample_index: trilinear between grid points, zero outside.
-fn coarse_sample(p: vec3<f32>) -> vec3<f32> {
-    let d = params.coarse_dims.xyz;
-    if (!inside(p, vec3<f32>(0.0), vec3<f32>(d - vec3<i32>(1)))) {
-        return vec3<f32>(0.0);
-    }
-    let l = lattice(p);
-    var c: array<vec3<f32>, 8>;
-    for (var k = 0; k < 8; k++) {
-        c[k] = coarse_j[clamped_index(l.base + corner(k), d)].xyz;
-    }
-    return trilinear3(c, l.t);
-}
 
 @compute @workgroup_size(4, 4, 4)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -72,7 +59,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let ds = dot(e, e);
                     let dr = rho - coarse_density[ci];
                     let w = exp(-ds * inv_spatial - dr * dr * inv_range);
-                    sum += coarse_j[ci].xyz * w;
+                    sum += j_grid[ci].xyz * w;
                     wsum += w;
                 }
             }
@@ -80,10 +67,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (wsum > 1e-20) {
             jv = sum / wsum;
         } else {
-            jv = coarse_sample(q);
+            jv = j_sample(q, params.coarse_dims.xyz, 0.0);
         }
     } else {
-        jv = coarse_sample(q);
+        jv = j_sample(q, params.coarse_dims.xyz, 0.0);
     }
     out_s[o] = vec4<f32>(params.sigma_s_per_density.xyz * rho * jv, 0.0);
 }

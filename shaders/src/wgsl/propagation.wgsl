@@ -1,8 +1,7 @@
 // Prelude of POP's two propagation kernels (pop/propagate.wgsl: one distant light's
 // rectilinear grid; pop/radial.wgsl: one local light's radial grid): their common parameters,
-// the per-cell emission record and the gathering of a neighbour's packets. Reads the
-// including kernel's buffers `sigma_s`, `sigma_a`, `p_in`, `a_in`, `emit`, `p_out`, `a_out`.
-// Needs hg.wgsl.
+// their bindings 0-10 (a kernel adds its own from 11), the per-cell emission record and the
+// gathering of a neighbour's packets. Needs hg.wgsl.
 
 // Mirrored by `PropagateParams` in pop/mod.rs.
 struct Params {
@@ -11,6 +10,21 @@ struct Params {
     flags: vec4<u32>,   // diffusion_correction, drift_matched (propagate) / vacuum_escape (radial)
     weight: vec4<f32>,  // J weight of this emission (0.5 for the packets' birth cells), -, -, -
 };
+
+// Read-only as the layout says (pop/mod.rs `PROPAGATION_READ_ONLY`).
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> sigma_s: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> sigma_a: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> mu: array<f32>;
+// Read-write: the radial kernel removes what escapes from empty cells (vacuum_escape).
+@group(0) @binding(4) var<storage, read_write> p_in: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> a_in: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> emit: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> j_acc: array<vec4<f32>>;
+// Two vec4 per cell: escapes realised so far, escapes of the current emission.
+@group(0) @binding(8) var<storage, read_write> esc: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> p_out: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> a_out: array<vec4<f32>>;
 
 // Four vec4 per cell in `emit`: front, side, back fractions and path length.
 fn store_emit(c: u32, lobe: Lobe, path: vec3<f32>) {

@@ -107,7 +107,6 @@ impl LightGrid {
             return Vec3::ZERO;
         }
         // Clamp to the outermost centres: the outer half cells hold the edge value.
-        let p = p.clamp(Vec3::ZERO, edge);
-        trilinear::trilinear(p, |c| field[trilinear::clamped_index(c, dims)])
+        trilinear::dense_inside(p.clamp(Vec3::ZERO, edge), dims, field)
     }
 }

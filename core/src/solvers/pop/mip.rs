@@ -10,7 +10,7 @@
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
-use crate::medium::trilinear::trilinear;
+use crate::medium::trilinear::{trilinear, Lattice};
 use crate::medium::Medium;
 
 struct Level {
@@ -39,7 +39,14 @@ impl Level {
     /// Trilinear between cell centres, zero outside (like the density grid itself).
     #[inline]
     fn sample(&self, q: Vec3) -> f32 {
-        trilinear(q, |c| self.at(c))
+        trilinear(q, self)
+    }
+}
+
+impl Lattice<f32> for &Level {
+    #[inline(always)]
+    fn at(&self, c: IVec3) -> f32 {
+        Level::at(self, c)
     }
 }
 
