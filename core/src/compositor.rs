@@ -2,19 +2,73 @@
 //! RGBA image, the way a host renders S as volume emission with the medium's density for
 //! extinction: L = integral T(0,t) S(x(t)) dt + T(0,inf) L_env(d), alpha = 1 - T.
 //!
-//! AOVs: `single` (single scattering, computed here by ray marching shadow rays, independent of
-//! the solver), `multiple` (the rest of S), `background` (environment through the medium).
+//! AOVs, each only when asked for (`Aovs`): `single` (single scattering, computed here by ray
+//! marching shadow rays, independent of the solver), `multiple` (the rest of S), `background`
+//! (environment through the medium). The first two need the single-scattering grid, which costs
+//! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
 
 use glam::{Affine3A, Vec3, Vec4};
 use rayon::prelude::*;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::medium::Medium;
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::ScatteringGrid;
+
+/// The AOV layers an image carries besides RGBA, in this order when present.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Aovs {
+    pub single: bool,
+    pub multiple: bool,
+    pub background: bool,
+}
+
+impl Aovs {
+    pub const NONE: Aovs = Aovs { single: false, multiple: false, background: false };
+    pub const ALL: Aovs = Aovs { single: true, multiple: true, background: true };
+    /// The layer names, in image order.
+    pub const NAMES: [&'static str; 3] = ["single", "multiple", "background"];
+
+    /// Whether the single-scattering grid must be computed: `multiple` is the scattered light
+    /// minus its single part, so it needs the grid as much as `single` does.
+    pub fn needs_single(self) -> bool {
+        self.single || self.multiple
+    }
+
+    /// A comma-separated list of layer names, or `all`, or `none` (or the empty string).
+    pub fn parse(list: &str) -> Result<Aovs> {
+        let mut aovs = Aovs::NONE;
+        for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+            match name {
+                "single" => aovs.single = true,
+                "multiple" => aovs.multiple = true,
+                "background" => aovs.background = true,
+                "all" => aovs = Aovs::ALL,
+                "none" => {}
+                other => {
+                    return Err(Error::InvalidArgument(format!(
+                        "unknown AOV `{other}` (AOVs: {}, or all, or none)",
+                        Aovs::NAMES.join(", ")
+                    )))
+                }
+            }
+        }
+        Ok(aovs)
+    }
+
+    /// Whether the layer `name` is in the set (unknown names are not).
+    pub fn contains(self, name: &str) -> bool {
+        match name {
+            "single" => self.single,
+            "multiple" => self.multiple,
+            "background" => self.background,
+            _ => false,
+        }
+    }
+}
 
 #[derive(Clone, Debug)]
 pub struct CompositeOptions {
@@ -27,11 +81,15 @@ pub struct CompositeOptions {
     pub single_resolution: u32,
     /// Directions used for the dome's single scattering (deterministic, importance-sampled).
     pub dome_directions: u32,
+    /// The AOV layers to make. The library's default is every layer, so that code reading
+    /// them keeps working; the image-making front ends (the CLI's `render --aov`, the C ABI's
+    /// `vs_result_composite_aovs`, the hosts) pass only what was asked for.
+    pub aovs: Aovs,
 }
 
 impl Default for CompositeOptions {
     fn default() -> Self {
-        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 64 }
+        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 64, aovs: Aovs::ALL }
     }
 }
 
@@ -210,7 +268,8 @@ impl<'a> GridLookup<'a> {
 }
 
 /// Marches one camera ray; returns (in-scattered radiance from S, from S1, transmittance).
-fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, step: f32) -> (Vec3, Vec3, Vec3) {
+/// Without S1 (no AOV needs it) its integral is zero and it costs no lookups.
+fn march(medium: &Medium, s: &GridLookup, s1: Option<&GridLookup>, o: Vec3, d: Vec3, step: f32) -> (Vec3, Vec3, Vec3) {
     let (lo, hi) = medium.world_bounds();
     let Some((t0, t1)) = ray_box(o, d, lo, hi) else { return (Vec3::ZERO, Vec3::ZERO, Vec3::ONE) };
     let n = (((t1 - t0) / step).ceil() as u32).clamp(1, 8192);
@@ -228,7 +287,9 @@ fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, ste
         let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
         let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
         l += tr * weight * s.at(x);
-        l1 += tr * weight * s1.at(x);
+        if let Some(s1) = s1 {
+            l1 += tr * weight * s1.at(x);
+        }
         tr *= seg_t;
         if tr.max_element() < 1e-5 {
             tr = Vec3::ZERO;
@@ -238,12 +299,28 @@ fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, ste
     (l, l1, tr)
 }
 
-/// Renders the scattering grid `s` as seen by the scene's camera.
+/// Renders the scattering grid `s` as seen by the scene's camera, with the AOVs `opts` asks for.
 pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> Result<Image> {
+    let single = single_for(scene, opts)?;
+    composite_with_single(scene, s, single.as_ref(), opts)
+}
+
+/// The single-scattering grid `opts`' AOVs need, or None when none needs it (then it is not
+/// computed at all: it costs more than the march).
+pub fn single_for(scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>> {
+    opts.aovs.needs_single().then(|| single_scattering_grid(scene, opts.single_resolution, opts.dome_directions)).transpose()
+}
+
+/// `composite` with the single-scattering grid given (`single_for`'s), so that a caller can
+/// time or place the two stages apart.
+pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Image> {
+    if opts.aovs.needs_single() && single.is_none() {
+        return Err(Error::InvalidArgument("the single and multiple AOVs need the single-scattering grid".into()));
+    }
     let medium = &scene.medium;
     let cam = &scene.camera;
-    let single = single_scattering_grid(scene, opts.single_resolution, opts.dome_directions)?;
-    let (ls, ls1) = (GridLookup::new(s), GridLookup::new(&single));
+    let ls = GridLookup::new(s);
+    let ls1 = single.filter(|_| opts.aovs.needs_single()).map(GridLookup::new);
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
     let env = scene.environment();
     let (w, h) = (cam.width as usize, cam.height as usize);
@@ -257,7 +334,7 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
             for sy in 0..k {
                 for sx in 0..k {
                     let d = cam.ray_dir(x + (sx as f32 + 0.5) / k as f32, y + (sy as f32 + 0.5) / k as f32);
-                    let (a, b, tr) = march(medium, &ls, &ls1, cam.position, d, step);
+                    let (a, b, tr) = march(medium, &ls, ls1.as_ref(), cam.position, d, step);
                     l += a;
                     l1 += b;
                     tsum += tr;
@@ -272,26 +349,31 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
             (rgb.extend(alpha.clamp(0.0, 1.0)), l1, bg)
         })
         .collect();
-    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent))
+    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent, opts.aovs))
 }
 
-/// The image and its AOVs from per-pixel (RGBA, single scattering, background) in row order:
-/// `multiple` is what was scattered minus its single part. Shared by the CPU and GPU
+/// The image and the AOVs in `aovs` from per-pixel (RGBA, single scattering, background) in row
+/// order: `multiple` is what was scattered minus its single part. Shared by the CPU and GPU
 /// compositors so that both define the AOVs the same way.
-pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = (Vec4, Vec3, Vec3)>, transparent: bool) -> Image {
+pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = (Vec4, Vec3, Vec3)>, transparent: bool, aovs: Aovs) -> Image {
     let n = width as usize * height as usize;
     let mut img = Image::new(width, height);
-    let mut single_aov = Vec::with_capacity(n);
-    let mut multiple_aov = Vec::with_capacity(n);
-    let mut bg_aov = Vec::with_capacity(n);
+    let mut layers: [Vec<Vec3>; 3] = Default::default();
+    for (name, layer) in Aovs::NAMES.iter().zip(&mut layers) {
+        if aovs.contains(name) {
+            layer.reserve_exact(n);
+        }
+    }
     for (i, (rgba, l1, bg)) in pixels.into_iter().take(n).enumerate() {
         img.rgba[i] = rgba;
         let scattered = rgba.truncate() - if transparent { Vec3::ZERO } else { bg };
-        single_aov.push(l1);
-        multiple_aov.push(scattered - l1);
-        bg_aov.push(bg);
+        for (value, (name, layer)) in [l1, scattered - l1, bg].into_iter().zip(Aovs::NAMES.iter().zip(&mut layers)) {
+            if aovs.contains(name) {
+                layer.push(value);
+            }
+        }
     }
-    img.aovs = vec![("single".into(), single_aov), ("multiple".into(), multiple_aov), ("background".into(), bg_aov)];
+    img.aovs = Aovs::NAMES.iter().zip(layers).filter(|(name, _)| aovs.contains(name)).map(|(name, layer)| (name.to_string(), layer)).collect();
     img
 }
 
