@@ -79,7 +79,9 @@ pub struct CompositeOptions {
     pub step_voxels: f32,
     /// Largest dimension of the grid on which single scattering is computed for the AOV.
     pub single_resolution: u32,
-    /// Directions used for the dome's single scattering (deterministic, importance-sampled).
+    /// Directions used for the dome's single scattering (deterministic, importance-sampled): at
+    /// most this many, fewer for a dim dome (`dome_directions_for`). 32: within 1.8% of 64 on
+    /// the plume under sun and sky, at half the cost (the dome is nearly all of it).
     pub dome_directions: u32,
     /// The AOV layers to make. The library's default is every layer, so that code reading
     /// them keeps working; the image-making front ends (the CLI's `render --aov`, the C ABI's
@@ -89,7 +91,7 @@ pub struct CompositeOptions {
 
 impl Default for CompositeOptions {
     fn default() -> Self {
-        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 64, aovs: Aovs::ALL }
+        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 32, aovs: Aovs::ALL }
     }
 }
 
@@ -308,7 +310,43 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
 /// The single-scattering grid `opts`' AOVs need, or None when none needs it (then it is not
 /// computed at all: it costs more than the march).
 pub fn single_for(scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>> {
-    opts.aovs.needs_single().then(|| single_scattering_grid(scene, opts.single_resolution, opts.dome_directions)).transpose()
+    opts.aovs.needs_single()
+        .then(|| single_scattering_grid(scene, opts.single_resolution, dome_directions_for(scene, opts.dome_directions)))
+        .transpose()
+}
+
+/// How many of at most `max` directions the single-scattering grid gives the dome: all of them
+/// when the dome brings at least a third of the light that reaches the medium (unshadowed,
+/// phase averaged out), in proportion below that, at least 8. The directions' quadrature error
+/// is a fraction of the dome's part, so a dim dome needs fewer for the same error in the sum:
+/// measured against 64 directions (BENCHMARKS.md, composite section), the plume under sun and
+/// sky (dome share 0.35: 32 directions) is within 1.8%, the smoke under a point light and a dim
+/// sky (share 0.15: 15 directions) within 0.4%, at a half and a quarter of the cost.
+pub fn dome_directions_for(scene: &Scene, max: u32) -> u32 {
+    const PROBE: u32 = 64;
+    // Sum of the weights L / (pdf n) over n directions: the dome's integral of L over the sphere,
+    // which is what a distant light's irradiance E is to it.
+    let dome: f32 = dome_directions_of(scene, PROBE).iter().map(|(_, w)| w.element_sum() / 3.0).sum();
+    if dome <= 0.0 {
+        return max;
+    }
+    let (lo, hi) = scene.medium.world_bounds();
+    let centre = 0.5 * (lo + hi);
+    let mut others = 0.0;
+    for light in &scene.lights {
+        if let Light::Distant { irradiance, .. } = light {
+            others += irradiance.element_sum() / 3.0;
+        }
+    }
+    // The lights only: a glowing medium's VPLs would cost a second translation, and leaving
+    // them out errs towards more directions.
+    for e in crate::translate::local_emitters(&scene.lights, AREA_VPLS_PER_SIDE) {
+        let to = centre - e.position;
+        let d2 = to.length_squared().max(1e-12);
+        others += e.intensity_towards(to / d2.sqrt()).element_sum() / 3.0 / d2;
+    }
+    let share = dome / (dome + others);
+    ((max as f32 * 3.0 * share).ceil() as u32).clamp(8.min(max), max)
 }
 
 /// `composite` with the single-scattering grid given (`single_for`'s), so that a caller can
@@ -409,6 +447,50 @@ mod tests {
         let comp = composite(&scene, &zero, &CompositeOptions::default()).unwrap();
         let e1 = relative_rmse(comp.aov("single").unwrap(), img.aov("single").unwrap());
         assert!(e1 < 0.15, "single-scattering AOV: {e1}");
+    }
+
+    /// The dome's share of the light sets its directions: the default scene's sky (a third of
+    /// the unshadowed light beside its sun) gets all of them, the same sky at a tenth of its
+    /// radiance fewer in proportion, and never under 8.
+    #[test]
+    fn dim_dome_gets_fewer_directions() {
+        let mut scene = Scene::default_scene();
+        assert_eq!(dome_directions_for(&scene, 32), 32);
+        let dim_by = |scene: &mut Scene, k: f32| {
+            for light in &mut scene.lights {
+                if let Light::Dome(dome) = light {
+                    dome.color *= k;
+                }
+            }
+        };
+        dim_by(&mut scene, 0.1);
+        let dim = dome_directions_for(&scene, 32);
+        assert!((8..=16).contains(&dim), "dim dome: {dim} directions");
+        dim_by(&mut scene, 1e-3);
+        assert_eq!(dome_directions_for(&scene, 32), 8);
+    }
+
+    /// Without the single and multiple AOVs the image has only the layers asked for and its
+    /// RGBA is that of the full composite (the AOVs never feed the beauty); `single` alone
+    /// equals the full composite's.
+    #[test]
+    fn aovs_are_made_only_when_asked() {
+        let scene = small_default_scene(12);
+        let mut s = ScatteringGrid::over_medium(&scene.medium, 12).unwrap();
+        s.data.iter_mut().enumerate().for_each(|(i, v)| *v = Vec3::splat((i % 5) as f32 * 0.1));
+        let all = composite(&scene, &s, &CompositeOptions::default()).unwrap();
+        let names = |img: &Image| img.aovs.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&all), ["single", "multiple", "background"]);
+        let none = composite(&scene, &s, &CompositeOptions { aovs: Aovs::NONE, ..Default::default() }).unwrap();
+        assert!(none.aovs.is_empty());
+        assert_eq!(none.rgba, all.rgba);
+        let single = composite(&scene, &s, &CompositeOptions { aovs: Aovs { single: true, ..Aovs::NONE }, ..Default::default() }).unwrap();
+        assert_eq!(names(&single), ["single"]);
+        assert_eq!(single.aov("single"), all.aov("single"));
+        assert_eq!(Aovs::parse("background, single").unwrap(), Aovs { single: true, multiple: false, background: true });
+        assert_eq!(Aovs::parse("all").unwrap(), Aovs::ALL);
+        assert_eq!(Aovs::parse("none").unwrap(), Aovs::NONE);
+        assert!(Aovs::parse("singel").unwrap_err().to_string().contains("singel"));
     }
 
     /// A grey slab seen head-on with S = 0: the alpha is 1 - exp(-sigma_t d) to quadrature

@@ -65,7 +65,8 @@ pub fn composite(ctx: &GpuContext, scene: &Scene, s: &ScatteringGrid, opts: &Com
 /// The single-scattering grid the AOVs of `opts` need, or None (not computed) when none does:
 /// the GPU twin of `compositor::single_for`.
 pub fn single_for(ctx: &GpuContext, scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>, GpuError> {
-    opts.aovs.needs_single().then(|| single::single_scattering_grid(ctx, scene, opts.single_resolution, opts.dome_directions)).transpose()
+    let dome_directions = volscatter_core::compositor::dome_directions_for(scene, opts.dome_directions);
+    opts.aovs.needs_single().then(|| single::single_scattering_grid(ctx, scene, opts.single_resolution, dome_directions)).transpose()
 }
 
 /// `composite` with the single-scattering grid given. Without one, the kernel reads a 2^3 grid
