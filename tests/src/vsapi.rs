@@ -111,6 +111,7 @@ api! {
     vs_result_copy_rgb: fn(Res, *mut f32, usize) -> S;
     vs_result_write_grid: fn(Res, Cs, u32) -> S;
     vs_result_composite: fn(Res, u32, u32, f32, *mut Img) -> S;
+    vs_result_composite_aovs: fn(Res, u32, u32, u32, f32, *mut Img) -> S;
     vs_image_destroy: fn(Img) -> S;
     vs_image_last_error: fn(Img) -> Cs;
     vs_image_size: fn(Img, *mut u32, *mut u32) -> S;

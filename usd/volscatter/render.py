@@ -95,9 +95,13 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
            solver: str = "reference", settings: Optional[dict] = None, width: int = 320, height: Optional[int] = None,
            volume: Optional[str] = None, light_convention: str = "auto", medium_defaults: Optional[dict] = None,
            progress: Progress = None, png_exposure: float = 1.0, stage=None,
-           warn: Optional[Callable[[str], None]] = None, transparent: bool = False) -> FrameResult:
+           warn: Optional[Callable[[str], None]] = None, transparent: bool = False,
+           aovs=("background",)) -> FrameResult:
     """Renders one frame of a stage into ``out`` (EXR: RGBA + AOVs) and optionally ``png``.
-    ``transparent`` leaves the directly seen environment out (alpha from the medium only)."""
+    ``transparent`` leaves the directly seen environment out (alpha from the medium only).
+    ``aovs``: the compositor's layers in the EXR, as in ``volscatter render --aov`` (background
+    by default: free; single and multiple cost a second light pass). The reference path
+    tracer's image keeps all its layers (they cost it nothing)."""
     sc = stage_mod.read_stage(stage_path, time=time, camera=camera, light_convention=light_convention,
                               medium_defaults=medium_defaults, stage=stage)
     warnings = list(sc.warnings) + solver_warnings(sc, solver)
@@ -113,7 +117,7 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
             image = scene.render_reference(progress)
         else:
             with scene.solve(progress) as result:
-                image = result.composite(transparent=transparent)
+                image = result.composite(transparent=transparent, aovs=aovs)
         with image:
             _ensure_parent(out)
             image.write_exr(out)
