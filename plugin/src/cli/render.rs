@@ -116,18 +116,23 @@ pub fn run(args: RenderArgs) -> Result<()> {
         let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
         let gpu_failed = |e: volscatter_gpu::GpuError| Error::InvalidArgument(format!("--device gpu: {e}"));
         // Timed apart from the march (phase "composite: single-scattering AOV", included in
-        // "composite"): it is the part an image without those AOVs skips.
+        // "composite", present only when an AOV needs it): the part an image without those
+        // AOVs skips.
         let start_composite = Instant::now();
-        let (single, _) = timings
-            .time("composite: single-scattering AOV", || {
-                volscatter_gpu::run_on(
-                    args.device,
-                    |ctx| volscatter_gpu::composite::single_for(ctx, &scene, &opts).map(Ok),
-                    || compositor::single_for(&scene, &opts),
-                )
-            })
-            .map_err(gpu_failed)?;
-        let single = single?;
+        let single = if opts.aovs.needs_single() {
+            let (single, _) = timings
+                .time("composite: single-scattering AOV", || {
+                    volscatter_gpu::run_on(
+                        args.device,
+                        |ctx| volscatter_gpu::composite::single_for(ctx, &scene, &opts).map(Ok),
+                        || compositor::single_for(&scene, &opts),
+                    )
+                })
+                .map_err(gpu_failed)?;
+            single?
+        } else {
+            None
+        };
         let (img, used_march) = volscatter_gpu::run_on(
             args.device,
             |ctx| volscatter_gpu::composite::composite_with_single(ctx, &scene, &out.scattering, single.as_ref(), &opts).map(Ok),
