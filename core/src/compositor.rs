@@ -2,20 +2,74 @@
 //! RGBA image, the way a host renders S as volume emission with the medium's density for
 //! extinction: L = integral T(0,t) S(x(t)) dt + T(0,inf) L_env(d), alpha = 1 - T.
 //!
-//! AOVs: `single` (single scattering, computed here by ray marching shadow rays, independent of
-//! the solver), `multiple` (the rest of S), `background` (environment through the medium).
+//! AOVs, each only when asked for (`Aovs`): `single` (single scattering, computed here by ray
+//! marching shadow rays, independent of the solver), `multiple` (the rest of S), `background`
+//! (environment through the medium). The first two need the single-scattering grid, which costs
+//! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
 
 use glam::{Affine3A, Vec3, Vec4};
 use rayon::prelude::*;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::medium::{ball_mean_inverse_square, near_field_radius, optical_depth, ray_box, Medium};
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::ScatteringGrid;
 use crate::translate::dome::dome_directions_of;
+
+/// The AOV layers an image carries besides RGBA, in this order when present.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Aovs {
+    pub single: bool,
+    pub multiple: bool,
+    pub background: bool,
+}
+
+impl Aovs {
+    pub const NONE: Aovs = Aovs { single: false, multiple: false, background: false };
+    pub const ALL: Aovs = Aovs { single: true, multiple: true, background: true };
+    /// The layer names, in image order.
+    pub const NAMES: [&'static str; 3] = ["single", "multiple", "background"];
+
+    /// Whether the single-scattering grid must be computed: `multiple` is the scattered light
+    /// minus its single part, so it needs the grid as much as `single` does.
+    pub fn needs_single(self) -> bool {
+        self.single || self.multiple
+    }
+
+    /// A comma-separated list of layer names, or `all`, or `none` (or the empty string).
+    pub fn parse(list: &str) -> Result<Aovs> {
+        let mut aovs = Aovs::NONE;
+        for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+            match name {
+                "single" => aovs.single = true,
+                "multiple" => aovs.multiple = true,
+                "background" => aovs.background = true,
+                "all" => aovs = Aovs::ALL,
+                "none" => {}
+                other => {
+                    return Err(Error::InvalidArgument(format!(
+                        "unknown AOV `{other}` (AOVs: {}, or all, or none)",
+                        Aovs::NAMES.join(", ")
+                    )))
+                }
+            }
+        }
+        Ok(aovs)
+    }
+
+    /// Whether the layer `name` is in the set (unknown names are not).
+    pub fn contains(self, name: &str) -> bool {
+        match name {
+            "single" => self.single,
+            "multiple" => self.multiple,
+            "background" => self.background,
+            _ => false,
+        }
+    }
+}
 
 #[derive(Clone, Debug)]
 pub struct CompositeOptions {
@@ -26,13 +80,19 @@ pub struct CompositeOptions {
     pub step_voxels: f32,
     /// Largest dimension of the grid on which single scattering is computed for the AOV.
     pub single_resolution: u32,
-    /// Directions used for the dome's single scattering (deterministic, importance-sampled).
+    /// Directions used for the dome's single scattering (deterministic, importance-sampled): at
+    /// most this many, fewer for a dim dome (`dome_directions_for`). 32: within 1.8% of 64 on
+    /// the plume under sun and sky, at half the cost (the dome is nearly all of it).
     pub dome_directions: u32,
+    /// The AOV layers to make. The library's default is every layer, so that code reading
+    /// them keeps working; the image-making front ends (the CLI's `render --aov`, the C ABI's
+    /// `vs_result_composite_aovs`, the hosts) pass only what was asked for.
+    pub aovs: Aovs,
 }
 
 impl Default for CompositeOptions {
     fn default() -> Self {
-        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 64 }
+        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 32, aovs: Aovs::ALL }
     }
 }
 
@@ -47,7 +107,7 @@ pub const AREA_VPLS_PER_SIDE: u32 = 8;
 pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid> {
     let medium = &scene.medium;
     let mut grid = ScatteringGrid::over_medium(medium, max_dim)?;
-    let vs = medium.voxel_size_world().min_element();
+    let step = shadow_step(medium, &grid);
     let frame = grid.index_to_world;
     let [nx, ny, _] = grid.dims;
     let g = medium.g;
@@ -63,7 +123,7 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
                     continue;
                 }
                 let view = (x - scene.camera.position).normalize_or(Vec3::Z);
-                let tr = |w: Vec3, t_max: f32| (-optical_depth(medium, x, w, t_max, vs, 512)).exp();
+                let tr = |w: Vec3, t_max: f32| (-optical_depth(medium, x, w, t_max, step, 512)).exp();
                 let mut sum = Vec3::ZERO;
                 for light in &scene.lights {
                     match light {
@@ -87,6 +147,16 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
         }
     });
     Ok(grid)
+}
+
+/// The shadow rays' quadrature step for a single-scattering grid: its own spacing, at least
+/// one voxel. Transmittance finer than the grid's spacing is lost in its interpolation anyway;
+/// on the plume (64 voxels, a 48-point grid) this is 3/4 of the steps of a one-voxel step, and
+/// the single AOV moves by 0.05% (relative RMSE against a one-voxel step, 32 dome directions).
+pub fn shadow_step(medium: &Medium, grid: &ScatteringGrid) -> f32 {
+    let m = grid.index_to_world.matrix3;
+    let spacing = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
+    spacing.max(medium.voxel_size_world().min_element())
 }
 
 /// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2
@@ -126,7 +196,8 @@ impl<'a> GridLookup<'a> {
 }
 
 /// Marches one camera ray; returns (in-scattered radiance from S, from S1, transmittance).
-fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, step: f32) -> (Vec3, Vec3, Vec3) {
+/// Without S1 (no AOV needs it) its integral is zero and it costs no lookups.
+fn march(medium: &Medium, s: &GridLookup, s1: Option<&GridLookup>, o: Vec3, d: Vec3, step: f32) -> (Vec3, Vec3, Vec3) {
     let (lo, hi) = medium.world_bounds();
     let Some((t0, t1)) = ray_box(o, d, lo, hi) else { return (Vec3::ZERO, Vec3::ZERO, Vec3::ONE) };
     let n = (((t1 - t0) / step).ceil() as u32).clamp(1, 8192);
@@ -144,7 +215,9 @@ fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, ste
         let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
         let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
         l += tr * weight * s.at(x);
-        l1 += tr * weight * s1.at(x);
+        if let Some(s1) = s1 {
+            l1 += tr * weight * s1.at(x);
+        }
         tr *= seg_t;
         if tr.max_element() < 1e-5 {
             tr = Vec3::ZERO;
@@ -154,12 +227,64 @@ fn march(medium: &Medium, s: &GridLookup, s1: &GridLookup, o: Vec3, d: Vec3, ste
     (l, l1, tr)
 }
 
-/// Renders the scattering grid `s` as seen by the scene's camera.
+/// Renders the scattering grid `s` as seen by the scene's camera, with the AOVs `opts` asks for.
 pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> Result<Image> {
+    let single = single_for(scene, opts)?;
+    composite_with_single(scene, s, single.as_ref(), opts)
+}
+
+/// The single-scattering grid `opts`' AOVs need, or None when none needs it (then it is not
+/// computed at all: it costs more than the march).
+pub fn single_for(scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>> {
+    opts.aovs.needs_single()
+        .then(|| single_scattering_grid(scene, opts.single_resolution, dome_directions_for(scene, opts.dome_directions)))
+        .transpose()
+}
+
+/// How many of at most `max` directions the single-scattering grid gives the dome: all of them
+/// when the dome brings at least a third of the light that reaches the medium (unshadowed,
+/// phase averaged out), in proportion below that, at least 8. The directions' quadrature error
+/// is a fraction of the dome's part, so a dim dome needs fewer for the same error in the sum:
+/// measured against 64 directions (BENCHMARKS.md, composite section), the plume under sun and
+/// sky (dome share 0.35: 32 directions) is within 1.8%, the smoke under a point light and a dim
+/// sky (share 0.15: 15 directions) within 0.4%, at a half and a quarter of the cost.
+pub fn dome_directions_for(scene: &Scene, max: u32) -> u32 {
+    const PROBE: u32 = 64;
+    // Sum of the weights L / (pdf n) over n directions: the dome's integral of L over the sphere,
+    // which is what a distant light's irradiance E is to it.
+    let dome: f32 = dome_directions_of(scene, PROBE).iter().map(|(_, w)| w.element_sum() / 3.0).sum();
+    if dome <= 0.0 {
+        return max;
+    }
+    let (lo, hi) = scene.medium.world_bounds();
+    let centre = 0.5 * (lo + hi);
+    let mut others = 0.0;
+    for light in &scene.lights {
+        if let Light::Distant { irradiance, .. } = light {
+            others += irradiance.element_sum() / 3.0;
+        }
+    }
+    // The lights only: a glowing medium's VPLs would cost a second translation, and leaving
+    // them out errs towards more directions.
+    for e in crate::translate::local_emitters(&scene.lights, AREA_VPLS_PER_SIDE) {
+        let to = centre - e.position;
+        let d2 = to.length_squared().max(1e-12);
+        others += e.intensity_towards(to / d2.sqrt()).element_sum() / 3.0 / d2;
+    }
+    let share = dome / (dome + others);
+    ((max as f32 * 3.0 * share).ceil() as u32).clamp(8.min(max), max)
+}
+
+/// `composite` with the single-scattering grid given (`single_for`'s), so that a caller can
+/// time or place the two stages apart.
+pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Image> {
+    if opts.aovs.needs_single() && single.is_none() {
+        return Err(Error::InvalidArgument("the single and multiple AOVs need the single-scattering grid".into()));
+    }
     let medium = &scene.medium;
     let cam = &scene.camera;
-    let single = single_scattering_grid(scene, opts.single_resolution, opts.dome_directions)?;
-    let (ls, ls1) = (GridLookup::new(s), GridLookup::new(&single));
+    let ls = GridLookup::new(s);
+    let ls1 = single.filter(|_| opts.aovs.needs_single()).map(GridLookup::new);
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
     let env = scene.environment();
     let (w, h) = (cam.width as usize, cam.height as usize);
@@ -173,7 +298,7 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
             for sy in 0..k {
                 for sx in 0..k {
                     let d = cam.ray_dir(x + (sx as f32 + 0.5) / k as f32, y + (sy as f32 + 0.5) / k as f32);
-                    let (a, b, tr) = march(medium, &ls, &ls1, cam.position, d, step);
+                    let (a, b, tr) = march(medium, &ls, ls1.as_ref(), cam.position, d, step);
                     l += a;
                     l1 += b;
                     tsum += tr;
@@ -188,26 +313,31 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
             (rgb.extend(alpha.clamp(0.0, 1.0)), l1, bg)
         })
         .collect();
-    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent))
+    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent, opts.aovs))
 }
 
-/// The image and its AOVs from per-pixel (RGBA, single scattering, background) in row order:
-/// `multiple` is what was scattered minus its single part. Shared by the CPU and GPU
+/// The image and the AOVs in `aovs` from per-pixel (RGBA, single scattering, background) in row
+/// order: `multiple` is what was scattered minus its single part. Shared by the CPU and GPU
 /// compositors so that both define the AOVs the same way.
-pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = (Vec4, Vec3, Vec3)>, transparent: bool) -> Image {
+pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = (Vec4, Vec3, Vec3)>, transparent: bool, aovs: Aovs) -> Image {
     let n = width as usize * height as usize;
     let mut img = Image::new(width, height);
-    let mut single_aov = Vec::with_capacity(n);
-    let mut multiple_aov = Vec::with_capacity(n);
-    let mut bg_aov = Vec::with_capacity(n);
+    let mut layers: [Vec<Vec3>; 3] = Default::default();
+    for (name, layer) in Aovs::NAMES.iter().zip(&mut layers) {
+        if aovs.contains(name) {
+            layer.reserve_exact(n);
+        }
+    }
     for (i, (rgba, l1, bg)) in pixels.into_iter().take(n).enumerate() {
         img.rgba[i] = rgba;
         let scattered = rgba.truncate() - if transparent { Vec3::ZERO } else { bg };
-        single_aov.push(l1);
-        multiple_aov.push(scattered - l1);
-        bg_aov.push(bg);
+        for (value, (name, layer)) in [l1, scattered - l1, bg].into_iter().zip(Aovs::NAMES.iter().zip(&mut layers)) {
+            if aovs.contains(name) {
+                layer.push(value);
+            }
+        }
     }
-    img.aovs = vec![("single".into(), single_aov), ("multiple".into(), multiple_aov), ("background".into(), bg_aov)];
+    img.aovs = Aovs::NAMES.iter().zip(layers).filter(|(name, _)| aovs.contains(name)).map(|(name, layer)| (name.to_string(), layer)).collect();
     img
 }
 
@@ -243,6 +373,50 @@ mod tests {
         let comp = composite(&scene, &zero, &CompositeOptions::default()).unwrap();
         let e1 = relative_rmse(comp.aov("single").unwrap(), img.aov("single").unwrap());
         assert!(e1 < 0.15, "single-scattering AOV: {e1}");
+    }
+
+    /// The dome's share of the light sets its directions: the default scene's sky (a third of
+    /// the unshadowed light beside its sun) gets all of them, the same sky at a tenth of its
+    /// radiance fewer in proportion, and never under 8.
+    #[test]
+    fn dim_dome_gets_fewer_directions() {
+        let mut scene = Scene::default_scene();
+        assert_eq!(dome_directions_for(&scene, 32), 32);
+        let dim_by = |scene: &mut Scene, k: f32| {
+            for light in &mut scene.lights {
+                if let Light::Dome(dome) = light {
+                    dome.color *= k;
+                }
+            }
+        };
+        dim_by(&mut scene, 0.1);
+        let dim = dome_directions_for(&scene, 32);
+        assert!((8..=16).contains(&dim), "dim dome: {dim} directions");
+        dim_by(&mut scene, 1e-3);
+        assert_eq!(dome_directions_for(&scene, 32), 8);
+    }
+
+    /// Without the single and multiple AOVs the image has only the layers asked for and its
+    /// RGBA is that of the full composite (the AOVs never feed the beauty); `single` alone
+    /// equals the full composite's.
+    #[test]
+    fn aovs_are_made_only_when_asked() {
+        let scene = small_default_scene(12);
+        let mut s = ScatteringGrid::over_medium(&scene.medium, 12).unwrap();
+        s.data.iter_mut().enumerate().for_each(|(i, v)| *v = Vec3::splat((i % 5) as f32 * 0.1));
+        let all = composite(&scene, &s, &CompositeOptions::default()).unwrap();
+        let names = |img: &Image| img.aovs.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&all), ["single", "multiple", "background"]);
+        let none = composite(&scene, &s, &CompositeOptions { aovs: Aovs::NONE, ..Default::default() }).unwrap();
+        assert!(none.aovs.is_empty());
+        assert_eq!(none.rgba, all.rgba);
+        let single = composite(&scene, &s, &CompositeOptions { aovs: Aovs { single: true, ..Aovs::NONE }, ..Default::default() }).unwrap();
+        assert_eq!(names(&single), ["single"]);
+        assert_eq!(single.aov("single"), all.aov("single"));
+        assert_eq!(Aovs::parse("background, single").unwrap(), Aovs { single: true, multiple: false, background: true });
+        assert_eq!(Aovs::parse("all").unwrap(), Aovs::ALL);
+        assert_eq!(Aovs::parse("none").unwrap(), Aovs::NONE);
+        assert!(Aovs::parse("singel").unwrap_err().to_string().contains("singel"));
     }
 
     /// A grey slab seen head-on with S = 0: the alpha is 1 - exp(-sigma_t d) to quadrature

@@ -64,6 +64,30 @@
 #define VS_DEVICE_AUTO 2
 
 /**
+ * AOV bit for `vs_result_composite_aovs`: the `single` layer (single scattering, from the
+ * compositor's own shadow rays). It and `VS_AOV_MULTIPLE` cost a second light pass over the
+ * medium (more than the march); without either it is not computed.
+ */
+#define VS_AOV_SINGLE 1
+
+/**
+ * AOV bit for `vs_result_composite_aovs`: the `multiple` layer (what was scattered minus the
+ * `single` layer; needs the same light pass as `VS_AOV_SINGLE`).
+ */
+#define VS_AOV_MULTIPLE 2
+
+/**
+ * AOV bit for `vs_result_composite_aovs`: the `background` layer (the environment seen
+ * through the medium; free, the march computes it anyway).
+ */
+#define VS_AOV_BACKGROUND 4
+
+/**
+ * Every AOV bit: what `vs_result_composite` makes.
+ */
+#define VS_AOV_ALL ((VS_AOV_SINGLE | VS_AOV_MULTIPLE) | VS_AOV_BACKGROUND)
+
+/**
  * Outcome of a call. `VS_STATUS_OK` is 0; every other value is a failure whose message is
  * available from the handle's `vs_*_last_error` (or, for calls without a handle, from
  * `vs_status_message`). New values may be added in later versions with the same ABI version:
@@ -146,7 +170,7 @@ typedef enum {
 } VsGridFormat;
 
 /**
- * Opaque image handle, made by `vs_result_composite` or `vs_scene_render_reference`,
+ * Opaque image handle, made by `vs_result_composite(_aovs)` or `vs_scene_render_reference`,
  * destroyed with `vs_image_destroy`.
  */
 typedef struct VsImage VsImage;
@@ -524,9 +548,13 @@ VsStatus vs_result_write_grid(const VsResult *result, const char *path, uint32_t
 /**
  * Composites the scattering grid into an image towards the scene's camera (ray marching S
  * with the medium's transmittance; alpha = 1 - transmittance) into a new image `*out` (NULL
- * on failure; destroy with `vs_image_destroy`). `flags`: 0 or `VS_COMPOSITE_TRANSPARENT`;
- * other bits are refused. `subpixels`: samples per pixel axis, 1..=16 (0: default 2).
- * `step_voxels`: march step in voxels, in [0.05, 8] (0: default 0.5).
+ * on failure; destroy with `vs_image_destroy`), with every AOV layer ("single", "multiple",
+ * "background"): the same as `vs_result_composite_aovs` with `VS_AOV_ALL`, kept for the
+ * callers written before it. A caller that does not read "single" or "multiple" should call
+ * `vs_result_composite_aovs` without them: they cost more than the rest of the composite.
+ * `flags`: 0 or `VS_COMPOSITE_TRANSPARENT`; other bits are refused. `subpixels`: samples per
+ * pixel axis, 1..=16 (0: default 2). `step_voxels`: march step in voxels, in [0.05, 8]
+ * (0: default 0.5).
  *
  * Thread safety: any thread; calls on one result are serialised.
  */
@@ -535,6 +563,22 @@ VsStatus vs_result_composite(const VsResult *result,
                              uint32_t subpixels,
                              float step_voxels,
                              VsImage **out);
+
+/**
+ * `vs_result_composite` with the AOV layers chosen: `aovs` is 0 (RGBA only) or a sum of
+ * `VS_AOV_SINGLE`, `VS_AOV_MULTIPLE` and `VS_AOV_BACKGROUND` (other bits are refused); the
+ * image carries exactly those layers, in that order. Without `VS_AOV_SINGLE` and
+ * `VS_AOV_MULTIPLE` the single-scattering light pass is skipped. `flags`, `subpixels` and
+ * `step_voxels` as for `vs_result_composite`.
+ *
+ * Thread safety: any thread; calls on one result are serialised.
+ */
+VsStatus vs_result_composite_aovs(const VsResult *result,
+                                  uint32_t flags,
+                                  uint32_t aovs,
+                                  uint32_t subpixels,
+                                  float step_voxels,
+                                  VsImage **out);
 
 /**
  * Creates a session in `*out` (NULL on failure; destroy with `vs_session_destroy`) with the
@@ -622,12 +666,15 @@ VsStatus vs_image_copy_rgba(const VsImage *image, float *rgba, size_t len);
 
 /**
  * Copies the AOV layer `name` (e.g. "single", "multiple", "background"; which exist depends
- * on how the image was made) as interleaved RGB into `rgb`: `len` must equal
+ * on how the image was made: `vs_result_composite_aovs` makes only the layers asked for) as interleaved RGB into `rgb`: `len` must equal
  * width * height * 3. An unknown name gives `VS_STATUS_INVALID_ARGUMENT` listing the layers.
  *
  * Thread safety: any thread; calls on one image are serialised.
  */
-VsStatus vs_image_copy_aov(const VsImage *image, const char *name, float *rgb, size_t len);
+VsStatus vs_image_copy_aov(const VsImage *image,
+                           const char *name,
+                           float *rgb,
+                           size_t len);
 
 /**
  * Writes the image as float OpenEXR (RGBA plus every AOV as `name.R/G/B`) to `path`.

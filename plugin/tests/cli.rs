@@ -147,3 +147,38 @@ fn compare_runs_on_the_device_asked_for() {
     let (o, _) = compare("cpu", "popp,reference@1");
     assert_clean_failure(&o, "unknown solver `popp` (known: reference, pop)");
 }
+
+/// `--aov`: the EXR holds the layers asked for (default: background only) whatever the solver,
+/// the single-scattering grid is computed (and timed) only for single or multiple, and an
+/// unknown name fails cleanly. Layer names are found in the EXR header's channel list.
+#[test]
+fn aov_layers_are_opt_in() {
+    let dir = tmp("aov");
+    let has = |layer: &str| {
+        let bytes = std::fs::read(dir.join("o.exr")).unwrap();
+        let needle = format!("{layer}.R");
+        bytes.windows(needle.len()).any(|w| w == needle.as_bytes())
+    };
+    let phases = || -> serde_json::Value {
+        let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
+        report["phases_seconds"].clone()
+    };
+    let report = dir.join("r.json");
+    let report = report.to_str().unwrap();
+    for (solver, extra) in [("pop", vec![]), ("reference", vec!["--spp", "1"])] {
+        let mut args = vec!["--solver", solver, "--report", report];
+        args.extend(&extra);
+        let o = render_json(&small_scene(), &dir, &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(has("background") && !has("single") && !has("multiple"), "{solver}: default layers");
+        assert!(phases().get("composite: single-scattering AOV").is_none(), "{solver}: single-scattering grid computed without its AOVs");
+        args.extend(["--aov", "single,multiple"]);
+        let o = render_json(&small_scene(), &dir, &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(!has("background") && has("single") && has("multiple"), "{solver}: --aov single,multiple");
+        if solver == "pop" {
+            assert!(phases()["composite: single-scattering AOV"].as_f64().unwrap() > 0.0);
+        }
+    }
+    assert_clean_failure(&render_json(&small_scene(), &dir, &["--aov", "singel"]), "singel");
+}

@@ -187,7 +187,7 @@ def render_ours(spec: SceneSpec, workdir: Path, seed: int, spp: int | None = Non
     out, report = workdir / f"{tag}.exr", workdir / f"{tag}.report.json"
     cmd = [str(volscatter_bin()), "render", str(scene_path), "--solver", "reference",
            "--out", str(out), "--spp", str(spp or spec.spp_ours), "--seed", str(seed),
-           "--report", str(report), "-q"]
+           "--report", str(report), "-q", "--aov", "all"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr}")

@@ -877,7 +877,7 @@ def test_single_scattering_matches_cycles(fresh, light):
     bs.camera(width=16, height=12)
     doc, warnings, _ = se.export(bpy.context, ob, str(fresh), 1, {"name": "reference", "grid_resolution": 6, "grid_spp": 2})
     assert [l["type"] for l in doc["lights"]] == [light.replace("sun", "distant")], warnings
-    with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite() as img:
+    with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite(aovs=("single",)) as img:
         w, h = img.size()
         single = list(img.aov("single"))
         alpha = list(img.rgba())[3::4]
@@ -941,7 +941,7 @@ def test_emission_scattered_by_smoke_matches_cycles(fresh, mode):
         assert em["temperature_grid"] == "flame" and em["temperature"] == pytest.approx(3000.0)
         assert em["blackbody_intensity"] == pytest.approx(1.0) and em["blackbody_tint"] == pytest.approx([1.0] * 3)
     em["vpls"] = 1024
-    with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite() as img:
+    with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite(aovs=("single",)) as img:
         w, h = img.size()
         single = list(img.aov("single"))
     sc = bpy.context.scene

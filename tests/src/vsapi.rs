@@ -119,6 +119,7 @@ api! {
     vs_session_last_error: fn(Sess) -> Cs;
     vs_session_solve: fn(Sess, Scene, Progress, *mut c_void, *mut Res) -> S;
     vs_session_frame_count: fn(Sess, *mut u64) -> S;
+    vs_result_composite_aovs: fn(Res, u32, u32, u32, f32, *mut Img) -> S;
     vs_image_destroy: fn(Img) -> S;
     vs_image_last_error: fn(Img) -> Cs;
     vs_image_size: fn(Img, *mut u32, *mut u32) -> S;

@@ -712,3 +712,47 @@ fn a_session_over_three_frames_equals_one_off_solves() {
         }
     }
 }
+
+/// `vs_result_composite_aovs` makes exactly the layers asked for (0: RGBA only), with the RGBA
+/// of `vs_result_composite` (the AOVs never feed the image); unknown AOV bits are refused.
+#[test]
+fn composite_aovs_makes_only_the_layers_asked_for() {
+    let a = api();
+    unsafe {
+        let s = small_scene();
+        let r = a.solve(s);
+        let rgba_and_layers = |aovs: Option<u32>| {
+            let mut img = null_mut::<c_void>();
+            let st = match aovs {
+                Some(bits) => (a.vs_result_composite_aovs)(r, 0, bits, 0, 0.0, &mut img),
+                None => (a.vs_result_composite)(r, 0, 0, 0.0, &mut img),
+            };
+            assert_eq!(st, OK, "{}", a.result_error(r));
+            let (mut w, mut h) = (0u32, 0u32);
+            assert_eq!((a.vs_image_size)(img, &mut w, &mut h), OK);
+            let mut px = vec![0f32; (w * h * 4) as usize];
+            assert_eq!((a.vs_image_copy_rgba)(img, px.as_mut_ptr(), px.len()), OK);
+            let mut rgb = vec![0f32; (w * h * 3) as usize];
+            let layers: Vec<&str> = ["single", "multiple", "background"]
+                .into_iter()
+                .filter(|n| (a.vs_image_copy_aov)(img, cstr(n).as_ptr(), rgb.as_mut_ptr(), rgb.len()) == OK)
+                .collect();
+            assert_eq!((a.vs_image_destroy)(img), OK);
+            (px, layers)
+        };
+        let (all_px, all) = rgba_and_layers(None);
+        assert_eq!(all, ["single", "multiple", "background"]);
+        for (bits, want) in [(0u32, vec![]), (1, vec!["single"]), (2, vec!["multiple"]), (4, vec!["background"]), (5, vec!["single", "background"]), (7, all.clone())] {
+            let (px, layers) = rgba_and_layers(Some(bits));
+            assert_eq!(layers, want, "aovs {bits}");
+            assert_eq!(px, all_px, "aovs {bits}: RGBA differs from vs_result_composite's");
+        }
+        for bad in [8u32, 0x10, u32::MAX] {
+            let mut img = std::ptr::dangling_mut::<c_void>();
+            expect_result(r, (a.vs_result_composite_aovs)(r, 0, bad, 0, 0.0, &mut img), INVALID_ARGUMENT, &["aovs", "unknown bits"]);
+            assert!(img.is_null(), "output handle set to NULL on failure");
+        }
+        assert_eq!((a.vs_result_destroy)(r), OK);
+        assert_eq!((a.vs_scene_destroy)(s), OK);
+    }
+}

@@ -47,6 +47,19 @@ GRID_FORMAT_VDB = 2
 #: Flag for :meth:`Result.composite`.
 COMPOSITE_TRANSPARENT = 1
 
+#: ``VS_AOV_*`` bits of ``vs_result_composite_aovs``, by layer name (:meth:`Result.composite`).
+AOV_BITS = {"single": 1, "multiple": 2, "background": 4}
+
+
+def aov_bits(aovs) -> int:
+    """The ``VS_AOV_*`` mask of layer names (an unknown name is a ValueError, not ignored)."""
+    bits = 0
+    for name in aovs:
+        if name not in AOV_BITS:
+            raise ValueError(f"unknown AOV {name!r} (AOVs: {', '.join(AOV_BITS)})")
+        bits |= AOV_BITS[name]
+    return bits
+
 
 class VolscatterError(Exception):
     """A failure reported by libvolscatter (or by loading it). ``status`` is the ``VsStatus``
@@ -128,6 +141,7 @@ _SIGNATURES = {
     "vs_session_last_error": (c_char_p, [_SessionPtr]),
     "vs_session_solve": (c_int32, [_SessionPtr, _ScenePtr, PROGRESS_CALLBACK, c_void_p, POINTER(_ResultPtr)]),
     "vs_session_frame_count": (c_int32, [_SessionPtr, POINTER(c_uint64)]),
+    "vs_result_composite_aovs": (c_int32, [_ResultPtr, c_uint32, c_uint32, c_uint32, c_float, POINTER(_ImagePtr)]),
     "vs_image_destroy": (c_int32, [_ImagePtr]),
     "vs_image_last_error": (c_char_p, [_ImagePtr]),
     "vs_image_size": (c_int32, [_ImagePtr, POINTER(c_uint32), POINTER(c_uint32)]),
@@ -491,11 +505,14 @@ class Result(_Handle):
     def write_grid(self, path, fmt: int = GRID_FORMAT_VDB):
         self._check(lib().vs_result_write_grid(self._p(), _path_bytes(path), int(fmt)), f"write grid {path}")
 
-    def composite(self, transparent: bool = False, subpixels: int = 0, step_voxels: float = 0.0) -> "Image":
+    def composite(self, transparent: bool = False, subpixels: int = 0, step_voxels: float = 0.0,
+                  aovs=()) -> "Image":
+        """Ray-marches the grid into an image with the AOV layers named in ``aovs`` ("single",
+        "multiple", "background"; none by default: single and multiple cost a second light pass)."""
         out = _ImagePtr()
         flags = COMPOSITE_TRANSPARENT if transparent else 0
-        self._check(lib().vs_result_composite(self._p(), flags, int(subpixels), float(step_voxels), ctypes.byref(out)),
-                    "composite")
+        self._check(lib().vs_result_composite_aovs(self._p(), flags, aov_bits(aovs), int(subpixels), float(step_voxels),
+                                                   ctypes.byref(out)), "composite")
         return Image(out)
 
 

@@ -194,6 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--transparent", action="store_true",
                    help="leave the directly seen environment out (alpha from the medium only; PNG with alpha)")
     r.add_argument("--volume", metavar="PATH", help="which Volume to render when the stage has several")
+    r.add_argument("--aov", default="background", metavar="LIST",
+                   help="AOV layers of the EXR, comma-separated: single, multiple, background, all or none "
+                        "(default background: free; single and multiple cost a second light pass)")
     b = sub.add_parser("bake", help="solve and write the scattering grid into a USD layer + VDB")
     _common(b, "bake")
     b.add_argument("--out-layer", required=True, metavar="scatter.usda",
@@ -206,6 +209,18 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--json", action="store_true", help="print the scene JSON (format 1) instead of the summary")
     i.add_argument("--width", type=int, default=320)
     return ap
+
+
+def _aovs(spec: str):
+    """`--aov` as layer names (all, none and unknown names as `volscatter render --aov`)."""
+    from ._native import AOV_BITS
+    names = [n.strip() for n in spec.split(",") if n.strip() and n.strip() != "none"]
+    if "all" in names:
+        return tuple(AOV_BITS)
+    for n in names:
+        if n not in AOV_BITS:
+            raise VolscatterError(f"--aov: unknown AOV {n!r} (AOVs: {', '.join(AOV_BITS)}, or all, or none)", 2)
+    return tuple(names)
 
 
 def _warn(msg: str):
@@ -249,7 +264,7 @@ def _render_frame(args, R, stage, settings, bar, warn, sessions, t, k: int, n: i
             args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver, settings=settings,
             width=args.width, height=args.height, volume=args.volume, light_convention=args.light_convention,
             medium_defaults=_medium_defaults(args), progress=bar, png_exposure=args.exposure, stage=stage,
-            warn=warn, transparent=args.transparent, sessions=sessions), bar)
+            warn=warn, transparent=args.transparent, aovs=_aovs(args.aov), sessions=sessions), bar)
     finally:
         bar.finish()
     if not args.quiet:

@@ -130,9 +130,12 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
            volume: Optional[str] = None, light_convention: str = "auto", medium_defaults: Optional[dict] = None,
            progress: Progress = None, png_exposure: float = 1.0, stage=None,
            warn: Optional[Callable[[str], None]] = None, transparent: bool = False,
-           sessions: Optional[FrameSessions] = None) -> FrameResult:
+           aovs=("background",), sessions: Optional[FrameSessions] = None) -> FrameResult:
     """Renders one frame of a stage into ``out`` (EXR: RGBA + AOVs) and optionally ``png``.
     ``transparent`` leaves the directly seen environment out (alpha from the medium only).
+    ``aovs``: the compositor's layers in the EXR, as in ``volscatter render --aov`` (background
+    by default: free; single and multiple cost a second light pass). The reference path
+    tracer's image keeps all its layers (they cost it nothing).
     ``sessions``: the frame range's sessions, to solve this frame in (see :class:`FrameSessions`)."""
     sc = stage_mod.read_stage(stage_path, time=time, camera=camera, light_convention=light_convention,
                               medium_defaults=medium_defaults, stage=stage)
@@ -150,7 +153,7 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
         else:
             solved = sessions.solve(scene, progress, sc.volumes[vi].path) if sessions else scene.solve(progress)
             with solved as result:
-                image = result.composite(transparent=transparent)
+                image = result.composite(transparent=transparent, aovs=aovs)
         with image:
             _ensure_parent(out)
             image.write_exr(out)

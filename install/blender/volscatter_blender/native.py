@@ -32,6 +32,8 @@ DEVICES = {"CPU": 0, "GPU": 1, "AUTO": 2}
 GRID_FORMAT_EXR = 1
 GRID_FORMAT_VDB = 2
 COMPOSITE_TRANSPARENT = 1
+# VS_AOV_* bits of vs_result_composite_aovs, by layer name.
+AOV_BITS = {"single": 1, "multiple": 2, "background": 4}
 
 _vp = ctypes.c_void_p
 _st = ctypes.c_int32
@@ -67,6 +69,7 @@ _SIGNATURES = {
     "vs_session_last_error": (ctypes.c_char_p, [_vp]),
     "vs_session_solve": (_st, [_vp, _vp, PROGRESS_CALLBACK, _vp, ctypes.POINTER(_vp)]),
     "vs_session_frame_count": (_st, [_vp, ctypes.POINTER(ctypes.c_uint64)]),
+    "vs_result_composite_aovs": (_st, [_vp, _u32, _u32, _u32, ctypes.c_float, ctypes.POINTER(_vp)]),
     "vs_image_destroy": (_st, [_vp]),
     "vs_image_last_error": (ctypes.c_char_p, [_vp]),
     "vs_image_size": (_st, [_vp, _u32p, _u32p]),
@@ -350,9 +353,15 @@ class Result(_Handle):
     def write_grid(self, path, fmt=GRID_FORMAT_VDB):
         self._call("vs_result_write_grid", os.fsencode(path), fmt)
 
-    def composite(self, transparent=False, subpixels=0, step_voxels=0.0):
+    def composite(self, transparent=False, subpixels=0, step_voxels=0.0, aovs=()):
+        """The image with the AOV layers named in `aovs` ("single", "multiple", "background"; none
+        by default: the preview reads RGBA only, and single/multiple cost a second light pass)."""
+        unknown = [a for a in aovs if a not in AOV_BITS]
+        if unknown:
+            raise ValueError("unknown AOV %r (AOVs: %s)" % (unknown[0], ", ".join(AOV_BITS)))
+        bits = sum(AOV_BITS[a] for a in set(aovs))
         out = _vp()
-        self._call("vs_result_composite", COMPOSITE_TRANSPARENT if transparent else 0, subpixels,
+        self._call("vs_result_composite_aovs", COMPOSITE_TRANSPARENT if transparent else 0, bits, subpixels,
                    ctypes.c_float(step_voxels), ctypes.byref(out))
         return Image(out)
 

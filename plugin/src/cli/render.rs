@@ -1,4 +1,5 @@
-//! `volscatter render`: scene -> solver -> image (EXR with AOVs, optional PNG, JSON report).
+//! `volscatter render`: scene -> solver -> image (EXR with the AOVs asked for, optional PNG,
+//! JSON report).
 
 use clap::Args;
 use serde_json::json;
@@ -38,6 +39,12 @@ pub struct RenderArgs {
     /// Solver setting KEY=VALUE (JSON value), repeatable: --set grid_resolution=48.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub settings: Vec<String>,
+    /// AOV layers written to the EXR besides RGBA, comma-separated: single, multiple,
+    /// background, or all, or none. The default, background, is free (the march computes it for
+    /// the image) and is what re-compositing over another backdrop needs; single and multiple
+    /// cost the compositor a second light pass (more than pop's solve), so they are asked for.
+    #[arg(long = "aov", value_name = "LIST", default_value = "background")]
+    pub aovs: String,
     /// Where GPU-capable stages run (pop's propagation, the compositor): gpu, cpu, or auto (a
     /// GPU adapter when one exists, else the CPU with a message).
     #[arg(long, default_value = "auto")]
@@ -92,29 +99,51 @@ pub fn run(args: RenderArgs) -> Result<()> {
     // Unknown names are refused before anything runs, with the registry's list.
     registry::get(&name)?;
     let settings = solver_settings(&scene, &name, &args)?;
+    let aovs = compositor::Aovs::parse(&args.aovs)?;
     let progress = StderrProgress::new(args.quiet);
     let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
     let mut solve_device = volscatter_gpu::DeviceUsed::Cpu;
     let image = if name == "reference" {
         let r = Reference::from_settings(&settings)?;
-        let img = r.render_image(&scene, &progress, &mut timings)?;
+        let mut img = r.render_image(&scene, &progress, &mut timings)?;
         progress.finish();
+        // The path tracer's layers cost nothing extra; the EXR still holds only those asked
+        // for, so that its layers do not depend on the solver.
+        img.aovs.retain(|(layer, _)| aovs.contains(layer));
         img
     } else {
         let (out, solved_on) = volscatter_gpu::solve(args.device, &scene, &name, &settings, &progress)?;
         solve_device = solved_on;
         progress.finish();
         timings.0.extend(out.timings.0);
-        let opts = compositor::CompositeOptions { transparent: args.transparent, ..Default::default() };
-        let (img, used) = timings.time("composite", || {
-            volscatter_gpu::run_on(
-                args.device,
-                |ctx| volscatter_gpu::composite::composite(ctx, &scene, &out.scattering, &opts).map(Ok),
-                || compositor::composite(&scene, &out.scattering, &opts),
-            )
-        })
+        let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
+        // Timed apart from the march (phase "composite: single-scattering AOV", included in
+        // "composite", present only when an AOV needs it): the part an image without those
+        // AOVs skips.
+        let start_composite = Instant::now();
+        let single = if opts.aovs.needs_single() {
+            let (single, _) = timings
+                .time("composite: single-scattering AOV", || {
+                    volscatter_gpu::run_on(
+                        args.device,
+                        |ctx| volscatter_gpu::composite::single_for(ctx, &scene, &opts).map(Ok),
+                        || compositor::single_for(&scene, &opts),
+                    )
+                })
+                .map_err(Error::from)?;
+            single?
+        } else {
+            None
+        };
+        let (img, used_march) = volscatter_gpu::run_on(
+            args.device,
+            |ctx| volscatter_gpu::composite::composite_with_single(ctx, &scene, &out.scattering, single.as_ref(), &opts).map(Ok),
+            || compositor::composite_with_single(&scene, &out.scattering, single.as_ref(), &opts),
+        )
         .map_err(Error::from)?;
-        device_used = used;
+        timings.0.push(("composite".into(), start_composite.elapsed().as_secs_f64()));
+        // Both stages ask for the same device; under auto a fall-back is noted on stderr.
+        device_used = used_march;
         img?
     };
     ensure_parent(&args.out)?;

@@ -9,7 +9,7 @@ use super::guard::{self, on_handle, out_slice, path_arg, str_arg, write_out};
 use super::handle::{lock, Handle, Registry};
 use super::status::{FfiError, FfiResult, VsStatus};
 
-/// Opaque image handle, made by `vs_result_composite` or `vs_scene_render_reference`,
+/// Opaque image handle, made by `vs_result_composite(_aovs)` or `vs_scene_render_reference`,
 /// destroyed with `vs_image_destroy`.
 pub struct VsImage {
     _private: [u8; 0],
@@ -89,7 +89,7 @@ pub unsafe extern "C" fn vs_image_copy_rgba(image: *const VsImage, rgba: *mut f3
 }
 
 /// Copies the AOV layer `name` (e.g. "single", "multiple", "background"; which exist depends
-/// on how the image was made) as interleaved RGB into `rgb`: `len` must equal
+/// on how the image was made: `vs_result_composite_aovs` makes only the layers asked for) as interleaved RGB into `rgb`: `len` must equal
 /// width * height * 3. An unknown name gives `VS_STATUS_INVALID_ARGUMENT` listing the layers.
 ///
 /// Thread safety: any thread; calls on one image are serialised.

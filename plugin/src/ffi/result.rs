@@ -4,7 +4,7 @@
 use std::ffi::c_char;
 use std::sync::Arc;
 
-use volscatter_core::compositor::{self, CompositeOptions};
+use volscatter_core::compositor::{self, Aovs, CompositeOptions};
 use volscatter_core::solvers::{ScatteringGrid, SolveOutput, Timings};
 use volscatter_core::{vdb, Scene};
 use volscatter_gpu::DeviceChoice;
@@ -20,6 +20,19 @@ use super::VsImage;
 pub struct VsResult {
     _private: [u8; 0],
 }
+
+/// AOV bit for `vs_result_composite_aovs`: the `single` layer (single scattering, from the
+/// compositor's own shadow rays). It and `VS_AOV_MULTIPLE` cost a second light pass over the
+/// medium (more than the march); without either it is not computed.
+pub const VS_AOV_SINGLE: u32 = 1;
+/// AOV bit for `vs_result_composite_aovs`: the `multiple` layer (what was scattered minus the
+/// `single` layer; needs the same light pass as `VS_AOV_SINGLE`).
+pub const VS_AOV_MULTIPLE: u32 = 2;
+/// AOV bit for `vs_result_composite_aovs`: the `background` layer (the environment seen
+/// through the medium; free, the march computes it anyway).
+pub const VS_AOV_BACKGROUND: u32 = 4;
+/// Every AOV bit: what `vs_result_composite` makes.
+pub const VS_AOV_ALL: u32 = VS_AOV_SINGLE | VS_AOV_MULTIPLE | VS_AOV_BACKGROUND;
 
 /// File formats for `vs_result_write_grid` (passed as `uint32_t`; other values are refused).
 #[repr(C)]
@@ -167,39 +180,72 @@ pub unsafe extern "C" fn vs_result_write_grid(result: *const VsResult, path: *co
 
 /// Composites the scattering grid into an image towards the scene's camera (ray marching S
 /// with the medium's transmittance; alpha = 1 - transmittance) into a new image `*out` (NULL
-/// on failure; destroy with `vs_image_destroy`). `flags`: 0 or `VS_COMPOSITE_TRANSPARENT`;
-/// other bits are refused. `subpixels`: samples per pixel axis, 1..=16 (0: default 2).
-/// `step_voxels`: march step in voxels, in [0.05, 8] (0: default 0.5).
+/// on failure; destroy with `vs_image_destroy`), with every AOV layer ("single", "multiple",
+/// "background"): the same as `vs_result_composite_aovs` with `VS_AOV_ALL`, kept for the
+/// callers written before it. A caller that does not read "single" or "multiple" should call
+/// `vs_result_composite_aovs` without them: they cost more than the rest of the composite.
+/// `flags`: 0 or `VS_COMPOSITE_TRANSPARENT`; other bits are refused. `subpixels`: samples per
+/// pixel axis, 1..=16 (0: default 2). `step_voxels`: march step in voxels, in [0.05, 8]
+/// (0: default 0.5).
 ///
 /// Thread safety: any thread; calls on one result are serialised.
 #[no_mangle]
 pub unsafe extern "C" fn vs_result_composite(result: *const VsResult, flags: u32, subpixels: u32, step_voxels: f32, out: *mut *mut VsImage) -> VsStatus {
-    with_result(result, |r| {
-        clear_out(out, "out")?;
-        if flags & !VS_COMPOSITE_TRANSPARENT != 0 {
-            return Err(FfiError::invalid(format!("flags {flags:#x}: unknown bits {:#x}", flags & !VS_COMPOSITE_TRANSPARENT)));
+    with_result(result, |r| composite_into(r, flags, VS_AOV_ALL, subpixels, step_voxels, out))
+}
+
+/// `vs_result_composite` with the AOV layers chosen: `aovs` is 0 (RGBA only) or a sum of
+/// `VS_AOV_SINGLE`, `VS_AOV_MULTIPLE` and `VS_AOV_BACKGROUND` (other bits are refused); the
+/// image carries exactly those layers, in that order. Without `VS_AOV_SINGLE` and
+/// `VS_AOV_MULTIPLE` the single-scattering light pass is skipped. `flags`, `subpixels` and
+/// `step_voxels` as for `vs_result_composite`.
+///
+/// Thread safety: any thread; calls on one result are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_result_composite_aovs(
+    result: *const VsResult,
+    flags: u32,
+    aovs: u32,
+    subpixels: u32,
+    step_voxels: f32,
+    out: *mut *mut VsImage,
+) -> VsStatus {
+    with_result(result, |r| composite_into(r, flags, aovs, subpixels, step_voxels, out))
+}
+
+/// The AOV set of a `VS_AOV_*` bit mask; unknown bits are refused, never ignored.
+fn aovs_from_bits(aovs: u32) -> FfiResult<Aovs> {
+    if aovs & !VS_AOV_ALL != 0 {
+        return Err(FfiError::invalid(format!("aovs {aovs:#x}: unknown bits {:#x} (VS_AOV_SINGLE 1, VS_AOV_MULTIPLE 2, VS_AOV_BACKGROUND 4)", aovs & !VS_AOV_ALL)));
+    }
+    Ok(Aovs { single: aovs & VS_AOV_SINGLE != 0, multiple: aovs & VS_AOV_MULTIPLE != 0, background: aovs & VS_AOV_BACKGROUND != 0 })
+}
+
+unsafe fn composite_into(r: &ResultState, flags: u32, aovs: u32, subpixels: u32, step_voxels: f32, out: *mut *mut VsImage) -> FfiResult {
+    clear_out(out, "out")?;
+    if flags & !VS_COMPOSITE_TRANSPARENT != 0 {
+        return Err(FfiError::invalid(format!("flags {flags:#x}: unknown bits {:#x}", flags & !VS_COMPOSITE_TRANSPARENT)));
+    }
+    let mut opts = CompositeOptions { transparent: flags & VS_COMPOSITE_TRANSPARENT != 0, aovs: aovs_from_bits(aovs)?, ..Default::default() };
+    if subpixels != 0 {
+        if subpixels > 16 {
+            return Err(FfiError::invalid(format!("subpixels is {subpixels}: must be in 1..=16 (0: default)")));
         }
-        let mut opts = CompositeOptions { transparent: flags & VS_COMPOSITE_TRANSPARENT != 0, ..Default::default() };
-        if subpixels != 0 {
-            if subpixels > 16 {
-                return Err(FfiError::invalid(format!("subpixels is {subpixels}: must be in 1..=16 (0: default)")));
-            }
-            opts.subpixels = subpixels;
+        opts.subpixels = subpixels;
+    }
+    let step = finite_arg(step_voxels, "step_voxels")?;
+    if step != 0.0 {
+        if !(0.05..=8.0).contains(&step) {
+            return Err(FfiError::invalid(format!("step_voxels is {step}: must be in [0.05, 8] (0: default)")));
         }
-        let step = finite_arg(step_voxels, "step_voxels")?;
-        if step != 0.0 {
-            if !(0.05..=8.0).contains(&step) {
-                return Err(FfiError::invalid(format!("step_voxels is {step}: must be in [0.05, 8] (0: default)")));
-            }
-            opts.step_voxels = step;
-        }
-        let (image, _used) = volscatter_gpu::run_on(
-            r.device,
-            |ctx| volscatter_gpu::composite::composite(ctx, &r.scene, &r.grid, &opts).map(Ok),
-            || compositor::composite(&r.scene, &r.grid, &opts),
-        )
-        .map_err(|e| FfiError::from(volscatter_core::Error::from(e)))?;
-        let image = image?;
-        write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
-    })
+        opts.step_voxels = step;
+    }
+    let (image, _used) = volscatter_gpu::run_on(
+        r.device,
+        |ctx| volscatter_gpu::composite::composite(ctx, &r.scene, &r.grid, &opts).map(Ok),
+        || compositor::composite(&r.scene, &r.grid, &opts),
+    )
+    .map_err(|e| FfiError::from(volscatter_core::Error::from(e)))?;
+    let image = image?;
+    write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
 }

@@ -56,19 +56,40 @@ fn v4(v: Vec3, w: f32) -> [f32; 4] {
     [v.x, v.y, v.z, w]
 }
 
-/// Renders `s` like the CPU compositor, on the GPU.
+/// Renders `s` like the CPU compositor, on the GPU, with the AOVs `opts` asks for.
 pub fn composite(ctx: &GpuContext, scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> Result<Image, GpuError> {
-    let single = single::single_scattering_grid(ctx, scene, opts.single_resolution, opts.dome_directions)?;
-    composite_with_single(ctx, scene, s, &single, opts)
+    let single = single_for(ctx, scene, opts)?;
+    composite_with_single(ctx, scene, s, single.as_ref(), opts)
 }
 
+/// The single-scattering grid the AOVs of `opts` need, or None (not computed) when none does:
+/// the GPU twin of `compositor::single_for`.
+pub fn single_for(ctx: &GpuContext, scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>, GpuError> {
+    let dome_directions = volscatter_core::compositor::dome_directions_for(scene, opts.dome_directions);
+    opts.aovs.needs_single().then(|| single::single_scattering_grid(ctx, scene, opts.single_resolution, dome_directions)).transpose()
+}
+
+/// `composite` with the single-scattering grid given. Without one, the kernel reads a 2^3 grid
+/// of zeros in its place (a binding must exist; 2 points per axis keep the trilinear lookup's
+/// neighbour inside it).
 pub fn composite_with_single(
     ctx: &GpuContext,
     scene: &Scene,
     s: &ScatteringGrid,
-    single: &ScatteringGrid,
+    single: Option<&ScatteringGrid>,
     opts: &CompositeOptions,
 ) -> Result<Image, GpuError> {
+    if opts.aovs.needs_single() && single.is_none() {
+        return Err(GpuError::Internal("the single and multiple AOVs need the single-scattering grid".into()));
+    }
+    let zero;
+    let single = match single {
+        Some(g) => g,
+        None => {
+            zero = ScatteringGrid { dims: [2, 2, 2], index_to_world: s.index_to_world, data: vec![Vec3::ZERO; 8] };
+            &zero
+        }
+    };
     let medium = &scene.medium;
     let cam = &scene.camera;
     ctx.check_storage_size("density", bricked_density_bytes(medium))?;
@@ -121,7 +142,7 @@ pub fn composite_with_single(
     )?;
     let px: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     let pixels = px.chunks_exact(3).map(|p| (Vec4::from(p[0]), Vec4::from(p[1]).truncate(), Vec4::from(p[2]).truncate()));
-    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent))
+    Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent, opts.aovs))
 }
 
 #[cfg(test)]

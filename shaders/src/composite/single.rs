@@ -111,7 +111,7 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         bounds_lo: lo.extend(0.0).to_array(),
         bounds_hi: hi.extend(0.0).to_array(),
         cam_pos: scene.camera.position.extend(0.0).to_array(),
-        misc: [medium.g, medium.voxel_size_world().min_element(), volscatter_core::medium::near_field_radius(&grid.index_to_world), 0.0],
+        misc: [medium.g, volscatter_core::compositor::shadow_step(medium, &grid), volscatter_core::medium::near_field_radius(&grid.index_to_world), 0.0],
     };
     let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
     let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;
