@@ -407,3 +407,5 @@ fn dome_ordinates_carry_the_dome() {
 }
 
 mod dome_cases;
+
+mod cloud_profile;
