@@ -233,7 +233,7 @@ impl Pop {
                 residual_threshold: s.residual_threshold,
             };
             let t0 = std::time::Instant::now();
-            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
+            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some(), moment_anisotropy: s.moment_anisotropy };
             let mut stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
             if let Some(r) = residuum.as_mut() {
                 r.gather(&grid, &std::mem::take(&mut stats.remaining));
@@ -301,7 +301,7 @@ fn run_residuum<B: PopBackend>(
         max_iterations: s.max_iterations,
         residual_threshold,
     };
-    let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false };
+    let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false, moment_anisotropy: s.moment_anisotropy };
     let stats = backend.propagate(&mut light, &prop, opts, 0.0, progress)?;
     let rep = ResiduumReport { dims: grid.dims.to_array(), cell_size: grid.h, gathered: gathered.to_array(), propagation: stats };
     Ok((grid, light, rep))
