@@ -25,6 +25,10 @@
 //! - light_grid.rs: cubic cells (Eq. 3's 45-degree cones assume them), so a grid is
 //!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
 //! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).
+//! - `moment_anisotropy` (opt-in, propagate.rs `lobe_moments`): the parts of a lobe sent
+//!   front, sideways and back leave with their own cones' mean cosines instead of the lobe's a
+//!   (Eq. 5-6 re-aim light sent back along d); docs/pop-dense-clouds.md has the diagnosis on
+//!   the dense cloud that led to it and why it is not the default.
 //!
 //! Environment lighting (Sec. 5): a dome becomes `dome_ordinates` distant ordinates, the
 //! sphere cut into regions of equal importance, each ordinate carrying exactly its region's
