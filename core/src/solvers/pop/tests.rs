@@ -409,3 +409,4 @@ fn dome_ordinates_carry_the_dome() {
 mod dome_cases;
 
 mod cloud_profile;
+mod cost;
