@@ -94,7 +94,7 @@ impl PopBackend for GpuBackend<'_> {
     }
 
     fn propagate(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
-        if opts.vacuum_escape {
+        if opts.vacuum_escape || opts.moment_anisotropy {
             return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
         }
         let (stats, times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every, opts.keep_remaining).map_err(gpu_error)?;
@@ -150,7 +150,7 @@ impl PopBackend for GpuBackend<'_> {
 }
 
 impl GpuBackend<'_> {
-    /// Options the GPU port lacks (`vacuum_escape`): this light's propagation runs on the CPU,
+    /// Options the GPU port lacks (`vacuum_escape`, `moment_anisotropy`): this light's propagation runs on the CPU,
     /// its packets and J crossing the bus both ways.
     fn propagate_on_cpu(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
         let packets = light.read_packets(self.ctx).map_err(gpu_error)?;

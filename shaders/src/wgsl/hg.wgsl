@@ -59,7 +59,9 @@ fn path_factor(a: vec3<f32>, lobe: Lobe, sigma_tr: vec3<f32>, h: f32, drift_matc
     let aa = min(abs(a), vec3<f32>(1.0));
     var ball = vec3<f32>(1.0);
     if (drift_matched) {
-        ball = select(vec3<f32>(0.75), (lobe.front - lobe.back) / max(aa, vec3<f32>(1e-3)), aa > vec3<f32>(1e-3));
+        // Signed, as propagate.rs: a backward lobe (a < 0) drifts backwards along a positive path.
+        let signed_a = select(min(a, vec3<f32>(-1e-3)), max(a, vec3<f32>(1e-3)), a >= vec3<f32>(0.0));
+        ball = select(vec3<f32>(0.75), (lobe.front - lobe.back) / signed_a, aa > vec3<f32>(1e-3));
     }
     return aa * ball + (vec3<f32>(1.0) - aa) * iso;
 }

@@ -25,6 +25,10 @@
 //! - light_grid.rs: cubic cells (Eq. 3's 45-degree cones assume them), so a grid is
 //!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
 //! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).
+//! - `moment_anisotropy` (opt-in, propagate.rs `lobe_moments`): the parts of a lobe sent
+//!   front, sideways and back leave with their own cones' mean cosines instead of the lobe's a
+//!   (Eq. 5-6 re-aim light sent back along d); docs/pop-dense-clouds.md has the diagnosis on
+//!   the dense cloud that led to it and why it is not the default.
 //!
 //! Environment lighting (Sec. 5): a dome becomes `dome_ordinates` distant ordinates, the
 //! sphere cut into regions of equal importance, each ordinate carrying exactly its region's
@@ -275,7 +279,7 @@ impl Pop {
                 residual_threshold: s.residual_threshold,
             };
             let t0 = std::time::Instant::now();
-            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some() };
+            let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: residuum.is_some(), moment_anisotropy: s.moment_anisotropy };
             let mut stats = backend.propagate(&mut light, &prop, opts, a0 * g, progress)?;
             let remaining = std::mem::take(&mut stats.remaining);
             if let Some(r) = residuum.as_mut() {
@@ -351,7 +355,7 @@ fn run_residuum<B: PopBackend>(
         max_iterations: s.max_iterations,
         residual_threshold,
     };
-    let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false };
+    let opts = propagate::RunOptions { vacuum_escape: s.vacuum_escape, keep_remaining: false, moment_anisotropy: s.moment_anisotropy };
     let stats = backend.propagate(&mut light, &prop, opts, 0.0, progress)?;
     let rep = ResiduumReport { dims: grid.dims.to_array(), cell_size: grid.h, gathered: gathered.to_array(), propagation: stats };
     Ok((grid, light, rep))

@@ -401,3 +401,6 @@ fn dome_ordinates_carry_the_dome() {
 }
 
 mod dome_cases;
+
+mod cloud_profile;
+mod cost;

@@ -81,7 +81,7 @@ impl RadialPropagation<'_> {
         let inv = Vec3::select(z.cmpgt(Vec3::ZERO), Vec3::ONE / z.max(Vec3::splat(1e-30)), Vec3::ZERO);
         let (front, back, side) = (front * wf * inv, back * wb * inv, side * inv);
         let kappa = path_factor(self.diffusion_correction, front, back, a, grid.sigma_s[c], grid.sigma_a[c], self.g, h);
-        Emit { front, side, back, path: kappa * h }
+        Emit { front, side, back, path: kappa * h, a_front: a, a_side: a, a_back: a }
     }
 
     /// Runs the propagation from the injected packets (anisotropy a_direct g per cell); adds

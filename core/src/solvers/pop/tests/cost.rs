@@ -1,0 +1,57 @@
+//! POP's time per phase against the volume's size (issue 15, "cost that follows the volume"):
+//! a smoke-like blob (density falling from 1 at the centre to 0 at the box's faces; 1 m
+//! across its largest side, sigma_t 8/m, albedo 0.99, g 0.9, one sun) at several voxel
+//! counts, the same settings (the defaults) for all. Prints, asserts nothing: timings belong
+//! in BENCHMARKS.md, not in tests. `cargo nextest run --cargo-profile release -p
+//! volscatter-core pop_cost_by_volume --run-ignored only --no-capture`; `POP_COST_SIZES` as
+//! `16x16x16,22x22x40,...`.
+
+use glam::{Affine3A, IVec3, Vec3};
+
+use super::scene;
+use crate::medium::{DensityGrid, GridLimits, Medium};
+use crate::solvers::pop::{Pop, PopSettings};
+use crate::solvers::NoProgress;
+
+fn blob(d: IVec3, sigma_t: f32) -> Medium {
+    let c = (d - IVec3::ONE).as_vec3() * 0.5;
+    let mut vals = Vec::with_capacity((d.x * d.y * d.z) as usize);
+    for z in 0..d.z {
+        for y in 0..d.y {
+            for x in 0..d.x {
+                let q = (IVec3::new(x, y, z).as_vec3() - c) / c.max(Vec3::ONE);
+                vals.push((1.0 - q.length()).clamp(0.0, 1.0));
+            }
+        }
+    }
+    let grid = DensityGrid::from_dense(IVec3::ZERO, d, &vals, GridLimits::default()).unwrap();
+    let voxel = 1.0 / d.max_element() as f32;
+    let to_world = Affine3A::from_translation(-c * voxel) * Affine3A::from_scale(Vec3::splat(voxel));
+    Medium::new(grid, to_world, Vec3::splat(sigma_t), Vec3::splat(0.99), 0.9)
+}
+
+#[test]
+#[ignore]
+fn pop_cost_by_volume() {
+    let sizes = std::env::var("POP_COST_SIZES").unwrap_or("16x16x16,22x22x40,32x32x32,64x64x64,128x128x128".into());
+    // (label, sigma_t, with a uniform sky dome besides the sun)
+    for (label, sigma_t, sky) in [("sun, sigma_t 8", 8.0, false), ("sun, sigma_t 40", 40.0, false), ("sun + sky, sigma_t 8", 8.0, true)] {
+        eprintln!("{label}:");
+        for s in sizes.split(',') {
+            let v: Vec<i32> = s.split('x').map(|x| x.parse().unwrap()).collect();
+            let mut sc = scene(blob(IVec3::new(v[0], v[1], v[2]), sigma_t), 16, 4.0, 25.0);
+            if sky {
+                sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.3), map: None }));
+            }
+            let pop = Pop::new(PopSettings::default()).unwrap();
+            let _ = pop.solve_detailed(&sc, &NoProgress).unwrap(); // warm-up (rayon pool, caches)
+            let t = std::time::Instant::now();
+            let (out, rep) = pop.solve_detailed(&sc, &NoProgress).unwrap();
+            let total = t.elapsed().as_secs_f64();
+            let phases: Vec<String> = out.timings.0.iter().map(|(n, t)| format!("{} {:.3}", n.trim_start_matches("pop "), t)).collect();
+            let iters: Vec<u32> = rep.lights.iter().map(|l| l.propagation.iterations).collect();
+            let res = rep.residuum.as_ref().map(|r| format!("{:?} x{} it", r.dims, r.propagation.iterations)).unwrap_or("-".into());
+            eprintln!("  {s:12} total {total:.3} s | {} | {} light grids, first {:?}, iterations {iters:?} | residuum {res}", phases.join(", "), rep.lights.len(), rep.lights[0].dims);
+        }
+    }
+}
