@@ -383,4 +383,4 @@ impl Solver for Pop {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
