@@ -109,3 +109,28 @@ fn vpl_explore() {
     let e = errors_against_fixture(&name, &sc, &out.scattering);
     eprintln!("{name} {s:?}: {e:?} vpls {} power {:?} cut {} {:.2} s {:?}", rep.vpls, rep.vpl_power, rep.walks_cut, t.elapsed().as_secs_f64(), out.timings);
 }
+
+/// Energy of the walks: around a point light inside a thick homogeneous box (optical radius
+/// 64 from the light, so next to nothing escapes), the power the VPLs scatter is the light's
+/// power times a + a^2 + ... = a / (1 - a) (issue 16's energy check; grey albedo 0.5 so the
+/// sum is 1). Bound 3%: the walks' noise at 4096 walks (each walk's total is a geometric sum
+/// with Russian roulette, relative standard deviation about 1.2 per walk, so ~2% of the mean).
+#[test]
+fn vpl_power_is_a_over_one_minus_a_around_a_point_light() {
+    use crate::scene::{Camera, Light, Scene};
+    let a = 0.5f32;
+    let sc = Scene {
+        medium: crate::solvers::testing::homogeneous_box(16, 1.0 / 16.0, 128.0, a, 0.3),
+        lights: vec![Light::Point { position: Vec3::ZERO, intensity: Vec3::splat(1.0), radius: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.0), Vec3::ZERO, Vec3::Z, 22.0, 8, 8),
+        solver: Default::default(),
+    };
+    let s = VplSettings { walks: 4096, gather_resolution: 2, output_resolution: 2, ..Default::default() };
+    let walks = super::walks::trace(&sc, &s, u32::MAX);
+    let light_power = 4.0 * std::f32::consts::PI;
+    let ratio = walks.total_power().x / light_power;
+    let expected = a / (1.0 - a);
+    eprintln!("VPL power / light power {ratio:.4} (a/(1-a) = {expected}), {} VPLs", walks.vpls.len());
+    assert!((ratio / expected - 1.0).abs() < 0.03, "{ratio} vs {expected}");
+    assert_eq!(walks.cut, 0);
+}
