@@ -6,6 +6,7 @@ pub mod pop;
 pub mod reference;
 pub mod registry;
 pub mod session;
+pub mod vpl;
 #[cfg(test)]
 pub(crate) mod testing;
 

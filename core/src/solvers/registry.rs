@@ -12,7 +12,7 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use super::{pop, reference, Solver};
+use super::{pop, reference, vpl, Solver};
 use crate::error::{Error, Result};
 
 /// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
@@ -323,8 +323,43 @@ const POP: SolverEntry = SolverEntry {
     gpu: true,
 };
 
+const VPL: SolverEntry = SolverEntry {
+    name: "vpl",
+    label: "Virtual Point Lights",
+    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering",
+    settings: &[
+        SettingSpec::int("walks", "random walks from the lights (noise falls as 1/sqrt)").range(1.0, (1u32 << 24) as f64),
+        SettingSpec::int("max_vertices", "most VPLs one walk leaves before it is cut").range(1.0, (1u32 << 20) as f64),
+        SettingSpec::int("rr_depth", "scattering vertices before Russian roulette starts"),
+        SettingSpec::int("walks_per_subset", "walks per interleaved subset gathered at each point").zero("every point uses every walk"),
+        SettingSpec { choices: &["clamp", "ball"], ..SettingSpec::new("near_field", SettingType::Choice, "near field of 1/d^2: clamp at the radius, or the lossless ball kernel") },
+        SettingSpec::float("clamp_radius", "near-field radius, in gather-cell radii")
+            .open_range(Range { min: Some(0.0), max: Some(16.0), min_exclusive: true, max_exclusive: false }),
+        SettingSpec::float("mean_free_paths", "the near-field radius is at most this many local mean free paths (0: no limit)")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: false, max_exclusive: false }),
+        SettingSpec::int("gather_resolution", "largest side of the coarse gather grid").range(2.0, 256.0),
+        SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
+        SettingSpec::bool("upsample", "joint bilateral upsampling guided by the density (off: trilinear)"),
+        SettingSpec::float("range_sigma", "range sigma of the bilateral filter, a fraction of the largest density")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }),
+        SettingSpec::float("spatial_sigma", "spatial sigma of the bilateral filter, in gather cells")
+            .open_range(Range { min: Some(0.0), max: Some(4.0), min_exclusive: true, max_exclusive: false }),
+        SettingSpec::int("dome_directions", "dome directions of the exact single scattering").range(1.0, 1024.0),
+        SettingSpec::int("seed", "random seed (walk w is stream w: deterministic for a seed)"),
+    ],
+    defaults: || serde_json::to_value(vpl::VplSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"walks": 1024, "gather_resolution": 12, "output_resolution": 48}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"walks": 4096, "gather_resolution": 16, "output_resolution": 64}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"walks": 16384, "gather_resolution": 24, "output_resolution": 128}"# },
+    ],
+    cpu: |m| Ok(Box::new(vpl::Vpl::from_settings(m)?)),
+    gpu: false,
+};
+
 /// Every solver, in menu order (the first is the hosts' default).
-pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP];
+pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL];
 
 /// The solvers' names, in `SOLVERS` order.
 pub const SOLVER_NAMES: &[&str] = &names::<{ SOLVERS.len() }>();

@@ -387,4 +387,4 @@ impl Solver for Pop {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

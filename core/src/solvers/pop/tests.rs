@@ -40,7 +40,7 @@ const FIXTURE_SIZE: u32 = 16;
 
 /// The scenes POP is measured on: the paper's Fig. 12 cube (sigma_s = 4 m^-1, albedo 1, side
 /// 1 m) at three anisotropies, and the procedural plume with g = 0.9, albedo 0.99.
-fn case(name: &str) -> Scene {
+pub(crate) fn case(name: &str) -> Scene {
     let size = FIXTURE_SIZE;
     match name {
         "cube_g0" => scene(cube(16, 4.0, 1.0, 0.0), size, 4.0, 22.0),
