@@ -29,6 +29,11 @@ pub struct Lobe {
     pub fluence: Vec3,
     pub g: f32,
     pub direction: Vec3,
+    /// Mean scattering order of the light (the paper's penetration depth gamma, Sec. 4.3).
+    pub order: f32,
+    /// Photon deposits behind the estimate (interpolated like the rest): its noise goes as
+    /// 1 / sqrt of this.
+    pub deposits: f32,
 }
 
 impl Tallies {
@@ -39,6 +44,7 @@ impl Tallies {
         let base = q.floor().as_ivec3();
         let f = q - base.as_vec3();
         let (mut flux, mut moment, mut weight, mut mass) = (Vec3::ZERO, Vec3::ZERO, 0.0f32, 0.0f32);
+        let (mut order, mut deposits) = (0.0f32, 0.0f32);
         for c in 0..8 {
             let o = IVec3::new(c & 1, (c >> 1) & 1, (c >> 2) & 1);
             let p = base + o;
@@ -51,12 +57,20 @@ impl Tallies {
             moment += self.moment[i] * w;
             weight += self.weight[i] * w;
             mass += self.mass[i] * w;
+            order += self.order[i] * w;
+            deposits += self.count[i] as f32 * w;
         }
         if mass <= 0.0 || weight <= 0.0 {
-            return Lobe { fluence: Vec3::ZERO, g: 0.0, direction: Vec3::ZERO };
+            return Lobe { fluence: Vec3::ZERO, g: 0.0, direction: Vec3::ZERO, order: 0.0, deposits };
         }
         let len = moment.length();
-        Lobe { fluence: flux / mass, g: (len / weight).min(0.999), direction: if len > 0.0 { moment / len } else { Vec3::ZERO } }
+        Lobe {
+            fluence: flux / mass,
+            g: (len / weight).min(0.999),
+            direction: if len > 0.0 { moment / len } else { Vec3::ZERO },
+            order: order / weight,
+            deposits,
+        }
     }
 }
 
