@@ -10,15 +10,15 @@
 //! paper's photon marching, no second stepping along the ray is needed (its Fig. 5).
 //!
 //! Spectral tracking is Tracking's (medium/tracking.rs: real-collision probability from the
-//! history-aware max heuristic); the loop is written out here because the deposits need every
-//! tentative collision, which Tracking does not expose.
+//! history-aware max heuristic), through `sample_free_flight_visiting`, which shows the
+//! deposits every tentative collision.
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::cache::Cache;
 use super::settings::PhotonGridSettings;
-use crate::medium::{ray_box, MajorantGrid, Medium};
+use crate::medium::{ray_box, FreeFlight, MajorantGrid, Medium, Tracking};
 use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
 use crate::sampling::uniform_sphere;
@@ -129,10 +129,9 @@ impl Tracer<'_> {
         let mut phase = &full;
         let reduced = self.reduced.map(|(medium, majorant)| Phase { medium, majorant, g: 0.0 });
         let (lo, hi) = self.medium.world_bounds();
-        loop {
-            // Nothing to track outside the medium's box: step to it (light rays start on the
-            // bounding sphere, outside it).
-            let Some((t0, t1)) = ray_box(x, d, lo, hi) else { break };
+        // Nothing to track outside the medium's box (light rays start on the bounding sphere,
+        // outside it); no box ahead: escaped.
+        while let Some((t0, t1)) = ray_box(x, d, lo, hi) {
             if t1 <= t0.max(0.0) {
                 break;
             }
@@ -175,48 +174,23 @@ impl Tracer<'_> {
     }
 }
 
-/// Woodcock / spectral tracking from `x` along `d` with throughput `beta`, calling
-/// `deposit(point, weight before the decision, rho / majorant)` at every tentative collision.
-/// Returns the distance of the real collision (None: escaped) and the weight after tracking
-/// (spectral tracking reweights at null collisions too; grey media keep it).
+/// Woodcock / spectral tracking (medium::Tracking) from `x` along `d` with throughput `beta`,
+/// calling `deposit(point, weight before the decision, rho / majorant)` at every tentative
+/// collision in the medium. Returns the distance of the real collision (None: escaped) and the
+/// weight after tracking (spectral tracking reweights at null collisions too; grey media keep
+/// it).
 fn track(phase: &Phase, x: Vec3, d: Vec3, beta: Vec3, rng: &mut Rng, mut deposit: impl FnMut(Vec3, Vec3, f32)) -> (Option<f32>, Vec3) {
-    let medium = phase.medium;
-    let o = medium.world_to_index.transform_point3(x);
-    let di = medium.world_to_index.transform_vector3(d);
-    let scale = medium.density_scale;
-    let mut beta = beta;
-    let mut hit = None;
-    phase.majorant.traverse(o, di, 0.0, f32::INFINITY, |seg| {
-        let m = seg.majorant;
-        if m <= 0.0 {
-            return true;
-        }
-        let mut t = seg.t0;
-        loop {
-            t -= (1.0 - rng.f32()).ln() / m;
-            if t >= seg.t1 {
-                return true;
-            }
-            let rho = medium.grid.sample(o + di * t);
-            if rho > 0.0 {
-                deposit(x + d * t, beta, rho / m);
-            }
-            let sigma_t = scale * rho;
-            let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
-            let p_real_w = (beta * sigma_t).max_element();
-            let p_null_w = (beta * sigma_n).max_element();
-            let total = p_real_w + p_null_w;
-            if total <= 0.0 {
-                continue;
-            }
-            let p_real = p_real_w / total;
-            if rng.f32() < p_real {
-                beta *= sigma_t / (m * p_real);
-                hit = Some(t);
-                return false;
-            }
-            beta *= sigma_n / (m * (1.0 - p_real));
+    let inv_scale = 1.0 / phase.medium.density_scale.max_element().max(1e-30);
+    let tracking = Tracking::new(phase.medium, phase.majorant);
+    let flight = tracking.sample_free_flight_visiting(x, d, f32::INFINITY, beta, rng, |t, w, sigma_t, m| {
+        // rho from sigma_t = density_scale * rho (its largest channel, the same rho).
+        let rho = sigma_t.max_element() * inv_scale;
+        if rho > 0.0 {
+            deposit(x + d * t, w, rho / m);
         }
     });
-    (hit, beta)
+    match flight {
+        FreeFlight::Scattered { t, weight } => (Some(t), weight),
+        FreeFlight::Escaped { weight } => (None, weight),
+    }
 }
