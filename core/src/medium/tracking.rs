@@ -75,9 +75,25 @@ impl<'a> Tracking<'a> {
     /// Samples a free flight from `x` along unit `d` over at most `t_max` (f32::INFINITY: to
     /// the medium's end) for a path of throughput `throughput` (Vec3::ONE for a fresh photon).
     pub fn sample_free_flight(&self, x: Vec3, d: Vec3, t_max: f32, throughput: Vec3, rng: &mut Rng) -> FreeFlight {
+        self.sample_free_flight_visiting(x, d, t_max, throughput, rng, |_, _, _, _| {})
+    }
+
+    /// `sample_free_flight`, calling `visit(t, throughput, sigma_t, majorant)` at every
+    /// tentative collision before its real / null decision (photon tracing deposits there:
+    /// the sum of f(t) / majorant over them estimates the integral of f along the flight).
+    pub fn sample_free_flight_visiting(
+        &self,
+        x: Vec3,
+        d: Vec3,
+        t_max: f32,
+        throughput: Vec3,
+        rng: &mut Rng,
+        mut visit: impl FnMut(f32, Vec3, Vec3, f32),
+    ) -> FreeFlight {
         let mut beta = throughput;
         let mut hit = None;
         self.tentative_collisions(x, d, t_max, rng, |t, sigma_t, m, rng| {
+            visit(t, beta, sigma_t, m);
             let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
             let p_real_w = (beta * sigma_t).max_element();
             let p_null_w = (beta * sigma_n).max_element();

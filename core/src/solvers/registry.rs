@@ -12,7 +12,7 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use super::{pop, reference, vpl, Solver};
+use super::{photon_grid, pop, reference, vpl, Solver};
 use crate::error::{Error, Result};
 
 /// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
@@ -358,8 +358,50 @@ const VPL: SolverEntry = SolverEntry {
     gpu: false,
 };
 
+const PHOTON_GRID: SolverEntry = SolverEntry {
+    name: "photon-grid",
+    label: "Photon Grid",
+    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds",
+    settings: &[
+        SettingSpec::int("photons", "photons traced per solve, equal flux each").range(1.0, (1u32 << 30) as f64),
+        SettingSpec::int("seed", "random seed (deterministic for a seed, any thread count)"),
+        SettingSpec::int("cache_resolution", "cells along the longest side of the photon cache").range(2.0, 256.0),
+        SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
+        SettingSpec::int("majorant_resolution", "cells per axis of the majorant grid used for Woodcock tracking").range(1.0, 512.0),
+        SettingSpec {
+            name: "single_scattering",
+            kind: SettingType::Choice,
+            range: None,
+            zero: None,
+            choices: &["exact", "photons"],
+            help: "single scattering from the compositor's shadow rays (exact) or from the photons",
+        },
+        SettingSpec::float("cutoff", "a beam stops when its weight falls below this (biased; 0: never)")
+            .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: false, max_exclusive: true }),
+        SettingSpec {
+            name: "similarity",
+            kind: SettingType::Choice,
+            range: None,
+            zero: None,
+            choices: &["sqrt", "linear", "off"],
+            help: "reduced scattering after the similarity switch: sigma_s sqrt(1-g), sigma_s (1-g), or no switch",
+        },
+        SettingSpec::float("similarity_threshold", "switch once g^bounces falls below this (the paper's t)")
+            .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
+    ],
+    defaults: || serde_json::to_value(photon_grid::PhotonGridSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"photons": 65536, "cache_resolution": 16, "output_resolution": 48}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"photons": 262144, "cache_resolution": 24, "output_resolution": 64}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"photons": 2097152, "cache_resolution": 48, "output_resolution": 128}"# },
+    ],
+    cpu: |m| Ok(Box::new(photon_grid::PhotonGrid::from_settings(m)?)),
+    gpu: false,
+};
+
 /// Every solver, in menu order (the first is the hosts' default).
-pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL];
+pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID];
 
 /// The solvers' names, in `SOLVERS` order.
 pub const SOLVER_NAMES: &[&str] = &names::<{ SOLVERS.len() }>();

@@ -1,0 +1,221 @@
+//! photon-grid: physical checks and errors against the shared reference fixtures.
+
+use glam::Vec3;
+
+use super::*;
+use crate::compositor::{dome_directions_for, single_scattering_grid, CompositeOptions};
+use crate::medium::{procedural, GridLimits, Medium};
+use crate::scene::{Camera, Light};
+use crate::solvers::testing::{against_single_scattering, cloud::cloud_scene, env_u32, errors_against_fixture, homogeneous_box, Errors};
+use crate::solvers::NoProgress;
+
+/// The fixtures' scenes (pop/tests.rs `case`, which wrote them): a 1 m cube of 16^3 voxels,
+/// sigma_t 4, albedo 1, at g 0 / 0.7 / 0.9, and the procedural plume (g 0.9, albedo 0.99), lit
+/// by a sun travelling along (0.4, -0.5, -0.75), irradiance 3, 16 x 16 pixels; and the dense
+/// cloud (testing/cloud.rs).
+fn case(name: &str) -> Scene {
+    let (medium, dist, fov) = match name {
+        "cube_g0" => (homogeneous_box(16, 1.0 / 16.0, 4.0, 1.0, 0.0), 4.0, 22.0),
+        "cube_g07" => (homogeneous_box(16, 1.0 / 16.0, 4.0, 1.0, 0.7), 4.0, 22.0),
+        "cube_g09" => (homogeneous_box(16, 1.0 / 16.0, 4.0, 1.0, 0.9), 4.0, 22.0),
+        "plume" => {
+            let (grid, to_world) = procedural::plume(32, GridLimits::default()).unwrap();
+            (Medium::new(grid, to_world, Vec3::splat(8.0), Vec3::splat(0.99), 0.9), 6.0, 25.0)
+        }
+        "cloud" => return cloud_scene(),
+        _ => panic!("unknown case {name}"),
+    };
+    Scene {
+        medium,
+        lights: vec![Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -dist, 0.3), Vec3::ZERO, Vec3::Z, fov, 16, 16),
+        solver: Default::default(),
+    }
+}
+
+fn solve(sc: &Scene, s: PhotonGridSettings) -> (SolveOutput, PhotonGridReport) {
+    PhotonGrid::new(s).unwrap().solve_detailed(sc, &NoProgress).unwrap()
+}
+
+fn against(name: &str, s: PhotonGridSettings) -> (Errors, PhotonGridReport, f64) {
+    let sc = case(name);
+    let t = std::time::Instant::now();
+    let (out, rep) = solve(&sc, s);
+    let secs = t.elapsed().as_secs_f64();
+    (errors_against_fixture(name, &sc, &out.scattering), rep, secs)
+}
+
+fn print(name: &str, what: &str, e: &Errors, rep: &PhotonGridReport, secs: f64) {
+    let en = &rep.energy;
+    let lost = |v: glam::DVec3| v.element_sum() / en.emitted.element_sum().max(1e-30);
+    eprintln!(
+        "{name} [{what}]: image {:.4} (x{:.3}) grid {:.4} (x{:.3}) multiple {:.4} (x{:.3}); escaped {:.4} absorbed {:.4} cut {:.5}, {:.1} scatterings/photon, {:.3} switched; {secs:.2} s",
+        e.image,
+        e.image_ratio,
+        e.grid,
+        e.grid_ratio,
+        e.multiple.unwrap_or(f64::NAN),
+        e.multiple_ratio.unwrap_or(f64::NAN),
+        lost(en.escaped),
+        lost(en.absorbed),
+        lost(en.cut),
+        en.scatterings as f64 / en.photons.max(1) as f64,
+        en.switched as f64 / en.photons.max(1) as f64,
+    );
+}
+
+/// Prints errors for settings variants (PG_CASE selects cases, PG_PHOTONS the photon count).
+#[test]
+#[ignore]
+fn explore() {
+    let photons = env_u32("PG_PHOTONS", 1 << 18);
+    let cache_resolution = env_u32("PG_CACHE", 24);
+    let output_resolution = env_u32("PG_OUTPUT", 64);
+    let only = std::env::var("PG_CASE").unwrap_or_default();
+    for name in ["cube_g0", "cube_g07", "cube_g09", "plume", "cloud"] {
+        if !only.is_empty() && !name.contains(only.as_str()) {
+            continue;
+        }
+        for (what, s) in [
+            ("exact sqrt", PhotonGridSettings { photons, cache_resolution, output_resolution, ..Default::default() }),
+            ("photons sqrt", PhotonGridSettings { photons, cache_resolution, output_resolution, single_scattering: SingleScattering::Photons, ..Default::default() }),
+            ("exact linear", PhotonGridSettings { photons, cache_resolution, output_resolution, similarity: Similarity::Linear, ..Default::default() }),
+            ("exact off", PhotonGridSettings { photons, cache_resolution, output_resolution, similarity: Similarity::Off, ..Default::default() }),
+        ] {
+            let (e, rep, secs) = against(name, s);
+            print(name, what, &e, &rep, secs);
+        }
+    }
+}
+
+/// Settings of the fast tests: 2^17 photons (under a second on one core for these scenes).
+fn fast() -> PhotonGridSettings {
+    PhotonGridSettings { photons: 1 << 17, ..Default::default() }
+}
+
+/// With photons carrying single scattering too and a tiny albedo (almost nothing scatters
+/// twice), S is the photons' single scattering, which must match the compositor's independent
+/// ray-marched single-scattering AOV: checks the deposits' normalisation (rho / majorant over
+/// the cell's mass), LightSampler's power, the lobe (g' = 1 for the unscattered sun) and the
+/// phase convention together.
+#[test]
+fn single_scattering_from_photons_matches_compositor() {
+    for g in [0.0f32, 0.7] {
+        let mut sc = case("cube_g0");
+        sc.medium.albedo = Vec3::splat(0.02);
+        sc.medium.g = g;
+        let (out, _) = solve(&sc, PhotonGridSettings { single_scattering: SingleScattering::Photons, photons: 1 << 18, ..Default::default() });
+        let (e, ratio) = against_single_scattering(&sc, &out.scattering);
+        eprintln!("g {g}: photon single scattering vs compositor: rel. RMSE {e:.4}, mean x{ratio:.4}");
+        assert!(e < 0.1 && (ratio - 1.0).abs() < 0.05, "g {g}: rel. RMSE {e}, mean ratio {ratio}");
+    }
+}
+
+/// Albedo 0: no photon survives its first collision, the cache stays empty and S is exactly
+/// the compositor's single scattering (which is zero here too, sigma_s being 0); and with
+/// albedo 0 all the energy a photon brings is absorbed or escapes.
+#[test]
+fn albedo_zero_gives_exactly_single_scattering() {
+    let mut sc = case("cube_g07");
+    sc.medium.albedo = Vec3::ZERO;
+    let s = fast();
+    let (out, rep) = solve(&sc, s.clone());
+    let dirs = dome_directions_for(&sc, CompositeOptions::default().dome_directions);
+    let single = single_scattering_grid(&sc, s.output_resolution, dirs).unwrap();
+    assert_eq!(out.scattering.data, single.data);
+    let e = &rep.energy;
+    let balance = (e.escaped + e.absorbed + e.cut - e.emitted).abs().max_element() / e.emitted.max_element();
+    assert!(balance < 1e-6 && e.absorbed.x > 0.0, "{e:?}");
+}
+
+/// Energy (issue 17): albedo 1 and a grey medium keep every photon's weight at 1, so the
+/// cutoff never acts and escaped = emitted (to f64 rounding); with albedo 0.9 escaped +
+/// absorbed + cut = emitted, and the cutoff's share is reported.
+#[test]
+fn energy_is_accounted_for() {
+    let mut sc = case("cube_g07");
+    let (_, rep) = solve(&sc, fast());
+    let e = rep.energy;
+    let rel = |v: glam::DVec3| (v - e.emitted).abs().max_element() / e.emitted.max_element();
+    assert!(rel(e.escaped) < 1e-9 && e.cut == glam::DVec3::ZERO, "albedo 1: {e:?}");
+    sc.medium.albedo = Vec3::splat(0.9);
+    let (_, rep) = solve(&sc, PhotonGridSettings { cutoff: 0.5, ..fast() });
+    let e = rep.energy;
+    eprintln!("albedo 0.9, cutoff 0.5: escaped {:.4} absorbed {:.4} cut {:.4} of emitted", e.escaped.x / e.emitted.x, e.absorbed.x / e.emitted.x, e.cut.x / e.emitted.x);
+    assert!(rel(e.escaped + e.absorbed + e.cut) < 1e-6 && e.cut.x > 0.0, "{e:?}");
+}
+
+/// The same seed gives the same S (photons in fixed batches, summed in order); another seed
+/// gives another sample.
+#[test]
+fn deterministic_for_a_seed() {
+    let sc = case("cube_g07");
+    let s = PhotonGridSettings { photons: 1 << 14, ..Default::default() };
+    let a = solve(&sc, s.clone()).0.scattering.data;
+    let b = solve(&sc, s.clone()).0.scattering.data;
+    let c = solve(&sc, PhotonGridSettings { seed: 2, ..s }).0.scattering.data;
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+}
+
+/// The lobe of the unscattered sun is the sun: direction along the beam, g' near 1 (every
+/// deposit's direction is the same; 0.999 is the clamp).
+#[test]
+fn lobe_of_direct_sun_points_along_the_beam() {
+    let mut sc = case("cube_g0");
+    sc.medium.albedo = Vec3::splat(1e-4);
+    let pg = PhotonGrid::new(PhotonGridSettings { single_scattering: SingleScattering::Photons, photons: 1 << 14, ..Default::default() }).unwrap();
+    let lobes = pg.lobes(&sc, &[Vec3::ZERO]).unwrap();
+    let sun = Vec3::new(0.4, -0.5, -0.75).normalize();
+    assert!(lobes[0].g > 0.99 && lobes[0].direction.dot(sun) > 0.999 && lobes[0].order < 0.01, "{:?}", lobes[0]);
+}
+
+#[test]
+fn settings_parse_and_reject() {
+    let ok: serde_json::Value = serde_json::json!({"name": "photon-grid", "photons": 1000, "similarity": "sqrt", "single_scattering": "photons"});
+    let pg = PhotonGrid::from_settings(ok.as_object().unwrap()).unwrap();
+    assert_eq!(pg.settings.similarity, Similarity::Sqrt);
+    for bad in [serde_json::json!({"photon": 10}), serde_json::json!({"similarity": "cubic"}), serde_json::json!({"cutoff": 1.0})] {
+        assert!(PhotonGrid::from_settings(bad.as_object().unwrap()).is_err(), "{bad} accepted");
+    }
+}
+
+// Against the converged references (fixtures written by the reference path tracer; their own
+// noise: cubes 0.5% (g 0) to 3% (g 0.9) of the image, cloud 2.2% image / 4.2% grid). Bounds:
+// the error measured with `fast()` when written plus 10% and 0.01 (a ratchet, as pop/tests.rs).
+// Measured (image / grid rel. RMSE, image mean ratio): cube g 0 0.031 / 0.066 (x0.999), cube
+// g 0.9 0.156 / 0.267 (x0.904), plume 0.211 / 0.245 (x0.962), cloud 0.253 / 0.311 (x0.882), in
+// 0.1 to 0.3 s each. POP with its test settings: 0.18, 0.40, 0.39, 0.49 (image). What is left
+// is mostly the one-lobe model, not noise: 2^20 photons on the cloud give 0.203 / 0.251, and
+// cache resolutions 12 / 24 / 40 give 0.209 / 0.203 / 0.209 (image). Keeping the light past
+// the similarity threshold apart as an isotropic term (the brief's "isotropic part") was
+// measured worse (cloud image 0.203 -> 0.239) and is not done.
+
+fn check_case(name: &str, max_image: f64, max_grid: f64) {
+    let (e, rep, secs) = against(name, fast());
+    print(name, "fast", &e, &rep, secs);
+    assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
+    assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+}
+
+/// The four fixtures, one bound pair each: (case, image bound, grid bound).
+const BOUNDS: [(&str, f64, f64); 4] = [("cube_g0", 0.044, 0.082), ("cube_g09", 0.182, 0.303), ("plume", 0.242, 0.280), ("cloud", 0.289, 0.352)];
+
+#[test]
+fn cubes_against_reference() {
+    for (name, image, grid) in &BOUNDS[..2] {
+        check_case(name, *image, *grid);
+    }
+}
+
+#[test]
+fn plume_against_reference() {
+    let (name, image, grid) = BOUNDS[2];
+    check_case(name, image, grid);
+}
+
+#[test]
+fn dense_cloud_against_reference() {
+    let (name, image, grid) = BOUNDS[3];
+    check_case(name, image, grid);
+}

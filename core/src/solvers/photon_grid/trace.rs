@@ -1,0 +1,196 @@
+//! Photon tracing (Sec. 4.1.1, App. A): photons from the shared light sampling, Woodcock
+//! (spectral) tracking against the majorant grid with a deposit into the cache at every
+//! tentative collision, HG scattering, the transmittance cutoff and the similarity switch.
+//!
+//! A deposit at a tentative collision of a photon of power P and weight beta is
+//! P beta rho(x) / majorant: tentative collisions are a Poisson process of rate `majorant`
+//! along the ray, so the deposits sum in expectation to P times the integral of beta rho along
+//! the track, and with spectral tracking E[beta 1{alive at t}] is the transmittance per
+//! channel: an unbiased estimate of the integral of rho * fluence (cache.rs). Unlike the
+//! paper's photon marching, no second stepping along the ray is needed (its Fig. 5).
+//!
+//! Spectral tracking is Tracking's (medium/tracking.rs: real-collision probability from the
+//! history-aware max heuristic), through `sample_free_flight_visiting`, which shows the
+//! deposits every tentative collision.
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+use super::cache::Cache;
+use super::settings::PhotonGridSettings;
+use crate::medium::{ray_box, FreeFlight, MajorantGrid, Medium, Tracking};
+use crate::phase::HenyeyGreenstein;
+use crate::rng::Rng;
+use crate::sampling::uniform_sphere;
+use crate::translate::LightSampler;
+
+/// Batches the photons are split into: fixed (not the thread count), so the result depends on
+/// the seed only.
+pub const BATCHES: u32 = 16;
+
+/// Where the emitted power went (W, RGB, already divided by the photon count).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct EnergyReport {
+    /// Photons traced.
+    pub photons: u64,
+    pub emitted: DVec3,
+    /// Left the medium's box.
+    pub escaped: DVec3,
+    /// Removed at real collisions by albedo < 1.
+    pub absorbed: DVec3,
+    /// Stopped by the cutoff with this weight left.
+    pub cut: DVec3,
+    /// Scattering events, total, and how many photons took the similarity switch.
+    pub scatterings: u64,
+    pub switched: u64,
+}
+
+impl EnergyReport {
+    fn add(&mut self, o: &EnergyReport) {
+        self.photons += o.photons;
+        self.emitted += o.emitted;
+        self.escaped += o.escaped;
+        self.absorbed += o.absorbed;
+        self.cut += o.cut;
+        self.scatterings += o.scatterings;
+        self.switched += o.switched;
+    }
+}
+
+/// One medium as tracked: the real one, or its reduced twin after the similarity switch.
+struct Phase<'a> {
+    medium: &'a Medium,
+    majorant: &'a MajorantGrid,
+    /// HG anisotropy of scattering (0 in the reduced medium).
+    g: f32,
+}
+
+/// The reduced medium of the similarity switch: sigma_s' = f sigma_s, sigma_a unchanged, so
+/// sigma_t' = sigma_t (albedo f + 1 - albedo) and albedo' = albedo f / (albedo f + 1 - albedo),
+/// per channel; isotropic. (A copy of the density: fine for the grids this first landing
+/// targets; a scaled view would avoid it.)
+pub fn reduced_medium(medium: &Medium, f: f32) -> Medium {
+    let a = medium.albedo;
+    let t = a * f + (Vec3::ONE - a);
+    let mut m = medium.clone();
+    m.density_scale = medium.density_scale * t;
+    m.albedo = (a * f) / t.max(Vec3::splat(1e-12));
+    m.g = 0.0;
+    m.emission = None;
+    m
+}
+
+pub struct Tracer<'a> {
+    pub medium: &'a Medium,
+    pub majorant: &'a MajorantGrid,
+    pub reduced: Option<(&'a Medium, &'a MajorantGrid)>,
+    pub settings: &'a PhotonGridSettings,
+    /// Deposit before the first real collision too (single scattering from photons).
+    pub deposit_unscattered: bool,
+}
+
+impl Tracer<'_> {
+    /// Traces all photons; returns one cache per batch (summed by the caller in order) and the
+    /// energy report, both already scaled by 1 / photons.
+    pub fn run(&self, sampler: &LightSampler, empty: &Cache) -> (Vec<Cache>, EnergyReport) {
+        let n = self.settings.photons;
+        let results: Vec<(Cache, EnergyReport)> = (0..BATCHES)
+            .into_par_iter()
+            .map(|b| {
+                let mut cache = empty.empty_like();
+                let mut report = EnergyReport::default();
+                let mut rng = Rng::new(self.settings.seed, b as u64 + 1);
+                let (lo, hi) = (n as u64 * b as u64 / BATCHES as u64, n as u64 * (b as u64 + 1) / BATCHES as u64);
+                for _ in lo..hi {
+                    if let Some(ray) = sampler.sample_rng(&mut rng) {
+                        self.photon(ray.origin, ray.direction, ray.power / n as f32, &mut rng, &mut cache, &mut report);
+                    }
+                }
+                (cache, report)
+            })
+            .collect();
+        let mut report = EnergyReport::default();
+        let mut caches = Vec::with_capacity(results.len());
+        for (c, r) in results {
+            report.add(&r);
+            caches.push(c);
+        }
+        (caches, report)
+    }
+
+    /// One photon of power `power` from `x` along `d` to its end.
+    fn photon(&self, mut x: Vec3, mut d: Vec3, power: Vec3, rng: &mut Rng, cache: &mut Cache, report: &mut EnergyReport) {
+        report.photons += 1;
+        report.emitted += power.as_dvec3();
+        let mut beta = Vec3::ONE;
+        let mut order = 0u32;
+        let switch_at = self.reduced.and(self.settings.switch_order(self.medium.g));
+        let full = Phase { medium: self.medium, majorant: self.majorant, g: self.medium.g };
+        let mut phase = &full;
+        let reduced = self.reduced.map(|(medium, majorant)| Phase { medium, majorant, g: 0.0 });
+        let (lo, hi) = self.medium.world_bounds();
+        // Nothing to track outside the medium's box (light rays start on the bounding sphere,
+        // outside it); no box ahead: escaped.
+        while let Some((t0, t1)) = ray_box(x, d, lo, hi) {
+            if t1 <= t0.max(0.0) {
+                break;
+            }
+            let deposit = order > 0 || self.deposit_unscattered;
+            let (hit, w) = track(phase, x, d, beta, rng, |p, w, rho_over_m| {
+                if deposit {
+                    let f = power * w * rho_over_m;
+                    cache.deposit(p, f, f.element_sum() / 3.0, d, order);
+                }
+            });
+            match hit {
+                None => {
+                    beta = w;
+                    break;
+                }
+                Some(t) => {
+                    x += d * t;
+                    // Real collision: scatter with the albedo, the rest is absorbed.
+                    let rho = phase.medium.density_world(x);
+                    let albedo = if rho > 0.0 { phase.medium.albedo } else { Vec3::ONE };
+                    report.absorbed += (power * w * (Vec3::ONE - albedo)).as_dvec3();
+                    beta = w * albedo;
+                    order += 1;
+                    report.scatterings += 1;
+                    if beta.max_element() < self.settings.cutoff || beta.max_element() <= 0.0 {
+                        report.cut += (power * beta).as_dvec3();
+                        return;
+                    }
+                    if let (Some(s), Some(r)) = (switch_at, reduced.as_ref()) {
+                        if order == s {
+                            phase = r;
+                            report.switched += 1;
+                        }
+                    }
+                    d = if phase.g == 0.0 { uniform_sphere(rng.pair()) } else { HenyeyGreenstein::new(phase.g).sample(d, rng.pair()) };
+                }
+            }
+        }
+        report.escaped += (power * beta).as_dvec3();
+    }
+}
+
+/// Woodcock / spectral tracking (medium::Tracking) from `x` along `d` with throughput `beta`,
+/// calling `deposit(point, weight before the decision, rho / majorant)` at every tentative
+/// collision in the medium. Returns the distance of the real collision (None: escaped) and the
+/// weight after tracking (spectral tracking reweights at null collisions too; grey media keep
+/// it).
+fn track(phase: &Phase, x: Vec3, d: Vec3, beta: Vec3, rng: &mut Rng, mut deposit: impl FnMut(Vec3, Vec3, f32)) -> (Option<f32>, Vec3) {
+    let inv_scale = 1.0 / phase.medium.density_scale.max_element().max(1e-30);
+    let tracking = Tracking::new(phase.medium, phase.majorant);
+    let flight = tracking.sample_free_flight_visiting(x, d, f32::INFINITY, beta, rng, |t, w, sigma_t, m| {
+        // rho from sigma_t = density_scale * rho (its largest channel, the same rho).
+        let rho = sigma_t.max_element() * inv_scale;
+        if rho > 0.0 {
+            deposit(x + d * t, w, rho / m);
+        }
+    });
+    match flight {
+        FreeFlight::Scattered { t, weight } => (Some(t), weight),
+        FreeFlight::Escaped { weight } => (None, weight),
+    }
+}
