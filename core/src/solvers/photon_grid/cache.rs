@@ -1,5 +1,6 @@
 //! The photon cache (Sec. 4.1.2): a coarse regular grid over the medium where photons leave
-//! their flux at every tentative collision of Woodcock tracking.
+//! their flux at every tentative collision of Woodcock tracking. A solve keeps two, one per
+//! lobe (mod.rs `SPLIT_ORDER`: once-scattered light, and the rest).
 //!
 //! Per cell: the density-weighted RGB flux sum (an unbiased estimate of the integral of
 //! rho * fluence over the cell), the moment vector (sum of scalar deposit x direction of
