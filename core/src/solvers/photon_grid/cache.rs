@@ -109,8 +109,8 @@ pub struct Tallies {
 impl Tallies {
     /// Sums `batches` in order, each deposit scaled by `scale` (1 / photons: a photon's
     /// power is the light's total, `LightSampler`'s convention), and measures each cell's mass.
-    pub fn sum(medium: &Medium, batches: &[Cache], scale: f64) -> Self {
-        let first = &batches[0];
+    pub fn sum(medium: &Medium, batches: &[&Cache], scale: f64) -> Self {
+        let first = batches[0];
         let n = first.cells.len();
         let mut flux = vec![DVec3::ZERO; n];
         let mut moment = vec![DVec3::ZERO; n];

@@ -77,9 +77,8 @@ impl PhotonGrid {
         };
         let (batches, energy) = timings.time("trace", || tracer.run(&sampler, &empty));
         // Deposits carry ray.power / photons already.
-        let a: Vec<cache::Cache> = batches.iter().map(|b| b[0].clone()).collect();
-        let b: Vec<cache::Cache> = batches.iter().map(|b| b[1].clone()).collect();
-        let tallies = timings.time("cache", || [cache::Tallies::sum(medium, &a, 1.0), cache::Tallies::sum(medium, &b, 1.0)]);
+        let lobe = |l: usize| batches.iter().map(|b| &b[l]).collect::<Vec<_>>();
+        let tallies = timings.time("cache", || [cache::Tallies::sum(medium, &lobe(0), 1.0), cache::Tallies::sum(medium, &lobe(1), 1.0)]);
         Ok((tallies, energy))
     }
 
