@@ -1,5 +1,6 @@
 //! The photon cache (Sec. 4.1.2): a coarse regular grid over the medium where photons leave
-//! their flux at every tentative collision of Woodcock tracking.
+//! their flux at every tentative collision of Woodcock tracking. A solve keeps two, one per
+//! lobe (mod.rs `SPLIT_ORDER`: once-scattered light, and the rest).
 //!
 //! Per cell: the density-weighted RGB flux sum (an unbiased estimate of the integral of
 //! rho * fluence over the cell), the moment vector (sum of scalar deposit x direction of
@@ -108,8 +109,8 @@ pub struct Tallies {
 impl Tallies {
     /// Sums `batches` in order, each deposit scaled by `scale` (1 / photons: a photon's
     /// power is the light's total, `LightSampler`'s convention), and measures each cell's mass.
-    pub fn sum(medium: &Medium, batches: &[Cache], scale: f64) -> Self {
-        let first = &batches[0];
+    pub fn sum(medium: &Medium, batches: &[&Cache], scale: f64) -> Self {
+        let first = batches[0];
         let n = first.cells.len();
         let mut flux = vec![DVec3::ZERO; n];
         let mut moment = vec![DVec3::ZERO; n];

@@ -1,5 +1,5 @@
-//! S towards the viewer from the cache (Sec. 4.4, App. C): at an output point x with density
-//! rho, S(x) = sigma_s(rho) phi(x) p_HG(mu, g g'), phi the fluence, g' the lobe's anisotropy
+//! S towards the viewer from the caches (Sec. 4.4, App. C): at an output point x with density
+//! rho, S(x) = sigma_s(rho) sum over the lobes of phi(x) p_HG(mu, g g'), phi the fluence, g' the lobe's anisotropy
 //! about the cell's dominant direction d, mu the cosine between d and the direction from x to
 //! the camera. The incident lobe p_HG(g') convolved with the medium's p_HG(g) is p_HG(g g')
 //! (App. C), so no integral is needed. The isotropic part of the light is inside the lobe:
@@ -74,8 +74,9 @@ impl Tallies {
     }
 }
 
-/// S towards `camera` on `ScatteringGrid::over_medium(medium, resolution)`.
-pub fn scattering_towards(medium: &Medium, tallies: &Tallies, camera: Vec3, resolution: u32) -> Result<ScatteringGrid> {
+/// S towards `camera` on `ScatteringGrid::over_medium(medium, resolution)`, the lobes of all
+/// `tallies` added.
+pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, resolution: u32) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, resolution)?;
     let [nx, ny, _] = out.dims;
     let frame = out.index_to_world;
@@ -87,10 +88,13 @@ pub fn scattering_towards(medium: &Medium, tallies: &Tallies, camera: Vec3, reso
                 if rho <= 0.0 {
                     continue;
                 }
-                let lobe = tallies.lobe(x);
                 let to_camera = (camera - x).normalize_or_zero();
-                let p = hg(lobe.direction.dot(to_camera), medium.g * lobe.g);
-                slab[(i + nx * j) as usize] = medium.sigma_s(rho) * lobe.fluence * p;
+                let mut s = Vec3::ZERO;
+                for t in tallies {
+                    let lobe = t.lobe(x);
+                    s += lobe.fluence * hg(lobe.direction.dot(to_camera), medium.g * lobe.g);
+                }
+                slab[(i + nx * j) as usize] = medium.sigma_s(rho) * s;
             }
         }
     });

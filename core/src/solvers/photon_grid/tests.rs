@@ -183,13 +183,14 @@ fn settings_parse_and_reject() {
 // Against the converged references (fixtures written by the reference path tracer; their own
 // noise: cubes 0.5% (g 0) to 3% (g 0.9) of the image, cloud 2.2% image / 4.2% grid). Bounds:
 // the error measured with `fast()` when written plus 10% and 0.01 (a ratchet, as pop/tests.rs).
-// Measured (image / grid rel. RMSE, image mean ratio): cube g 0 0.031 / 0.066 (x0.999), cube
-// g 0.9 0.156 / 0.267 (x0.904), plume 0.211 / 0.245 (x0.962), cloud 0.253 / 0.311 (x0.882), in
-// 0.1 to 0.3 s each. POP with its test settings: 0.18, 0.40, 0.39, 0.49 (image). What is left
-// is mostly the one-lobe model, not noise: 2^20 photons on the cloud give 0.203 / 0.251, and
-// cache resolutions 12 / 24 / 40 give 0.209 / 0.203 / 0.209 (image). Keeping the light past
-// the similarity threshold apart as an isotropic term (the brief's "isotropic part") was
-// measured worse (cloud image 0.203 -> 0.239) and is not done.
+// Measured (image / grid rel. RMSE, image mean ratio), two lobes per cell: cube g 0 0.031 /
+// 0.066 (x0.999), cube g 0.9 0.157 / 0.246 (x0.908), plume 0.204 / 0.222 (x0.965), cloud
+// 0.210 / 0.295 (x0.962), in 0.1 to 0.5 s each. POP with its test settings: 0.18, 0.40, 0.39,
+// 0.49 (image). At 2^20 photons the cloud gives 0.153 / 0.240 and the cube g 0.9 0.134 / 0.169:
+// the rest is the lobe model, not noise (cache resolutions 12 / 24 / 40 changed the one-lobe
+// cloud image only between 0.203 and 0.209). Keeping the light past the similarity threshold
+// apart as an isotropic term (the brief's "isotropic part") was measured worse with one lobe
+// (cloud image 0.203 -> 0.239) and is not done.
 
 fn check_case(name: &str, max_image: f64, max_grid: f64) {
     let (e, rep, secs) = against(name, fast());
@@ -199,7 +200,7 @@ fn check_case(name: &str, max_image: f64, max_grid: f64) {
 }
 
 /// The four fixtures, one bound pair each: (case, image bound, grid bound).
-const BOUNDS: [(&str, f64, f64); 4] = [("cube_g0", 0.044, 0.082), ("cube_g09", 0.182, 0.303), ("plume", 0.242, 0.280), ("cloud", 0.289, 0.352)];
+const BOUNDS: [(&str, f64, f64); 4] = [("cube_g0", 0.044, 0.082), ("cube_g09", 0.183, 0.281), ("plume", 0.235, 0.254), ("cloud", 0.241, 0.334)];
 
 #[test]
 fn cubes_against_reference() {

@@ -87,17 +87,19 @@ pub struct Tracer<'a> {
     pub settings: &'a PhotonGridSettings,
     /// Deposit before the first real collision too (single scattering from photons).
     pub deposit_unscattered: bool,
+    /// Deposits of photons scattered this often or more go to the second lobe.
+    pub split_order: u32,
 }
 
 impl Tracer<'_> {
     /// Traces all photons; returns one cache per batch (summed by the caller in order) and the
     /// energy report, both already scaled by 1 / photons.
-    pub fn run(&self, sampler: &LightSampler, empty: &Cache) -> (Vec<Cache>, EnergyReport) {
+    pub fn run(&self, sampler: &LightSampler, empty: &Cache) -> (Vec<[Cache; 2]>, EnergyReport) {
         let n = self.settings.photons;
-        let results: Vec<(Cache, EnergyReport)> = (0..BATCHES)
+        let results: Vec<([Cache; 2], EnergyReport)> = (0..BATCHES)
             .into_par_iter()
             .map(|b| {
-                let mut cache = empty.empty_like();
+                let mut cache = [empty.empty_like(), empty.empty_like()];
                 let mut report = EnergyReport::default();
                 let mut rng = Rng::new(self.settings.seed, b as u64 + 1);
                 let (lo, hi) = (n as u64 * b as u64 / BATCHES as u64, n as u64 * (b as u64 + 1) / BATCHES as u64);
@@ -119,7 +121,7 @@ impl Tracer<'_> {
     }
 
     /// One photon of power `power` from `x` along `d` to its end.
-    fn photon(&self, mut x: Vec3, mut d: Vec3, power: Vec3, rng: &mut Rng, cache: &mut Cache, report: &mut EnergyReport) {
+    fn photon(&self, mut x: Vec3, mut d: Vec3, power: Vec3, rng: &mut Rng, caches: &mut [Cache; 2], report: &mut EnergyReport) {
         report.photons += 1;
         report.emitted += power.as_dvec3();
         let mut beta = Vec3::ONE;
@@ -136,6 +138,7 @@ impl Tracer<'_> {
                 break;
             }
             let deposit = order > 0 || self.deposit_unscattered;
+            let cache = &mut caches[(order >= self.split_order) as usize];
             let (hit, w) = track(phase, x, d, beta, rng, |p, w, rho_over_m| {
                 if deposit {
                     let f = power * w * rho_over_m;

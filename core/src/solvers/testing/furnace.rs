@@ -72,16 +72,16 @@ fn expectation(name: &str) -> Expectation {
             energy: 0.048,
         },
         // Monte Carlo every order, so near 1 up to noise (65536 photons, seed 1) and two
-        // approximations: the one HG lobe per cell evaluated towards the camera (in a furnace
+        // approximations: the two HG lobes per cell evaluated towards the camera (in a furnace
         // the light scattered at least once is not isotropic, 1 - T(x, w), and a lobe fitted to
         // its mean cosine is not exact in every direction) and the compositor's dome single
-        // scattering from 32 directions. Measured: box S / sigma_s 1.0056, image 1.0102; cloud
-        // S / sigma_s 1.0012; energy 1.0209 (the reference's own quadrature gives 1.0072).
+        // scattering from 32 directions. Measured: box S / sigma_s 1.0064, image 1.0109; cloud
+        // S / sigma_s 1.0117; energy 1.0209 (the reference's own quadrature gives 1.0072).
         // Bounds: measured deviation + 10% + 0.01.
         "photon-grid" => Expectation {
             settings: serde_json::json!({"name": "photon-grid", "photons": 65536, "cache_resolution": 10, "output_resolution": 16}),
             furnace: [0.017, 0.022],
-            furnace_cloud: 0.012,
+            furnace_cloud: 0.023,
             energy: 0.033,
         },
         other => panic!("solver `{other}` has no stated furnace / energy tolerance: add it to testing/furnace.rs `expectation`"),
