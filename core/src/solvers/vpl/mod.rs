@@ -19,6 +19,14 @@
 //! - Transmittance to VPLs is ray marched at the gather grid's spacing (deterministic),
 //!   as the compositor's shadow rays; the paper uses the same kind of march.
 //! - CPU only for now.
+//! - A VPL sits at every collision of a walk in the medium, the first included: light from a
+//!   source to a point is the single scattering (exact, from the compositor), light from a
+//!   walk's first collision to a point is double scattering, and so on. (Counting the light
+//!   source as a walk's vertex 0, VPLs start at the walk's second vertex.)
+//!
+//! Measured (tests.rs, 4096 walks, 12-cell gather, 1 core): image rel. RMSE 0.076 (cube g 0),
+//! 0.153 (cube g 0.7), 0.365 (plume g 0.9), 0.15-0.19 (local lights beside the plume), 0.73
+//! (dense cloud, too dark: needs the compensation).
 
 pub mod gather;
 pub mod settings;

@@ -269,4 +269,4 @@ pub fn emitted_power(src: &RadialSource) -> Vec3 {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

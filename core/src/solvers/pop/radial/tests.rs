@@ -37,7 +37,7 @@ const SIZE: u32 = 16;
 /// The measured cases: paper Fig. 10 (point light at the centre of a uniform sphere of radius
 /// 2.5 m, sigma_s = (0.8, 1, 1.3), albedo 1) at g = 0 and 0.8; a point, a sphere, a spot and a
 /// rect light outside the heterogeneous plume (g 0.6).
-fn case(name: &str) -> Scene {
+pub(crate) fn case(name: &str) -> Scene {
     let cam = |d: f32, fov: f32| Camera::look_at(Vec3::new(0.0, -d, 0.3), Vec3::ZERO, Vec3::Z, fov, SIZE, SIZE);
     let beside = Vec3::new(1.6, -0.8, 0.6);
     let (medium, light, camera) = match name {
