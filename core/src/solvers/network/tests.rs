@@ -1,0 +1,116 @@
+//! `network` against the compositor's single scattering, the reference fixtures, and its own
+//! invariants. Small grids and few particles: each test runs in seconds in release.
+
+use glam::Vec3;
+
+use super::*;
+use crate::medium::Medium;
+use crate::scene::{Camera, Light};
+use crate::solvers::testing::{against_single_scattering, errors_against_fixture, homogeneous_box, Errors};
+use crate::solvers::NoProgress;
+
+/// The shared fixtures' cube scene (pop/tests.rs `case`): a 1 m cube of 16^3 voxels, sigma_s
+/// 4 m^-1, albedo 1, under a sun travelling down, sideways and towards the camera.
+fn cube_scene(g: f32, albedo: f32) -> Scene {
+    Scene {
+        medium: homogeneous_box(16, 1.0 / 16.0, 4.0, albedo, g),
+        lights: vec![Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.3), Vec3::ZERO, Vec3::Z, 22.0, 16, 16),
+        solver: Default::default(),
+    }
+}
+
+fn small() -> NetworkSettings {
+    NetworkSettings { particles: 1024, directions: 48, output_resolution: 16, ..Default::default() }
+}
+
+fn solve(sc: &Scene, s: NetworkSettings) -> (ScatteringGrid, NetworkReport) {
+    let (out, rep) = Network::new(s).unwrap().solve_detailed(sc, &NoProgress).unwrap();
+    (out.scattering, rep)
+}
+
+use crate::solvers::ScatteringGrid;
+
+#[test]
+fn network_phase_rows_sum_to_one() {
+    let dirs = directions::fibonacci(64);
+    for g in [0.0, 0.7, 0.95] {
+        let m = directions::phase_matrix(&dirs, g);
+        for row in m.chunks(64) {
+            let s: f32 = row.iter().sum();
+            // Normalised in f32: rounding only.
+            assert!((s - 1.0).abs() < 1e-5, "g {g}: row sums to {s}");
+        }
+    }
+}
+
+/// With albedo ~0 nothing scatters twice: S is the compositor's own single scattering.
+#[test]
+fn network_albedo_zero_is_single_scattering() {
+    let sc = cube_scene(0.7, 1e-4);
+    // On the grid of the compositor's single-scattering AOV (CompositeOptions'
+    // single_resolution 48, dome_directions 32), so that both are the same computation.
+    let (grid, _) = solve(&sc, NetworkSettings { output_resolution: 48, dome_directions: 32, ..small() });
+    let (rmse, ratio) = against_single_scattering(&sc, &grid);
+    eprintln!("network albedo 1e-4: rel. RMSE {rmse:.5} mean ratio {ratio:.5}");
+    // The network adds albedo^2-order light only (1e-4 of the single): the same grid's image.
+    assert!(rmse < 1e-3 && (ratio - 1.0).abs() < 1e-3, "rmse {rmse} ratio {ratio}");
+}
+
+/// The residual falls monotonically (each iteration is the next scattering order).
+#[test]
+fn network_residual_falls() {
+    let sc = cube_scene(0.7, 0.9);
+    let (_, rep) = solve(&sc, NetworkSettings { residual_threshold: 1e-4, ..small() });
+    eprintln!("network residuals: {:?}", rep.residuals.iter().map(|r| format!("{r:.2e}")).collect::<Vec<_>>());
+    assert!(rep.residuals.len() > 3);
+    for w in rep.residuals.windows(2).skip(1) {
+        assert!(w[1] <= w[0], "residual rose: {:?}", rep.residuals);
+    }
+    assert!(*rep.residuals.last().unwrap() <= 1e-4);
+}
+
+/// Deterministic for a seed.
+#[test]
+fn network_deterministic() {
+    let sc = cube_scene(0.0, 1.0);
+    let s = NetworkSettings { particles: 256, directions: 16, output_resolution: 8, ..Default::default() };
+    let (a, _) = solve(&sc, s.clone());
+    let (b, _) = solve(&sc, s);
+    assert_eq!(a.data, b.data);
+}
+
+fn vs_fixture(name: &str, g: f32) -> Errors {
+    let sc = cube_scene(g, 1.0);
+    let t = std::time::Instant::now();
+    let (grid, rep) = solve(&sc, NetworkSettings { particles: 2048, directions: 64, output_resolution: 16, ..Default::default() });
+    let e = errors_against_fixture(name, &sc, &grid);
+    eprintln!(
+        "network {name}: image {:.3} (x{:.3}) grid {:.3} (x{:.3}) multiple {:?} (x{:?}) M {} iterations {} {:.1}s",
+        e.image,
+        e.image_ratio,
+        e.grid,
+        e.grid_ratio,
+        e.multiple,
+        e.multiple_ratio,
+        rep.window,
+        rep.residuals.len(),
+        t.elapsed().as_secs_f64()
+    );
+    e
+}
+
+#[test]
+fn network_cube_g0_vs_fixture() {
+    let e = vs_fixture("cube_g0", 0.0);
+    let _ = e;
+}
+
+#[test]
+fn network_cube_g09_vs_fixture() {
+    let e = vs_fixture("cube_g09", 0.9);
+    let _ = e;
+}
+
+#[allow(dead_code)]
+fn unused(_: Medium) {}
