@@ -331,6 +331,10 @@ const NETWORK: SolverEntry = SolverEntry {
         SettingSpec::int("particles", "particles N, sampled in proportion to sigma_t").range(16.0, 65536.0),
         SettingSpec::int("directions", "directions D of the network (Fibonacci lattice)").range(6.0, 1024.0),
         SettingSpec::int("window", "side M of each direction's orthographic window").range(1.0, 4096.0).zero("the paper's bound M^2 <= D (R tau)^2 / pi"),
+        SettingSpec {
+            choices: &["boundary", "segment"],
+            ..SettingSpec::new("opacity", SettingType::Choice, "a pair's optical depth: difference of their depths to the boundary, or along the segment between them")
+        },
         SettingSpec::int("max_iterations", "cap on iterations (one scattering order each)").range(1.0, 100_000.0),
         SettingSpec::float("residual_threshold", "stop when an iteration changes the network by less than this fraction")
             .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: false, max_exclusive: true }),

@@ -76,7 +76,7 @@ impl Network {
         let dirs = directions::fibonacci(s.directions);
         let sphere = BoundingSphere::of(medium);
         report.window = visibility::window_side(s.window, s.directions, sphere.radius, p.mean_sigma_t, p.len());
-        let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, report.window));
+        let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, report.window, s.opacity));
         if !progress.update("network visibility", 0.3) {
             return Err(Error::Cancelled);
         }

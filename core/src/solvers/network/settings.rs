@@ -17,6 +17,8 @@ pub struct NetworkSettings {
     /// Side M of each direction's orthographic window; 0 = the paper's bound M^2 <= D (R tau)^2
     /// / pi with tau the mean extinction inside the medium, clamped to [2, sqrt(N)].
     pub window: u32,
+    /// How a pair's opacity is measured (visibility.rs).
+    pub opacity: Opacity,
     /// Cap on iterations of Eq. 2 (one scattering order per iteration, see iterate.rs).
     pub max_iterations: u32,
     /// Stop when an iteration changes the network by less than this fraction of its total.
@@ -37,12 +39,28 @@ pub struct NetworkSettings {
     pub dome_directions: u32,
 }
 
+/// The optical depth of the gap between a particle and its upstream neighbour in direction w.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Opacity {
+    /// The particle's own ray-marched optical depth to the medium's boundary against w, less
+    /// its neighbour's: along a column the opacities then multiply to exactly the
+    /// transmittance the direct light uses, so scattered plus direct light is consistent
+    /// (white furnace exact up to quadrature). Measured, white furnace box: 1.014 vs 1.062
+    /// with `segment` (M 16).
+    Boundary,
+    /// Ray-marched optical depth along the segment between the two, per metre, times their
+    /// gap in depth along w (the paper's tau x distance, with the density marched).
+    Segment,
+}
+
 impl Default for NetworkSettings {
     fn default() -> Self {
         NetworkSettings {
             particles: 2048,
             directions: 64,
             window: 0,
+            opacity: Opacity::Segment,
             max_iterations: 300,
             residual_threshold: 1e-3,
             seed: 1,
@@ -56,7 +74,10 @@ impl Default for NetworkSettings {
 
 impl NetworkSettings {
     pub fn validate(&self) -> Result<()> {
-        let bad = |m: &str| Err(Error::InvalidArgument(format!("network: {m}")));
+        let bad = |m: &str| {
+            let field = m.split(' ').next().unwrap_or("");
+            Err(Error::scene(format!("solver.{field}"), m.to_string()))
+        };
         if !(16..=65536).contains(&self.particles) {
             return bad("particles must be in [16, 65536]");
         }

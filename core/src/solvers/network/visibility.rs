@@ -1,14 +1,16 @@
 //! The visibility network (Sec. 3.1): for each direction, the particles binned into an M x M
 //! orthographic window over the bounding sphere and sorted by depth along the direction, so
 //! that each particle's upstream neighbour is the one before it in its pixel's list (what the
-//! paper's depth peeling finds). Each pair's opacity is 1 - exp(-tau) with tau the ray-marched
-//! optical depth between the two particles (the paper's tau x distance assumes a homogeneous
-//! gap; marching sees the density between them).
+//! paper's depth peeling finds). Each pair's opacity is 1 - exp(-tau) with tau ray-marched
+//! (settings `opacity`: by default the difference of the two particles' optical depths to the
+//! boundary, else along the segment between them; the paper's tau x distance assumes a
+//! homogeneous gap).
 
 use glam::Vec3;
 use rayon::prelude::*;
 
 use super::particles::Particles;
+use super::settings::Opacity;
 use crate::medium::{optical_depth, Medium};
 use crate::sampling::orthonormal_basis;
 
@@ -40,7 +42,7 @@ pub fn window_side(requested: u32, directions: u32, radius: f32, mean_sigma_t: f
 }
 
 /// The links of every direction in `dirs` (directions light travels).
-pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius: f32, m: u32) -> Vec<DirectionLinks> {
+pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius: f32, m: u32, opacity: Opacity) -> Vec<DirectionLinks> {
     let step = medium.voxel_size_world().min_element() * 0.5;
     dirs.par_iter()
         .map(|&w| {
@@ -56,6 +58,13 @@ pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius
             let n = p.len();
             let mut up = vec![NONE; n];
             let mut alpha = vec![Vec3::ZERO; n];
+            let boundary = |x: Vec3| optical_depth(medium, x, -w, f32::INFINITY, step, 512);
+            let mut to_boundary = vec![Vec3::ZERO; n];
+            if opacity == Opacity::Boundary {
+                for (i, t) in to_boundary.iter_mut().enumerate() {
+                    *t = boundary(p.position[i]);
+                }
+            }
             for (k, key) in keyed.iter().enumerate() {
                 let b = key.2 as usize;
                 let x = p.position[b];
@@ -63,21 +72,28 @@ pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius
                     Some(prev) => {
                         let a = prev.2 as usize;
                         up[b] = a as u32;
-                        // Light crosses the gap's depth along w, not the slanted segment
-                        // between the two (laterally up to a pixel apart): the segment's
-                        // optical depth per metre times the depth gap. The slanted length
-                        // overcounts extinction and scattering alike (measured: white furnace
-                        // box 1.18 with the full segment).
-                        let gap = x - p.position[a];
-                        let len = gap.length();
-                        if len > 0.0 {
-                            optical_depth(medium, p.position[a], gap / len, len, step, 256) * (gap.dot(w).max(0.0) / len)
-                        } else {
-                            Vec3::ZERO
+                        match opacity {
+                            // Clipped at 0 where the neighbour's ray is the denser one.
+                            Opacity::Boundary => (to_boundary[b] - to_boundary[a]).max(Vec3::ZERO),
+                            // Light crosses the gap's depth along w, not the slanted segment
+                            // between the two (laterally up to a pixel apart): the segment's
+                            // optical depth per metre times the depth gap. The slanted length
+                            // overcounts extinction and scattering alike (measured: white
+                            // furnace box 1.18 with the full segment, 1.06 so).
+                            Opacity::Segment => {
+                                let gap = x - p.position[a];
+                                let len = gap.length();
+                                if len > 0.0 {
+                                    optical_depth(medium, p.position[a], gap / len, len, step, 256) * (gap.dot(w).max(0.0) / len)
+                                } else {
+                                    Vec3::ZERO
+                                }
+                            }
                         }
                     }
                     // The column's first particle: the gap from the medium's boundary.
-                    None => optical_depth(medium, x, -w, f32::INFINITY, step, 256),
+                    None if opacity == Opacity::Boundary => to_boundary[b],
+                    None => boundary(x),
                 };
                 alpha[b] = Vec3::ONE - (-tau).exp();
             }
