@@ -106,7 +106,10 @@ fn solvers_prints_the_registry_as_json() {
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is JSON");
     assert_eq!(doc, volscatter_core::solvers::registry::to_json());
     let names: Vec<&str> = doc["solvers"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["reference", "pop"]);
+    // The first two in menu order (the hosts' default first); each later solver checked by
+    // name on its own line, so that solvers added in parallel merge cleanly.
+    assert_eq!(names[..2], ["reference", "pop"]);
+    assert!(names.contains(&"network"), "{names:?}");
 }
 
 /// `compare --device`: pop solves (and composites) on the device asked for, recorded per run in
@@ -145,7 +148,8 @@ fn compare_runs_on_the_device_asked_for() {
     let (o, _) = compare("gpu", "pop,reference@1");
     assert_clean_failure(&o, "device: no GPU adapter");
     let (o, _) = compare("cpu", "popp,reference@1");
-    assert_clean_failure(&o, "unknown solver `popp` (known: reference, pop)");
+    // A prefix of the list: the solvers after these two differ between branches.
+    assert_clean_failure(&o, "unknown solver `popp` (known: reference, pop");
 }
 
 /// `--aov`: the EXR holds the layers asked for (default: background only) whatever the solver,
