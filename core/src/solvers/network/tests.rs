@@ -154,3 +154,24 @@ fn network_unnormalised_rows_lose_energy() {
     eprintln!("network: unnormalised row sums at g 0.9, D 64: worst |sum - 1| = {worst:.3}");
     assert!(worst > 0.01, "{worst}");
 }
+
+/// The dense cloud (testing/cloud.rs, optical depth over 30) against its fixture, with the
+/// time per phase: `cargo nextest run ... --run-ignored only network_cloud --no-capture`.
+/// Measured (defaults, 32^3 output, M 45, 46 iterations, 0.3 s on one core): image 0.686
+/// (x0.368), grid 0.684 (x0.436); with 8192 particles and residual 1e-5 (M 90, 2.5 s) the
+/// same, 0.680 (x0.369): a bias, not noise. Likely cause (not yet confirmed): the sunlit skin
+/// (one mean free path, 4 cm) is thinner than the gap from the boundary to a column's first
+/// particle, whose own (shadowed) source stands for that whole gap (iterate.rs), so the skin's
+/// first scattering never enters the network. Not a ratchet until that is fixed.
+#[test]
+#[ignore]
+fn network_cloud_vs_fixture() {
+    let sc = crate::solvers::testing::cloud::cloud_scene();
+    let t = std::time::Instant::now();
+    let (out, rep) = Network::new(NetworkSettings { output_resolution: 32, ..Default::default() }).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let e = errors_against_fixture("cloud", &sc, &out.scattering);
+    eprintln!(
+        "network cloud: image {:.3} (x{:.3}) grid {:.3} (x{:.3}) M {} iterations {} {:.1}s {:?}",
+        e.image, e.image_ratio, e.grid, e.grid_ratio, rep.window, rep.residuals.len(), t.elapsed().as_secs_f64(), out.timings.0
+    );
+}
