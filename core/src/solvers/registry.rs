@@ -12,7 +12,7 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use super::{photon_grid, pop, reference, vpl, Solver};
+use super::{network, photon_grid, pop, reference, vpl, Solver};
 use crate::error::{Error, Result};
 
 /// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
@@ -400,8 +400,42 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
     gpu: false,
 };
 
+const NETWORK: SolverEntry = SolverEntry {
+    name: "network",
+    label: "Illumination Networks",
+    help: "illumination networks (paper 02): particles linked along D directions, view-independent multiple scattering",
+    settings: &[
+        SettingSpec::int("particles", "particles N, sampled in proportion to sigma_t").range(16.0, 65536.0),
+        SettingSpec::int("directions", "directions D of the network (Fibonacci lattice)").range(6.0, 1024.0),
+        SettingSpec::int("window", "side M of each direction's orthographic window").range(1.0, 4096.0).zero("the paper's bound M^2 <= D (R tau)^2 / pi"),
+        SettingSpec {
+            choices: &["boundary", "segment"],
+            ..SettingSpec::new("opacity", SettingType::Choice, "a pair's optical depth: difference of their depths to the boundary, or along the segment between them")
+        },
+        SettingSpec::int("max_iterations", "cap on iterations (one scattering order each)").range(1.0, 100_000.0),
+        SettingSpec::float("residual_threshold", "stop when an iteration changes the network by less than this fraction")
+            .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: false, max_exclusive: true }),
+        SettingSpec::int("seed", "random seed of the particle positions"),
+        SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
+        SettingSpec::float("kernel_radius", "spatial sigma of the splatting kernel, in particle radii")
+            .open_range(Range { min: Some(0.0), max: Some(8.0), min_exclusive: true, max_exclusive: false }),
+        SettingSpec::float("range_sigma", "density sigma of the splatting kernel, a fraction of the largest density")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }),
+        SettingSpec::int("dome_directions", "directions the dome's direct light is sampled with").range(1.0, 1024.0),
+    ],
+    defaults: || serde_json::to_value(network::NetworkSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"particles": 512, "directions": 32, "output_resolution": 32}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"particles": 2048, "directions": 64, "output_resolution": 64}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"particles": 8192, "directions": 128, "output_resolution": 128}"# },
+    ],
+    cpu: |m| Ok(Box::new(network::Network::from_settings(m)?)),
+    gpu: false,
+};
+
 /// Every solver, in menu order (the first is the hosts' default).
-pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID];
+pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID, NETWORK];
 
 /// The solvers' names, in `SOLVERS` order.
 pub const SOLVER_NAMES: &[&str] = &names::<{ SOLVERS.len() }>();

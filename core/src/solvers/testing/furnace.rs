@@ -84,6 +84,20 @@ fn expectation(name: &str) -> Expectation {
             furnace_cloud: 0.023,
             energy: 0.033,
         },
+        // Biased by its particles' columns: a pixel of the M x M window is as wide as the gap
+        // between neighbours, so a column's chain of opacities is not the straight line's
+        // transmittance that the exact direct light uses, and scattered plus direct light
+        // exceeds 1 near the faces (the bias falls with M: box 1.18 with the slanted segment's
+        // full depth, 1.06 at the paper's M = 16, 1.01 at M = 32). The phase matrix itself
+        // conserves energy (rows normalised). Measured (1024 particles, 48 directions): box
+        // S / sigma_s 1.062, image 1.036; cloud S / sigma_s 1.048; energy 1.088. Bounds:
+        // measured deviation + 10% + 0.01 (a ratchet, as in pop/tests.rs).
+        "network" => Expectation {
+            settings: serde_json::json!({"name": "network", "particles": 1024, "directions": 48, "output_resolution": 16}),
+            furnace: [0.079, 0.050],
+            furnace_cloud: 0.063,
+            energy: 0.107,
+        },
         other => panic!("solver `{other}` has no stated furnace / energy tolerance: add it to testing/furnace.rs `expectation`"),
     }
 }

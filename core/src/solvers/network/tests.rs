@@ -1,0 +1,177 @@
+//! `network` against the compositor's single scattering, the reference fixtures, and its own
+//! invariants. Small grids and few particles: each test runs in seconds in release.
+
+use glam::Vec3;
+
+use super::*;
+use crate::medium::Medium;
+use crate::scene::{Camera, Light};
+use crate::solvers::testing::{against_single_scattering, errors_against_fixture, homogeneous_box, Errors};
+use crate::solvers::{NoProgress, ScatteringGrid};
+
+/// The shared fixtures' cube scene (pop/tests.rs `case`): a 1 m cube of 16^3 voxels, sigma_s
+/// 4 m^-1, albedo 1, under a sun travelling down, sideways and towards the camera.
+fn cube_scene(g: f32, albedo: f32) -> Scene {
+    Scene {
+        medium: homogeneous_box(16, 1.0 / 16.0, 4.0, albedo, g),
+        lights: vec![Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.3), Vec3::ZERO, Vec3::Z, 22.0, 16, 16),
+        solver: Default::default(),
+    }
+}
+
+fn small() -> NetworkSettings {
+    NetworkSettings { particles: 1024, directions: 48, output_resolution: 16, ..Default::default() }
+}
+
+fn solve(sc: &Scene, s: NetworkSettings) -> (ScatteringGrid, NetworkReport) {
+    let (out, rep) = Network::new(s).unwrap().solve_detailed(sc, &NoProgress).unwrap();
+    (out.scattering, rep)
+}
+
+#[test]
+fn network_phase_rows_sum_to_one() {
+    let dirs = directions::fibonacci(64);
+    for g in [0.0, 0.7, 0.95] {
+        let m = directions::phase_matrix(&dirs, g);
+        for row in m.chunks(64) {
+            let s: f32 = row.iter().sum();
+            // Normalised in f32: rounding only.
+            assert!((s - 1.0).abs() < 1e-5, "g {g}: row sums to {s}");
+        }
+    }
+}
+
+/// With albedo ~0 nothing scatters twice: S is the compositor's own single scattering.
+#[test]
+fn network_albedo_zero_is_single_scattering() {
+    let sc = cube_scene(0.7, 1e-4);
+    // On the grid of the compositor's single-scattering AOV (CompositeOptions'
+    // single_resolution 48, dome_directions 32), so that both are the same computation.
+    let (grid, _) = solve(&sc, NetworkSettings { output_resolution: 48, dome_directions: 32, ..small() });
+    let (rmse, ratio) = against_single_scattering(&sc, &grid);
+    eprintln!("network albedo 1e-4: rel. RMSE {rmse:.5} mean ratio {ratio:.5}");
+    // The network adds albedo^2-order light only (1e-4 of the single): the same grid's image.
+    assert!(rmse < 1e-3 && (ratio - 1.0).abs() < 1e-3, "rmse {rmse} ratio {ratio}");
+}
+
+/// The residual falls monotonically (each iteration is the next scattering order).
+#[test]
+fn network_residual_falls() {
+    let sc = cube_scene(0.7, 0.9);
+    let (_, rep) = solve(&sc, NetworkSettings { residual_threshold: 1e-4, ..small() });
+    eprintln!("network residuals: {:?}", rep.residuals.iter().map(|r| format!("{r:.2e}")).collect::<Vec<_>>());
+    assert!(rep.residuals.len() > 3);
+    for w in rep.residuals.windows(2).skip(1) {
+        assert!(w[1] <= w[0], "residual rose: {:?}", rep.residuals);
+    }
+    assert!(*rep.residuals.last().unwrap() <= 1e-4);
+}
+
+/// Deterministic for a seed.
+#[test]
+fn network_deterministic() {
+    let sc = cube_scene(0.0, 1.0);
+    let s = NetworkSettings { particles: 256, directions: 16, output_resolution: 8, ..Default::default() };
+    let (a, _) = solve(&sc, s.clone());
+    let (b, _) = solve(&sc, s);
+    assert_eq!(a.data, b.data);
+}
+
+/// The plume fixture's scene (pop/tests.rs `case`): procedural plume, 32 voxels, density
+/// scale 8, albedo 0.99, g 0.9, camera 6 m away.
+fn plume_scene() -> Scene {
+    let (grid, to_world) = crate::medium::procedural::plume(32, crate::medium::GridLimits::default()).unwrap();
+    let mut sc = cube_scene(0.9, 0.99);
+    sc.medium = Medium::new(grid, to_world, Vec3::splat(8.0), Vec3::splat(0.99), 0.9);
+    sc.camera = Camera::look_at(Vec3::new(0.0, -6.0, 0.3), Vec3::ZERO, Vec3::Z, 25.0, 16, 16);
+    sc
+}
+
+fn vs_fixture(name: &str, sc: &Scene) -> Errors {
+    let t = std::time::Instant::now();
+    let (grid, rep) = solve(sc, NetworkSettings { particles: 2048, directions: 64, output_resolution: 16, ..Default::default() });
+    let e = errors_against_fixture(name, sc, &grid);
+    eprintln!(
+        "network {name}: image {:.3} (x{:.3}) grid {:.3} (x{:.3}) multiple {:.3} (x{:.3}) M {} iterations {} {:.1}s",
+        e.image,
+        e.image_ratio,
+        e.grid,
+        e.grid_ratio,
+        e.multiple.unwrap_or(f64::NAN),
+        e.multiple_ratio.unwrap_or(f64::NAN),
+        rep.window,
+        rep.residuals.len(),
+        t.elapsed().as_secs_f64()
+    );
+    e
+}
+
+/// Ratchet: measured + 10% + 0.01 on image and grid rel. RMSE (pop/tests.rs's rule), so a
+/// regression fails and an improvement is kept by lowering the numbers.
+fn ratchet(name: &str, e: &Errors, measured: [f64; 2]) {
+    let bound = |m: f64| m * 1.1 + 0.01;
+    assert!(e.image <= bound(measured[0]), "{name}: image rel. RMSE {} (measured {})", e.image, measured[0]);
+    assert!(e.grid <= bound(measured[1]), "{name}: grid rel. RMSE {} (measured {})", e.grid, measured[1]);
+}
+
+// Measured (N 2048, D 64, M 16 from the paper's bound, 16^3 output; fixture noise ~0.01).
+// pop at 16 cells for comparison (settings.rs): cube g 0 0.17, g 0.9 0.30, plume 0.35.
+
+#[test]
+fn network_cube_g0_vs_fixture() {
+    // Measured: image 0.092 (x1.083), grid 0.077 (x1.077): the furnace's column bias (+6-8%).
+    ratchet("cube_g0", &vs_fixture("cube_g0", &cube_scene(0.0, 1.0)), [0.092, 0.077]);
+}
+
+#[test]
+fn network_cube_g07_vs_fixture() {
+    // Measured: image 0.086 (x1.087), grid 0.080 (x1.073).
+    ratchet("cube_g07", &vs_fixture("cube_g07", &cube_scene(0.7, 1.0)), [0.086, 0.080]);
+}
+
+#[test]
+fn network_cube_g09_vs_fixture() {
+    // Measured: image 0.118 (x1.001), grid 0.115 (x1.036).
+    ratchet("cube_g09", &vs_fixture("cube_g09", &cube_scene(0.9, 1.0)), [0.118, 0.115]);
+}
+
+#[test]
+fn network_plume_vs_fixture() {
+    // Measured: image 0.196 (x1.024), grid 0.215 (x0.956): the plume's thin wisps hold few
+    // particles, whose large balls smear their light (splat.rs).
+    ratchet("plume", &vs_fixture("plume", &plume_scene()), [0.196, 0.215]);
+}
+
+/// Without the rows' normalisation the 4 pi / D quadrature of a g 0.9 lobe over 64 directions
+/// is far from 1 (the lobe is narrower than the directions' spacing): the normalisation is
+/// what makes the phase matrix conserve energy.
+#[test]
+fn network_unnormalised_rows_lose_energy() {
+    let dirs = directions::fibonacci(64);
+    let w = 4.0 * std::f32::consts::PI / 64.0;
+    let worst = dirs.iter().map(|&o| (dirs.iter().map(|d| crate::phase::hg(d.dot(o), 0.9)).sum::<f32>() * w - 1.0).abs()).fold(0.0f32, f32::max);
+    eprintln!("network: unnormalised row sums at g 0.9, D 64: worst |sum - 1| = {worst:.3}");
+    assert!(worst > 0.01, "{worst}");
+}
+
+/// The dense cloud (testing/cloud.rs, optical depth over 30) against its fixture, with the
+/// time per phase: `cargo nextest run ... --run-ignored only network_cloud --no-capture`.
+/// Measured (defaults, 32^3 output, M 45, 46 iterations, 0.3 s on one core): image 0.686
+/// (x0.368), grid 0.684 (x0.436); with 8192 particles and residual 1e-5 (M 90, 2.5 s) the
+/// same, 0.680 (x0.369): a bias, not noise. Likely cause (not yet confirmed): the sunlit skin
+/// (one mean free path, 4 cm) is thinner than the gap from the boundary to a column's first
+/// particle, whose own (shadowed) source stands for that whole gap (iterate.rs), so the skin's
+/// first scattering never enters the network. Not a ratchet until that is fixed.
+#[test]
+#[ignore]
+fn network_cloud_vs_fixture() {
+    let sc = crate::solvers::testing::cloud::cloud_scene();
+    let t = std::time::Instant::now();
+    let (out, rep) = Network::new(NetworkSettings { output_resolution: 32, ..Default::default() }).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let e = errors_against_fixture("cloud", &sc, &out.scattering);
+    eprintln!(
+        "network cloud: image {:.3} (x{:.3}) grid {:.3} (x{:.3}) M {} iterations {} {:.1}s {:?}",
+        e.image, e.image_ratio, e.grid, e.grid_ratio, rep.window, rep.residuals.len(), t.elapsed().as_secs_f64(), out.timings.0
+    );
+}
