@@ -187,6 +187,22 @@ pub(crate) struct Errors {
     pub multiple_ratio: Option<f64>,
 }
 
+/// "image E (xR), grid E (xR), multiple E (xR)": the line every solver's fixture test prints.
+impl std::fmt::Display for Errors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "image {:.4} (x{:.3}), grid {:.4} (x{:.3}), multiple {:.4} (x{:.3})",
+            self.image,
+            self.image_ratio,
+            self.grid,
+            self.grid_ratio,
+            self.multiple.unwrap_or(f64::NAN),
+            self.multiple_ratio.unwrap_or(f64::NAN)
+        )
+    }
+}
+
 impl Errors {
     /// `image`, `grid` and `multiple` of a solver against those of the reference.
     pub fn between(image: &[Vec3], grid: &[Vec3], multiple: &[Vec3], ref_image: &[Vec3], ref_grid: &[Vec3], ref_multiple: Option<&[Vec3]>) -> Self {

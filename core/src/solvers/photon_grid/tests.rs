@@ -49,13 +49,7 @@ fn print(name: &str, what: &str, e: &Errors, rep: &PhotonGridReport, secs: f64) 
     let en = &rep.energy;
     let lost = |v: glam::DVec3| v.element_sum() / en.emitted.element_sum().max(1e-30);
     eprintln!(
-        "{name} [{what}]: image {:.4} (x{:.3}) grid {:.4} (x{:.3}) multiple {:.4} (x{:.3}); escaped {:.4} absorbed {:.4} cut {:.5}, {:.1} scatterings/photon, {:.3} switched; {secs:.2} s",
-        e.image,
-        e.image_ratio,
-        e.grid,
-        e.grid_ratio,
-        e.multiple.unwrap_or(f64::NAN),
-        e.multiple_ratio.unwrap_or(f64::NAN),
+        "{name} [{what}]: {e}; escaped {:.4} absorbed {:.4} cut {:.5}, {:.1} scatterings/photon, {:.3} switched; {secs:.2} s",
         lost(en.escaped),
         lost(en.absorbed),
         lost(en.cut),
