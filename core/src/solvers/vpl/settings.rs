@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::solvers::pop::settings::validate_upsampling;
 
 /// How the 1/d^2 of a VPL's connection is kept finite near the VPL (paper Sec. 4.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -107,15 +108,7 @@ impl VplSettings {
         if !(2..=256).contains(&self.gather_resolution) {
             return Err(Error::scene("solver.gather_resolution", format!("must be in 2..=256, got {}", self.gather_resolution)));
         }
-        if !(2..=1024).contains(&self.output_resolution) {
-            return Err(Error::scene("solver.output_resolution", format!("must be in 2..=1024, got {}", self.output_resolution)));
-        }
-        if !(self.range_sigma.is_finite() && self.range_sigma > 0.0) {
-            return Err(Error::scene("solver.range_sigma", format!("must be > 0, got {}", self.range_sigma)));
-        }
-        if !(self.spatial_sigma.is_finite() && self.spatial_sigma > 0.0 && self.spatial_sigma <= 4.0) {
-            return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {}", self.spatial_sigma)));
-        }
+        validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
         if !(1..=1024).contains(&self.dome_directions) {
             return Err(Error::scene("solver.dome_directions", format!("must be in 1..=1024, got {}", self.dome_directions)));
         }
