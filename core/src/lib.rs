@@ -1,6 +1,7 @@
 //! volscatter-core: scene model, VDB and EXR I/O, phase functions, solvers, reference path
 //! tracer and compositor. Pure CPU; no FFI (that is `plugin/`).
 
+pub mod budget;
 pub mod compositor;
 pub mod error;
 pub mod image;
