@@ -404,3 +404,4 @@ mod dome_cases;
 
 mod cloud_profile;
 mod cost;
+mod sweep;
