@@ -30,18 +30,33 @@ fn blob(d: IVec3, sigma_t: f32) -> Medium {
     Medium::new(grid, to_world, Vec3::splat(sigma_t), Vec3::splat(0.99), 0.9)
 }
 
+#[derive(Clone, Copy)]
+enum Extra {
+    None,
+    Sky,
+    Point,
+}
+
 #[test]
 #[ignore]
 fn pop_cost_by_volume() {
     let sizes = std::env::var("POP_COST_SIZES").unwrap_or("16x16x16,22x22x40,32x32x32,64x64x64,128x128x128".into());
-    // (label, sigma_t, with a uniform sky dome besides the sun)
-    for (label, sigma_t, sky) in [("sun, sigma_t 8", 8.0, false), ("sun, sigma_t 40", 40.0, false), ("sun + sky, sigma_t 8", 8.0, true)] {
+    // (label, sigma_t, lights besides the sun): a uniform sky dome, or (Blender's default
+    // scene, whose "Light" is a point light) a point light 1.5 m beside the volume instead.
+    let cases = [("sun, sigma_t 8", 8.0, Extra::None), ("sun, sigma_t 40", 40.0, Extra::None), ("sun + sky, sigma_t 8", 8.0, Extra::Sky), ("point light, sigma_t 8", 8.0, Extra::Point)];
+    let only = std::env::var("POP_COST_CASES").ok();
+    for (label, sigma_t, extra) in cases {
+        if only.as_ref().is_some_and(|o| !o.split(',').any(|c| label.starts_with(c))) {
+            continue;
+        }
         eprintln!("{label}:");
         for s in sizes.split(',') {
             let v: Vec<i32> = s.split('x').map(|x| x.parse().unwrap()).collect();
             let mut sc = scene(blob(IVec3::new(v[0], v[1], v[2]), sigma_t), 16, 4.0, 25.0);
-            if sky {
-                sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.3), map: None }));
+            match extra {
+                Extra::None => {}
+                Extra::Sky => sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.3), map: None })),
+                Extra::Point => sc.lights = vec![crate::scene::Light::Point { position: Vec3::new(1.5, -0.5, 0.5), intensity: Vec3::splat(10.0), radius: 0.0 }],
             }
             let pop = Pop::new(PopSettings::default()).unwrap();
             let _ = pop.solve_detailed(&sc, &NoProgress).unwrap(); // warm-up (rayon pool, caches)
@@ -50,8 +65,12 @@ fn pop_cost_by_volume() {
             let total = t.elapsed().as_secs_f64();
             let phases: Vec<String> = out.timings.0.iter().map(|(n, t)| format!("{} {:.3}", n.trim_start_matches("pop "), t)).collect();
             let iters: Vec<u32> = rep.lights.iter().map(|l| l.propagation.iterations).collect();
+            let radial: Vec<String> = rep.radial.iter().map(|r| format!("{} {:?} x{} it", r.kind, r.dims, r.propagation.iterations)).collect();
+            if !radial.is_empty() {
+                eprintln!("    radial grids: {}", radial.join("; "));
+            }
             let res = rep.residuum.as_ref().map(|r| format!("{:?} x{} it", r.dims, r.propagation.iterations)).unwrap_or("-".into());
-            eprintln!("  {s:12} total {total:.3} s | {} | {} light grids, first {:?}, iterations {iters:?} | residuum {res}", phases.join(", "), rep.lights.len(), rep.lights[0].dims);
+            eprintln!("  {s:12} total {total:.3} s | {} | {} light grids, first {:?}, iterations {iters:?} | residuum {res}", phases.join(", "), rep.lights.len(), rep.lights.first().map(|l| l.dims));
         }
     }
 }
