@@ -1,7 +1,7 @@
 //! POP's time per phase against the volume's size (issue 15, "cost that follows the volume"):
 //! a smoke-like blob (density falling from 1 at the centre to 0 at the box's faces; 1 m
 //! across its largest side, sigma_t 8/m, albedo 0.99, g 0.9, one sun) at several voxel
-//! counts, the same settings (the defaults) for all. Prints, asserts nothing: timings belong
+//! counts, the same settings (the defaults, changed by `POP_SET` as in sweep.rs) for all. Prints, asserts nothing: timings belong
 //! in BENCHMARKS.md, not in tests. `cargo nextest run --cargo-profile release -p
 //! volscatter-core pop_cost_by_volume --run-ignored only --no-capture`; `POP_COST_SIZES` as
 //! `16x16x16,22x22x40,...`.
@@ -35,6 +35,7 @@ enum Extra {
     None,
     Sky,
     Point,
+    PointSky,
 }
 
 #[test]
@@ -43,7 +44,7 @@ fn pop_cost_by_volume() {
     let sizes = std::env::var("POP_COST_SIZES").unwrap_or("16x16x16,22x22x40,32x32x32,64x64x64,128x128x128".into());
     // (label, sigma_t, lights besides the sun): a uniform sky dome, or (Blender's default
     // scene, whose "Light" is a point light) a point light 1.5 m beside the volume instead.
-    let cases = [("sun, sigma_t 8", 8.0, Extra::None), ("sun, sigma_t 40", 40.0, Extra::None), ("sun + sky, sigma_t 8", 8.0, Extra::Sky), ("point light, sigma_t 8", 8.0, Extra::Point)];
+    let cases = [("sun, sigma_t 8", 8.0, Extra::None), ("sun, sigma_t 40", 40.0, Extra::None), ("sun + sky, sigma_t 8", 8.0, Extra::Sky), ("point light, sigma_t 8", 8.0, Extra::Point), ("point light + dim sky, sigma_t 8", 8.0, Extra::PointSky)];
     let only = std::env::var("POP_COST_CASES").ok();
     for (label, sigma_t, extra) in cases {
         if only.as_ref().is_some_and(|o| !o.split(',').any(|c| label.starts_with(c))) {
@@ -56,9 +57,13 @@ fn pop_cost_by_volume() {
             match extra {
                 Extra::None => {}
                 Extra::Sky => sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.3), map: None })),
-                Extra::Point => sc.lights = vec![crate::scene::Light::Point { position: Vec3::new(1.5, -0.5, 0.5), intensity: Vec3::splat(10.0), radius: 0.0 }],
+                Extra::Point | Extra::PointSky => sc.lights = vec![crate::scene::Light::Point { position: Vec3::new(1.5, -0.5, 0.5), intensity: Vec3::splat(10.0), radius: 0.0 }],
             }
-            let pop = Pop::new(PopSettings::default()).unwrap();
+            // Blender's default world: a grey background of 0.05, exported as a dome.
+            if let Extra::PointSky = extra {
+                sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.05), map: None }));
+            }
+            let pop = Pop::new(super::sweep::with_env(PopSettings::default())).unwrap();
             let _ = pop.solve_detailed(&sc, &NoProgress).unwrap(); // warm-up (rayon pool, caches)
             let t = std::time::Instant::now();
             let (out, rep) = pop.solve_detailed(&sc, &NoProgress).unwrap();
