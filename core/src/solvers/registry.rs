@@ -274,7 +274,7 @@ const REFERENCE: SolverEntry = SolverEntry {
 const POP: SolverEntry = SolverEntry {
     name: "pop",
     label: "Principal Ordinates",
-    help: "principal-ordinates propagation (paper 01): fast, grids aligned with each light",
+    help: "principal-ordinates propagation (paper 01), grids aligned with each light: 0.17-0.40 image error on smoke and cubes; dense clouds (optical depth 30+) 0.49 and 35% too dark, 0.25 with moment_anisotropy",
     settings: &[
         SettingSpec::int("grid_resolution", "cells along the longest side of each light's propagation grid").range(2.0, 512.0),
         SettingSpec::int("max_iterations", "cap on propagation iterations per light").range(1.0, 100_000.0),
@@ -291,7 +291,7 @@ const POP: SolverEntry = SolverEntry {
             .open_range(Range { min: Some(0.0), max: Some(4.0), min_exclusive: true, max_exclusive: false }),
         SettingSpec::bool("diffusion_correction", "match the lattice's diffusion to the physical one where light is isotropic"),
         SettingSpec::bool("vacuum_escape", "isotropic light leaving the medium escapes instead of random-walking back"),
-        SettingSpec::bool("moment_anisotropy", "each part of a lobe keeps its own mean cosine; empty cells re-emit isotropically (dense clouds: image 0.49 -> 0.25)"),
+        SettingSpec::bool("moment_anisotropy", "each part of a lobe keeps its own mean cosine; empty cells re-emit isotropically (dense clouds: image 0.49 -> 0.25, flux 0.65x -> 1.02x; cube g 0.7 0.25 -> 0.30; CPU only)"),
         SettingSpec::int("dome_ordinates", "distant ordinates a dome is approximated by (0: the dome is left out)").range(0.0, 1024.0),
         SettingSpec::int("dome_grid_resolution", "propagation grid resolution of each dome ordinate")
             .range(2.0, 512.0)
