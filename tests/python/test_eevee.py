@@ -1,0 +1,164 @@
+"""EEVEE + volscatter against Cycles' multiple scattering, in CI (issue 20).
+
+EEVEE has single scattering only. volscatter's Compute Scattering replaces a volume by one that
+emits the multiple-scattered light S with the same extinction, so EEVEE renders what Cycles
+renders with many volume bounces. Three scenes (tests/python/eevee_scenes.py): a smoke under a
+sun and a sky, a dense cloud (optical depth ~30 through its centre, albedo 0.95), a smoke lit by
+a point light; each rendered by EEVEE alone and by EEVEE with the add-on's result, both with the
+EEVEE settings the add-on recommends (install/blender/volscatter_blender/eevee.py), against a
+converged Cycles render with 64 (the cloud: 256) volume bounces stored in
+tests/python/fixtures/eevee/ (scripts/make_eevee_fixtures.py; each .json beside it records its
+samples and its own noise, 1-3% relative RMSE). Metrics: relative RMSE of the premultiplied RGB
+over the image (film transparent: only the volume counts) and the flux (sum of RGB) ratio.
+
+Skipped, with the reason, when bpy, the library or an EEVEE (OpenGL through EGL: Debian
+libegl-mesa0 + libgl1-mesa-dri) is not available.
+"""
+
+import ctypes
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(os.path.dirname(HERE))
+LIB = os.environ.get("VOLSCATTER_LIB") or os.path.join(REPO, "target", "release", "libvolscatter.so")
+
+if not os.path.isfile(LIB):
+    pytest.skip("libvolscatter not built (%s); run cargo build --release -p volscatter --lib or set VOLSCATTER_LIB"
+                % LIB, allow_module_level=True)
+try:
+    ctypes.CDLL(LIB).vs_result_write_grid
+except (OSError, AttributeError) as e:
+    pytest.skip("%s is not a usable libvolscatter with the C ABI (%s); rebuild it" % (LIB, e), allow_module_level=True)
+
+bpy = pytest.importorskip("bpy", reason="bpy (pip install bpy==5.0.1, Python 3.11) is not importable")
+
+import numpy as np  # noqa: E402
+
+import eevee_scenes as es  # noqa: E402
+
+
+def _eevee_probe():
+    """None when EEVEE renders here, else why not. In a child process: without an OpenGL
+    context bpy can abort the whole process instead of raising."""
+    code = textwrap.dedent("""
+        import bpy
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        sc = bpy.context.scene
+        sc.render.engine = %r
+        cam = bpy.data.objects.new("c", bpy.data.cameras.new("c"))
+        sc.collection.objects.link(cam)
+        sc.camera = cam
+        sc.render.resolution_x = sc.render.resolution_y = 4
+        bpy.ops.render.render()
+        print("EEVEE-OK")
+    """ % es.ENGINE_EEVEE)
+    try:
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    except subprocess.TimeoutExpired:
+        return "a 4x4 EEVEE render did not finish in 300 s"
+    if r.returncode == 0 and "EEVEE-OK" in r.stdout:
+        return None
+    tail = " | ".join((r.stdout + r.stderr).strip().splitlines()[-3:])
+    return ("EEVEE cannot render here (exit %d: %s); it needs OpenGL through EGL (Debian: libegl-mesa0 "
+            "libgl1-mesa-dri)" % (r.returncode, tail))
+
+
+@pytest.fixture(scope="module")
+def addon():
+    """The add-on from the source tree (install/blender), registered, loading $VOLSCATTER_LIB."""
+    why = _eevee_probe()
+    if why:
+        pytest.skip(why)
+    os.environ["VOLSCATTER_LIB"] = LIB
+    # An installed copy (test_blender_addon.py's extension) would own the same class names.
+    import addon_utils
+    for mod in [m for m in list(bpy.context.preferences.addons.keys()) if m.endswith("volscatter_blender")]:
+        addon_utils.disable(mod, default_set=True)
+    sys.path.insert(0, os.path.join(REPO, "install", "blender"))
+    import volscatter_blender
+    volscatter_blender.register()
+    yield sys.modules["volscatter_blender.eevee"]
+    es.bs.reset()
+    volscatter_blender.unregister()
+
+
+def _reference(name):
+    ref = es.load_reference(name)
+    with open(os.path.join(es.FIXTURES, name + ".json")) as f:
+        meta = json.load(f)
+    assert ref.shape == (es.HEIGHT, es.WIDTH, 4) and np.isfinite(ref).all()
+    return ref, meta
+
+
+#: Per scene: (solver, Custom settings or None for the Preview preset). pop (principal ordinates)
+#: handles the sun, the sky and the point light, and takes about a second at Preview.
+SOLVERS = {"smoke_sun_sky": ("pop", None), "dense_cloud": ("pop", None), "smoke_point": ("pop", None)}
+
+#: EEVEE + volscatter must be at least this many times closer (relative RMSE) to Cycles than
+#: EEVEE alone. Measured (BENCHMARKS.md "EEVEE"): 6.3x, 4.2x, 6.9x.
+FACTOR = {"smoke_sun_sky": 3.0, "dense_cloud": 2.0, "smoke_point": 3.0}
+#: |flux ratio - 1| allowed for EEVEE + volscatter against Cycles. Measured: 0.905, 0.86, 0.93
+#: (pop at Preview is dark where light arrives after many orders; issue 20's 5% of the grid
+#: handed to hosts is part of it). Tolerance: the measured gap plus 5 points for the fixture's
+#: noise and the solver's seed.
+FLUX_TOL = {"smoke_sun_sky": 0.15, "dense_cloud": 0.20, "smoke_point": 0.15}
+
+
+def _compare(name, tmp_path):
+    ref, meta = _reference(name)
+    ob = es.build(name)
+    solver, settings = SOLVERS[name]
+    res = es.compute_scattering(ob, solver, tmp_path, **(settings or {}))
+    return ref, meta, ob, res
+
+
+@pytest.mark.parametrize("name", es.SCENES)
+def test_eevee_with_volscatter_is_closer_to_cycles(addon, tmp_path, name):
+    ref, meta, ob, res = _compare(name, tmp_path)
+    sc = bpy.context.scene
+    changes = addon.apply(sc)
+    assert [c[0] for c in changes] == ["volumetric_tile_size"], changes  # 8 -> 2 on these 80x60 frames
+    with_vs = es.render_eevee(str(tmp_path / "eevee_volscatter.exr"))
+    # EEVEE alone: the source volume with its own material, the same EEVEE settings
+    res.hide_render = True
+    ob.hide_render = False
+    alone = es.render_eevee(str(tmp_path / "eevee_alone.exr"))
+    e_vs, e_alone = es.rel_rmse(with_vs, ref), es.rel_rmse(alone, ref)
+    f_vs, f_alone = es.flux_ratio(with_vs, ref), es.flux_ratio(alone, ref)
+    print("%s: EEVEE alone %.3f (flux %.3f), EEVEE + volscatter %.3f (flux %.3f), Cycles noise %.3f"
+          % (name, e_alone, f_alone, e_vs, f_vs, meta["noise_rel_rmse"]))
+    # both see the same extinction: the coverage (alpha) is the medium's, whatever lights it
+    assert np.abs(with_vs[..., 3] - ref[..., 3]).mean() < 0.02
+    assert e_vs * FACTOR[name] < e_alone, "EEVEE + volscatter %.3f, EEVEE alone %.3f" % (e_vs, e_alone)
+    assert abs(f_vs - 1.0) < FLUX_TOL[name], "flux %.3f of Cycles'" % f_vs
+    # EEVEE alone misses the multiple scattering: darker than Cycles' single scattering or close to it
+    assert f_alone < 0.6
+
+
+def test_recommended_settings_make_the_result_show(addon, tmp_path):
+    """EEVEE's default froxels (8 px tiles) blur the result; the add-on's recommendation (2 px on
+    this 80x60 frame, where a voxel of the result covers ~0.3 px) is measurably closer to Cycles
+    (measured 0.27 -> 0.12). A camera clip range that cuts through the result (EEVEE's volume
+    range when Custom Range is off) hides what lies beyond it; the recommendation extends it."""
+    ref, meta, ob, res = _compare("smoke_sun_sky", tmp_path)
+    sc = bpy.context.scene
+    assert sc.eevee.volumetric_tile_size == '8'
+    default = es.render_eevee(str(tmp_path / "default.exr"))
+    changes = addon.apply(sc)
+    assert ("volumetric_tile_size", '8', '2') in [c[:3] for c in changes], changes
+    tuned = es.render_eevee(str(tmp_path / "tuned.exr"))
+    e_default, e_tuned = es.rel_rmse(default, ref), es.rel_rmse(tuned, ref)
+    print("tile 8: %.3f, recommended: %.3f" % (e_default, e_tuned))
+    assert e_tuned * 1.5 < e_default
+    assert addon.recommend(sc) == []  # applied: nothing left to recommend
+    # the camera 6 m from the smoke's centre: a clip end of 5 m cuts it
+    sc.camera.data.clip_end = 5.0
+    changes = dict((c[0], c[2]) for c in addon.recommend(sc))
+    assert changes.get("use_volume_custom_range") is True
+    assert changes["volumetric_end"] > 6.0 * 1.2 and changes["volumetric_start"] <= sc.camera.data.clip_start
