@@ -48,6 +48,18 @@ def _sky(color=(0.25, 0.35, 0.6), strength=1.0):
     return world
 
 
+def _map_range(ng, value, source, target, clamp=True):
+    """A Map Range node of tree `ng` taking `value` from the interval `source` to `target`
+    (clamped by default, as Blender makes it)."""
+    mr = ng.nodes.new('ShaderNodeMapRange')
+    mr.clamp = clamp
+    for (lo, hi), names in ((source, ('From Min', 'From Max')), (target, ('To Min', 'To Max'))):
+        mr.inputs[names[0]].default_value = lo
+        mr.inputs[names[1]].default_value = hi
+    ng.links.new(value, mr.inputs['Value'])
+    return mr
+
+
 def _cloud_volume(name="Cloud", res=40, radius=1.0):
     """A ball of noisy density: Volume Cube over [-radius, radius]^3 whose density is
     (0.4 + 1.2 Noise) * clamp((radius - |p|) / (0.35 radius)), i.e. full inside 0.65 radius and
@@ -67,19 +79,10 @@ def _cloud_volume(name="Cloud", res=40, radius=1.0):
     ln = n.new('ShaderNodeVectorMath')
     ln.operation = 'LENGTH'
     ng.links.new(pos.outputs[0], ln.inputs[0])
-    fall = n.new('ShaderNodeMapRange')
-    fall.clamp = True
-    fall.inputs['From Min'].default_value = 0.65 * radius
-    fall.inputs['From Max'].default_value = radius
-    fall.inputs['To Min'].default_value = 1.0
-    fall.inputs['To Max'].default_value = 0.0
-    ng.links.new(ln.outputs['Value'], fall.inputs['Value'])
+    fall = _map_range(ng, ln.outputs["Value"], (0.65 * radius, radius), (1.0, 0.0))
     noise = n.new('ShaderNodeTexNoise')
     noise.inputs['Scale'].default_value = 2.0
-    shape = n.new('ShaderNodeMapRange')  # 0.4 + 1.2 * noise (noise is ~0.5 +- 0.2)
-    shape.inputs['To Min'].default_value = 0.4
-    shape.inputs['To Max'].default_value = 1.6
-    ng.links.new(noise.outputs['Fac'], shape.inputs['Value'])
+    shape = _map_range(ng, noise.outputs['Fac'], (0.0, 1.0), (0.4, 1.6))  # noise is ~0.5 +- 0.2
     mul = n.new('ShaderNodeMath')
     mul.operation = 'MULTIPLY'
     ng.links.new(fall.outputs['Result'], mul.inputs[0])

@@ -96,31 +96,37 @@ def _reference(name):
     return ref, meta
 
 
-#: Per scene: (solver, Custom settings or None for the Preview preset). pop (principal ordinates)
-#: handles the sun, the sky and the point light, and takes about a second at Preview.
-SOLVERS = {"smoke_sun_sky": ("pop", None), "dense_cloud": ("pop", None), "smoke_point": ("pop", None)}
+#: Per scene: (solver, Custom settings or None for the Preview preset). pop (principal ordinates,
+#: ~3 s here) for the sun and sky and the cloud; the reference path tracer (~15 s) for the point
+#: light, where pop at Preview is 13% dark (BENCHMARKS.md "EEVEE": error 0.19, flux 0.87).
+SOLVERS = {"smoke_sun_sky": ("pop", None), "dense_cloud": ("pop", None), "smoke_point": ("reference", None)}
 
 #: EEVEE + volscatter must be at least this many times closer (relative RMSE) to Cycles than
-#: EEVEE alone. Measured (BENCHMARKS.md "EEVEE"): 6.3x, 4.2x, 6.9x.
-FACTOR = {"smoke_sun_sky": 3.0, "dense_cloud": 2.0, "smoke_point": 3.0}
-#: |flux ratio - 1| allowed for EEVEE + volscatter against Cycles. Measured: 0.905, 0.86, 0.93
-#: (pop at Preview is dark where light arrives after many orders; issue 20's 5% of the grid
-#: handed to hosts is part of it). Tolerance: the measured gap plus 5 points for the fixture's
-#: noise and the solver's seed.
-FLUX_TOL = {"smoke_sun_sky": 0.15, "dense_cloud": 0.20, "smoke_point": 0.15}
+#: EEVEE alone. Measured (BENCHMARKS.md "EEVEE"): 0.783 / 0.119 = 6.6x, 0.783 / 0.150 = 5.2x,
+#: 0.291 / 0.091 = 3.2x (EEVEE alone under the point light has no volumetric shadows, its default:
+#: the unattenuated light makes up in flux, 0.83, for the missing orders). About half of each.
+FACTOR = {"smoke_sun_sky": 3.0, "dense_cloud": 3.0, "smoke_point": 2.0}
+#: |flux ratio - 1| allowed for EEVEE + volscatter against Cycles. Measured: 0.904 (pop is dark
+#: where light arrives after many orders; issue 20's 5% of the grid handed to hosts is part of
+#: it), 1.047, 0.969. Tolerance: the measured gap plus 5 points for the fixtures' noise (2-4%)
+#: and the solver's seed.
+FLUX_TOL = {"smoke_sun_sky": 0.15, "dense_cloud": 0.10, "smoke_point": 0.10}
 
 
 @pytest.mark.parametrize("name", es.SCENES)
 def test_eevee_with_volscatter_is_closer_to_cycles(addon, tmp_path, name):
     ref, meta = _reference(name)
     ob = es.build(name)
+    sc = bpy.context.scene
+    assert bpy.ops.volscatter.eevee_settings() == {'CANCELLED'}  # no result yet: nothing to set
     solver, settings = SOLVERS[name]
     res = es.compute_scattering(ob, solver, tmp_path, **(settings or {}))
-    sc = bpy.context.scene
     e_default = _default_froxels(addon, sc, ref, tmp_path) if name == "smoke_sun_sky" else None
-    changes = addon.apply(sc)
     # 8 -> 2 on these 80x60 frames, where a voxel of the result covers ~0.3 px
-    assert [c[:3] for c in changes] == [("volumetric_tile_size", '8', '2')], changes
+    assert [c[:3] for c in addon.recommend(sc)] == [("volumetric_tile_size", '8', '2')]
+    _panel_lines(addon, sc, res)
+    assert bpy.ops.volscatter.eevee_settings() == {'FINISHED'}
+    assert sc.eevee.volumetric_tile_size == '2'
     assert addon.recommend(sc) == []  # applied: nothing left to recommend
     with_vs = es.render_eevee(str(tmp_path / "eevee_volscatter.exr"))
     # EEVEE alone: the source volume with its own material, the same EEVEE settings
@@ -135,10 +141,35 @@ def test_eevee_with_volscatter_is_closer_to_cycles(addon, tmp_path, name):
     assert np.abs(with_vs[..., 3] - ref[..., 3]).mean() < 0.02
     assert e_vs * FACTOR[name] < e_alone, "EEVEE + volscatter %.3f, EEVEE alone %.3f" % (e_vs, e_alone)
     assert abs(f_vs - 1.0) < FLUX_TOL[name], "flux %.3f of Cycles'" % f_vs
-    # EEVEE alone misses the multiple scattering: at most Cycles' single scattering's share, ~0.35
-    assert f_alone < 0.6
+    # EEVEE alone misses the multiple scattering: its flux is farther off
+    assert abs(f_alone - 1.0) > abs(f_vs - 1.0)
     if e_default is not None:
         assert e_vs * 1.5 < e_default, "the recommended froxels %.3f, EEVEE's default %.3f" % (e_vs, e_default)
+
+
+def _panel_lines(addon, sc, res):
+    """The EEVEE sub-panel, drawn into a recording layout: shown for EEVEE only, it lists the
+    recommendation and offers the operator."""
+    from types import SimpleNamespace
+    drawn = []
+
+    class Layout:
+        def column(self, **kw):
+            return self
+
+        def label(self, text="", **kw):
+            drawn.append(text)
+
+        def operator(self, idname, **kw):
+            drawn.append(idname)
+
+    ctx = SimpleNamespace(object=res, scene=sc)
+    sc.render.engine = 'CYCLES'
+    assert not addon.VOLSCATTER_PT_eevee.poll(ctx)
+    sc.render.engine = es.ENGINE_EEVEE
+    assert addon.VOLSCATTER_PT_eevee.poll(ctx)
+    addon.VOLSCATTER_PT_eevee.draw(SimpleNamespace(layout=Layout()), ctx)
+    assert drawn == ["volumetric_tile_size: 2 (now 8)", "volscatter.eevee_settings"], drawn
 
 
 def _default_froxels(addon, sc, ref, tmp_path):
