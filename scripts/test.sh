@@ -10,8 +10,10 @@ root=$(pwd)
 log() { printf '\n== %s\n' "$*" >&2; }
 
 # --- system packages: OpenVDB itself (to check our VDB files), Mesa's Vulkan drivers (lavapipe:
-# a software GPU adapter, so the GPU kernels are tested against the CPU on GPU-less machines) --
-apt_packages=(python3-openvdb libopenvdb-tools mesa-vulkan-drivers)
+# a software GPU adapter, so the GPU kernels are tested against the CPU on GPU-less machines),
+# Mesa's EGL and OpenGL drivers (llvmpipe: headless bpy renders EEVEE through them,
+# tests/python/test_eevee.py) --
+apt_packages=(python3-openvdb libopenvdb-tools mesa-vulkan-drivers libegl-mesa0 libgl1-mesa-dri)
 missing=()
 for p in "${apt_packages[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
