@@ -29,9 +29,10 @@ impl<'a> Reader<'a> {
         self.data.len() - self.pos
     }
 
-    /// A format error at the current offset.
+    /// A format error at the current offset. The message is cut to an excerpt: it may quote a
+    /// name or type string of any length from the file.
     pub fn err(&self, msg: impl std::fmt::Display) -> Error {
-        Error::format(self.path, format!("at byte {}: {msg}", self.pos))
+        Error::format(self.path, format!("at byte {}: {}", self.pos, crate::error::excerpt(&msg.to_string())))
     }
 
     /// Moves to an absolute offset taken from the file (checked against the file size).

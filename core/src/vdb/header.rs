@@ -137,7 +137,11 @@ pub(crate) fn read_meta_map(r: &mut Reader) -> Result<MetaMap> {
 fn r_err(r: &Reader, start: usize, name: &str, ty: &str, size: usize, n: usize) -> crate::error::Error {
     crate::error::Error::format(
         r.path(),
-        format!("at byte {start}: metadata `{name}` of type {ty} has size {size}, expected {n}"),
+        format!(
+            "at byte {start}: metadata `{}` of type {} has size {size}, expected {n}",
+            crate::error::excerpt(name),
+            crate::error::excerpt(ty)
+        ),
     )
 }
 

@@ -174,7 +174,7 @@ impl VdbFile {
         let listing = || {
             let names = self.grids
                 .iter()
-                .map(|g| format!("`{}` ({}{})", excerpt(&g.name), ValueKind::type_name(&g.grid_type), if g.half { ", half" } else { "" }))
+                .map(|g| format!("`{}` ({}{})", excerpt(&g.name), excerpt(ValueKind::type_name(&g.grid_type)), if g.half { ", half" } else { "" }))
                 .collect::<Vec<_>>()
                 .join(", ");
             // A file may hold thousands of grids: the listing is quoted like any input.
@@ -199,7 +199,7 @@ impl VdbFile {
                 format!(
                     "grid `{}` holds {} values, not float: it cannot be used as density (grids: {})",
                     excerpt(&g.name),
-                    ValueKind::type_name(&g.grid_type),
+                    excerpt(ValueKind::type_name(&g.grid_type)),
                     listing()
                 ),
             ));
@@ -274,7 +274,7 @@ impl VdbFile {
                 info.sum = Some(if kind.comps == 1 { Sum::Scalar(s.sum[0]) } else { Sum::Vector(s.sum) });
             }
             None => {
-                info.note = Some(format!("values of type `{}` are listed, not read", info.value_type));
+                info.note = Some(format!("values of type `{}` are listed, not read", excerpt(&info.value_type)));
             }
         }
         Ok(info)
