@@ -78,6 +78,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -357,7 +358,12 @@ def open_stage(path):
     try:
         stage = Usd.Stage.Open(str(p))
     except Tf.ErrorException as e:
+        # pxr repeats its source location for each of many parse errors: keep what they say,
+        # the first few, at most 500 characters.
         msg = " ".join(str(e).split())
+        msg = re.sub(r"Error in '[^']*' at line \d+ in file \S+ : ", "", msg)
+        if len(msg) > 500:
+            msg = msg[:500] + f"... ({len(msg) - 500} more characters)"
         raise VolscatterError(f"cannot open stage {path}: {msg}", 7) from e
     if stage is None:
         raise VolscatterError(f"cannot open stage {path}", 7)
