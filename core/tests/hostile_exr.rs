@@ -123,7 +123,7 @@ fn huge_scanline_dome_is_read_reduced_within_bounded_memory() {
     let path = dir.join("huge_scanlines.exr");
     {
         let channels = ["B", "G", "R"].map(|n| exr::meta::attribute::ChannelDescription::new(n, SampleType::F16, true));
-        let header = exr::meta::header::Header::new("sky".try_into().unwrap(), (16384, 8192), channels.into_iter().collect())
+        let header = exr::meta::header::Header::new("sky".into(), (16384, 8192), channels.into_iter().collect())
             .with_encoding(Compression::ZIP16, exr::meta::BlockDescription::ScanLines, LineOrder::Increasing);
         let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
         let one = f16::from_f32(1.0).to_bits().to_ne_bytes();

@@ -273,6 +273,8 @@ pub fn write_layer(path: &Path, layer: Layer<AnyChannels<FlatSamples>>) -> Resul
 /// Reads back the RGBA of an EXR written by `write_image` (tests, `compare`).
 pub fn read_rgba(path: &Path) -> Result<Image> {
     let (w, h) = check_header(path)?;
+    // Decoded whole (an image to compare is wanted at full size): the pixels and exr's copy.
+    crate::budget::check_elements::<[Vec4; 2]>(&format!("EXR image {} ({w}x{h})", path.display()), w as u64 * h as u64)?;
     let decoded = std::panic::catch_unwind(|| {
         read_first_rgba_layer_from_file(
             path,
