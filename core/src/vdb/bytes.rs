@@ -29,10 +29,15 @@ impl<'a> Reader<'a> {
         self.data.len() - self.pos
     }
 
-    /// A format error at the current offset. The message is cut to an excerpt: it may quote a
-    /// name or type string of any length from the file.
+    /// A format error at the current offset. Names from the file are quoted as excerpts where
+    /// messages are made; this cut (at 4 quote lengths) is the backstop for one that is not.
     pub fn err(&self, msg: impl std::fmt::Display) -> Error {
-        Error::format(self.path, format!("at byte {}: {}", self.pos, crate::error::excerpt(&msg.to_string())))
+        let msg = msg.to_string();
+        let msg = match msg.char_indices().nth(4 * crate::error::MAX_QUOTE_CHARS) {
+            Some((end, _)) => format!("{}... ({} more bytes)", &msg[..end], msg.len() - end),
+            None => msg,
+        };
+        Error::format(self.path, format!("at byte {}: {msg}", self.pos))
     }
 
     /// Moves to an absolute offset taken from the file (checked against the file size).
