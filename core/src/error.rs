@@ -49,3 +49,27 @@ impl Error {
         Error::Format { path: path.into(), message: message.into() }
     }
 }
+
+/// Longest piece of input quoted in a message. A 100 MB grid name must not become a 100 MB error
+/// in the artist's console (issue 22).
+pub const MAX_QUOTE_CHARS: usize = 200;
+
+/// `text` for quoting in a message: whole when short, else its first [`MAX_QUOTE_CHARS`]
+/// characters and how much was left out.
+pub fn excerpt(text: &str) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(MAX_QUOTE_CHARS) {
+        None => std::borrow::Cow::Borrowed(text),
+        Some((end, _)) => std::borrow::Cow::Owned(format!("{}... ({} more bytes)", &text[..end], text.len() - end)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn excerpt_keeps_short_text_and_cuts_long_text_on_a_char_boundary() {
+        assert_eq!(super::excerpt("density"), "density");
+        let long = "é".repeat(100_000);
+        let e = super::excerpt(&long);
+        assert!(e.chars().count() < super::MAX_QUOTE_CHARS + 40 && e.ends_with("(199600 more bytes)"), "{e}");
+    }
+}

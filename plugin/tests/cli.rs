@@ -182,3 +182,59 @@ fn aov_layers_are_opt_in() {
     }
     assert_clean_failure(&render_json(&small_scene(), &dir, &["--aov", "singel"]), "singel");
 }
+
+/// Issue 22: `--out /dev/full` reported success with nothing written.
+#[test]
+fn a_full_disk_is_an_error() {
+    if !std::path::Path::new("/dev/full").exists() {
+        eprintln!("skipped: /dev/full does not exist here");
+        return;
+    }
+    let dir = tmp("full");
+    let path = dir.join("scene.json");
+    std::fs::write(&path, serde_json::to_string(&small_scene()).unwrap()).unwrap();
+    let o = bin().arg("render").arg(&path).args(["--out", "/dev/full", "-q", "--spp", "1"]).output().unwrap();
+    assert_clean_failure(&o, "No space left");
+    // The PNG preview goes through the same checked write.
+    let o = bin().arg("render").arg(&path).arg("--out").arg(dir.join("o.exr")).args(["--png", "/dev/full", "-q", "--spp", "1"]).output().unwrap();
+    assert_clean_failure(&o, "No space left");
+}
+
+/// Issue 22: a FIFO given as `medium.vdb` blocked the CLI forever (it waited for a writer).
+/// Refused now as "not a regular file"; a run still going after 20 s counts as the hang.
+#[test]
+fn a_fifo_as_medium_is_refused_not_waited_on() {
+    let dir = tmp("fifo");
+    let fifo = dir.join("medium.vdb");
+    let _ = std::fs::remove_file(&fifo);
+    match Command::new("mkfifo").arg(&fifo).status() {
+        Ok(s) if s.success() => {}
+        _ => {
+            eprintln!("skipped: mkfifo is not available");
+            return;
+        }
+    }
+    let mut scene = small_scene();
+    scene["medium"] = serde_json::json!({"vdb": "medium.vdb"});
+    let path = dir.join("scene.json");
+    std::fs::write(&path, serde_json::to_string(&scene).unwrap()).unwrap();
+    let mut child = bin()
+        .arg("render")
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.join("o.exr"))
+        .arg("-q")
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed().as_secs() > 20 {
+            child.kill().unwrap();
+            panic!("the CLI is still waiting on the FIFO after 20 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let o = child.wait_with_output().unwrap();
+    assert_clean_failure(&o, "not a regular file");
+}

@@ -584,3 +584,31 @@ def test_set_device_reaches_the_library():
         s.set_device("cpu")
         with s.solve() as r:
             assert all(d > 0 for d in r.dims())
+
+
+def test_ctrl_c_leaves_a_worker_that_never_calls_back(tmp_path):
+    """Issue 22: Ctrl-C was ignored while the worker sat in a native call that never called its
+    progress callback again. After CANCEL_GRACE_S (5 s) the CLI leaves without it: exit 130
+    well within 15 s, with a message, no traceback."""
+    import signal
+    import time
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "usd"), VOLSCATTER_LIB=str(LIB))
+    code = ("import sys, time\n"
+            "from volscatter import cli\n"
+            "sys.argv = ['volscatter-usd']\n"
+            "def stuck():\n"
+            "    print('working', flush=True)\n"
+            "    time.sleep(120)\n"
+            "try:\n"
+            "    cli.run_cancellable(stuck, cli.ProgressBar(False))\n"
+            "except KeyboardInterrupt:\n"
+            "    sys.stderr.write('interrupted\\n'); sys.exit(130)\n")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    assert p.stdout.readline().strip() == "working"
+    time.sleep(0.5)  # the main thread is then in its wait, not still starting the worker
+    start = time.time()
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=30)
+    took = time.time() - start
+    assert p.returncode == 130 and "did not stop within 5 s" in err and "Traceback" not in err, err
+    assert took < 15, took

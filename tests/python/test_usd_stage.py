@@ -657,3 +657,55 @@ def test_vec3_vdb_writer_against_openvdb(tmp_path):
     vt, count, err, p = json.loads(r.stdout)
     assert vt == "vec3s" and count == n and err == 0.0
     assert p == pytest.approx([1.0 - 0.05 * 4, -2.0 + 0.05 * 3, 0.5 + 0.1 * 5], abs=1e-9)
+
+
+# ------------------------------------------------------------------------------------------------
+# bad attributes (issue 22): each is a VolscatterError naming the prim and the attribute, never a
+# traceback or a JSON parse error about a document the user never wrote
+
+def _author(stage, prim_path, name, type_name, value):
+    """Authors in the layer (Sdf), as a hand-edited .usda would: the Usd API refuses a value whose
+    type differs from the schema's, a file does not."""
+    spec = stage.GetRootLayer().GetPrimAtPath(prim_path)
+    if name in spec.properties:
+        spec.RemoveProperty(spec.properties[name])
+    Sdf.AttributeSpec(spec, name, type_name).default = value
+
+
+@pytest.mark.parametrize("prim_path,name,type_name,value,needle", [
+    ("/World/Cam", "horizontalAperture", "float", float("nan"), "not finite"),
+    ("/World/Cam", "focalLength", "float", float("inf"), "not finite"),
+    ("/World/Smoke", "volscatter:densityScale", "float", float("nan"), "not finite"),
+    ("/World/Smoke", "volscatter:albedo", "color3f", (0.5, float("nan"), 0.5), "not finite"),
+    ("/World/Smoke", "volscatter:g", "string", "forward", "a number is expected"),
+    ("/World/Sun", "inputs:intensity", "float", float("nan"), "not finite"),
+    ("/World/Sun", "inputs:color", "string", "red", "a number is expected"),
+    ("/World/Sun", "inputs:angle", "string", "wide", "a number is expected"),
+    ("/World/Sky", "inputs:texture:file", "int", 7, "an asset path is expected"),
+    ("/World/Smoke/density", "filePath", "int", 3, "an asset path is expected"),
+    ("/World/Smoke/density", "fieldIndex", "string", "first", "a number is expected"),
+])
+def test_bad_attributes_name_the_prim_and_attribute(tmp_path, prim_path, name, type_name, value, needle):
+    stage, path = make_stage(tmp_path)
+    UsdLux.DistantLight.Define(stage, "/World/Sun")
+    UsdLux.DomeLight.Define(stage, "/World/Sky")
+    _author(stage, prim_path, name, getattr(Sdf.ValueTypeNames, type_name[0].upper() + type_name[1:]), value)
+    stage.Save()
+    with pytest.raises(VolscatterError) as e:
+        S.read_stage(path).scene_json()
+    assert f"{prim_path}: attribute {name}" in str(e.value) and needle in str(e.value), str(e.value)
+
+
+def test_finite_attributes_that_overflow_are_named_by_prim(tmp_path):
+    """intensity x 2^exposure beyond float range: named, not a traceback (OverflowError)."""
+    stage, path = make_stage(tmp_path)
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    sun.CreateExposureAttr().Set(5000.0)
+    stage.Save()
+    with pytest.raises(VolscatterError, match=r"/World/Sun.*overflows"):
+        S.read_stage(path).scene_json()
+    sun.CreateExposureAttr().Set(200.0)
+    sun.CreateIntensityAttr().Set(3e38)
+    stage.Save()
+    with pytest.raises(VolscatterError, match=r"/World/Sun: the computed irradiance .* is not finite"):
+        S.read_stage(path).scene_json()

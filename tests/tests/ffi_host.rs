@@ -424,13 +424,27 @@ fn bad_text_files_and_solver_settings_give_messages() {
 
         // Writing into a directory that does not exist.
         let nowhere = cstr("/nonexistent/dir/grid.exr");
+        // Issue 22: a missing folder is VS_STATUS_IO (it was VS_STATUS_FORMAT).
         let st = (a.vs_result_write_grid)(r, nowhere.as_ptr(), GRID_FORMAT_EXR);
-        assert_ne!(st, OK);
+        assert_eq!(st, IO);
         assert!(a.result_error(r).contains("/nonexistent/dir/grid.exr"), "{}", a.result_error(r));
         let mut img = null_mut();
         assert_eq!((a.vs_result_composite)(r, 0, 0, 0.0, &mut img), OK);
-        assert_ne!((a.vs_image_write_exr)(img, nowhere.as_ptr()), OK);
+        assert_eq!((a.vs_image_write_exr)(img, nowhere.as_ptr()), IO);
         assert!(a.image_error(img).contains("/nonexistent/dir/grid.exr"));
+        // Issue 22: a full disk returned OK with nothing written. /dev/full fails every write
+        // with ENOSPC; every writer must say so with VS_STATUS_IO.
+        if std::path::Path::new("/dev/full").exists() {
+            let full = cstr("/dev/full");
+            assert_eq!((a.vs_image_write_exr)(img, full.as_ptr()), IO);
+            assert!(a.image_error(img).contains("No space left"), "{}", a.image_error(img));
+            for format in [GRID_FORMAT_EXR, GRID_FORMAT_VDB] {
+                assert_eq!((a.vs_result_write_grid)(r, full.as_ptr(), format), IO, "grid format {format}");
+                assert!(a.result_error(r).contains("No space left"), "{}", a.result_error(r));
+            }
+        } else {
+            eprintln!("skipped: /dev/full does not exist here");
+        }
         assert_eq!((a.vs_image_destroy)(img), OK);
         assert_eq!((a.vs_result_destroy)(r), OK);
 

@@ -67,25 +67,45 @@ class ProgressBar:
             self._drawn = False
 
 
+#: seconds to wait for the native work to return after Ctrl-C before leaving without it
+CANCEL_GRACE_S = 5.0
+
+
 def run_cancellable(fn, bar: ProgressBar):
     """Runs ``fn()`` in a worker thread so that Ctrl-C reaches Python while the library works:
     the progress callback then answers "stop" and the library returns VS_STATUS_CANCELLED."""
     box = {}
+    # Finished-ness is an Event, not Thread.is_alive(): a join() interrupted by Ctrl-C can leave
+    # is_alive() False for a thread that still runs (CPython gh-90882).
+    done = threading.Event()
 
     def work():
         try:
             box["value"] = fn()
         except BaseException as e:  # noqa: BLE001 - handed to the main thread
             box["error"] = e
+        finally:
+            done.set()
 
     t = threading.Thread(target=work, name="volscatter-usd", daemon=True)
     t.start()
     try:
-        while t.is_alive():
-            t.join(0.2)
+        while not done.wait(0.2):
+            pass
     except KeyboardInterrupt:
+        # The next progress callback answers "stop". The library calls it at least every
+        # 100 ms, so the worker normally returns at once; if it does not within
+        # CANCEL_GRACE_S (a library that is stuck), or on a second Ctrl-C, we leave without it
+        # (a daemon thread) rather than leave the user with a terminal that ignores Ctrl-C.
         bar.cancelled = True
-        t.join()
+        deadline = _time.monotonic() + CANCEL_GRACE_S
+        try:
+            while not done.wait(0.1) and _time.monotonic() < deadline:
+                pass
+        except KeyboardInterrupt:
+            pass
+        if not done.is_set():
+            sys.stderr.write(f"\n{PROG}: the library did not stop within {CANCEL_GRACE_S:g} s of Ctrl-C; leaving it\n")
         raise
     if "error" in box:
         raise box["error"]

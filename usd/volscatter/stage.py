@@ -78,6 +78,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -296,6 +297,18 @@ class StageScene:
             height = max(1, round(width / self.camera.aspect))
         doc = {"format": 1, "medium": self.volumes[volume].medium_json(), "lights": [l.json for l in self.lights],
                "camera": self.camera.json(width, height)}
+        # Finite attributes can still combine into infinity (intensity x 2^exposure, a huge
+        # radius squared); JSON has no infinity, so it is named here, by prim, instead of
+        # reaching the library as a parse error about a document the user never wrote.
+        parts = [(self.volumes[volume].path, doc["medium"]), (self.camera.path, doc["camera"])]
+        parts += [(l.path, l.json) for l in self.lights]
+        for prim, part in parts:
+            for key, value in part.items():
+                nums = _numbers(value)
+                # The library reads single precision: beyond 3.4e38 is infinity there.
+                if nums is not None and not all(math.isfinite(x) and abs(x) <= _F32_MAX for x in nums):
+                    raise VolscatterError(f"{prim}: the computed {key} {value} is not finite in single precision "
+                                          "(check the prim's attributes)", 2)
         if solver:
             doc["solver"] = solver
         return doc
@@ -345,7 +358,12 @@ def open_stage(path):
     try:
         stage = Usd.Stage.Open(str(p))
     except Tf.ErrorException as e:
+        # pxr repeats its source location for each of many parse errors: keep what they say,
+        # the first few, at most 500 characters.
         msg = " ".join(str(e).split())
+        msg = re.sub(r"Error in '[^']*' at line \d+ in file \S+ : ", "", msg)
+        if len(msg) > 500:
+            msg = msg[:500] + f"... ({len(msg) - 500} more characters)"
         raise VolscatterError(f"cannot open stage {path}: {msg}", 7) from e
     if stage is None:
         raise VolscatterError(f"cannot open stage {path}", 7)
@@ -372,11 +390,70 @@ def _is_blender(stage) -> bool:
     return False
 
 
+_F32_MAX = 3.4028234663852886e38
+
+
+def _where(attr) -> str:
+    return f"{attr.GetPrim().GetPath()}: attribute {attr.GetName()}"
+
+
+def _numbers(v):
+    """The numbers in an attribute value (a scalar, a Gf vector or matrix, a tuple), or None
+    when it holds something else (a string, an asset path)."""
+    if isinstance(v, bool):
+        return [float(v)]
+    if isinstance(v, (int, float)):
+        return [float(v)]
+    if isinstance(v, (str, bytes)) or not hasattr(v, "__len__"):
+        return None
+    out = []
+    try:
+        for x in v:
+            sub = _numbers(x)
+            if sub is None:
+                return None
+            out.extend(sub)
+    except TypeError:
+        return None
+    return out
+
+
 def _get(attr, t, default=None):
+    """The attribute's value at ``t``, or ``default`` when unauthored. Every value is checked
+    here, where the prim and attribute are known: a NaN or infinity, or a value of another kind
+    than ``default`` (a string where a number belongs, a number where a colour belongs), is a
+    VolscatterError naming both (issue 22: they surfaced as JSON parse errors and tracebacks)."""
     if not attr or not attr.IsValid():
         return default
     v = attr.Get(t)
-    return default if v is None else v
+    if v is None:
+        return default
+    nums = _numbers(v)
+    if nums is not None and not all(math.isfinite(x) for x in nums):
+        raise VolscatterError(f"{_where(attr)} = {v} is not finite (NaN or infinity)", 2)
+    if default is None:
+        return v
+    want = _numbers(default)
+    if want is not None:
+        if nums is None:
+            raise VolscatterError(f"{_where(attr)} is {type(v).__name__} {str(v)[:200]!r}, a number is expected", 2)
+        if len(want) > 1 and len(nums) not in (1, len(want)):
+            raise VolscatterError(f"{_where(attr)} has {len(nums)} values, {len(want)} are expected", 2)
+    elif isinstance(default, str) and not isinstance(v, str):
+        raise VolscatterError(f"{_where(attr)} is {type(v).__name__} {str(v)[:200]!r}, a token or string is expected", 2)
+    return v
+
+
+def _asset(attr, t):
+    """An asset-path attribute's value (None when unauthored); anything else authored under that
+    name (an integer file path) is an error naming the prim and attribute."""
+    v = _get(attr, t)
+    if v is None:
+        return None
+    from pxr import Sdf
+    if not isinstance(v, Sdf.AssetPath):
+        raise VolscatterError(f"{_where(attr)} is {type(v).__name__} {str(v)[:200]!r}, an asset path is expected", 2)
+    return v
 
 
 def _rgb(v) -> List[float]:
@@ -472,7 +549,7 @@ class _Reader:
                                   "only OpenVDBAsset fields are supported", 9)
         asset = UsdVol.OpenVDBAsset(fprim)
         fp_attr = asset.GetFilePathAttr()
-        ap = _get(fp_attr, self.t)
+        ap = _asset(fp_attr, self.t)
         if ap is None or not ap.path:
             raise VolscatterError(f"field {fprim.GetPath()} has no filePath at time {self._tstr()}", 5)
         resolved = ap.resolvedPath
@@ -486,7 +563,7 @@ class _Reader:
         grids = vdb_grid_names(resolved)
         name = _get(asset.GetFieldNameAttr(), self.t) or None
         index_attr = asset.GetFieldIndexAttr()
-        index = _get(index_attr, self.t) if index_attr.HasAuthoredValue() else None
+        index = _get(index_attr, self.t, 0) if index_attr.HasAuthoredValue() else None
         base = [(g.split("\x1e")[0], g, ty) for g, ty in grids]
         if name:
             matching = [(g, ty) for b, g, ty in base if b == name]
@@ -525,7 +602,7 @@ class _Reader:
         for key, attr_name, kind in (("density_scale", "volscatter:densityScale", "rgb"),
                                      ("albedo", "volscatter:albedo", "rgb"), ("g", "volscatter:g", "float")):
             attr = prim.GetAttribute(attr_name)
-            v = _get(attr, self.t) if attr and attr.HasAuthoredValue() else None
+            v = _get(attr, self.t, (1.0, 1.0, 1.0) if kind == "rgb" else 0.0) if attr and attr.HasAuthoredValue() else None
             if v is not None:
                 vals[key] = _rgb(v) if kind == "rgb" else float(v if isinstance(v, (int, float)) else v[0])
                 src[key] = f"attribute {attr_name}"
@@ -623,7 +700,10 @@ class _Reader:
         ct_on = bool(_get(api.GetEnableColorTemperatureAttr(), self.t, False))
         kelvin = float(_get(api.GetColorTemperatureAttr(), self.t, 6500.0))
         bb = blackbody_rgb(kelvin) if ct_on else (1.0, 1.0, 1.0)
-        s = intensity * 2.0 ** exposure
+        try:
+            s = intensity * 2.0 ** exposure
+        except OverflowError:
+            raise VolscatterError(f"light {prim.GetPath()}: intensity {intensity} x 2^exposure ({exposure}) overflows", 2) from None
         rgb = [s * color[i] * bb[i] for i in range(3)]
         detail = {"intensity": intensity, "exposure": exposure, "color": color, "normalize": normalize,
                   "color_temperature": kelvin if ct_on else None, "blackbody": list(bb)}
@@ -638,7 +718,7 @@ class _Reader:
         """The UsdLuxShapingAPI inputs volscatter reads (spec defaults when unauthored)."""
         from pxr import UsdLux
         sh = UsdLux.ShapingAPI(prim)
-        ies = _get(sh.GetShapingIesFileAttr(), self.t)
+        ies = _asset(sh.GetShapingIesFileAttr(), self.t)
         return {"cone_angle": float(_get(sh.GetShapingConeAngleAttr(), self.t, 90.0)),
                 "cone_softness": float(_get(sh.GetShapingConeSoftnessAttr(), self.t, 0.0)),
                 "focus": float(_get(sh.GetShapingFocusAttr(), self.t, 0.0)),
@@ -776,9 +856,9 @@ class _Reader:
         from pxr import UsdLux
         rgb, _normalize, detail = self._scalar(prim)  # normalize is ignored for domes
         api = UsdLux.LightAPI(prim)
-        intensity = float(_get(api.GetIntensityAttr(), self.t, 1.0)) * 2.0 ** float(_get(api.GetExposureAttr(), self.t, 0.0))
+        intensity = detail["intensity"] * 2.0 ** detail["exposure"]  # _scalar has checked that this is finite
         tex_attr = prim.GetAttribute("inputs:texture:file")
-        ap = _get(tex_attr, self.t)
+        ap = _asset(tex_attr, self.t)
         if ap is not None and ap.path:
             resolved = ap.resolvedPath
             if not resolved or not os.path.isfile(resolved):

@@ -18,6 +18,7 @@ pub const MAX_EXR_PIXELS: u64 = 16384 * 8192;
 
 /// Checks the header of an EXR file; returns its data-window size.
 pub fn check_header(path: &Path) -> Result<(usize, usize)> {
+    super::files::regular_file(path, "EXR file")?;
     let meta = std::panic::catch_unwind(|| exr::meta::MetaData::read_from_file(path, false))
         .map_err(|_| Error::format(path, "EXR header could not be parsed"))?
         .map_err(|e| Error::format(path, format!("not a readable EXR file: {e}")))?;
@@ -53,30 +54,58 @@ pub fn check_header(path: &Path) -> Result<(usize, usize)> {
     Ok((header.layer_size.0, header.layer_size.1))
 }
 
-/// Reads a lat-long environment map (first RGB(A) layer).
+/// Largest dome map kept in memory: 4096 x 2048 (0.09 degrees a pixel). No solver resolves
+/// lighting finer than that: pop decomposes the sky into at most a few hundred ordinates, the
+/// reference tracer importance-samples the map (a sun 0.53 degrees wide still covers ~35 pixels),
+/// and the map, its sampling tables and pop's importance map at this size take ~250 MB, where a
+/// 16384 x 8192 map took 3-4.7 GB. Larger maps are box-filtered down while they are read.
+pub const MAX_DOME_PIXELS: u64 = 4096 * 2048;
+
+/// Bytes per kept dome pixel for the budget: the RGB sum while reading (12), then the map's
+/// pixels (12) and its sampling tables (`LatLongMap::new`: function + two CDF levels, ~12).
+const DOME_BYTES_PER_PIXEL: u64 = 36;
+
+/// A decoded block is held whole, and the decompressor holds the compressed and one or two
+/// working copies of it: three times its decoded size is what one block costs.
+const BLOCK_COPIES: u64 = 3;
+
+/// Reads a lat-long environment map (the first part with R, G and B channels), box-filtered
+/// down to at most [`MAX_DOME_PIXELS`].
 pub fn read_latlong(path: &Path) -> Result<LatLongMap> {
+    read_latlong_at_most(path, MAX_DOME_PIXELS)
+}
+
+/// The integer box-filter factor that brings `w` x `h` to at most `max_pixels`.
+fn reduction_factor(w: usize, h: usize, max_pixels: u64) -> usize {
+    let mut f = 1usize;
+    while (w.div_ceil(f) as u64) * (h.div_ceil(f) as u64) > max_pixels.max(1) {
+        f += 1;
+    }
+    f
+}
+
+/// [`read_latlong`] with an explicit pixel limit. The file is decoded block by block (one tile or
+/// scanline group at a time), each block added into the reduced map, so memory is the reduced
+/// map plus one block, both checked against the memory budget before they are allocated.
+pub fn read_latlong_at_most(path: &Path, max_pixels: u64) -> Result<LatLongMap> {
     if !path.exists() {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "file not found")));
     }
     let (w, h) = check_header(path)?;
-    let decoded = std::panic::catch_unwind(|| {
-        read_first_rgba_layer_from_file(
-            path,
-            |res, _| vec![Vec3::ZERO; res.width() * res.height()],
-            move |pixels: &mut Vec<Vec3>, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
-            },
-        )
-    })
-    .map_err(|_| Error::format(path, "EXR decoding failed"))?
-    .map_err(|e| Error::format(path, format!("EXR decoding failed: {e}")))?;
-    let size = decoded.layer_data.size;
-    if (size.0, size.1) != (w, h) {
-        return Err(Error::format(path, "EXR size changed between header and data"));
+    let factor = reduction_factor(w, h, max_pixels);
+    let (ow, oh) = (w.div_ceil(factor), h.div_ceil(factor));
+    let sums = std::panic::catch_unwind(|| decode_reduced(path, (w, h), factor))
+        .map_err(|_| Error::format(path, "EXR decoding failed"))??;
+    if factor > 1 {
+        eprintln!("note: {}: dome map {w}x{h} read at {ow}x{oh} (box filter {factor}x{factor}); no solver uses finer lighting", path.display());
     }
-    let mut pixels = decoded.layer_data.channel_data.pixels;
+    let mut pixels = sums;
     let mut bad = 0usize;
-    for p in pixels.iter_mut() {
+    for (i, p) in pixels.iter_mut().enumerate() {
+        // Edge boxes are partial when the size is not a multiple of the factor.
+        let (ox, oy) = (i % ow, i / ow);
+        let area = (factor.min(w - ox * factor) * factor.min(h - oy * factor)) as f32;
+        *p /= area;
         if !p.is_finite() || p.min_element() < 0.0 {
             *p = p.max(Vec3::ZERO);
             if !p.is_finite() {
@@ -88,7 +117,119 @@ pub fn read_latlong(path: &Path) -> Result<LatLongMap> {
     if bad > 0 {
         eprintln!("warning: {}: {bad} pixels were NaN, infinite or negative and were set to zero", path.display());
     }
-    Ok(LatLongMap::new(w, h, pixels))
+    Ok(LatLongMap::new(ow, oh, pixels))
+}
+
+/// Which of R, G, B a channel name is: `R` or `<layer>.R`, any case.
+fn rgb_index(name: &str) -> Option<(&str, usize)> {
+    let (prefix, last) = name.rsplit_once('.').unwrap_or(("", name));
+    let c = ["R", "G", "B"].iter().position(|c| c.eq_ignore_ascii_case(last))?;
+    Some((prefix, c))
+}
+
+/// The part and its R, G, B channel indices: the first part, and in it the first layer prefix
+/// (`""` before named layers), with all three at full resolution.
+fn find_rgb(headers: &[exr::meta::header::Header]) -> Option<(usize, [usize; 3])> {
+    for (part, header) in headers.iter().enumerate() {
+        let names: Vec<String> = header.channels.list.iter().map(|c| c.name.to_string()).collect();
+        let mut prefixes: Vec<&str> = names.iter().filter_map(|n| rgb_index(n).map(|(p, _)| p)).collect();
+        prefixes.sort_by_key(|p| !p.is_empty());
+        for prefix in prefixes {
+            let mut found = [usize::MAX; 3];
+            for (i, (c, name)) in header.channels.list.iter().zip(&names).enumerate() {
+                if let Some((p, k)) = rgb_index(name) {
+                    if p == prefix && c.sampling == exr::math::Vec2(1, 1) {
+                        found[k] = i;
+                    }
+                }
+            }
+            if found.iter().all(|&i| i != usize::MAX) {
+                return Some((part, found));
+            }
+        }
+    }
+    None
+}
+
+fn exr_error(path: &Path, e: exr::error::Error) -> Error {
+    match e {
+        exr::error::Error::Io(io) => Error::io(path, io),
+        other => Error::format(path, format!("EXR decoding failed: {other}")),
+    }
+}
+
+/// Sums of the `factor` x `factor` boxes of the R, G, B channels, row-major, top row first.
+fn decode_reduced(path: &Path, (w, h): (usize, usize), factor: usize) -> Result<Vec<Vec3>> {
+    use exr::block::reader::ChunksReader;
+    let file = std::io::BufReader::new(std::fs::File::open(path).map_err(|e| Error::io(path, e))?);
+    let reader = exr::block::read(file, false).map_err(|e| exr_error(path, e))?;
+    let Some((part, rgb)) = find_rgb(reader.headers()) else {
+        return Err(Error::format(path, "EXR file has no part with full-resolution R, G and B channels"));
+    };
+    let header = &reader.headers()[part];
+    // One block is decoded whole: a 16384x8192 tile is 1-2 GB however small the file.
+    let block = header.max_block_pixel_size();
+    let block_pixels = crate::budget::checked_product(
+        "EXR block",
+        &[block.0.min(w) as u64, block.1.min(h) as u64, header.channels.bytes_per_pixel as u64, BLOCK_COPIES],
+    )?;
+    crate::budget::check(&format!("{}: one EXR block ({}x{} pixels, decoded whole)", path.display(), block.0.min(w), block.1.min(h)), block_pixels)?;
+    let channels = header.channels.clone();
+    // The offset tables are read (and must be in the file) before the map is allocated: a
+    // 300-byte header promising 16384x8192 pixels fails here, having allocated nothing large.
+    let chunks = reader
+        .filter_chunks(false, |_, tile, index| index.layer == part && tile.is_largest_resolution_level())
+        .map_err(|e| exr_error(path, e))?;
+    let (ow, oh) = (w.div_ceil(factor), h.div_ceil(factor));
+    let n = crate::budget::check_elements::<[u8; DOME_BYTES_PER_PIXEL as usize]>(
+        &format!("dome map {} ({w}x{h} read at {ow}x{oh})", path.display()),
+        ow as u64 * oh as u64,
+    )?;
+    let mut sums = vec![Vec3::ZERO; n];
+    let mut covered = 0u64;
+    let mut blocks = chunks.sequential_decompressor(false);
+    while let Some(block) = blocks.decompress_next_block() {
+        let block = block.map_err(|e| exr_error(path, e))?;
+        // The chunk says where it goes; a hostile file may point it anywhere.
+        if block.index.layer != part || block.index.level != exr::math::Vec2(0, 0) {
+            continue;
+        }
+        for line in block.lines(&channels) {
+            let Some(c) = rgb.iter().position(|&i| i == line.location.channel) else { continue };
+            let (x0, y) = (line.location.position.x(), line.location.position.y());
+            let count = line.location.sample_count;
+            if y >= h || x0.checked_add(count).is_none_or(|end| end > w) {
+                return Err(Error::format(path, format!("EXR block line at ({x0}, {y}) lies outside the {w}x{h} data window")));
+            }
+            let row = (y / factor) * ow;
+            let mut add = |i: usize, v: f32| sums[row + (x0 + i) / factor][c] += v;
+            let bad = |_| Error::format(path, "EXR line shorter than its channel type");
+            match channels.list[line.location.channel].sample_type {
+                SampleType::F16 => {
+                    for (i, v) in line.read_samples::<f16>().enumerate() {
+                        add(i, v.map_err(bad)?.to_f32());
+                    }
+                }
+                SampleType::F32 => {
+                    for (i, v) in line.read_samples::<f32>().enumerate() {
+                        add(i, v.map_err(bad)?);
+                    }
+                }
+                SampleType::U32 => {
+                    for (i, v) in line.read_samples::<u32>().enumerate() {
+                        add(i, v.map_err(bad)? as f32);
+                    }
+                }
+            }
+            if c == 0 {
+                covered += count as u64;
+            }
+        }
+    }
+    if covered < w as u64 * h as u64 {
+        return Err(Error::format(path, format!("EXR file is truncated: {covered} of {} pixels present", w as u64 * h as u64)));
+    }
+    Ok(sums)
 }
 
 /// Writes float RGBA plus every AOV as `name.R/G/B` channels of the same part (the layout
@@ -114,15 +255,26 @@ pub fn write_image(path: &Path, image: &Image) -> Result<()> {
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into()),
     );
+    write_layer(path, layer)
+}
+
+/// Encodes one layer in memory, then writes it with [`super::files::write_file`]: a full disk
+/// or a missing folder is an `Error::Io`. (`exr`'s own `to_file` also deletes the path when a
+/// write fails, which must not happen to `/dev/full` or to a file the user pointed us at.)
+pub fn write_layer(path: &Path, layer: Layer<AnyChannels<FlatSamples>>) -> Result<()> {
+    let mut bytes = std::io::Cursor::new(Vec::new());
     exr::image::Image::from_layer(layer)
         .write()
-        .to_file(path)
-        .map_err(|e| Error::format(path, format!("writing EXR failed: {e}")))
+        .to_buffered(&mut bytes)
+        .map_err(|e| Error::format(path, format!("encoding EXR failed: {e}")))?;
+    super::files::write_file(path, bytes.get_ref())
 }
 
 /// Reads back the RGBA of an EXR written by `write_image` (tests, `compare`).
 pub fn read_rgba(path: &Path) -> Result<Image> {
     let (w, h) = check_header(path)?;
+    // Decoded whole (an image to compare is wanted at full size): the pixels and exr's copy.
+    crate::budget::check_elements::<[Vec4; 2]>(&format!("EXR image {} ({w}x{h})", path.display()), w as u64 * h as u64)?;
     let decoded = std::panic::catch_unwind(|| {
         read_first_rgba_layer_from_file(
             path,

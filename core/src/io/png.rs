@@ -13,8 +13,10 @@ fn srgb_encode(x: f32) -> u8 {
 
 /// `exposure` multiplies radiance before encoding. With `transparent`, writes straight alpha.
 pub fn write_png(path: &Path, image: &Image, exposure: f32, transparent: bool) -> Result<()> {
-    let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), image.width, image.height);
+    // Encoded in memory, written by `write_file`: the encoder's own writes to a BufWriter would
+    // lose an error raised when it is dropped.
+    let mut bytes = Vec::new();
+    let mut enc = png::Encoder::new(&mut bytes, image.width, image.height);
     enc.set_color(png::ColorType::Rgba);
     enc.set_depth(png::BitDepth::Eight);
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
@@ -31,5 +33,6 @@ pub fn write_png(path: &Path, image: &Image, exposure: f32, transparent: bool) -
     }
     let mut w = enc.write_header().map_err(|e| Error::format(path, e.to_string()))?;
     w.write_image_data(&data).map_err(|e| Error::format(path, e.to_string()))?;
-    w.finish().map_err(|e| Error::format(path, e.to_string()))
+    w.finish().map_err(|e| Error::format(path, e.to_string()))?;
+    super::files::write_file(path, &bytes)
 }

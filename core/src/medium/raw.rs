@@ -15,11 +15,11 @@ pub fn read_raw_f32(path: &Path, dims: [u32; 3], limits: GridLimits) -> Result<D
     if count * 4 > limits.max_bytes || count > limits.max_extent_voxels {
         return Err(Error::TooLarge(format!("raw grid {}x{}x{} is over the memory limit", dims[0], dims[1], dims[2])));
     }
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if meta.len() != count * 4 {
+    let len = crate::io::files::regular_file(path, "raw density file")?;
+    if len != count * 4 {
         return Err(Error::format(
             path,
-            format!("is {} bytes, but {}x{}x{} float32 values need {}", meta.len(), dims[0], dims[1], dims[2], count * 4),
+            format!("is {len} bytes, but {}x{}x{} float32 values need {}", dims[0], dims[1], dims[2], count * 4),
         ));
     }
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;

@@ -47,7 +47,7 @@ fn load_grid(field: &str, name: &str, src: &DensitySource, limits: GridLimits) -
             Ok((grid, src.object_to_world * index_to_object))
         }
         None if name == "density" => Ok((src.grid.clone(), src.object_to_world * src.index_to_object)),
-        None => Err(Error::scene(field, format!("grid `{name}`: only a `vdb` medium has other grids (`density` works for every medium)"))),
+        None => Err(Error::scene(field, format!("grid `{}`: only a `vdb` medium has other grids (`density` works for every medium)", crate::error::excerpt(name)))),
     }
 }
 

@@ -5,11 +5,48 @@
 use serde::{Deserialize, Serialize};
 
 /// A number or an RGB triple (`10.0` means `[10, 10, 10]`).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
 #[serde(untagged)]
 pub enum Rgb {
     Grey(f32),
     Rgb([f32; 3]),
+}
+
+/// By hand rather than `#[serde(untagged)]`, whose only message for any mistake is "data did
+/// not match any variant of untagged enum Rgb": this one says what was found and what is
+/// accepted, and serde_path_to_error adds the field.
+impl<'de> Deserialize<'de> for Rgb {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct RgbVisitor;
+        const EXPECTED: &str = "a number (grey) or three numbers [r, g, b]";
+        impl<'de> serde::de::Visitor<'de> for RgbVisitor {
+            type Value = Rgb;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str(EXPECTED)
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Rgb, E> {
+                Ok(Rgb::Grey(v as f32))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Rgb, E> {
+                Ok(Rgb::Grey(v as f32))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Rgb, E> {
+                Ok(Rgb::Grey(v as f32))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Rgb, A::Error> {
+                let mut out = [0.0f32; 3];
+                for (i, slot) in out.iter_mut().enumerate() {
+                    *slot = seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(i, &EXPECTED))?;
+                }
+                // A fourth element is an error, not silently dropped (counting stops at 4).
+                if seq.next_element::<serde::de::IgnoredAny>()?.is_some() {
+                    return Err(serde::de::Error::invalid_length(4, &"three numbers [r, g, b] (no alpha)"));
+                }
+                Ok(Rgb::Rgb(out))
+            }
+        }
+        d.deserialize_any(RgbVisitor)
+    }
 }
 
 impl Rgb {

@@ -15,7 +15,7 @@ pub use environment::{Environment, LatLongMap};
 pub use json::SceneJson;
 pub use light::{AreaLight, AreaShape, Light, Spot};
 
-use crate::error::{Error, Result};
+use crate::error::{excerpt, Error, Result};
 use crate::medium::{procedural, raw, GridLimits, Medium};
 
 /// Largest image side and pixel count accepted (checked before any buffer is allocated).
@@ -79,10 +79,17 @@ impl Scene {
     /// Parses and validates scene JSON; relative file paths resolve against `base_dir`.
     pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Self> {
         let de = &mut serde_json::Deserializer::from_str(text);
-        let parsed: SceneJson = serde_path_to_error::deserialize(de).map_err(|e| {
+        // serde's messages quote the input (an unknown 100 MB key, a string where a number
+        // belongs): both the field path and the message are cut to an excerpt.
+        let parsed: SceneJson = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
             let path = e.path().to_string();
-            Error::scene(if path == "." { "(root)".to_string() } else { path }, e.into_inner().to_string())
+            let path = light_field(text, &path).unwrap_or(path);
+            let field = if path == "." { "(root)".to_string() } else { excerpt(&path).into_owned() };
+            Error::scene(field, excerpt(&e.into_inner().to_string()).into_owned())
         })?;
+        // Text after the object is a mistake (two scenes pasted together, a truncated edit),
+        // not something to ignore.
+        de.end().map_err(|e| Error::scene("(root)", format!("text after the scene's JSON object: {e}")))?;
         Scene::from_json(parsed, base_dir)
     }
 
@@ -114,6 +121,19 @@ impl Scene {
             _ => None,
         })
     }
+}
+
+/// Lights are an internally tagged enum, which serde reads through a buffer: an error inside a
+/// light is reported at `lights[i]`, without the field. For the colour fields, the one at fault
+/// is found by reading each again on its own.
+fn light_field(text: &str, path: &str) -> Option<String> {
+    let i: usize = path.strip_prefix("lights[")?.strip_suffix(']')?.parse().ok()?;
+    let doc: serde_json::Value = serde_json::from_str(text).ok()?;
+    let light = doc.get("lights")?.get(i)?.as_object()?;
+    ["irradiance", "intensity", "radiance", "color"]
+        .into_iter()
+        .find(|k| light.get(*k).is_some_and(|v| serde_json::from_value::<json::Rgb>(v.clone()).is_err()))
+        .map(|k| format!("{path}.{k}"))
 }
 
 pub fn build_camera(c: &json::CameraJson) -> Result<Camera> {
@@ -205,7 +225,7 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
                 return Err(Error::scene(format!("{field}.intensity"), format!("must be finite and >= 0, got {intensity}")));
             }
             let map = match texture {
-                Some(t) => Some(crate::io::exr::read_latlong(&base_dir.join(t))?),
+                Some(t) => Some(crate::io::exr::read_latlong(&scene_file(&format!("{field}.texture"), t, base_dir)?)?),
                 None => None,
             };
             let colour = match color {
@@ -216,6 +236,17 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
             Light::Dome(Environment { color: colour * *intensity, map })
         }
     })
+}
+
+/// A file named by the scene, resolved against `base_dir`. Paths longer than any file system
+/// takes (Linux's PATH_MAX, 4096 bytes) are refused here, so the error that names the path
+/// cannot echo megabytes of input.
+fn scene_file(field: &str, name: &str, base_dir: &Path) -> Result<PathBuf> {
+    const MAX_PATH_BYTES: usize = 4096;
+    if name.len() > MAX_PATH_BYTES {
+        return Err(Error::scene(field, format!("a path of {} bytes is longer than any file system allows: `{}`", name.len(), excerpt(name))));
+    }
+    Ok(base_dir.join(name))
 }
 
 /// A finite, non-zero vector, normalised.
@@ -275,7 +306,7 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
         let build = match name.as_str() {
             "plume" => procedural::plume,
             "cumulus" => crate::medium::cumulus::cumulus,
-            _ => return Err(Error::scene("medium.procedural", format!("unknown procedural medium `{name}` (known: plume, cumulus)"))),
+            _ => return Err(Error::scene("medium.procedural", format!("unknown procedural medium `{}` (known: plume, cumulus)", excerpt(name)))),
         };
         let n = match m.dims.as_deref() {
             None => 64,
@@ -293,11 +324,11 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
         if !(voxel.is_finite() && voxel > 0.0) {
             return Err(Error::scene("medium.voxel_size", format!("must be > 0, got {voxel}")));
         }
-        let grid = raw::read_raw_f32(&base_dir.join(file), dims, limits)?;
+        let grid = raw::read_raw_f32(&scene_file("medium.raw", file, base_dir)?, dims, limits)?;
         (grid, Affine3A::from_translation(origin) * Affine3A::from_scale(Vec3::splat(voxel)))
     } else {
         let file = m.vdb.as_ref().unwrap();
-        crate::vdb::load_density(&base_dir.join(file), m.grid.as_deref(), limits)?
+        crate::vdb::load_density(&scene_file("medium.vdb", file, base_dir)?, m.grid.as_deref(), limits)?
     };
     let mut medium = Medium::new(grid, object_to_world * index_to_object, density_scale, albedo, m.g);
     if let Some(e) = &m.emission {
@@ -379,5 +410,49 @@ mod tests {
         assert!(e.contains("kamera"), "{e}");
         let e = err_of(&base.replace(r#""irradiance": [5.0, 4.6, 4.0]"#, r#""irradiance": "bright""#));
         assert!(e.contains("lights[0]"), "{e}");
+    }
+
+    /// Issue 22: text after the object was ignored; now it is an error naming what follows.
+    #[test]
+    fn text_after_the_object_is_an_error() {
+        let e = err_of(&format!("{DEFAULT_SCENE_JSON} {{\"format\": 1}}"));
+        assert!(e.contains("text after the scene's JSON object"), "{e}");
+        let e = err_of(&format!("{DEFAULT_SCENE_JSON}garbage"));
+        assert!(e.contains("text after"), "{e}");
+        // Trailing white space is not text.
+        assert!(Scene::from_json_str(&format!("{DEFAULT_SCENE_JSON}\n\t  \n"), Path::new(".")).is_ok());
+    }
+
+    /// Issue 22: a 100 MB name was echoed whole. Every message quotes at most
+    /// MAX_QUOTE_CHARS characters of input (plus a fixed-size frame: field, reason, the count
+    /// of what was left out; 600 bytes is generous for that frame and 10^5 times below the input).
+    #[test]
+    fn messages_quote_at_most_an_excerpt_of_huge_input() {
+        let huge = "x".repeat(10 << 20);
+        let cases = [
+            DEFAULT_SCENE_JSON.replace(r#""procedural": "plume""#, &format!(r#""procedural": "{huge}""#)),
+            DEFAULT_SCENE_JSON.replace(r#""camera": {"#, &format!(r#""{huge}": 1, "camera": {{"#)),
+            DEFAULT_SCENE_JSON.replace(r#""type": "dome""#, &format!(r#""type": "{huge}""#)),
+            DEFAULT_SCENE_JSON.replace(r#""procedural": "plume", "dims": [64]"#, &format!(r#""vdb": "{huge}.vdb", "grid": "{huge}""#)),
+            DEFAULT_SCENE_JSON.replace(r#""color": [0.12, 0.17, 0.28]"#, &format!(r#""texture": "{huge}.exr""#)),
+            DEFAULT_SCENE_JSON.replace(r#""width": 256"#, &format!(r#""width": "{huge}""#)),
+        ];
+        for json in cases {
+            let e = err_of(&json);
+            assert!(e.len() < 600 && e.contains("xxxxxxxxxx"), "{} bytes: {}", e.len(), &e[..e.len().min(700)]);
+        }
+    }
+
+    /// Issue 22: "data did not match any variant of untagged enum Rgb" named neither the field
+    /// nor the accepted forms.
+    #[test]
+    fn colour_errors_name_the_field_and_the_accepted_forms() {
+        for bad in [r#""bright""#, "[1, 2]", "[1, 2, 3, 4]", "{}", "[1, \"a\", 3]"] {
+            let e = err_of(&DEFAULT_SCENE_JSON.replace(r#""irradiance": [5.0, 4.6, 4.0]"#, &format!(r#""irradiance": {bad}"#)));
+            assert!(e.contains("lights[0].irradiance") && !e.contains("untagged"), "{bad}: {e}");
+            assert!(e.contains("[r, g, b]") || e.contains("f32"), "{bad}: {e}");
+        }
+        let ok = Scene::from_json_str(&DEFAULT_SCENE_JSON.replace("[0.95, 0.95, 0.95]", "0.5"), Path::new(".")).unwrap();
+        assert_eq!(ok.medium.albedo, Vec3::splat(0.5));
     }
 }

@@ -29,8 +29,14 @@ impl<'a> Reader<'a> {
         self.data.len() - self.pos
     }
 
-    /// A format error at the current offset.
+    /// A format error at the current offset. Names from the file are quoted as excerpts where
+    /// messages are made; this cut (at 4 quote lengths) is the backstop for one that is not.
     pub fn err(&self, msg: impl std::fmt::Display) -> Error {
+        let msg = msg.to_string();
+        let msg = match msg.char_indices().nth(4 * crate::error::MAX_QUOTE_CHARS) {
+            Some((end, _)) => format!("{}... ({} more bytes)", &msg[..end], msg.len() - end),
+            None => msg,
+        };
         Error::format(self.path, format!("at byte {}: {msg}", self.pos))
     }
 

@@ -137,7 +137,11 @@ pub(crate) fn read_meta_map(r: &mut Reader) -> Result<MetaMap> {
 fn r_err(r: &Reader, start: usize, name: &str, ty: &str, size: usize, n: usize) -> crate::error::Error {
     crate::error::Error::format(
         r.path(),
-        format!("at byte {start}: metadata `{name}` of type {ty} has size {size}, expected {n}"),
+        format!(
+            "at byte {start}: metadata `{}` of type {} has size {size}, expected {n}",
+            crate::error::excerpt(name),
+            crate::error::excerpt(ty)
+        ),
     )
 }
 
@@ -222,8 +226,9 @@ pub(crate) fn read_descriptor(r: &mut Reader) -> Result<GridDescriptor> {
     let block_ok = block_pos == 0 || (grid_pos <= block_pos && block_pos <= end_pos);
     if !(0 <= grid_pos && grid_pos <= end_pos && end_pos <= len && block_ok) {
         return Err(r.err(format!(
-            "grid `{unique_name}` has offsets grid {grid_pos}, blocks {block_pos}, end {end_pos} \
-             that are out of order or past the end of the file ({len} bytes)"
+            "grid `{}` has offsets grid {grid_pos}, blocks {block_pos}, end {end_pos} \
+             that are out of order or past the end of the file ({len} bytes)",
+            crate::error::excerpt(&unique_name)
         )));
     }
     let name = unique_name.split(NAME_SEP).next().unwrap_or("").to_string();

@@ -39,7 +39,7 @@ use std::path::{Path, PathBuf};
 use glam::{Affine3A, IVec3};
 use serde::Serialize;
 
-use crate::error::{Error, Result};
+use crate::error::{excerpt, Error, Result};
 use crate::medium::{DensityGrid, DensityGridBuilder, GridLimits};
 use bytes::Reader;
 use header::{FileHeader, GridDescriptor, MetaMap, MetaValue};
@@ -69,7 +69,8 @@ struct GridHead {
 impl VdbFile {
     /// Reads the file; refuses files larger than `max_bytes` before reading them.
     pub fn open(path: &Path, max_bytes: u64) -> Result<Self> {
-        let size = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+        // A FIFO passed as `medium.vdb` would block `read` forever (issue 22).
+        let size = crate::io::files::regular_file(path, "VDB file")?;
         if size > max_bytes {
             return Err(Error::TooLarge(format!(
                 "{}: file of {} MiB is over the limit of {} MiB",
@@ -78,6 +79,7 @@ impl VdbFile {
                 max_bytes >> 20
             )));
         }
+        crate::budget::check(&format!("VDB file {}", path.display()), size)?;
         let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         Self::from_bytes(data, path)
     }
@@ -100,7 +102,7 @@ impl VdbFile {
             for _ in 0..count {
                 let gd = header::read_descriptor(&mut r)?;
                 if (gd.grid_pos as u64) < r.pos() as u64 {
-                    return Err(r.err(format!("grid `{}` starts at {}, inside its own descriptor", gd.name, gd.grid_pos)));
+                    return Err(r.err(format!("grid `{}` starts at {}, inside its own descriptor", excerpt(&gd.name), gd.grid_pos)));
                 }
                 r.seek(gd.end_pos, "grid end")?;
                 grids.push(gd);
@@ -144,10 +146,10 @@ impl VdbFile {
             .iter()
             .position(|g| g.unique_name == gd.instance_parent && g.instance_parent.is_empty())
             .ok_or_else(|| {
-                Error::format(&self.path, format!("grid `{}` is an instance of `{}`, which is not in the file", gd.name, gd.instance_parent))
+                Error::format(&self.path, format!("grid `{}` is an instance of `{}`, which is not in the file", excerpt(&gd.name), excerpt(&gd.instance_parent)))
             })?;
         if self.grids[p].grid_type != gd.grid_type || self.grids[p].half != gd.half {
-            return Err(Error::format(&self.path, format!("instance grid `{}` and its parent differ in type", gd.name)));
+            return Err(Error::format(&self.path, format!("instance grid `{}` and its parent differ in type", excerpt(&gd.name))));
         }
         Ok(p)
     }
@@ -158,7 +160,7 @@ impl VdbFile {
         let head = self.grid_head(owner)?;
         let gd = &self.grids[owner];
         if gd.half && !kind.is_real() {
-            return Err(Error::format(&self.path, format!("grid `{}`: half precision on a non-real value type", gd.name)));
+            return Err(Error::format(&self.path, format!("grid `{}`: half precision on a non-real value type", excerpt(&gd.name))));
         }
         let mut r = self.grid_reader(owner)?;
         r.seek(head.tree_pos as i64, "tree")?;
@@ -170,16 +172,18 @@ impl VdbFile {
     /// with `None` the grid named "density", else the first float grid.
     pub fn find_density_grid(&self, name: Option<&str>) -> Result<usize> {
         let listing = || {
-            self.grids
+            let names = self.grids
                 .iter()
-                .map(|g| format!("`{}` ({}{})", g.name, ValueKind::type_name(&g.grid_type), if g.half { ", half" } else { "" }))
+                .map(|g| format!("`{}` ({}{})", excerpt(&g.name), excerpt(ValueKind::type_name(&g.grid_type)), if g.half { ", half" } else { "" }))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", ");
+            // A file may hold thousands of grids: the listing is quoted like any input.
+            excerpt(&names).into_owned()
         };
         let is_float = |g: &GridDescriptor| ValueKind::from_tree_type(&g.grid_type) == Some(ValueKind::FLOAT);
         let i = match name {
             Some(n) => self.grids.iter().position(|g| g.name == n || g.unique_name == n).ok_or_else(|| {
-                Error::format(&self.path, format!("no grid named `{n}`; the file has {}", listing()))
+                Error::format(&self.path, format!("no grid named `{}`; the file has {}", excerpt(n), listing()))
             })?,
             None => self
                 .grids
@@ -194,8 +198,8 @@ impl VdbFile {
                 &self.path,
                 format!(
                     "grid `{}` holds {} values, not float: it cannot be used as density (grids: {})",
-                    g.name,
-                    ValueKind::type_name(&g.grid_type),
+                    excerpt(&g.name),
+                    excerpt(ValueKind::type_name(&g.grid_type)),
                     listing()
                 ),
             ));
@@ -211,7 +215,7 @@ impl VdbFile {
         let res = self.visit_tree(i, ValueKind::FLOAT, &mut v);
         match res {
             Ok(()) => {}
-            Err(Error::InvalidArgument(m)) => return Err(Error::format(&self.path, format!("grid `{name}`: {m}"))),
+            Err(Error::InvalidArgument(m)) => return Err(Error::format(&self.path, format!("grid `{}`: {m}", excerpt(&name)))),
             Err(e) => return Err(e),
         }
         let xf = head.transform.to_affine3a();
@@ -219,7 +223,7 @@ impl VdbFile {
         if !xf.is_finite() || !det.is_finite() || det == 0.0 {
             return Err(Error::format(
                 &self.path,
-                format!("grid `{name}`: transform {} is out of single-precision range", head.transform.map_type),
+                format!("grid `{}`: transform {} is out of single-precision range", excerpt(&name), excerpt(&head.transform.map_type)),
             ));
         }
         let grid = v.builder.build()?;
@@ -270,7 +274,7 @@ impl VdbFile {
                 info.sum = Some(if kind.comps == 1 { Sum::Scalar(s.sum[0]) } else { Sum::Vector(s.sum) });
             }
             None => {
-                info.note = Some(format!("values of type `{}` are listed, not read", info.value_type));
+                info.note = Some(format!("values of type `{}` are listed, not read", excerpt(&info.value_type)));
             }
         }
         Ok(info)

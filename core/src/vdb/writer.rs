@@ -270,7 +270,7 @@ fn write_file(path: &Path, grids: &[(&str, FloatTree)], xf: Affine3A, o: &WriteO
         used.push(name);
         write_grid(&mut w, &unique, name, tree, xf, o);
     }
-    std::fs::write(path, &w.buf).map_err(|e| Error::io(path, e))
+    crate::io::files::write_file(path, &w.buf)
 }
 
 /// 36 characters in UUID form; unique enough to tell files apart.

@@ -261,7 +261,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         }
-        std::fs::write(path, serde_json::to_string_pretty(&doc).unwrap()).map_err(|e| Error::io(path, e))?;
+        volscatter_core::io::files::write_file(path, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
     }
     Ok(())
 }

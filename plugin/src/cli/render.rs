@@ -189,7 +189,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "image": stats,
         });
         ensure_parent(report)?;
-        std::fs::write(report, serde_json::to_string_pretty(&doc).unwrap()).map_err(|e| Error::io(report, e))?;
+        volscatter_core::io::files::write_file(report, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
     }
     Ok(())
 }

@@ -21,8 +21,7 @@ pub(crate) fn write_grid(path: &Path, grid: &ScatteringGrid) -> FfiResult {
     let m = glam::Mat4::from(grid.index_to_world).transpose().to_cols_array();
     attributes.other.insert(Text::from("volscatterIndexToWorld"), AttributeValue::Matrix4x4(m));
     let layer = Layer::new((nx, height), attributes, Encoding::SMALL_LOSSLESS, channels);
-    Image::from_layer(layer)
-        .write()
-        .to_file(path)
-        .map_err(|e| FfiError::new(VsStatus::Io, format!("{}: writing EXR failed: {e}", path.display())))
+    // Encoded in memory and written checked: a full disk or a missing folder is VS_STATUS_IO.
+    volscatter_core::io::exr::write_layer(path, layer)?;
+    Ok(())
 }
