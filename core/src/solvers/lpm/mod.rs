@@ -131,7 +131,7 @@ impl Lpm {
         report.cell_bytes = cells * 16 + (2 * u_count + grid.len()) as u64 * 12;
         report.layers = match ov.layers {
             Some(l) => [l.max(1); FACES],
-            None => stream::plan(&grid, &dirs, s.memory_budget)?,
+            None => stream::plan(grid.dims, &dirs, s.memory_budget)?,
         };
         let camera = scene.camera.position;
         let albedo = medium.albedo;

@@ -55,8 +55,12 @@ pub struct FaceFrame {
 
 impl FaceFrame {
     pub fn new(grid: &LpmGrid, face: usize) -> Self {
+        FaceFrame::from_dims(grid.dims, face)
+    }
+
+    pub fn from_dims(dims: [usize; 3], face: usize) -> Self {
         let axes = face_axes(face);
-        FaceFrame { face, axes, nu: grid.dims[axes.0], nv: grid.dims[axes.1], nw: grid.dims[axes.2], forward: face % 2 == 0 }
+        FaceFrame { face, axes, nu: dims[axes.0], nv: dims[axes.1], nw: dims[axes.2], forward: face % 2 == 0 }
     }
 
     /// Grid coordinates of map cell (u, v) at sweep layer `w` (0 = the face the rays enter).

@@ -28,10 +28,10 @@ pub fn working_bytes(map_len: usize, p: usize, layers: usize) -> u64 {
 /// Slab thickness of each face: the whole depth when `memory_budget` is 0, else the most
 /// layers whose working buffers fit it. Refused, with the size needed, when one layer does
 /// not fit.
-pub fn plan(grid: &LpmGrid, dirs: &Directions, memory_budget: u64) -> Result<[usize; FACES]> {
+pub fn plan(dims: [usize; 3], dirs: &Directions, memory_budget: u64) -> Result<[usize; FACES]> {
     let mut layers = [0usize; FACES];
     for (f, l) in layers.iter_mut().enumerate() {
-        let ff = FaceFrame::new(grid, f);
+        let ff = FaceFrame::from_dims(dims, f);
         if memory_budget == 0 {
             *l = ff.nw;
             continue;
