@@ -164,3 +164,93 @@ fn lpm_memory_budget_picks_slices_and_peak_memory_scales_with_the_slice() {
     assert!((s32 as f64 / s16 as f64 - 4.0).abs() < 0.01);
     assert!(w32 as f64 / w16 as f64 > 7.5);
 }
+
+/// The error against the converged reference falls as the grid, the directions and the
+/// orders grow (cube g 0, image rel. RMSE). Measured: grid 8 0.057, grid 16 0.029; 4
+/// directions (2 x 2 a face) 0.032; 2 orders 0.352.
+#[test]
+fn lpm_error_falls_with_resolution_directions_and_orders() {
+    let name = "cube_g0";
+    let sc = case(name);
+    let err = |grid_resolution: u32, directions: u32, max_orders: u32| {
+        let s = LpmSettings { grid_resolution, directions, max_orders, output_resolution: 24, ..Default::default() };
+        let (g, _) = run(&sc, s, Overrides::default());
+        errors_against_fixture(name, &sc, &g).image
+    };
+    let coarse = err(8, 25, 200);
+    let base = err(16, 25, 200);
+    let few_dirs = err(16, 4, 200);
+    let few_orders = err(16, 25, 2);
+    eprintln!("cube g 0 image rel. RMSE: grid 8 {coarse:.4}, grid 16 {base:.4}; 4 directions {few_dirs:.4}; 2 orders {few_orders:.4}");
+    assert!(base < coarse, "resolution: {base} vs {coarse}");
+    assert!(base < few_dirs, "directions: {base} vs {few_dirs}");
+    assert!(base < few_orders, "orders: {base} vs {few_orders}");
+}
+
+/// How far a fixed 3 orders (the paper's benchmark setting) is from the converged answer at
+/// albedo 0.99 (the plume): the mean of J (orders 2 and up) after 3 propagations over the mean
+/// at epsilon 1e-3, and the energy each order adds (it falls order by order). Measured
+/// (grid 16): 19 orders to epsilon; 3 propagations give 0.653 of the converged J, the orders'
+/// shares 0.32, 0.20, 0.14, 0.10, 0.07, ... (each about 0.7 of the last).
+#[test]
+fn lpm_three_orders_against_converged_at_albedo_099() {
+    let sc = case("plume");
+    assert!((sc.medium.albedo.x - 0.99).abs() < 1e-6);
+    let s = LpmSettings { grid_resolution: 16, ..Default::default() };
+    let (_, rep) = run(&sc, s, Overrides { keep_orders: true, j_only: true, ..Default::default() });
+    let per_order: Vec<f64> = rep.j_per_order.iter().map(|j| j.iter().map(|v| v.x as f64).sum::<f64>()).collect();
+    let total: f64 = per_order.iter().sum();
+    let three: f64 = per_order.iter().take(3).sum();
+    eprintln!(
+        "plume: {} orders to epsilon; J after 3 propagations = {:.3} of converged; per-order share {:?}",
+        rep.orders,
+        three / total,
+        per_order.iter().map(|e| format!("{:.3}", e / total)).collect::<Vec<_>>()
+    );
+    assert!(rep.orders > 3);
+    assert!(per_order.windows(2).skip(1).all(|w| w[1] < w[0]), "orders must lose energy: {per_order:?}");
+    assert!(three / total < 0.98);
+}
+
+fn check_case(name: &str, max_image: f64, max_grid: f64) {
+    let sc = case(name);
+    let t = std::time::Instant::now();
+    let s = LpmSettings { grid_resolution: 24, output_resolution: 24, ..Default::default() };
+    let (grid, rep) = run(&sc, s, Overrides::default());
+    let e = errors_against_fixture(name, &sc, &grid);
+    eprintln!("lpm {name}: {e}; {} orders, {:.1} s", rep.orders, t.elapsed().as_secs_f64());
+    assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
+    assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+}
+
+macro_rules! against_reference {
+    ($($test:ident: $case:literal, $image:literal, $grid:literal;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                check_case($case, $image, $grid);
+            }
+        )*
+    };
+}
+
+// Ratchets against the converged fixtures (their own noise 0.5-3%), grid 24, 25 directions,
+// 6 storage directions, to epsilon: bounds = measured + 10% + 0.01. Measured (image / grid,
+// image mean ratio): cube g 0 0.023 / 0.014 x1.02; cube g 0.7 0.115 / 0.078 x1.01; cube g 0.9
+// 0.403 / 0.397 x1.36; plume (g 0.9) 0.250 / 0.227 x1.18; plume beside a point light 0.164 /
+// 0.140 x1.17, spot 0.154 / 0.131, rect 0.153 / 0.135; dense cloud (g 0.9, optical depth 30)
+// 0.993 / 0.366 x1.92. Too bright where g is 0.9: a bin of the 5 x 5 lattice is ~16 degrees
+// wide and the phase table averages the lobe (~6 degrees) over both bins, so light scattered
+// forward spreads sideways order after order (m = 24 storage bins: cloud 0.72; the cure is a
+// delta-M split of the lobe's peak, not in this landing). Isotropic and moderate g are within
+// a few percent.
+against_reference! {
+    lpm_cube_g0_against_reference: "cube_g0", 0.036, 0.026;
+    lpm_cube_g07_against_reference: "cube_g07", 0.137, 0.096;
+    lpm_cube_g09_against_reference: "cube_g09", 0.454, 0.447;
+    lpm_plume_against_reference: "plume", 0.286, 0.26;
+    lpm_plume_point_against_reference: "plume_point", 0.191, 0.164;
+    lpm_plume_spot_against_reference: "plume_spot", 0.18, 0.154;
+    lpm_plume_rect_against_reference: "plume_rect", 0.178, 0.159;
+    lpm_cloud_against_reference: "cloud", 1.103, 0.413;
+}

@@ -100,7 +100,7 @@ fn expectation(name: &str) -> Expectation {
         },
         // Provisional: being measured.
         "lpm" => Expectation {
-            settings: serde_json::json!({"name": "lpm", "grid_resolution": 16, "directions": 25, "output_resolution": 16}),
+            settings: serde_json::json!({"name": "lpm", "grid_resolution": 24, "output_resolution": 16}),
             furnace: [0.5, 0.5],
             furnace_cloud: 0.5,
             energy: 0.5,
