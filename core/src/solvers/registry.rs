@@ -440,7 +440,7 @@ const LPM: SolverEntry = SolverEntry {
     help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget",
     settings: &[
         SettingSpec::int("grid_resolution", "cells of the propagation grid along the longest side").range(2.0, 512.0),
-        SettingSpec::int("directions", "propagation directions per cube face (a perfect square; the paper's 25)").range(1.0, 1024.0),
+        SettingSpec::int("directions", "propagation directions per cube face (a perfect square; the paper's 25)").range(1.0, 256.0),
         SettingSpec::int("storage_per_face", "storage directions m = 6 x this^2 (1: the paper's 6; anisotropic media need 2 or more)").range(1.0, 32.0),
         SettingSpec::float("epsilon", "stop when an order's largest U falls below this fraction of the first order's")
             .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),

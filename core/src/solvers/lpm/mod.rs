@@ -121,7 +121,7 @@ impl Lpm {
         let grid = timings.time("lpm grid", || LpmGrid::new(medium, s.grid_resolution, &mip))?;
         report.grid_dims = grid.dims;
         let dirs = Directions::new(s.lattice_side() as usize, s.storage_per_face as usize);
-        let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g));
+        let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
         let m = table.m;
         let cells = grid.len() as u64;
         let u_count = crate::budget::check_elements::<Vec3>("lpm U (cells x storage directions)", cells * m as u64)?;

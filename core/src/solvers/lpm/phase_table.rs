@@ -12,6 +12,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::directions::Directions;
+use crate::error::Result;
 use crate::phase::hg;
 
 pub struct PhaseTable {
@@ -27,10 +28,11 @@ pub struct PhaseTable {
 }
 
 impl PhaseTable {
-    pub fn new(dirs: &Directions, g: f32) -> Self {
+    pub fn new(dirs: &Directions, g: f32) -> Result<Self> {
         let n = dirs.len();
         let m = dirs.storage_len();
-        let mut fine = vec![0.0f32; n * n];
+        let count = crate::budget::check_elements::<f32>("lpm phase table (directions^2)", (n as u64) * (n as u64 + m as u64))?;
+        let mut fine = vec![0.0f32; count - m * n];
         let raw: Vec<f32> = fine
             .par_chunks_mut(n)
             .enumerate()
@@ -58,7 +60,7 @@ impl PhaseTable {
                 storage[dj.storage * n + i] += w * fine[j * n + i];
             }
         }
-        PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw }
+        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw })
     }
 
     /// Mean over storage bin `d` of p(w_out . w) for light travelling along unit `w` (a
@@ -103,7 +105,7 @@ mod tests {
     fn phase_table_rows_sum_to_solid_angle() {
         let dirs = Directions::new(5, 2);
         for (g, tol) in [(0.0f32, 0.005f32), (0.6, 0.005), (0.9, 0.02)] {
-            let t = PhaseTable::new(&dirs, g);
+            let t = PhaseTable::new(&dirs, g).unwrap();
             let worst = t
                 .raw_row_solid_angle
                 .iter()

@@ -13,7 +13,8 @@ pub struct LpmSettings {
     /// on one core, and the error against the fixtures falls with it (tests.rs).
     pub grid_resolution: u32,
     /// Propagation directions per cube face (n, a perfect square: a k x k lattice over the
-    /// face). The paper's 25; fewer shows the ray effect, more costs linearly.
+    /// face). The paper's 25; fewer shows the ray effect, more costs linearly per order (and
+    /// the phase table, 6n x 6n, quadratically: 256 is its cap).
     pub directions: u32,
     /// Storage directions per face side: m = 6 x `storage_per_face`^2 bins of U. The paper's
     /// 6 (1 per face) flattens an anisotropic phase function to one value per face. Measured
@@ -92,8 +93,8 @@ impl LpmSettings {
             return bad("grid_resolution must be in [2, 512]");
         }
         let k = self.lattice_side();
-        if !(1..=1024).contains(&self.directions) || k * k != self.directions {
-            return bad("directions must be a perfect square (k x k per face) in [1, 1024]");
+        if !(1..=256).contains(&self.directions) || k * k != self.directions {
+            return bad("directions must be a perfect square (k x k per face) in [1, 256]");
         }
         if !(1..=32).contains(&self.storage_per_face) {
             return bad("storage_per_face must be in [1, 32]");
