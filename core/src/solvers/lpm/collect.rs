@@ -27,6 +27,7 @@ pub struct Targets<'a> {
 
 /// Adds the slab `w0..w1` of face `ff`: `t` holds the face's directions' buffers one after
 /// the other, each `(w1 - w0) x map` long.
+#[allow(clippy::too_many_arguments)]
 pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceFrame, t: &[Vec3], w0: usize, w1: usize, targets: Targets) {
     let m = table.m;
     let n = table.n;

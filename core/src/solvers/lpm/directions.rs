@@ -21,7 +21,7 @@ pub fn face_axes(f: usize) -> (usize, usize, usize) {
 
 #[inline]
 pub fn face_sign(f: usize) -> f32 {
-    if f % 2 == 0 { 1.0 } else { -1.0 }
+    if f.is_multiple_of(2) { 1.0 } else { -1.0 }
 }
 
 /// Solid angle of the rectangle [a0, a1] x [b0, b1] on the plane at distance 1.
@@ -113,6 +113,10 @@ impl Directions {
 
     pub fn len(&self) -> usize {
         self.dirs.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.dirs.is_empty()
     }
 
     pub fn storage_len(&self) -> usize {

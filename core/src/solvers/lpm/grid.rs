@@ -47,6 +47,10 @@ impl LpmGrid {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
 
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
     #[inline]
     pub fn index(&self, c: [usize; 3]) -> usize {
         c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])

@@ -60,7 +60,7 @@ impl FaceFrame {
 
     pub fn from_dims(dims: [usize; 3], face: usize) -> Self {
         let axes = face_axes(face);
-        FaceFrame { face, axes, nu: dims[axes.0], nv: dims[axes.1], nw: dims[axes.2], forward: face % 2 == 0 }
+        FaceFrame { face, axes, nu: dims[axes.0], nv: dims[axes.1], nw: dims[axes.2], forward: face.is_multiple_of(2) }
     }
 
     /// Grid coordinates of map cell (u, v) at sweep layer `w` (0 = the face the rays enter).

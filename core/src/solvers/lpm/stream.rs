@@ -79,9 +79,9 @@ pub fn sweep(
 ) -> Result<()> {
     let p = dirs.per_face();
     let m = table.m;
-    for f in 0..FACES {
+    for (f, &layers) in layers.iter().enumerate() {
         let ff = FaceFrame::new(grid, f);
-        let s = layers[f].clamp(1, ff.nw.max(1));
+        let s = layers.clamp(1, ff.nw.max(1));
         let map_count = crate::budget::check_elements::<Vec3>("lpm propagation maps", p as u64 * ff.map_len() as u64)?;
         let t_count = crate::budget::check_elements::<Vec3>("lpm slice buffer", (p * s) as u64 * ff.map_len() as u64)?;
         let mut maps = vec![Vec3::ZERO; map_count];
