@@ -12,7 +12,7 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use super::{network, photon_grid, pop, reference, vpl, Solver};
+use super::{lpm, network, photon_grid, pop, reference, vpl, Solver};
 use crate::error::{Error, Result};
 
 /// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
@@ -434,8 +434,43 @@ const NETWORK: SolverEntry = SolverEntry {
     gpu: false,
 };
 
+const LPM: SolverEntry = SolverEntry {
+    name: "lpm",
+    label: "Light Propagation Maps",
+    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget",
+    settings: &[
+        SettingSpec::int("grid_resolution", "cells of the propagation grid along the longest side").range(2.0, 512.0),
+        SettingSpec::int("directions", "propagation directions per cube face (a perfect square; the paper's 25)").range(1.0, 256.0),
+        SettingSpec::int("storage_per_face", "storage directions m = 6 x this^2 (1: the paper's 6; anisotropic media need 2 or more)").range(1.0, 32.0),
+        SettingSpec::float("epsilon", "stop when an order's largest U falls below this fraction of the first order's")
+            .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
+        SettingSpec::int("max_orders", "cap on propagated orders").range(1.0, 100_000.0),
+        SettingSpec {
+            choices: &["exact", "boundary"],
+            ..SettingSpec::new("first_order", SettingType::Choice, "first scattering of distant lights: exact transmittance to every cell, or the paper's boundary radiance in one bin")
+        },
+        SettingSpec::int("memory_budget", "bytes for the propagation's slice buffers; the slice thickness is picked from it (0: one slice, the whole volume)"),
+        SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
+        SettingSpec::bool("upsample", "joint bilateral upsampling guided by the density (off: trilinear)"),
+        SettingSpec::float("range_sigma", "range sigma of the bilateral filter, a fraction of the largest density")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }),
+        SettingSpec::float("spatial_sigma", "spatial sigma of the bilateral filter, in propagation cells")
+            .open_range(Range { min: Some(0.0), max: Some(4.0), min_exclusive: true, max_exclusive: false }),
+        SettingSpec::int("dome_directions", "dome directions of the exact single scattering").range(1.0, 1024.0),
+    ],
+    defaults: || serde_json::to_value(lpm::LpmSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"grid_resolution": 16, "directions": 9, "output_resolution": 48}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "directions": 49, "output_resolution": 128}"# },
+    ],
+    cpu: |m| Ok(Box::new(lpm::Lpm::from_settings(m)?)),
+    gpu: false,
+};
+
 /// Every solver, in menu order (the first is the hosts' default).
-pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID, NETWORK];
+pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID, NETWORK, LPM];
 
 /// The solvers' names, in `SOLVERS` order.
 pub const SOLVER_NAMES: &[&str] = &names::<{ SOLVERS.len() }>();

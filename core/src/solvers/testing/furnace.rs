@@ -98,6 +98,19 @@ fn expectation(name: &str) -> Expectation {
             furnace_cloud: 0.063,
             energy: 0.107,
         },
+        // Deterministic; a non-absorbing medium conserves energy cell by cell (propagate.rs),
+        // so what remains is the grid's discretisation (16 cells; the box's S / sigma_s falls
+        // to 1.005 at 40 cells), where the exact single scattering of the compositor and the
+        // maps' own first order differ, and the orders cut off at `max_orders`. Measured: box
+        // S / sigma_s 1.0064, image 1.0035; energy 1.0173; the white dense cloud (optical
+        // depth 30) 0.900: 200 orders are not enough there (each keeps ~0.99 of the last).
+        // Bounds: measured deviation + 10% + 0.01.
+        "lpm" => Expectation {
+            settings: serde_json::json!({"name": "lpm", "grid_resolution": 16, "output_resolution": 16}),
+            furnace: [0.018, 0.014],
+            furnace_cloud: 0.12,
+            energy: 0.03,
+        },
         other => panic!("solver `{other}` has no stated furnace / energy tolerance: add it to testing/furnace.rs `expectation`"),
     }
 }

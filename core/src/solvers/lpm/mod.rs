@@ -1,0 +1,203 @@
+//! `lpm`: light propagation maps (paper 05, after Fattal 2009), CPU, first landing.
+//!
+//! A discrete-ordinates solver: the medium on a grid of cubic cells (grid.rs), 6 x n
+//! propagation directions, n per cube face, and m storage directions (directions.rs), the
+//! phase table F of Eq. 5 between them (phase_table.rs). Each order propagates every face's
+//! map of rays layer by layer through the grid (propagate.rs, Eq. 3), then collects what the
+//! rays left in each cell into U of the next order and, towards the camera, into J
+//! (collect.rs, Eq. 4); the split needs no atomics (Sec. 4.1). Orders run until the largest U
+//! falls below `epsilon` times the first order's (Fattal's criterion). The sweeps run in slabs
+//! whose working memory fits `memory_budget` (stream.rs, Sec. 4.2).
+//!
+//! S = (the compositor's exact single scattering) + sigma_s x J upsampled by pop's
+//! density-guided filter. The first propagation (dome, emission, and the sun in `boundary`
+//! mode) and the exact first order of the other lights (lights.rs) make U of the first order;
+//! J gathers orders two and up.
+//!
+//! Departures from the paper, each where it is made: T is the exact segment mean
+//! (propagate.rs); J from the fine bins (collect.rs); exact first order for distant and local
+//! lights (lights.rs); the phase table normalised (phase_table.rs).
+//!
+//! Not yet here (issue 19): the GPU kernels, the VDB read per region and S written per slice
+//! (the per-cell arrays stay in memory, stream.rs).
+
+mod collect;
+pub mod directions;
+pub mod grid;
+pub mod lights;
+pub mod phase_table;
+pub mod propagate;
+pub mod settings;
+pub mod stream;
+#[cfg(test)]
+mod tests;
+
+pub use settings::{FirstOrder, LpmSettings};
+
+use glam::Vec3;
+
+use super::pop::merge::{footprint, Merged};
+use super::pop::mip::MediumMip;
+use super::pop::upsample::upsample;
+use super::pop::PopSettings;
+use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
+use crate::compositor::single_scattering_grid;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use directions::{Directions, FACES};
+use grid::LpmGrid;
+use phase_table::PhaseTable;
+
+pub struct Lpm {
+    settings: LpmSettings,
+}
+
+/// What a solve did, for tests and benchmarks.
+#[derive(Clone, Debug, Default)]
+pub struct LpmReport {
+    pub grid_dims: [usize; 3],
+    /// Largest U (max over cells, bins and channels) of each order from the first.
+    pub max_u: Vec<f32>,
+    /// Propagations after the first order's (each gives J one more order).
+    pub orders: usize,
+    pub layers: [usize; FACES],
+    pub sweep: stream::SweepStats,
+    /// Bytes of the per-cell arrays (density, sigma_t, two U, J).
+    pub cell_bytes: u64,
+    /// J (in-scattered radiance per unit sigma_s, orders two and up) on the cell centres.
+    pub j: Option<super::ScatteringGrid>,
+    /// J of each order (when asked for: `keep_orders`).
+    pub j_per_order: Vec<Vec<Vec3>>,
+}
+
+/// Overrides for tests and benchmarks.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Overrides {
+    /// Slab thickness for every face instead of the budget's plan.
+    pub layers: Option<usize>,
+    /// Keep J of every order in the report.
+    pub keep_orders: bool,
+    /// Skip the upsampled output (the report's J is enough).
+    pub j_only: bool,
+}
+
+fn max_abs(v: &[Vec3]) -> f32 {
+    v.iter().fold(0.0f32, |a, x| a.max(x.abs().max_element()))
+}
+
+impl Lpm {
+    pub fn new(settings: LpmSettings) -> Result<Self> {
+        settings.validate()?;
+        Ok(Lpm { settings })
+    }
+
+    pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
+        Lpm::new(parse_settings(map)?)
+    }
+
+    pub fn settings(&self) -> &LpmSettings {
+        &self.settings
+    }
+
+    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides) -> Result<(SolveOutput, LpmReport)> {
+        let s = &self.settings;
+        let medium = &scene.medium;
+        let mut timings = Timings::default();
+        let mut report = LpmReport::default();
+        let out_probe = super::ScatteringGrid::over_medium(medium, s.output_resolution)?;
+        let single = if ov.j_only {
+            out_probe.clone()
+        } else {
+            timings.time("lpm single scattering", || single_scattering_grid(scene, s.output_resolution, s.dome_directions))?
+        };
+        if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
+            return Ok((SolveOutput { scattering: single, timings }, report));
+        }
+        // The mip serves both the cells' mean density and the upsampling.
+        let (lo, hi) = medium.world_bounds();
+        let h = (hi - lo).max_element() / s.grid_resolution as f32;
+        let cell_fp = h / medium.voxel_size_world().max_element();
+        let mip = timings.time("lpm mip", || MediumMip::new(medium, cell_fp.min(footprint(medium, &out_probe))));
+        let grid = timings.time("lpm grid", || LpmGrid::new(medium, s.grid_resolution, &mip))?;
+        report.grid_dims = grid.dims;
+        let dirs = Directions::new(s.lattice_side() as usize, s.storage_per_face as usize);
+        let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
+        let m = table.m;
+        let cells = grid.len() as u64;
+        let u_count = crate::budget::check_elements::<Vec3>("lpm U (cells x storage directions)", cells * m as u64)?;
+        let mut u_prev = vec![Vec3::ZERO; u_count];
+        let mut u_cur = vec![Vec3::ZERO; u_count];
+        let mut j = vec![Vec3::ZERO; grid.len()];
+        report.cell_bytes = cells * 16 + (2 * u_count + grid.len()) as u64 * 12;
+        report.layers = match ov.layers {
+            Some(l) => [l.max(1); FACES],
+            None => stream::plan(grid.dims, &dirs, s.memory_budget)?,
+        };
+        let camera = scene.camera.position;
+        let albedo = medium.albedo;
+        let zero_boundary = vec![Vec3::ZERO; dirs.len()];
+
+        // First order: the first propagation (dome, emission, sun as boundary) and the exact
+        // first scattering of the other lights.
+        let boundary = lights::boundary(scene, &dirs, s.first_order);
+        timings.time("lpm first order", || -> Result<()> {
+            if lights::first_propagation_needed(&boundary, scene) {
+                lights::emission_source(scene, &grid, m, &mut u_prev);
+                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &boundary, &mut u_cur, None, camera, albedo, &mut report.sweep)?;
+            }
+            lights::add_first_order(scene, &grid, &dirs, &table, s.first_order, &mut u_cur);
+            Ok(())
+        })?;
+        std::mem::swap(&mut u_prev, &mut u_cur);
+        let first_max = max_abs(&u_prev);
+        report.max_u.push(first_max);
+        if !progress.update("lpm propagate", 0.1) {
+            return Err(Error::Cancelled);
+        }
+        timings.time("lpm propagate", || -> Result<()> {
+            while first_max > 0.0 && report.orders < s.max_orders as usize && *report.max_u.last().unwrap_or(&0.0) > s.epsilon * first_max {
+                u_cur.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                let before = ov.keep_orders.then(|| j.clone());
+                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &zero_boundary, &mut u_cur, Some(&mut j), camera, albedo, &mut report.sweep)?;
+                if let Some(b) = before {
+                    report.j_per_order.push(j.iter().zip(&b).map(|(a, b)| *a - *b).collect());
+                }
+                std::mem::swap(&mut u_prev, &mut u_cur);
+                report.max_u.push(max_abs(&u_prev));
+                report.orders += 1;
+                let done = (report.orders as f32 / s.max_orders as f32).max((s.epsilon * first_max / report.max_u.last().unwrap_or(&1.0).max(1e-30)).min(1.0));
+                if !progress.update("lpm propagate", 0.1 + 0.8 * done) {
+                    return Err(Error::Cancelled);
+                }
+            }
+            Ok(())
+        })?;
+        drop(u_prev);
+        drop(u_cur);
+        let j_grid = grid.as_scattering_grid(j);
+        if ov.j_only {
+            report.j = Some(j_grid);
+            return Ok((SolveOutput { scattering: single, timings }, report));
+        }
+        let merged = Merged { j: j_grid, density: grid.density.clone() };
+        let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
+        let mut scattering = timings.time("lpm upsample", || upsample(medium, &mip, &merged, &pop_like))?;
+        debug_assert_eq!(scattering.dims, single.dims);
+        for (a, b) in scattering.data.iter_mut().zip(&single.data) {
+            *a += *b;
+        }
+        report.j = Some(merged.j);
+        progress.update("lpm upsample", 1.0);
+        Ok((SolveOutput { scattering, timings }, report))
+    }
+}
+
+impl Solver for Lpm {
+    fn name(&self) -> &'static str {
+        "lpm"
+    }
+
+    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
+        Ok(self.solve_detailed(scene, progress, Overrides::default())?.0)
+    }
+}

@@ -1,0 +1,107 @@
+//! Slice streaming (Sec. 4.2) on the CPU: each face's sweep runs through slabs of `layers`
+//! layers; the rays' radiance leaving a slab (the maps, one per direction) is carried into the
+//! next, so the propagation's working memory is the maps plus one slab's temporary buffers,
+//! p x map x (layers + 1) RGB values, whatever the volume's depth (the paper's
+//! 4 nbSpect (S p n^2 + p n^2) terms). A slab is propagated and collected before the next
+//! one starts, in the same order as one whole-volume slab, so streamed and in-memory solves
+//! agree to the bit (tests.rs).
+//!
+//! Not streamed here (reported in issue 19): the per-cell arrays (density, sigma_t, U of two
+//! orders, J) stay whole in memory; only the propagation's buffers are bounded.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::collect::{collect, Targets};
+use super::directions::{Directions, FACES};
+use super::grid::LpmGrid;
+use super::phase_table::PhaseTable;
+use super::propagate::{propagate, FaceFrame};
+use crate::error::{Error, Result};
+
+/// Bytes of the propagation's working buffers for a face whose map has `map_len` cells, `p`
+/// directions and slabs of `layers` layers: the maps and the slab's T.
+pub fn working_bytes(map_len: usize, p: usize, layers: usize) -> u64 {
+    (p as u64) * (map_len as u64) * (layers as u64 + 1) * std::mem::size_of::<Vec3>() as u64
+}
+
+/// Slab thickness of each face: the whole depth when `memory_budget` is 0, else the most
+/// layers whose working buffers fit it. Refused, with the size needed, when one layer does
+/// not fit.
+pub fn plan(dims: [usize; 3], dirs: &Directions, memory_budget: u64) -> Result<[usize; FACES]> {
+    let mut layers = [0usize; FACES];
+    for (f, l) in layers.iter_mut().enumerate() {
+        let ff = FaceFrame::from_dims(dims, f);
+        if memory_budget == 0 {
+            *l = ff.nw;
+            continue;
+        }
+        let one = working_bytes(ff.map_len(), dirs.per_face(), 1);
+        if one > memory_budget {
+            return Err(Error::TooLarge(format!(
+                "lpm: one slice (1 layer of {}x{} cells, {} directions) needs {} but memory_budget is {}; lower grid_resolution or directions, or raise memory_budget",
+                ff.nu,
+                ff.nv,
+                dirs.per_face(),
+                crate::budget::human(one),
+                crate::budget::human(memory_budget)
+            )));
+        }
+        let per_layer = working_bytes(ff.map_len(), dirs.per_face(), 0);
+        *l = ((memory_budget / per_layer) as usize - 1).clamp(1, ff.nw);
+    }
+    Ok(layers)
+}
+
+/// What the sweeps allocated: the largest working set (bytes, counted from the buffers'
+/// capacities as they are allocated) and the number of slabs.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SweepStats {
+    pub peak_working_bytes: u64,
+    pub slabs: usize,
+}
+
+/// One propagation order over all six faces: propagate from U of the previous order and the
+/// boundary radiance (one value per direction), collect into U of this order (and J).
+#[allow(clippy::too_many_arguments)]
+pub fn sweep(
+    grid: &LpmGrid,
+    dirs: &Directions,
+    table: &PhaseTable,
+    layers: &[usize; FACES],
+    u_prev: &[Vec3],
+    boundary: &[Vec3],
+    u_cur: &mut [Vec3],
+    mut j: Option<&mut [Vec3]>,
+    camera: Vec3,
+    albedo: Vec3,
+    stats: &mut SweepStats,
+) -> Result<()> {
+    let p = dirs.per_face();
+    let m = table.m;
+    for (f, &layers) in layers.iter().enumerate() {
+        let ff = FaceFrame::new(grid, f);
+        let s = layers.clamp(1, ff.nw.max(1));
+        let map_count = crate::budget::check_elements::<Vec3>("lpm propagation maps", p as u64 * ff.map_len() as u64)?;
+        let t_count = crate::budget::check_elements::<Vec3>("lpm slice buffer", (p * s) as u64 * ff.map_len() as u64)?;
+        let mut maps = vec![Vec3::ZERO; map_count];
+        let mut t = vec![Vec3::ZERO; t_count];
+        let bytes = ((maps.capacity() + t.capacity()) * std::mem::size_of::<Vec3>()) as u64;
+        stats.peak_working_bytes = stats.peak_working_bytes.max(bytes);
+        let first = f * p;
+        let mut w0 = 0;
+        while w0 < ff.nw {
+            let w1 = (w0 + s).min(ff.nw);
+            let slab = (w1 - w0) * ff.map_len();
+            t[..p * slab].par_chunks_mut(slab).zip(maps.par_chunks_mut(ff.map_len())).enumerate().for_each(|(li, (tc, map))| {
+                let dir = &dirs.dirs[first + li];
+                propagate(grid, &ff, dir, m, u_prev, boundary[first + li], map, w0, w1, tc);
+            });
+            let targets = Targets { u_cur: &mut *u_cur, j: j.as_deref_mut(), camera, albedo };
+            collect(grid, dirs, table, &ff, &t[..p * slab], w0, w1, targets);
+            stats.slabs += 1;
+            w0 = w1;
+        }
+    }
+    Ok(())
+}

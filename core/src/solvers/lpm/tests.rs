@@ -1,0 +1,256 @@
+//! lpm against the white furnace, exact single scattering, the converged reference fixtures,
+//! and itself (streamed against in-memory, convergence in directions, resolution, orders).
+
+use glam::Vec3;
+
+use super::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
+use crate::scene::{Camera, Environment, Light, Scene};
+use crate::solvers::testing::{errors_against_fixture, homogeneous_box, s_over_sigma_s};
+use crate::solvers::{NoProgress, ScatteringGrid};
+
+/// The fixtures' scenes (as vpl/tests.rs).
+fn case(name: &str) -> Scene {
+    if name == "cloud" {
+        crate::solvers::testing::cloud::cloud_scene()
+    } else if name.starts_with("plume_") || name.starts_with("fig10") {
+        crate::solvers::pop::radial::tests::case(name)
+    } else {
+        crate::solvers::pop::tests::case(name)
+    }
+}
+
+fn run(sc: &Scene, s: LpmSettings, ov: Overrides) -> (ScatteringGrid, LpmReport) {
+    let (out, rep) = Lpm::new(s).unwrap().solve_detailed(sc, &NoProgress, ov).unwrap();
+    (out.scattering, rep)
+}
+
+/// The furnace box: 8^3 voxels of 0.125 m, optical thickness 4 across, g 0.6, white, under a
+/// uniform dome of radiance 1 (as testing/furnace.rs).
+fn furnace_box(g: f32) -> Scene {
+    Scene {
+        medium: homogeneous_box(8, 0.125, 4.0, 1.0, g),
+        lights: vec![Light::Dome(Environment { color: Vec3::ONE, map: None })],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.5), Vec3::ZERO, Vec3::Z, 22.0, 12, 12),
+        solver: Default::default(),
+    }
+}
+
+fn mean(v: &[f32]) -> f64 {
+    v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64
+}
+
+/// White furnace run to epsilon: the radiance is 1 everywhere inside, so S / sigma_s = 1 in
+/// the box's interior. Within 1%.
+#[test]
+fn lpm_white_furnace_to_epsilon() {
+    for g in [0.0f32, 0.6] {
+        let sc = furnace_box(g);
+        let s = LpmSettings { grid_resolution: 24, output_resolution: 10, epsilon: 1e-4, max_orders: 2000, ..Default::default() };
+        let t = std::time::Instant::now();
+        let (grid, rep) = run(&sc, s, Overrides::default());
+        let m = mean(&s_over_sigma_s(&grid, &sc.medium, 0.99));
+        eprintln!("g {g}: white furnace S / sigma_s {m:.4} after {} orders, {:.2} s", rep.orders, t.elapsed().as_secs_f64());
+        assert!((m - 1.0).abs() < 0.01, "g {g}: {m}");
+    }
+}
+
+/// Streamed equals in-memory: slabs of 4, 8, 16 layers and the whole volume give the same J
+/// (the same arithmetic in the same order: equal to the bit, asserted within 1e-6
+/// relative), and the working memory is the maps plus one slab.
+#[test]
+fn lpm_streamed_equals_in_memory() {
+    let sc = case("plume");
+    let s = LpmSettings { grid_resolution: 24, directions: 9, max_orders: 3, ..Default::default() };
+    let ov = |layers| Overrides { layers, j_only: true, ..Default::default() };
+    let (_, whole) = run(&sc, s.clone(), ov(None));
+    let jw = whole.j.as_ref().unwrap();
+    let top = jw.data.iter().fold(0.0f32, |a, v| a.max(v.max_element()));
+    assert!(top > 0.0);
+    for layers in [4usize, 8, 16] {
+        let (_, rep) = run(&sc, s.clone(), ov(Some(layers)));
+        let j = rep.j.as_ref().unwrap();
+        let worst = j.data.iter().zip(&jw.data).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0f32, f32::max) / top;
+        let depth = whole.grid_dims.iter().max().copied().unwrap();
+        eprintln!("slabs of {layers}: worst |streamed - whole| / max {worst:e}; peak working {} B vs whole {} B", rep.sweep.peak_working_bytes, whole.sweep.peak_working_bytes);
+        assert!(worst <= 1e-6, "{layers} layers: {worst}");
+        assert!(rep.sweep.slabs > whole.sweep.slabs);
+        let map = whole.grid_dims.iter().copied().fold(1, usize::max).pow(2);
+        assert!(rep.sweep.peak_working_bytes <= super::stream::working_bytes(map, 9, layers), "{layers}");
+        assert!(rep.sweep.peak_working_bytes * (depth as u64 + 1) < whole.sweep.peak_working_bytes * (layers as u64 + 1) + 1);
+    }
+}
+
+/// Exploration (not in CI): a fixture case with settings from the environment.
+#[test]
+#[ignore]
+fn lpm_explore() {
+    use crate::solvers::testing::env_u32;
+    let name = std::env::var("LPM_CASE").unwrap_or_else(|_| "plume".into());
+    let s = LpmSettings {
+        grid_resolution: env_u32("LPM_GRID", 24),
+        directions: env_u32("LPM_DIRS", 25),
+        storage_per_face: env_u32("LPM_STORAGE", 2),
+        output_resolution: env_u32("LPM_OUT", 24),
+        max_orders: env_u32("LPM_ORDERS", 200),
+        first_order: if std::env::var("LPM_BOUNDARY").is_ok() { FirstOrder::Boundary } else { FirstOrder::Exact },
+        ..Default::default()
+    };
+    if name == "furnace" {
+        let sc = furnace_box(0.6);
+        let (grid, rep) = run(&sc, LpmSettings { epsilon: 1e-4, max_orders: 2000, ..s }, Overrides::default());
+        eprintln!("furnace S / sigma_s {:.4}, {} orders", mean(&s_over_sigma_s(&grid, &sc.medium, 0.99)), rep.orders);
+        return;
+    }
+    let sc = case(&name);
+    let t = std::time::Instant::now();
+    let (grid, rep) = run(&sc, s.clone(), Overrides::default());
+    let e = errors_against_fixture(&name, &sc, &grid);
+    eprintln!("{name} {s:?}: {e}; orders {} grid {:?} {:.2} s", rep.orders, rep.grid_dims, t.elapsed().as_secs_f64());
+}
+
+/// The sun along a propagation direction (straight down: the centre bin of face -Z, 5 x 5
+/// lattice) as the paper's boundary radiance gives the same first-order U, hence the same
+/// multiple scattering, as the exact transmittance: J within 2% (relative RMSE over the lit
+/// cells), on the g 0 cube. (An unaligned sun lands on its bin's centre direction instead:
+/// there boundary is worse, see `first_order` in settings.rs.)
+#[test]
+fn lpm_sun_along_a_direction_boundary_matches_exact() {
+    let mut sc = case("cube_g0");
+    for l in &mut sc.lights {
+        if let Light::Distant { direction, .. } = l {
+            *direction = Vec3::NEG_Z;
+        }
+    }
+    let s = LpmSettings { grid_resolution: 16, max_orders: 4, ..Default::default() };
+    let ov = Overrides { j_only: true, ..Default::default() };
+    let (_, exact) = run(&sc, s.clone(), ov);
+    let (_, boundary) = run(&sc, LpmSettings { first_order: FirstOrder::Boundary, ..s }, ov);
+    let (a, b) = (&exact.j.as_ref().unwrap().data, &boundary.j.as_ref().unwrap().data);
+    let err = crate::image::relative_rmse(b, a);
+    let first = boundary.max_u[0] / exact.max_u[0];
+    eprintln!("sun along -z: J boundary vs exact rel. RMSE {err:.4}, largest first-order U ratio {first:.4}");
+    assert!(err < 0.02, "{err}");
+    assert!((first - 1.0).abs() < 0.02, "{first}");
+}
+
+/// Budget: a slab's layers are the most that fit (maps + layers x map per direction); a
+/// budget below one layer is refused with the size it needs. Peak memory, counted from the
+/// buffers the sweep allocates: streamed it grows with the map (n^2: a 32^3 grid costs 4x a
+/// 16^3 one at the same slab), in memory with the volume (7.8x).
+#[test]
+fn lpm_memory_budget_picks_slices_and_peak_memory_scales_with_the_slice() {
+    let dirs = super::directions::Directions::new(5, 1);
+    let one = super::stream::working_bytes(128 * 128, 25, 1);
+    let err = super::stream::plan([128; 3], &dirs, one - 1).unwrap_err().to_string();
+    assert!(err.contains("memory_budget") && err.contains("lower grid_resolution"), "{err}");
+    let layers = super::stream::plan([128; 3], &dirs, super::stream::working_bytes(128 * 128, 25, 8)).unwrap();
+    assert_eq!(layers, [8; 6]);
+    assert_eq!(super::stream::plan([128; 3], &dirs, 0).unwrap(), [128; 6]);
+    // The paper's 256^3 vs 128^3 at the same slab: 4x, not 8x.
+    let ratio = super::stream::working_bytes(256 * 256, 25, 16) as f64 / super::stream::working_bytes(128 * 128, 25, 16) as f64;
+    assert_eq!(ratio, 4.0);
+    // Measured on solves: the bytes the sweeps allocated.
+    let sc = furnace_box(0.0);
+    let peak = |res: u32, layers: Option<usize>| {
+        let s = LpmSettings { grid_resolution: res, directions: 9, max_orders: 1, ..Default::default() };
+        let (_, rep) = run(&sc, s, Overrides { layers, j_only: true, ..Default::default() });
+        assert_eq!(rep.grid_dims, [res as usize; 3]);
+        rep.sweep.peak_working_bytes
+    };
+    let (s16, s32) = (peak(16, Some(4)), peak(32, Some(4)));
+    let (w16, w32) = (peak(16, None), peak(32, None));
+    eprintln!("peak working bytes, slabs of 4: 16^3 {s16}, 32^3 {s32} (x{:.2}); whole: {w16}, {w32} (x{:.2})", s32 as f64 / s16 as f64, w32 as f64 / w16 as f64);
+    assert_eq!(s16, super::stream::working_bytes(16 * 16, 9, 4));
+    assert!((s32 as f64 / s16 as f64 - 4.0).abs() < 0.01);
+    assert!(w32 as f64 / w16 as f64 > 7.5);
+}
+
+/// The error against the converged reference falls as the grid, the directions and the
+/// orders grow (cube g 0, image rel. RMSE). Measured: grid 8 0.057, grid 16 0.029; 4
+/// directions (2 x 2 a face) 0.032; 2 orders 0.352.
+#[test]
+fn lpm_error_falls_with_resolution_directions_and_orders() {
+    let name = "cube_g0";
+    let sc = case(name);
+    let err = |grid_resolution: u32, directions: u32, max_orders: u32| {
+        let s = LpmSettings { grid_resolution, directions, max_orders, output_resolution: 24, ..Default::default() };
+        let (g, _) = run(&sc, s, Overrides::default());
+        errors_against_fixture(name, &sc, &g).image
+    };
+    let coarse = err(8, 25, 200);
+    let base = err(16, 25, 200);
+    let few_dirs = err(16, 4, 200);
+    let few_orders = err(16, 25, 2);
+    eprintln!("cube g 0 image rel. RMSE: grid 8 {coarse:.4}, grid 16 {base:.4}; 4 directions {few_dirs:.4}; 2 orders {few_orders:.4}");
+    assert!(base < coarse, "resolution: {base} vs {coarse}");
+    assert!(base < few_dirs, "directions: {base} vs {few_dirs}");
+    assert!(base < few_orders, "orders: {base} vs {few_orders}");
+}
+
+/// How far a fixed 3 orders (the paper's benchmark setting) is from the converged answer at
+/// albedo 0.99 (the plume): the mean of J (orders 2 and up) after 3 propagations over the mean
+/// at epsilon 1e-3, and the energy each order adds (it falls order by order). Measured
+/// (grid 16): 19 orders to epsilon; 3 propagations give 0.653 of the converged J, the orders'
+/// shares 0.32, 0.20, 0.14, 0.10, 0.07, ... (each about 0.7 of the last).
+#[test]
+fn lpm_three_orders_against_converged_at_albedo_099() {
+    let sc = case("plume");
+    assert!((sc.medium.albedo.x - 0.99).abs() < 1e-6);
+    let s = LpmSettings { grid_resolution: 16, ..Default::default() };
+    let (_, rep) = run(&sc, s, Overrides { keep_orders: true, j_only: true, ..Default::default() });
+    let per_order: Vec<f64> = rep.j_per_order.iter().map(|j| j.iter().map(|v| v.x as f64).sum::<f64>()).collect();
+    let total: f64 = per_order.iter().sum();
+    let three: f64 = per_order.iter().take(3).sum();
+    eprintln!(
+        "plume: {} orders to epsilon; J after 3 propagations = {:.3} of converged; per-order share {:?}",
+        rep.orders,
+        three / total,
+        per_order.iter().map(|e| format!("{:.3}", e / total)).collect::<Vec<_>>()
+    );
+    assert!(rep.orders > 3);
+    assert!(per_order.windows(2).skip(1).all(|w| w[1] < w[0]), "orders must lose energy: {per_order:?}");
+    assert!(three / total < 0.98);
+}
+
+fn check_case(name: &str, max_image: f64, max_grid: f64) {
+    let sc = case(name);
+    let t = std::time::Instant::now();
+    let s = LpmSettings { grid_resolution: 24, output_resolution: 24, ..Default::default() };
+    let (grid, rep) = run(&sc, s, Overrides::default());
+    let e = errors_against_fixture(name, &sc, &grid);
+    eprintln!("lpm {name}: {e}; {} orders, {:.1} s", rep.orders, t.elapsed().as_secs_f64());
+    assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
+    assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+}
+
+macro_rules! against_reference {
+    ($($test:ident: $case:literal, $image:literal, $grid:literal;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                check_case($case, $image, $grid);
+            }
+        )*
+    };
+}
+
+// Ratchets against the converged fixtures (their own noise 0.5-3%), grid 24, 25 directions,
+// 6 storage directions, to epsilon: bounds = measured + 10% + 0.01. Measured (image / grid,
+// image mean ratio): cube g 0 0.023 / 0.014 x1.02; cube g 0.7 0.115 / 0.078 x1.01; cube g 0.9
+// 0.403 / 0.397 x1.36; plume (g 0.9) 0.250 / 0.227 x1.18; plume beside a point light 0.164 /
+// 0.140 x1.17, spot 0.154 / 0.131, rect 0.153 / 0.135; dense cloud (g 0.9, optical depth 30)
+// 0.993 / 0.366 x1.92. Too bright where g is 0.9: a bin of the 5 x 5 lattice is ~16 degrees
+// wide and the phase table averages the lobe (~6 degrees) over both bins, so light scattered
+// forward spreads sideways order after order (m = 24 storage bins: cloud 0.72; the cure is a
+// delta-M split of the lobe's peak, not in this landing). Isotropic and moderate g are within
+// a few percent.
+against_reference! {
+    lpm_cube_g0_against_reference: "cube_g0", 0.036, 0.026;
+    lpm_cube_g07_against_reference: "cube_g07", 0.137, 0.096;
+    lpm_cube_g09_against_reference: "cube_g09", 0.454, 0.447;
+    lpm_plume_against_reference: "plume", 0.286, 0.26;
+    lpm_plume_point_against_reference: "plume_point", 0.191, 0.164;
+    lpm_plume_spot_against_reference: "plume_spot", 0.18, 0.154;
+    lpm_plume_rect_against_reference: "plume_rect", 0.178, 0.159;
+    lpm_cloud_against_reference: "cloud", 1.103, 0.413;
+}
