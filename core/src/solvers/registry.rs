@@ -388,6 +388,11 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
         },
         SettingSpec::float("similarity_threshold", "switch once g^bounces falls below this (the paper's t)")
             .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
+        SettingSpec::int(
+            "generations",
+            "temporal ring m: in a session each frame traces photons/m new photons and drops the oldest m-th (1/m the cost, up to m-1 frames of lag); 1: every frame solved afresh",
+        )
+        .range(1.0, 64.0),
     ],
     defaults: || serde_json::to_value(photon_grid::PhotonGridSettings::default()).unwrap_or(Value::Null),
     lights: &LightType::ALL,
