@@ -20,6 +20,10 @@ pub mod settings;
 mod trace;
 
 #[cfg(test)]
+mod physics_tests;
+#[cfg(test)]
+mod temporal_tests;
+#[cfg(test)]
 mod tests;
 
 pub use reconstruct::Lobe;
