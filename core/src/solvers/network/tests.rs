@@ -11,7 +11,7 @@ use crate::solvers::{NoProgress, ScatteringGrid};
 
 /// The shared fixtures' cube scene (pop/tests.rs `case`): a 1 m cube of 16^3 voxels, sigma_s
 /// 4 m^-1, albedo 1, under a sun travelling down, sideways and towards the camera.
-fn cube_scene(g: f32, albedo: f32) -> Scene {
+pub(super) fn cube_scene(g: f32, albedo: f32) -> Scene {
     Scene {
         medium: homogeneous_box(16, 1.0 / 16.0, 4.0, albedo, g),
         lights: vec![Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
@@ -20,7 +20,7 @@ fn cube_scene(g: f32, albedo: f32) -> Scene {
     }
 }
 
-fn small() -> NetworkSettings {
+pub(super) fn small() -> NetworkSettings {
     NetworkSettings { particles: 1024, directions: 48, output_resolution: 16, ..Default::default() }
 }
 
@@ -33,7 +33,7 @@ fn solve(sc: &Scene, s: NetworkSettings) -> (ScatteringGrid, NetworkReport) {
 fn network_phase_rows_sum_to_one() {
     let dirs = directions::fibonacci(64);
     for g in [0.0, 0.7, 0.95] {
-        let m = directions::phase_matrix(&dirs, g);
+        let m = directions::phase_matrix(&dirs, g, true);
         for row in m.chunks(64) {
             let s: f32 = row.iter().sum();
             // Normalised in f32: rounding only.
