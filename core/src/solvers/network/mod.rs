@@ -29,6 +29,8 @@ pub mod settings;
 mod splat;
 mod visibility;
 #[cfg(test)]
+mod bench;
+#[cfg(test)]
 mod session_tests;
 #[cfg(test)]
 mod tests;

@@ -77,9 +77,9 @@ fn network_warm_start_from_another_light_converges_to_the_same_answer() {
 /// The white furnace (uniform dome of radiance 1, albedo 1: S / sigma_s = 1 everywhere) on
 /// the furnace box at g 0.9 with D 48: passes with the phase rows normalised (within the
 /// furnace bound of testing/furnace.rs, 0.079) and fails without (the paper's HG x 4 pi / D
-/// quadrature, whose rows at this g and D sum to up to 3.3 where the lobe falls on a lattice
-/// direction: the orders grow instead of fading and the iteration diverges to infinity,
-/// measured).
+/// quadrature, whose rows at this g sum to far from 1 (up to 3.3 at D 64,
+/// `network_unnormalised_rows_lose_energy`): the orders grow instead of fading and the
+/// iteration diverges, measured S / sigma_s infinite after 300 iterations; normalised 1.019).
 #[test]
 fn network_white_furnace_fails_without_row_normalisation() {
     let sc = Scene {

@@ -20,6 +20,8 @@ pub mod settings;
 mod trace;
 
 #[cfg(test)]
+mod bench;
+#[cfg(test)]
 mod physics_tests;
 #[cfg(test)]
 mod temporal_tests;
