@@ -35,8 +35,10 @@ def run_benches(module: str) -> dict:
         sys.exit(f"{module} benches failed ({out.returncode})")
     found = {}
     for line in out.stdout.splitlines():
-        if line.startswith("BENCH_JSON "):
-            doc = json.loads(line[len("BENCH_JSON "):])
+        # The test harness may print its progress on the same line before ours.
+        at = line.find("BENCH_JSON ")
+        if at >= 0:
+            doc = json.loads(line[at + len("BENCH_JSON "):])
             found[doc["bench"]] = doc["data"]
     return found
 
