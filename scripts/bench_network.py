@@ -59,9 +59,9 @@ def main() -> None:
                      f" {r['orbit_frame_seconds']:.3f} |")
     lines += [
         "",
-        "An orbit frame still computes the exact single scattering towards the new camera and the splat; the particles,"
-        " visibility links, direct light and iteration are kept (the direct light is recomputed to check that the lights"
-        " did not change, which is most of what remains).",
+        "An orbit frame keeps the particles, visibility links and the iterated I; it still computes the exact single"
+        " scattering towards the new camera (dome included), the network's direct light (recomputed to check that the"
+        " lights did not change: its bits are the key) and the splat.",
     ]
     path = write_section("network", "\n".join(lines) + "\n")
     print(f"wrote {path}", file=sys.stderr)

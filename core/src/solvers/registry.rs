@@ -392,7 +392,7 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
             "generations",
             "temporal ring m: in a session each frame traces photons/m new photons and drops the oldest m-th (1/m the cost, up to m-1 frames of lag); 1: every frame solved afresh",
         )
-        .range(1.0, 64.0),
+        .range(1.0, 128.0),
     ],
     defaults: || serde_json::to_value(photon_grid::PhotonGridSettings::default()).unwrap_or(Value::Null),
     lights: &LightType::ALL,

@@ -111,8 +111,8 @@ impl PhotonGridSettings {
         if !(self.similarity_threshold.is_finite() && self.similarity_threshold > 0.0 && self.similarity_threshold < 1.0) {
             return Err(Error::scene("solver.similarity_threshold", format!("must be in (0, 1), got {}", self.similarity_threshold)));
         }
-        if !(1..=64).contains(&self.generations) || self.generations > self.photons {
-            return Err(Error::scene("solver.generations", format!("must be in 1..=64 and at most photons, got {}", self.generations)));
+        if !(1..=128).contains(&self.generations) || self.generations > self.photons {
+            return Err(Error::scene("solver.generations", format!("must be in 1..=128 and at most photons, got {}", self.generations)));
         }
         Ok(())
     }
