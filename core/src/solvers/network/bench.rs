@@ -19,7 +19,7 @@ fn emit(name: &str, v: serde_json::Value) {
 }
 
 fn phase(out: &SolveOutput, name: &str) -> f64 {
-    out.timings.0.iter().filter(|(k, _)| k == name).map(|(_, v)| *v as f64).sum()
+    out.timings.0.iter().filter(|(k, _)| k == name).map(|(_, v)| *v).sum()
 }
 
 /// Error against the shared fixtures against time, N 1024 / 2048 / 4096 (D 64).

@@ -76,7 +76,7 @@ fn bench_photon_grid_fig12() {
         let t = Instant::now();
         let (one, _) = pg.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
         let full = t.elapsed().as_secs_f64();
-        let trace_full = one.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v as f64).sum::<f64>();
+        let trace_full = one.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum::<f64>();
         let mut frame = Vec::new();
         let mut trace = Vec::new();
         for _ in 0..3 {
@@ -84,7 +84,7 @@ fn bench_photon_grid_fig12() {
             let t = Instant::now();
             let (out, _) = pg.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
             frame.push(t.elapsed().as_secs_f64());
-            trace.push(out.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v as f64).sum::<f64>());
+            trace.push(out.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum::<f64>());
         }
         let med = |v: &mut Vec<f64>| {
             v.sort_by(f64::total_cmp);
