@@ -361,7 +361,7 @@ const VPL: SolverEntry = SolverEntry {
 const PHOTON_GRID: SolverEntry = SolverEntry {
     name: "photon-grid",
     label: "Photon Grid",
-    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds",
+    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20); noise falls as photons^-0.47. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve)",
     settings: &[
         SettingSpec::int("photons", "photons traced per solve, equal flux each").range(1.0, (1u32 << 30) as f64),
         SettingSpec::int("seed", "random seed (deterministic for a seed, any thread count)"),
@@ -388,6 +388,11 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
         },
         SettingSpec::float("similarity_threshold", "switch once g^bounces falls below this (the paper's t)")
             .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
+        SettingSpec::int(
+            "generations",
+            "temporal ring m: in a session each frame traces photons/m new photons and drops the oldest m-th (1/m the cost, up to m-1 frames of lag); 1: every frame solved afresh",
+        )
+        .range(1.0, 128.0),
     ],
     defaults: || serde_json::to_value(photon_grid::PhotonGridSettings::default()).unwrap_or(Value::Null),
     lights: &LightType::ALL,
@@ -403,7 +408,7 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
 const NETWORK: SolverEntry = SolverEntry {
     name: "network",
     label: "Illumination Networks",
-    help: "illumination networks (paper 02): particles linked along D directions, view-independent multiple scattering",
+    help: "illumination networks (paper 02): particles linked along D directions, view-independent multiple scattering. Image rel. RMSE at 2048 particles, 64 directions: cubes 0.09-0.12, plume 0.20; NOT for dense clouds: the optical-depth-30 cloud comes out 0.36x too dark (image error 0.69). In a session a camera move re-splats without iterating (exactly the full solve)",
     settings: &[
         SettingSpec::int("particles", "particles N, sampled in proportion to sigma_t").range(16.0, 65536.0),
         SettingSpec::int("directions", "directions D of the network (Fibonacci lattice)").range(6.0, 1024.0),

@@ -8,6 +8,11 @@
 //! the part of the scene it came from, and recomputes what no longer matches, so a session's
 //! answer is the one-off answer: `Solver::solve_in_session` defaults to `solve`, and POP's
 //! reuse returns the very values it would recompute (tests below and in pop/reuse.rs).
+//!
+//! One declared exception, by the user's choice: `photon-grid` with `generations` m > 1 keeps
+//! the paper's temporal ring (photon_grid/ring.rs), whose frames average the last m frames'
+//! photons: its first frame is the one-off answer, later ones lag the scene by up to m - 1
+//! frames for 1 / m of the cost (with m = 1, the default, it keeps the contract).
 
 use std::any::Any;
 

@@ -31,7 +31,13 @@ pub fn phase_row(dirs: &[Vec3], out: Vec3, g: f32) -> Vec<f32> {
     row
 }
 
-/// The D x D phase matrix, row i = `phase_row(dirs, dirs[i], g)` (row-major).
-pub fn phase_matrix(dirs: &[Vec3], g: f32) -> Vec<f32> {
-    dirs.iter().flat_map(|&out| phase_row(dirs, out, g)).collect()
+/// The D x D phase matrix, row i = `phase_row(dirs, dirs[i], g)` (row-major); with
+/// `normalise` false, the paper's quadrature HG x 4 pi / D instead (for the test that shows
+/// what the normalisation is for).
+pub fn phase_matrix(dirs: &[Vec3], g: f32, normalise: bool) -> Vec<f32> {
+    if normalise {
+        return dirs.iter().flat_map(|&out| phase_row(dirs, out, g)).collect();
+    }
+    let w = 4.0 * std::f32::consts::PI / dirs.len() as f32;
+    dirs.iter().flat_map(|&out| dirs.iter().map(move |d| hg(d.dot(out), g) * w)).collect()
 }

@@ -14,8 +14,12 @@
 //! Jacobi steps (iterate.rs), HG instead of Cornette-Shanks with rows normalised
 //! (directions.rs), grid splatting instead of camera-facing splats (splat.rs).
 //!
-//! Not yet here (issue 18): warm start in a session and re-splatting on a camera move, the GPU
-//! backend.
+//! In a session (session.rs) the network is kept while the medium stays, and so is its
+//! radiance I[particle, direction]: a camera move re-splats it without iterating (exactly the
+//! one-off answer), a change of the lights iterates from it (warm start: the same fixed point to
+//! the residual threshold, not bit for bit).
+//!
+//! Not yet here (issue 18): the GPU backend.
 
 mod direct;
 mod directions;
@@ -25,10 +29,16 @@ pub mod settings;
 mod splat;
 mod visibility;
 #[cfg(test)]
+mod bench;
+#[cfg(test)]
+mod session_tests;
+#[cfg(test)]
 mod tests;
 
 pub use settings::NetworkSettings;
 
+use super::pop::reuse::MediumKey;
+use super::session::SessionState;
 use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -36,20 +46,53 @@ use crate::translate::sampling::BoundingSphere;
 
 pub struct Network {
     settings: NetworkSettings,
+    /// Rows of the phase matrix normalised to sum 1 (directions.rs). Always, but for the test
+    /// that shows the white furnace failing without it.
+    normalise_phase: bool,
+}
+
+/// How a solve came by its network radiance I[particle, direction].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Start {
+    /// Iterated from zero (a one-off solve, or the medium changed).
+    Cold,
+    /// Iterated from the previous frame's I (same medium, other lights): the same fixed point
+    /// to the residual threshold, in fewer iterations when the light changed little.
+    Warm,
+    /// The previous frame's I as it was: same medium and bit-identical direct light, so the
+    /// iteration would give it again (a camera move only re-splats).
+    Kept,
 }
 
 /// What a solve measured, for tests and benchmarks.
 #[derive(Clone, Debug)]
 pub struct NetworkReport {
     pub window: u32,
-    /// Residual after each iteration.
+    /// Residual after each iteration (empty when I was kept).
     pub residuals: Vec<f64>,
+    pub start: Start,
 }
+
+/// What a session keeps (session.rs): the medium-dependent network and the last answer.
+struct Kept {
+    medium: MediumKey,
+    particles: particles::Particles,
+    dirs: Vec<glam::Vec3>,
+    links: Vec<visibility::DirectionLinks>,
+    phase: Vec<f32>,
+    window: u32,
+    /// The direct light's first scattering I was iterated with, and I.
+    first: Vec<glam::Vec3>,
+    radiance: Vec<glam::Vec3>,
+}
+
+#[derive(Default)]
+struct KeptNetwork(Option<Kept>);
 
 impl Network {
     pub fn new(settings: NetworkSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(Network { settings })
+        Ok(Network { settings, normalise_phase: true })
     }
 
     pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
@@ -58,42 +101,70 @@ impl Network {
 
     /// Solves and returns what the iteration did along with S and the timings.
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, NetworkReport)> {
+        self.solve_keeping(scene, progress, &mut KeptNetwork(None))
+    }
+
+    /// One frame of a session with its report: the network (particles, visibility links,
+    /// phase matrix) is kept while the medium is the same (exact key: every voxel's bits,
+    /// transform and material); I is kept as is when the direct light is bit-identical too
+    /// (a camera move: S is exactly the one-off solve's), else iterated from the previous I.
+    pub fn solve_in_session_detailed(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<(SolveOutput, NetworkReport)> {
+        self.solve_keeping(scene, progress, state.kept(KeptNetwork::default))
+    }
+
+    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, kept: &mut KeptNetwork) -> Result<(SolveOutput, NetworkReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut scattering = timings.time("network single scattering", || {
             crate::compositor::single_scattering_grid(scene, s.output_resolution, s.dome_directions)
         })?;
-        let mut report = NetworkReport { window: 0, residuals: Vec::new() };
+        let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
             // Nothing scatters twice: S is its single scattering.
             return Ok((SolveOutput { scattering, timings }, report));
         }
-        let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
-        if p.mean_sigma_t <= 0.0 {
-            return Ok((SolveOutput { scattering, timings }, report));
-        }
-        let dirs = directions::fibonacci(s.directions);
-        let sphere = BoundingSphere::of(medium);
-        report.window = visibility::window_side(s.window, s.directions, sphere.radius, p.mean_sigma_t, p.len());
-        let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, report.window, s.opacity));
+        let key = timings.time("network medium key", || MediumKey::of(medium));
+        let mut net = match kept.0.take().filter(|k| k.medium == key) {
+            Some(k) => k,
+            None => {
+                let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
+                if p.mean_sigma_t <= 0.0 {
+                    return Ok((SolveOutput { scattering, timings }, report));
+                }
+                let dirs = directions::fibonacci(s.directions);
+                let sphere = BoundingSphere::of(medium);
+                let window = visibility::window_side(s.window, s.directions, sphere.radius, p.mean_sigma_t, p.len());
+                let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, window, s.opacity));
+                let phase = directions::phase_matrix(&dirs, medium.g, self.normalise_phase);
+                Kept { medium: key, particles: p, dirs, links, phase, window, first: Vec::new(), radiance: Vec::new() }
+            }
+        };
+        report.window = net.window;
         if !progress.update("network visibility", 0.3) {
             return Err(Error::Cancelled);
         }
-        let first = timings.time("network direct", || direct::first_scattering(scene, &p, &dirs, s.dome_directions));
-        let phase = directions::phase_matrix(&dirs, medium.g);
-        let it = timings.time("network iterate", || {
-            iterate::iterate(&links, &phase, &first, medium.albedo, s.max_iterations, s.residual_threshold, None)
-        });
-        report.residuals = it.residuals;
+        let first = timings.time("network direct", || direct::first_scattering(scene, &net.particles, &net.dirs, s.dome_directions));
+        let same_light = first.len() == net.first.len() && first.iter().zip(&net.first).all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits));
+        if same_light && !net.radiance.is_empty() {
+            report.start = Start::Kept;
+        } else {
+            let start = (!net.radiance.is_empty()).then(|| std::mem::take(&mut net.radiance));
+            report.start = if start.is_some() { Start::Warm } else { Start::Cold };
+            let it = timings.time("network iterate", || iterate::iterate(&net.links, &net.phase, &first, medium.albedo, s.max_iterations, s.residual_threshold, start));
+            report.residuals = it.residuals;
+            net.radiance = it.radiance;
+            net.first = first;
+        }
         if !progress.update("network iterate", 0.9) {
             return Err(Error::Cancelled);
         }
         timings.time("network splat", || {
-            let values = splat::towards_viewer(&p, &it.radiance, &dirs, medium.g, scene.camera.position);
-            splat::splat_into(&mut scattering, medium, &p, &values, s.kernel_radius, s.range_sigma);
+            let values = splat::towards_viewer(&net.particles, &net.radiance, &net.dirs, medium.g, scene.camera.position);
+            splat::splat_into(&mut scattering, medium, &net.particles, &values, s.kernel_radius, s.range_sigma);
         });
         progress.update("network splat", 1.0);
+        kept.0 = Some(net);
         Ok((SolveOutput { scattering, timings }, report))
     }
 }
@@ -105,5 +176,9 @@ impl Solver for Network {
 
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
         Ok(self.solve_detailed(scene, progress)?.0)
+    }
+
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
+        Ok(self.solve_in_session_detailed(scene, progress, state)?.0)
     }
 }

@@ -23,14 +23,15 @@
 //! length over the cell volume would count only the part of the cell inside the majorant grid
 //! and darken every cell that is partly empty.
 
-use glam::{Affine3A, DVec3, Vec3};
+use glam::{Affine3A, Vec3};
+
+use super::fixed::{unfix, unfix3, FixedTallies};
 
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::solvers::ScatteringGrid;
 
-/// One cell's tallies (f32 within a batch, summed over batches in f64 order-independently of
-/// threads: batches are summed in their own order).
+/// One cell's tallies (f32 within a batch; batches are summed in fixed point, fixed.rs).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Cell {
     pub flux: Vec3,
@@ -89,7 +90,7 @@ impl Cache {
     }
 }
 
-/// The cache's tallies summed over batches and normalised: per cell the integral of rho over
+/// The cache's tallies summed over batches (and generations): per cell the integral of rho over
 /// the cell (`mass`, world volume x density) and the totals. Everything a reconstruction
 /// needs is a ratio of two of these, interpolated separately (mass-weighted interpolation).
 #[derive(Clone, Debug)]
@@ -107,34 +108,21 @@ pub struct Tallies {
 }
 
 impl Tallies {
-    /// Sums `batches` in order, each deposit scaled by `scale` (1 / photons: a photon's
-    /// power is the light's total, `LightSampler`'s convention), and measures each cell's mass.
-    pub fn sum(medium: &Medium, batches: &[&Cache], scale: f64) -> Self {
-        let first = batches[0];
-        let n = first.cells.len();
-        let mut flux = vec![DVec3::ZERO; n];
-        let mut moment = vec![DVec3::ZERO; n];
-        let mut weight = vec![0f64; n];
-        let mut order = vec![0f64; n];
-        let mut count = vec![0u32; n];
-        for b in batches {
-            for (i, c) in b.cells.iter().enumerate() {
-                flux[i] += c.flux.as_dvec3();
-                moment[i] += c.moment.as_dvec3();
-                weight[i] += c.weight as f64;
-                order[i] += c.order as f64;
-                count[i] += c.count;
-            }
-        }
+    /// The fixed-point tallies `fixed` (fixed.rs: the sum of a solve's batches, or of the
+    /// ring's generations) on `cache`'s frame, with each cell's mass measured in `medium`.
+    /// Deposits carry each photon's power (the light's total over the photon count,
+    /// `LightSampler`'s convention) already.
+    pub fn from_fixed(medium: &Medium, cache: &Cache, fixed: &FixedTallies) -> Self {
+        let cells = &fixed.cells;
         Tallies {
-            frame: first.frame.clone(),
-            world_to_cell: first.world_to_cell,
-            flux: flux.iter().map(|v| (*v * scale).as_vec3()).collect(),
-            moment: moment.iter().map(|v| (*v * scale).as_vec3()).collect(),
-            weight: weight.iter().map(|v| (*v * scale) as f32).collect(),
-            order: order.iter().map(|v| (*v * scale) as f32).collect(),
-            count,
-            mass: cell_mass(medium, &first.frame),
+            frame: cache.frame.clone(),
+            world_to_cell: cache.world_to_cell,
+            flux: cells.iter().map(|c| unfix3(&c.flux)).collect(),
+            moment: cells.iter().map(|c| unfix3(&c.moment)).collect(),
+            weight: cells.iter().map(|c| unfix(c.weight) as f32).collect(),
+            order: cells.iter().map(|c| unfix(c.order) as f32).collect(),
+            count: cells.iter().map(|c| c.count.min(u32::MAX as u64) as u32).collect(),
+            mass: cell_mass(medium, &cache.frame),
         }
     }
 }

@@ -7,14 +7,24 @@
 //! lobes per cell, once-scattered light and the rest (cache.rs, `SPLIT_ORDER`), and S towards the viewer (reconstruct.rs). Single scattering comes
 //! from the compositor's exact `single_scattering_grid` by default (settings.rs says why).
 //!
-//! Not yet (issue 17): the temporal ring of partial caches in a session (every frame is a
-//! one-off solve of all photons), the paper's physically based upsampling, the GPU kernel.
+//! The temporal ring of partial caches (ring.rs) keeps m generations of photons in a session,
+//! summed in fixed point (fixed.rs); a one-off solve traces all m.
+//!
+//! Not yet (issue 17): the paper's physically based upsampling, the GPU kernel.
 
 mod cache;
+mod fixed;
 mod reconstruct;
+mod ring;
 pub mod settings;
 mod trace;
 
+#[cfg(test)]
+mod bench;
+#[cfg(test)]
+mod physics_tests;
+#[cfg(test)]
+mod temporal_tests;
 #[cfg(test)]
 mod tests;
 
@@ -26,7 +36,9 @@ use crate::compositor::{dome_directions_for, single_scattering_grid, CompositeOp
 use crate::error::{Error, Result};
 use crate::medium::MajorantGrid;
 use crate::scene::Scene;
+use crate::solvers::session::SessionState;
 use crate::solvers::{parse_settings, Progress, SolveOutput, Solver, Timings};
+use ring::{Generation, KeptRing, Ring};
 use crate::translate::LightSampler;
 
 /// Light scattered fewer times than this goes into a cell's first lobe, the rest into its
@@ -45,7 +57,10 @@ pub struct PhotonGrid {
 /// What a solve measured besides S.
 #[derive(Clone, Debug, Default)]
 pub struct PhotonGridReport {
+    /// Where the cache's photons' energy went (all its generations).
     pub energy: EnergyReport,
+    /// The generations the cache holds (ring.rs), oldest first.
+    pub generations: Vec<u64>,
 }
 
 impl PhotonGrid {
@@ -58,8 +73,9 @@ impl PhotonGrid {
         PhotonGrid::new(parse_settings(map)?)
     }
 
-    /// Traces the photons into the cache (normalised tallies) and reports the energy.
-    fn trace(&self, scene: &Scene, timings: &mut Timings) -> Result<([cache::Tallies; 2], EnergyReport)> {
+    /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns.
+    fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings) -> Result<(cache::Cache, Vec<Generation>)> {
+        use rayon::prelude::*;
         let s = &self.settings;
         let medium = &scene.medium;
         let empty = cache::Cache::new(medium, s.cache_resolution)?;
@@ -75,25 +91,35 @@ impl PhotonGrid {
             deposit_unscattered: s.single_scattering == SingleScattering::Photons,
             split_order: SPLIT_ORDER,
         };
-        let (batches, energy) = timings.time("trace", || tracer.run(&sampler, &empty));
-        // Deposits carry ray.power / photons already.
-        let lobe = |l: usize| batches.iter().map(|b| &b[l]).collect::<Vec<_>>();
-        let tallies = timings.time("cache", || [cache::Tallies::sum(medium, &lobe(0), 1.0), cache::Tallies::sum(medium, &lobe(1), 1.0)]);
-        Ok((tallies, energy))
+        let generations = timings.time("trace", || {
+            generations
+                .par_iter()
+                .map(|&g| {
+                    let (tallies, energy) = tracer.run_generation(&sampler, &empty, g, ring::photons_of(g, s.photons, s.generations), s.photons);
+                    Generation { index: g, tallies, energy }
+                })
+                .collect()
+        });
+        Ok((empty, generations))
     }
 
-    /// Solves and returns the energy report with S and the timings.
-    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
-        let mut timings = Timings::default();
-        if !progress.update("photons", 0.0) {
-            return Err(Error::Cancelled);
-        }
-        let (tallies, energy) = self.trace(scene, &mut timings)?;
+    /// The ring of generations first..first + m, traced afresh: the one-off solve when
+    /// `first` is 0.
+    fn fresh_ring(&self, scene: &Scene, first: u64, timings: &mut Timings) -> Result<Ring> {
+        let gens: Vec<u64> = (first..first + self.settings.generations as u64).collect();
+        let (cache, traced) = self.trace(scene, &gens, timings)?;
+        Ok(Ring::new(&self.settings, cache, traced))
+    }
+
+    /// S from the ring's cache: its lobes towards the camera, plus exact single scattering.
+    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
         }
+        let medium = &scene.medium;
+        let tallies = timings.time("cache", || ring.total().each_ref().map(|t| cache::Tallies::from_fixed(medium, ring.cache(), t)));
         let res = self.settings.output_resolution;
-        let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(&scene.medium, &tallies, scene.camera.position, res))?;
+        let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(medium, &tallies, scene.camera.position, res))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
             let single = timings.time("single scattering", || single_scattering_grid(scene, res, dirs))?;
@@ -104,15 +130,61 @@ impl PhotonGrid {
             }
         }
         progress.update("done", 1.0);
-        Ok((SolveOutput { scattering: s, timings }, PhotonGridReport { energy }))
+        Ok((SolveOutput { scattering: s, timings }, PhotonGridReport { energy: ring.energy(), generations: ring.generations() }))
+    }
+
+    /// Solves and returns the energy report with S and the timings.
+    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
+        self.solve_generations(scene, 0, progress)
+    }
+
+    /// The one-off solve from generations first..first + m (`solve_detailed` is first 0): what
+    /// a session's ring holds m frames after the scene last changed.
+    pub fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
+        let mut timings = Timings::default();
+        if !progress.update("photons", 0.0) {
+            return Err(Error::Cancelled);
+        }
+        let ring = self.fresh_ring(scene, first, &mut timings)?;
+        self.finish(scene, &ring, timings, progress)
+    }
+
+    /// One frame of a session (`Solver::solve_in_session`) with its report: the first frame
+    /// (or one after the settings changed) fills the ring, each later one traces a single
+    /// new generation into it (ring.rs). With one generation, the one-off solve.
+    pub fn solve_in_session_detailed(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<(SolveOutput, PhotonGridReport)> {
+        if self.settings.generations == 1 {
+            return self.solve_detailed(scene, progress);
+        }
+        let mut timings = Timings::default();
+        if !progress.update("photons", 0.0) {
+            return Err(Error::Cancelled);
+        }
+        let kept = state.kept(KeptRing::default);
+        match kept.0.as_mut().filter(|r| r.traced_with(&self.settings)) {
+            Some(ring) => {
+                let next = ring.next_generation();
+                let (cache, mut traced) = self.trace(scene, &[next], &mut timings)?;
+                ring.move_to(&cache);
+                if let Some(g) = traced.pop() {
+                    ring.replace(g);
+                }
+            }
+            None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings)?),
+        }
+        match kept.0.as_ref() {
+            Some(ring) => self.finish(scene, ring, timings, progress),
+            None => unreachable!("the ring was set just above"),
+        }
     }
 
     /// The view-independent first lobe (fluence, g', direction) at world points (light
     /// scattered less than `SPLIT_ORDER` times; in `exact` mode without the unscattered light):
     /// the cache as a host could keep it to re-light from any view.
     pub fn lobes(&self, scene: &Scene, points: &[glam::Vec3]) -> Result<Vec<Lobe>> {
-        let (tallies, _) = self.trace(scene, &mut Timings::default())?;
-        Ok(points.iter().map(|&p| tallies[0].lobe(p)).collect())
+        let ring = self.fresh_ring(scene, 0, &mut Timings::default())?;
+        let first = cache::Tallies::from_fixed(&scene.medium, ring.cache(), &ring.total()[0]);
+        Ok(points.iter().map(|&p| first.lobe(p)).collect())
     }
 }
 
@@ -122,5 +194,8 @@ impl Solver for PhotonGrid {
     }
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
         self.solve_detailed(scene, progress).map(|(out, _)| out)
+    }
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
+        self.solve_in_session_detailed(scene, progress, state).map(|(out, _)| out)
     }
 }

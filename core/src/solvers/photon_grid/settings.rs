@@ -64,6 +64,14 @@ pub struct PhotonGridSettings {
     /// The paper's t: the switch happens after log t / log |g| bounces, when the lobe of the
     /// light scattered that often, HG(g^i), has anisotropy below t (paper: 0.05).
     pub similarity_threshold: f32,
+    /// The temporal ring's m (Sec. 3.2, 4.2; ring.rs): the cache is the sum of m generations
+    /// of photons / m photons each. A one-off solve (and a session's first frame) traces all
+    /// m; each later frame of a session traces one new generation and drops the oldest, so a
+    /// frame costs 1 / m of a solve and the cache lags the scene by up to m - 1 frames (about
+    /// (m - 1) / 2 on average) at the noise of all `photons`. Equivalently, at a fixed cost per
+    /// frame, a larger m trades lag for less noise. 1: no ring, every frame of a session is the
+    /// one-off solve (the sessions' contract, session.rs).
+    pub generations: u32,
 }
 
 impl Default for PhotonGridSettings {
@@ -78,6 +86,7 @@ impl Default for PhotonGridSettings {
             cutoff: 0.01,
             similarity: Similarity::Linear,
             similarity_threshold: 0.05,
+            generations: 1,
         }
     }
 }
@@ -101,6 +110,9 @@ impl PhotonGridSettings {
         }
         if !(self.similarity_threshold.is_finite() && self.similarity_threshold > 0.0 && self.similarity_threshold < 1.0) {
             return Err(Error::scene("solver.similarity_threshold", format!("must be in (0, 1), got {}", self.similarity_threshold)));
+        }
+        if !(1..=128).contains(&self.generations) || self.generations > self.photons {
+            return Err(Error::scene("solver.generations", format!("must be in 1..=128 and at most photons, got {}", self.generations)));
         }
         Ok(())
     }

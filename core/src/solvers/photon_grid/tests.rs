@@ -13,7 +13,7 @@ use crate::solvers::NoProgress;
 /// sigma_t 4, albedo 1, at g 0 / 0.7 / 0.9, and the procedural plume (g 0.9, albedo 0.99), lit
 /// by a sun travelling along (0.4, -0.5, -0.75), irradiance 3, 16 x 16 pixels; and the dense
 /// cloud (testing/cloud.rs).
-fn case(name: &str) -> Scene {
+pub(super) fn case(name: &str) -> Scene {
     let (medium, dist, fov) = match name {
         "cube_g0" => (homogeneous_box(16, 1.0 / 16.0, 4.0, 1.0, 0.0), 4.0, 22.0),
         "cube_g07" => (homogeneous_box(16, 1.0 / 16.0, 4.0, 1.0, 0.7), 4.0, 22.0),

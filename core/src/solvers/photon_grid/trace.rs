@@ -17,6 +17,7 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::cache::Cache;
+use super::fixed::FixedTallies;
 use super::settings::PhotonGridSettings;
 use crate::medium::{ray_box, FreeFlight, MajorantGrid, Medium, Tracking};
 use crate::phase::HenyeyGreenstein;
@@ -46,7 +47,7 @@ pub struct EnergyReport {
 }
 
 impl EnergyReport {
-    fn add(&mut self, o: &EnergyReport) {
+    pub fn add(&mut self, o: &EnergyReport) {
         self.photons += o.photons;
         self.emitted += o.emitted;
         self.escaped += o.escaped;
@@ -92,32 +93,34 @@ pub struct Tracer<'a> {
 }
 
 impl Tracer<'_> {
-    /// Traces all photons; returns one cache per batch (summed by the caller in order) and the
-    /// energy report, both already scaled by 1 / photons.
-    pub fn run(&self, sampler: &LightSampler, empty: &Cache) -> (Vec<[Cache; 2]>, EnergyReport) {
-        let n = self.settings.photons;
+    /// Traces generation `generation` (`count` photons, each of power 1 / `total` of its
+    /// light's: a generation is `count / total` of a full solve) and returns its tallies per
+    /// lobe in fixed point and its energy report. Its batches draw from random streams of
+    /// their own, `generation` x BATCHES + batch + 1, so generation 0 is the one-off solve's
+    /// photons when there is one generation, and every generation is reproducible alone (the
+    /// ring's exactness, ring.rs).
+    pub fn run_generation(&self, sampler: &LightSampler, empty: &Cache, generation: u64, count: u32, total: u32) -> ([FixedTallies; 2], EnergyReport) {
         let results: Vec<([Cache; 2], EnergyReport)> = (0..BATCHES)
             .into_par_iter()
             .map(|b| {
                 let mut cache = [empty.empty_like(), empty.empty_like()];
                 let mut report = EnergyReport::default();
-                let mut rng = Rng::new(self.settings.seed, b as u64 + 1);
-                let (lo, hi) = (n as u64 * b as u64 / BATCHES as u64, n as u64 * (b as u64 + 1) / BATCHES as u64);
+                let mut rng = Rng::new(self.settings.seed, generation * BATCHES as u64 + b as u64 + 1);
+                let (lo, hi) = (count as u64 * b as u64 / BATCHES as u64, count as u64 * (b as u64 + 1) / BATCHES as u64);
                 for _ in lo..hi {
                     if let Some(ray) = sampler.sample_rng(&mut rng) {
-                        self.photon(ray.origin, ray.direction, ray.power / n as f32, &mut rng, &mut cache, &mut report);
+                        self.photon(ray.origin, ray.direction, ray.power / total as f32, &mut rng, &mut cache, &mut report);
                     }
                 }
                 (cache, report)
             })
             .collect();
         let mut report = EnergyReport::default();
-        let mut caches = Vec::with_capacity(results.len());
-        for (c, r) in results {
-            report.add(&r);
-            caches.push(c);
+        for (_, r) in &results {
+            report.add(r);
         }
-        (caches, report)
+        let lobe = |l: usize| FixedTallies::sum_of(&results.iter().map(|(c, _)| &c[l]).collect::<Vec<_>>());
+        ([lobe(0), lobe(1)], report)
     }
 
     /// One photon of power `power` from `x` along `d` to its end.

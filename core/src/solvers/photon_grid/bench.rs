@@ -1,0 +1,147 @@
+//! Measurements for `scripts/bench_photon_grid.py` (ignored tests: they time, never assert).
+//! Each prints one line `BENCH_JSON {...}` that the script turns into BENCHMARKS.md's
+//! "photon-grid" section. `cargo test --release -p volscatter-core --lib -- --ignored
+//! photon_grid::bench --nocapture --test-threads 1`
+
+use glam::{Affine3A, IVec3, Quat, Vec3};
+use serde_json::json;
+use std::time::Instant;
+
+use super::tests::case;
+use super::*;
+use crate::medium::{cumulus::cumulus_density, DensityGrid, GridLimits, Medium};
+use crate::scene::Light;
+use crate::solvers::testing::errors_against_fixture;
+use crate::solvers::NoProgress;
+
+fn emit(name: &str, v: serde_json::Value) {
+    println!("BENCH_JSON {}", json!({"bench": name, "data": v}));
+}
+
+/// Error against the shared fixtures against time, for 2^14, 2^16 and 2^18 photons.
+#[test]
+#[ignore]
+fn bench_photon_grid_error_vs_time() {
+    let mut rows = Vec::new();
+    for name in ["cube_g0", "cube_g09", "plume", "cloud"] {
+        let sc = case(name);
+        for p in [14u32, 16, 18] {
+            let pg = PhotonGrid::new(PhotonGridSettings { photons: 1 << p, ..Default::default() }).unwrap();
+            let t = Instant::now();
+            let out = pg.solve(&sc, &NoProgress).unwrap();
+            let secs = t.elapsed().as_secs_f64();
+            let e = errors_against_fixture(name, &sc, &out.scattering);
+            rows.push(json!({"scene": name, "photons": 1u64 << p, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio, "grid": e.grid}));
+        }
+    }
+    emit("error_vs_time", json!(rows));
+}
+
+/// The paper's cumulus size (48 x 62 x 90 voxels, the cumulus of medium/cumulus.rs sampled on
+/// that lattice over its 2 m box, sigma_t 25, albedo 0.99, g 0.9, the dense cloud's sun).
+fn paper_cumulus() -> Scene {
+    let dims = IVec3::new(48, 62, 90);
+    let mut vals = Vec::with_capacity((dims.x * dims.y * dims.z) as usize);
+    for k in 0..dims.z {
+        for j in 0..dims.y {
+            for i in 0..dims.x {
+                let p = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / dims.as_vec3() * 2.0 - 1.0;
+                vals.push(cumulus_density(p));
+            }
+        }
+    }
+    let grid = DensityGrid::from_dense(IVec3::ZERO, dims, &vals, GridLimits::default()).unwrap();
+    let voxel = Vec3::splat(2.0) / dims.as_vec3();
+    let to_world = Affine3A::from_translation(Vec3::splat(-1.0) + 0.5 * voxel) * Affine3A::from_scale(voxel);
+    let mut sc = case("cloud");
+    sc.medium = Medium::new(grid, to_world, Vec3::splat(25.0), Vec3::splat(0.99), 0.9);
+    sc
+}
+
+/// Paper Fig. 12's three (cells, photons) settings at m = 100: 270 / 2080 / 16640 cells (here
+/// cache_resolution 9 / 18 / 36 over the 48 x 62 x 90 box) and 102 k / 819 k / 4096 k photons;
+/// the time of a one-off solve (all photons) and of a session frame (photons / m).
+#[test]
+#[ignore]
+fn bench_photon_grid_fig12() {
+    let sc = paper_cumulus();
+    let mut rows = Vec::new();
+    for (res, photons) in [(9u32, 102_400u32), (18, 819_200), (36, 4_096_000)] {
+        let s = PhotonGridSettings { photons, cache_resolution: res, generations: 100, ..Default::default() };
+        let pg = PhotonGrid::new(s).unwrap();
+        let cells = cache::Cache::new(&sc.medium, res).unwrap().cells.len();
+        // A session's first frame is the one-off solve (all m generations).
+        let mut state = SessionState::new();
+        state.begin_frame();
+        let t = Instant::now();
+        let (one, _) = pg.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
+        let full = t.elapsed().as_secs_f64();
+        let trace_full = one.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum::<f64>();
+        let mut frame = Vec::new();
+        let mut trace = Vec::new();
+        for _ in 0..3 {
+            state.begin_frame();
+            let t = Instant::now();
+            let (out, _) = pg.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
+            frame.push(t.elapsed().as_secs_f64());
+            trace.push(out.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum::<f64>());
+        }
+        let med = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        rows.push(json!({"cache_resolution": res, "cells": cells, "photons": photons, "one_off_seconds": full, "one_off_trace": trace_full,
+            "frame_seconds": med(&mut frame), "frame_trace": med(&mut trace)}));
+    }
+    emit("fig12", json!(rows));
+}
+
+/// Flicker on a moving sun (0.5 degree per frame, 12 frames, cube g 0.7, 2^16 photons): the
+/// rel. RMS change of S between consecutive frames, and the time per frame, for one-off solves
+/// per frame (seed fixed, and a new seed per frame) and for sessions with m 4 and 16.
+#[test]
+#[ignore]
+fn bench_photon_grid_flicker() {
+    let frames = 12u64;
+    let scene = |f: u64| {
+        let mut sc = case("cube_g07");
+        for l in &mut sc.lights {
+            if let Light::Distant { direction, .. } = l {
+                *direction = Quat::from_rotation_z((0.5 * f as f32).to_radians()) * *direction;
+            }
+        }
+        sc
+    };
+    let rel = |a: &[Vec3], b: &[Vec3]| {
+        let (mut n, mut d) = (0.0f64, 0.0f64);
+        for (x, y) in a.iter().zip(b) {
+            n += (*x - *y).as_dvec3().length_squared();
+            d += y.as_dvec3().length_squared();
+        }
+        (n / d).sqrt()
+    };
+    let base = PhotonGridSettings { photons: 1 << 16, cache_resolution: 16, output_resolution: 32, ..Default::default() };
+    let mut rows = Vec::new();
+    for (label, m, new_seed) in [("one-off, fixed seed", 1u32, false), ("one-off, new seed per frame", 1, true), ("session m 4", 4, false), ("session m 16", 16, false)] {
+        let mut state = SessionState::new();
+        let mut prev: Option<Vec<Vec3>> = None;
+        let (mut changes, mut secs) = (Vec::new(), Vec::new());
+        for f in 0..frames {
+            let s = PhotonGridSettings { generations: m, seed: if new_seed { 1 + f } else { 1 }, ..base.clone() };
+            let pg = PhotonGrid::new(s).unwrap();
+            state.begin_frame();
+            let t = Instant::now();
+            let (out, _) = pg.solve_in_session_detailed(&scene(f), &NoProgress, &mut state).unwrap();
+            if f > 0 {
+                secs.push(t.elapsed().as_secs_f64());
+            }
+            if let Some(p) = &prev {
+                changes.push(rel(&out.scattering.data, p));
+            }
+            prev = Some(out.scattering.data);
+        }
+        let rms = (changes.iter().map(|c| c * c).sum::<f64>() / changes.len() as f64).sqrt();
+        rows.push(json!({"run": label, "generations": m, "flicker": rms, "frame_seconds": secs.iter().sum::<f64>() / secs.len() as f64}));
+    }
+    emit("flicker", json!(rows));
+}
