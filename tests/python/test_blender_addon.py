@@ -1155,12 +1155,17 @@ def test_computing_again_replaces_the_previous_result(fresh):
     _tiny(ob, fresh)
     sc = bpy.context.scene
     sc.render.film_transparent = True
+    lights = [o for o in bpy.data.objects if o.type == 'LIGHT']
     assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
-    for light in [o for o in bpy.data.objects if o.type == 'LIGHT']:
+    for light in lights:
         light.hide_render = True  # only the result's emission lights pixels
     first = _mean_render(str(fresh / "first.exr"))
     assert first > 0.0
+    for light in lights:
+        light.hide_render = False
     assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    for light in lights:
+        light.hide_render = True
     results = _results_of(ob)
     assert [o.name for o in results] == ["Smoke_scattering"], [o.name for o in results]
     vdbs = sorted(f for f in os.listdir(str(fresh)) if f.endswith(".vdb"))
@@ -1269,6 +1274,9 @@ def _smoke_domain(cache_dir, frames):
     ds.cache_type = 'ALL'  # never simulates on a frame change
     ds.cache_data_format = 'OPENVDB'
     ds.cache_directory = cache_dir
+    # Evaluating the modifier makes the PyPI bpy's Mantaflow read these files as its own cache
+    # and abort on them (they are not a bake's): it stays off; volscatter reads only its settings.
+    mod.show_viewport = mod.show_render = False
     return ob
 
 
@@ -1354,15 +1362,21 @@ def _host_vs_own_image(out, solver, samples):
 
 @pytest.mark.parametrize("solver", REGISTRY_SOLVERS)
 def test_host_render_of_the_grid_keeps_the_light(fresh, solver):
-    px, own, w, h = _host_vs_own_image(fresh, solver, 64)
+    """Cycles' render of the result volume (S as emission, the copied density for extinction)
+    equals the solver's own image of the same grid (volscatter's compositor), for every
+    registered solver: what the host gets keeps the light. Tolerances: mean RGB 2% (measured
+    0.994-1.000 on every solver at 64 samples, 24x18), per-pixel relative RMSE of RGB sums
+    0.15 (measured 0.063-0.069 at 64 samples: Cycles' own noise, ~1/sqrt(samples))."""
+    px, own, w, h = _host_vs_own_image(fresh, solver, 32)
     n = w * h
     for c in range(3):
-        a = sum(px[c::4]) / n
-        b = sum(own[c::4]) / n
-        print("FLUX", solver, c, a, b, a / b)
+        host = sum(px[c::4]) / n
+        mine = sum(own[c::4]) / n
+        assert mine > 0.0, "%s: the solver's own image is black" % solver
+        assert host == pytest.approx(mine, rel=0.02), "%s channel %d: Cycles %.5f, own image %.5f" % (solver, c, host, mine)
     lum_h = [sum(px[4 * i:4 * i + 3]) for i in range(n)]
     lum_o = [sum(own[4 * i:4 * i + 3]) for i in range(n)]
-    num = sum((x - y) ** 2 for x, y in zip(lum_h, lum_o))
-    den = sum(y * y for y in lum_o)
-    print("RRMSE", solver, math.sqrt(num / den))
-    print("ALPHA", sum(px[3::4]) / n, sum(own[3::4]) / n)
+    err = math.sqrt(sum((x - y) ** 2 for x, y in zip(lum_h, lum_o)) / sum(y * y for y in lum_o))
+    assert err < 0.15, "%s: per-pixel relative RMSE %.3f" % (solver, err)
+    # alpha: the same extinction (Cycles ratio-tracks, the compositor marches)
+    assert sum(px[3::4]) / n == pytest.approx(sum(own[3::4]) / n, abs=0.01)
