@@ -811,8 +811,10 @@ def _modal_harness():
     """The Compute Scattering operator's methods on a plain class, so the modal path (worker
     thread, timer events, Esc) runs without Blender's window event loop."""
     ops = sys.modules[MODULE + ".operators"]
-    names = ("frames", "_setup", "_export", "per_frame", "finish")
-    body = {n: ops.VOLSCATTER_OT_compute_scattering.__dict__[n] for n in names}
+    import inspect
+    # every method the operator class defines itself (frames, _setup, _export, per_frame,
+    # finish and their helpers)
+    body = {n: f for n, f in ops.VOLSCATTER_OT_compute_scattering.__dict__.items() if inspect.isfunction(f)}
     body["reports"] = None
 
     def report(self, kind, msg):
@@ -1173,6 +1175,14 @@ def test_computing_again_replaces_the_previous_result(fresh):
     assert len([m for m in bpy.data.materials if m.name.startswith("Smoke_scattering")]) == 1
     second = _mean_render(str(fresh / "second.exr"))
     assert second == pytest.approx(first, rel=0.01), (first, second)
+    # a third run writes no file over the second's (Blender caches grids by file path)
+    old = bpy.path.abspath(results[0].data.filepath)
+    for light in lights:
+        light.hide_render = False
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    results = _results_of(ob)
+    assert len(results) == 1 and bpy.path.abspath(results[0].data.filepath) != old
+    assert len([f for f in os.listdir(str(fresh)) if f.endswith(".vdb")]) == 1
 
 
 def test_greyed_quality_fields_show_the_preset_values(fresh):

@@ -48,9 +48,20 @@ def _out_dir(settings):
     return os.path.normpath(bpy.path.abspath(path))
 
 
-def _unique_name(base):
+def _unique_name(base, folder=None):
+    """`base`, or `base.001`, ... : a name no object or volume has and, with `folder`, whose
+    files (`<name>_<frame>.vdb`) are not there: a new result never writes over files that an
+    earlier one reads (Blender caches a VDB's grids by path)."""
+    try:
+        files = set(os.listdir(folder)) if folder else set()
+    except OSError:
+        files = set()
+
+    def taken(name):
+        pattern = re.compile(re.escape(bpy.path.clean_name(name)) + r"_\d+\.vdb$")
+        return name in bpy.data.objects or name in bpy.data.volumes or any(pattern.match(f) for f in files)
     name, i = base, 1
-    while name in bpy.data.objects or name in bpy.data.volumes:
+    while taken(name):
         name = "%s.%03d" % (base, i)
         i += 1
     return name
@@ -450,7 +461,7 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
 
     def _setup(self, context):
         _JobOperator._setup(self, context)  # explicit: the job methods are also driven outside bpy in tests
-        self._name = _unique_name(self._obj.name + "_scattering")
+        self._name = _unique_name(self._obj.name + "_scattering", self._out)
         self._grid = None
         self._density_scale = None
         self._cache_frames = {}  # scene frame -> the number of the source's file read for it
