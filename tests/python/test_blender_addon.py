@@ -1390,3 +1390,30 @@ def test_host_render_of_the_grid_keeps_the_light(fresh, solver):
     assert err < 0.15, "%s: per-pixel relative RMSE %.3f" % (solver, err)
     # alpha: the same extinction (Cycles ratio-tracks, the compositor marches)
     assert sum(px[3::4]) / n == pytest.approx(sum(own[3::4]) / n, abs=0.01)
+
+
+def test_device_gpu_says_where_a_solver_without_gpu_backend_runs(fresh, monkeypatch):
+    """Device GPU (or Auto) with a solver the registry gives no GPU backend used to do nothing,
+    silently: the operator now says the solve runs on the CPU, naming the solvers that have one;
+    with a solver that has one (or Device CPU) it says nothing."""
+    native, ops = _native(), sys.modules[MODULE + ".operators"]
+    seen = _record_devices(monkeypatch)
+    entries = native.solvers()["solvers"]
+    without = [e["name"] for e in entries if not e["gpu"]]
+    with_gpu = [e["name"] for e in entries if e["gpu"]]
+    assert without, "every solver has a GPU backend: nothing to say"
+    ob = bs.standard_scene(res=6, points=False)
+    _tiny(ob, fresh, solver=without[0])
+    ob.volscatter.device = 'GPU'
+    H = _modal_harness()
+    op, ctx = H(), _UIContext(ob)
+    op.reports = []
+    assert _drive(op, ctx) == {'FINISHED'}, op.reports
+    assert 1 in seen  # the choice still reaches the library
+    notes = [m for k, m in op.reports if 'WARNING' in k and "no GPU backend" in m]
+    assert len(notes) == 1 and "CPU" in notes[0], op.reports
+    for name in with_gpu:
+        assert name in notes[0] or native.solver(name)["label"] in notes[0]
+    for name in with_gpu:
+        assert ops.device_note(name, 'GPU') is None
+    assert ops.device_note(without[0], 'CPU') is None

@@ -67,6 +67,18 @@ def _unique_name(base, folder=None):
     return name
 
 
+def device_note(solver, device):
+    """What the Device menu's choice does for `solver`, when it is not what the menu says: a
+    GPU asked of a solver with no GPU backend (the registry's `gpu` flag) runs on the CPU."""
+    entry = native.solver(solver)
+    if device == 'CPU' or entry is None or entry.get("gpu"):
+        return None
+    gpu = [s["label"] for s in native.solvers()["solvers"] if s.get("gpu")]
+    return ("volscatter: the %s solver has no GPU backend (%s: %s), so Device %s runs it on the CPU"
+            % (entry["label"], "the solvers with one" if len(gpu) != 1 else "the one with one",
+               ", ".join(gpu) or "none", device.title()))
+
+
 def _solve_on(sc, device, progress, notes, job=None):
     """Solves scene `sc` on the Device menu's choice, passed to the library as it is. AUTO: the
     library uses a hardware GPU when one works, else the CPU. GPU: when the GPU fails (status
@@ -160,6 +172,9 @@ class _JobOperator:
             native.lib()
         except native.LibraryNotFound as e:
             raise ExportError(str(e))
+        note = device_note(self._settings.solver, self._settings.device)
+        if note:
+            self._warn(note)
 
     def _warn(self, msg):
         if msg not in self._warned:

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import mantaflow, properties
+from . import mantaflow, operators, properties
 
 
 def preset_rows(s):
@@ -59,6 +59,12 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         if properties.solver_has(s.solver, "seed"):
             col.prop(s, "seed")
         col.prop(s, "device")
+        try:
+            note = operators.device_note(s.solver, s.device)
+        except Exception:  # no library: the operators say why
+            note = None
+        if note:
+            col.label(text=note.replace("volscatter: ", "").capitalize(), icon='INFO')
         col.separator()
         col.prop(s, "use_frame_range")
         sub = col.column(align=True)
