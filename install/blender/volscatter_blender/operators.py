@@ -510,9 +510,9 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         entry = native.solver(self._solver["name"]) or {"settings": []}
         defaults = {x["name"]: x.get("default") for x in entry["settings"]}
         for key in ("output_resolution", "grid_resolution"):
-            if key in defaults:
-                v = self._solver.get(key, defaults[key])
-                return int(v) if isinstance(v, (int, float)) else 0
+            v = self._solver.get(key, defaults.get(key))
+            if isinstance(v, (int, float)) and v > 0:  # 0: "as grid_resolution" (reference)
+                return int(v)
         return 0
 
     def _grids_in_range(self, context, ob):
