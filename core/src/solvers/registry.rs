@@ -258,14 +258,17 @@ const REFERENCE: SolverEntry = SolverEntry {
         SettingSpec::bool("transparent", "leave the environment seen directly through the medium out of the image"),
         SettingSpec::int("grid_resolution", "largest side of the scattering grid").range(2.0, 1024.0),
         SettingSpec::int("grid_spp", "paths per scattering-grid point").range(1.0, (1u32 << 20) as f64),
+        SettingSpec::int("output_resolution", "largest side of the returned grid, on the medium's voxels: sigma_s of each voxel times the radiance interpolated from the path grid")
+            .range(2.0, 1024.0)
+            .zero("the path grid itself, S point-sampled there"),
         SettingSpec::int("majorant_resolution", "cells per axis of the majorant grid used for free-flight sampling").range(1.0, 512.0),
     ],
     defaults: || serde_json::to_value(reference::ReferenceSettings::default()).unwrap_or(Value::Null),
     lights: &LightType::ALL,
     presets: &[
-        Preset { name: "draft", help: DRAFT, settings_json: r#"{"grid_resolution": 16, "grid_spp": 16}"# },
-        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "grid_spp": 64}"# },
-        Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "grid_spp": 256}"# },
+        Preset { name: "draft", help: DRAFT, settings_json: r#"{"grid_resolution": 16, "grid_spp": 16, "output_resolution": 64}"# },
+        Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "grid_spp": 64, "output_resolution": 128}"# },
+        Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "grid_spp": 256, "output_resolution": 256}"# },
     ],
     cpu: |m| Ok(Box::new(reference::Reference::from_settings(m)?)),
     gpu: false,

@@ -9,11 +9,11 @@ as an extension); the native library is loaded on first use, not at registration
 
 if "bpy" in locals():  # script reload (F8 / Reload Scripts)
     import importlib
-    from . import native, scene_export, properties, operators, panel, eevee
-    for _m in (native, scene_export, properties, operators, panel, eevee):
+    from . import native, scene_export, mantaflow, properties, operators, panel, eevee
+    for _m in (native, scene_export, mantaflow, properties, operators, panel, eevee):
         importlib.reload(_m)
 else:
-    from . import native, scene_export, properties, operators, panel, eevee
+    from . import native, scene_export, mantaflow, properties, operators, panel, eevee
 
 import bpy  # noqa: E402
 

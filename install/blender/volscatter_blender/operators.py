@@ -10,6 +10,7 @@ cancellation leaves the scene as it was (files written so far are deleted).
 """
 
 import os
+import re
 import tempfile
 import threading
 import time
@@ -17,10 +18,27 @@ import time
 import bpy
 from bpy.props import StringProperty
 
-from . import native, scene_export
+from . import mantaflow, native, scene_export
 from .scene_export import ExportError
 
 RESULT_TAG = "volscatter_source"
+#: Custom property on an object whose visibility volscatter keyed: the frames it keyed.
+KEYED_TAG = "volscatter_keyed_frames"
+
+
+def source_of(ob, context):
+    """-> (the Volume object to solve, the object whose settings drive it and that renders the
+    original smoke). A result volume stands for its source; a Mantaflow smoke domain for the
+    Volume reading its cache (mantaflow.cache_volume), with the domain's settings."""
+    src = ob.get(RESULT_TAG) if ob is not None else None
+    if src and src in bpy.data.objects and bpy.data.objects[src].type == 'VOLUME':
+        ob = bpy.data.objects[src]  # asked on a result volume: work on its source
+    dom = ob.get(mantaflow.DOMAIN_TAG) if ob is not None else None
+    if dom and dom in bpy.data.objects and mantaflow.gas_domain(bpy.data.objects[dom]):
+        ob = bpy.data.objects[dom]  # a domain's cache volume: the domain holds the settings
+    if mantaflow.gas_domain(ob) is not None:
+        return mantaflow.cache_volume(ob, context), ob
+    return ob, ob
 
 
 def _out_dir(settings):
@@ -30,12 +48,35 @@ def _out_dir(settings):
     return os.path.normpath(bpy.path.abspath(path))
 
 
-def _unique_name(base):
+def _unique_name(base, folder=None):
+    """`base`, or `base.001`, ... : a name no object or volume has and, with `folder`, whose
+    files (`<name>_<frame>.vdb`) are not there: a new result never writes over files that an
+    earlier one reads (Blender caches a VDB's grids by path)."""
+    try:
+        files = set(os.listdir(folder)) if folder else set()
+    except OSError:
+        files = set()
+
+    def taken(name):
+        pattern = re.compile(re.escape(bpy.path.clean_name(name)) + r"_\d+\.vdb$")
+        return name in bpy.data.objects or name in bpy.data.volumes or any(pattern.match(f) for f in files)
     name, i = base, 1
-    while name in bpy.data.objects or name in bpy.data.volumes:
+    while taken(name):
         name = "%s.%03d" % (base, i)
         i += 1
     return name
+
+
+def device_note(solver, device):
+    """What the Device menu's choice does for `solver`, when it is not what the menu says: a
+    GPU asked of a solver with no GPU backend (the registry's `gpu` flag) runs on the CPU."""
+    entry = native.solver(solver)
+    if device == 'CPU' or entry is None or entry.get("gpu"):
+        return None
+    gpu = [s["label"] for s in native.solvers()["solvers"] if s.get("gpu")]
+    return ("volscatter: the %s solver has no GPU backend (%s: %s), so Device %s runs it on the CPU"
+            % (entry["label"], "the solvers with one" if len(gpu) != 1 else "the one with one",
+               ", ".join(gpu) or "none", device.title()))
 
 
 def _solve_on(sc, device, progress, notes, job=None):
@@ -110,7 +151,7 @@ class _JobOperator:
     @classmethod
     def poll(cls, context):
         ob = context.object
-        return ob is not None and ob.type == 'VOLUME'
+        return ob is not None and (ob.type == 'VOLUME' or mantaflow.gas_domain(ob) is not None)
 
     def _setup(self, context):
         # first what _fail needs, so that a failure anywhere below is reported cleanly
@@ -118,11 +159,8 @@ class _JobOperator:
         self._inputs = []  # generated input VDBs: only the solver reads them
         self._session = None  # made from the first frame's scene, closed when the job ends
         self._frame0 = context.scene.frame_current
-        self._obj = context.object
-        src = self._obj.get(RESULT_TAG)
-        if src and src in bpy.data.objects and bpy.data.objects[src].type == 'VOLUME':
-            self._obj = bpy.data.objects[src]  # asked on a result volume: work on its source
-        self._settings = self._obj.volscatter
+        self._obj, self._owner = source_of(context.object, context)
+        self._settings = self._owner.volscatter
         self._frames = self.frames(context)
         self._index = 0
         self._values = []
@@ -134,6 +172,9 @@ class _JobOperator:
             native.lib()
         except native.LibraryNotFound as e:
             raise ExportError(str(e))
+        note = device_note(self._settings.solver, self._settings.device)
+        if note:
+            self._warn(note)
 
     def _warn(self, msg):
         if msg not in self._warned:
@@ -426,7 +467,7 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def frames(self, context):
-        s = self._obj.volscatter
+        s = self._settings
         if s.use_frame_range:
             if s.frame_end < s.frame_start:
                 raise ExportError("frame range %d..%d is empty" % (s.frame_start, s.frame_end))
@@ -435,23 +476,105 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
 
     def _setup(self, context):
         _JobOperator._setup(self, context)  # explicit: the job methods are also driven outside bpy in tests
-        self._name = _unique_name(self._obj.name + "_scattering")
+        self._name = _unique_name(self._obj.name + "_scattering", self._out)
         self._grid = None
         self._density_scale = None
+        self._cache_frames = {}  # scene frame -> the number of the source's file read for it
+        self._dims = None  # the result grid's dims (the first frame's)
 
     def _export(self, context, frame):
         doc = _JobOperator._export(self, context, frame)
         if self._grid is None:
             self._grid = doc["medium"]["grid"]
             self._density_scale = doc["medium"]["density_scale"]
+        m = re.search(r"(\d+)\.vdb$", os.path.basename(doc["medium"]["vdb"]))
+        if m and getattr(self._obj.data, "is_sequence", False):
+            self._cache_frames[frame] = int(m.group(1))
         os.makedirs(self._out, exist_ok=True)
         return doc
 
     def per_frame(self, result, frame):
-        path = os.path.join(self._out, "%s_%04d.vdb" % (bpy.path.clean_name(self._name), frame))
+        # A range is a sequence numbered by scene frame (the volume maps frames to files); a
+        # single frame of a cache sequence is named after the cache file it was computed from.
+        number = frame if len(self._frames) > 1 else self._cache_frames.get(frame, frame)
+        path = os.path.join(self._out, "%s_%04d.vdb" % (bpy.path.clean_name(self._name), number))
         self._files.append(path)
         result.write_grid(path, native.GRID_FORMAT_VDB)
+        if self._dims is None:
+            self._dims = tuple(result.dims())
         return path
+
+    def _requested_resolution(self):
+        """The largest side asked of the returned grid: output_resolution where the solver has
+        it, else grid_resolution (the value set, or the registry's default)."""
+        entry = native.solver(self._solver["name"]) or {"settings": []}
+        defaults = {x["name"]: x.get("default") for x in entry["settings"]}
+        for key in ("output_resolution", "grid_resolution"):
+            v = self._solver.get(key, defaults.get(key))
+            if isinstance(v, (int, float)) and v > 0:  # 0: "as grid_resolution" (reference)
+                return int(v)
+        return 0
+
+    def _grids_in_range(self, context, ob):
+        """The grid names Blender reads from `ob` at the first computed frame (the current
+        frame may lie outside the range, where the sequence has no file)."""
+        scene = context.scene
+        if scene.frame_current not in self._frames:
+            scene.frame_set(self._frames[0])
+        try:
+            ev = ob.evaluated_get(context.evaluated_depsgraph_get()).data
+            return [g.name for g in ev.grids], ev.grids.error_message
+        finally:
+            self._restore_frame(context)
+
+    def _previous_results(self, new):
+        return [o for o in bpy.data.objects if o is not new and o.get(RESULT_TAG) == self._obj.name and o.type == 'VOLUME']
+
+    def _remove_result(self, ob):
+        """Deletes an earlier result of the same source: its object, volume, material, density
+        node group and the VDB files it reads (files volscatter wrote: <name>_<frame>.vdb)."""
+        vol = ob.data
+        mats = [m for m in vol.materials if m is not None]
+        groups = [m.node_group for m in ob.modifiers if m.type == 'NODES' and m.node_group is not None]
+        path = bpy.path.abspath(vol.filepath)
+        bpy.data.objects.remove(ob)
+        if vol.users == 0:
+            bpy.data.volumes.remove(vol)
+        for m in mats:
+            if m.users == 0:
+                bpy.data.materials.remove(m)
+        for g in groups:
+            if g.users == 0:
+                bpy.data.node_groups.remove(g)
+        folder, base = os.path.split(path)
+        m = re.match(r"(.*_)\d+\.vdb$", base)
+        if m and os.path.isdir(folder):
+            pattern = re.compile(re.escape(m.group(1)) + r"\d+\.vdb$")
+            for f in os.listdir(folder):
+                p = os.path.join(folder, f)
+                if pattern.match(f) and p not in self._values:
+                    try:
+                        os.remove(p)
+                    except OSError:
+                        pass
+
+    def _key_visibility(self, context, ob, hidden_inside, frames):
+        """Keys hide_render and hide_viewport of `ob`: `hidden_inside` within [first, last] of
+        `frames`, the opposite outside (constant: booleans step). Replaces keys an earlier run
+        made."""
+        for f in ob.get(KEYED_TAG, ()):
+            for prop in ("hide_render", "hide_viewport"):
+                try:
+                    ob.keyframe_delete(prop, frame=f)
+                except RuntimeError:  # no such key (the user removed it)
+                    pass
+        first, last = frames[0], frames[-1]
+        keys = ((first - 1, not hidden_inside), (first, hidden_inside), (last + 1, not hidden_inside))
+        for f, hidden in keys:
+            for prop in ("hide_render", "hide_viewport"):
+                setattr(ob, prop, hidden)
+                ob.keyframe_insert(prop, frame=f)
+        ob[KEYED_TAG] = [f for f, _ in keys]
 
     def finish(self, context, paths):
         created = []
@@ -485,11 +608,10 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
             cols = list(self._obj.users_collection) or [context.scene.collection]
             for c in cols:
                 c.objects.link(ob)
-            ev = ob.evaluated_get(context.evaluated_depsgraph_get()).data
-            names = [g.name for g in ev.grids]
+            names, error = self._grids_in_range(context, ob)
             if "scattering_r" not in names:
                 raise ExportError("volscatter wrote %s but Blender reads no scattering grid from it (%s)"
-                                  % (paths[0], ev.grids.error_message or "no grids"))
+                                  % (paths[0], error or "no grids"))
         except Exception:
             for coll, idb in reversed(created):
                 try:
@@ -498,14 +620,34 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
                     pass
             raise
         self._files = [p for p in self._files if p in self._inputs]  # the results belong to the new volume now
+        # Computing again replaces the earlier result of this source (never two stacked).
+        previous = self._previous_results(ob)
+        for old in previous:
+            self._remove_result(old)
+        if previous:
+            base = self._obj.name + "_scattering"
+            for idb in (ob, vol, mat):  # the base name is free again (files keep theirs)
+                idb.name = base
+            self.report({'INFO'}, "volscatter: replaced the earlier result of '%s'" % self._obj.name)
+        original = self._owner
+        # The result shows only over the frames it holds, where the source is animated (a range,
+        # or a single frame of a sequence): outside them the original is visible again.
+        animated = len(self._frames) > 1 or getattr(self._obj.data, "is_sequence", False)
+        hide_original = has_density and self._settings.hide_original
+        if animated:
+            self._key_visibility(context, ob, False, self._frames)
+            if hide_original:
+                self._key_visibility(context, original, True, self._frames)
+            context.scene.frame_set(context.scene.frame_current)  # apply the keys at this frame
+        elif hide_original:
+            original.hide_render = True
+            if original.name in context.view_layer.objects:
+                original.hide_set(True)
         if not has_density:
             self.report({'WARNING'}, "volscatter: this Blender cannot copy the density grid onto '%s' (Geometry Nodes "
                         "grid nodes need Blender 5.0), so it has emission only; '%s' stays visible: give it an "
                         "absorption-only material for the extinction" % (ob.name, self._obj.name))
-        elif self._settings.hide_original:
-            self._obj.hide_render = True
-            if self._obj.name in context.view_layer.objects:
-                self._obj.hide_set(True)
+        self._note_resolution()
         for o in context.view_layer.objects:
             o.select_set(False)
         if ob.name in context.view_layer.objects:
@@ -513,6 +655,16 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
             context.view_layer.objects.active = ob
         self.report({'INFO'}, "volscatter: '%s' holds the scattering of '%s' (%d frame%s, %s)"
                     % (ob.name, self._obj.name, len(paths), "" if len(paths) == 1 else "s", self._out))
+
+    def _note_resolution(self):
+        """Records the result's resolution for the panel and says when the solver capped it
+        below the one asked for (at the source's voxels)."""
+        got = max(self._dims) if self._dims else 0
+        asked = self._requested_resolution()
+        self._settings.last_resolution, self._settings.last_requested = got, asked
+        if 0 < got < asked:
+            self.report({'INFO'}, "volscatter: the result grid has %d cells along its longest side, not the %d "
+                        "asked: a solver computes no finer than the source's voxels" % (got, asked))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -2,7 +2,26 @@
 
 import bpy
 
-from . import properties
+from . import mantaflow, operators, properties
+
+
+def preset_rows(s):
+    """(label, value) for each setting of the chosen Quality preset that no Custom field
+    shows, as the solver gets it (none under Custom)."""
+    try:
+        preset = properties.preset_settings(s.solver, s.quality) or {}
+    except Exception:  # no library: the operators say why
+        return []
+    shown = {setting for _, setting in properties.CUSTOM_FIELDS}
+    return [(k.replace("_", " ").title(), str(v)) for k, v in preset.items() if k not in shown]
+
+
+def cap_note(s):
+    """The panel's line about the last result's grid when the solver capped it below the
+    resolution asked for (at the source's voxels), else None."""
+    if 0 < s.last_resolution < s.last_requested:
+        return "Last result: %d cells (asked %d; capped at the source's voxels)" % (s.last_resolution, s.last_requested)
+    return None
 
 
 class VOLSCATTER_PT_volume(bpy.types.Panel):
@@ -14,7 +33,8 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
     @classmethod
     def poll(cls, context):
         ob = context.object
-        return ob is not None and ob.type == 'VOLUME'
+        # Volume objects, and Mantaflow smoke domains (their cache is read as the volume)
+        return ob is not None and (ob.type == 'VOLUME' or mantaflow.gas_domain(ob) is not None)
 
     def draw(self, context):
         layout = self.layout
@@ -24,14 +44,27 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         col.prop(s, "solver")
         col.prop(s, "quality")
         sub = col.column()
-        sub.active = s.quality == 'CUSTOM'
         # The Custom fields the chosen solver has a setting for (by the library's registry).
+        # Under a preset they are read-only and hold the preset's values (set when Quality or
+        # Solver changes), and the preset's other settings are listed below them: the panel
+        # shows what the solver runs with.
+        sub.enabled = s.quality == 'CUSTOM'
         for field, setting in properties.CUSTOM_FIELDS:
             if properties.solver_has(s.solver, setting):
                 sub.prop(s, field)
+        for key, value in preset_rows(s):
+            row = sub.row()
+            row.label(text=key)
+            row.label(text=value)
         if properties.solver_has(s.solver, "seed"):
             col.prop(s, "seed")
         col.prop(s, "device")
+        try:
+            note = operators.device_note(s.solver, s.device)
+        except Exception:  # no library: the operators say why
+            note = None
+        if note:
+            col.label(text=note.replace("volscatter: ", "").capitalize(), icon='INFO')
         col.separator()
         col.prop(s, "use_frame_range")
         sub = col.column(align=True)
@@ -39,6 +72,9 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         sub.prop(s, "frame_start")
         sub.prop(s, "frame_end")
         col.prop(s, "output_dir")
+        note = cap_note(s)
+        if note:
+            col.label(text=note, icon='INFO')
         col.prop(s, "hide_original")
         row = layout.row(align=True)
         row.operator("volscatter.compute_scattering", icon='OUTLINER_DATA_VOLUME')

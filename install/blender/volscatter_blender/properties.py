@@ -47,6 +47,54 @@ def _quality_items(self, context):
     return _registry_items("quality", build)
 
 
+def preset_settings(solver, quality):
+    """The settings of `solver`'s registry preset `quality` (Blender's upper-case identifier),
+    or None (Custom, an unknown solver or preset)."""
+    entry = native.solver(solver)
+    preset = next((p for p in entry["presets"] if p["name"].upper() == quality), None) if entry else None
+    return dict(preset["settings"]) if preset else None
+
+
+def _show_preset(self, context):
+    """Quality or Solver changed: the Custom fields (greyed out under a preset) take the values
+    the preset really runs with, so the panel shows what is used, and Custom starts from them."""
+    if self.quality == CUSTOM:
+        return
+    try:
+        preset = preset_settings(self.solver, self.quality)
+    except Exception:  # no library: nothing to show (the operators report it)
+        return
+    for field, setting in CUSTOM_FIELDS:
+        if preset and setting in preset:
+            setattr(self, field, int(preset[setting]))
+
+
+def _scene_of(settings):
+    """The scene whose frame range a frame-range field defaults to: the first scene showing
+    the object, else the current one."""
+    ob = settings.id_data
+    scenes = getattr(ob, "users_scene", ()) if ob is not None else ()
+    return scenes[0] if scenes else bpy.context.scene
+
+
+def _frame_field(key, scene_attr):
+    """get/set for Start/End: the scene's own range until the user sets a value."""
+    def get(self):
+        v = self.get(key)
+        if v is not None:
+            return int(v)
+        sc = _scene_of(self)
+        return int(getattr(sc, scene_attr)) if sc is not None else 1
+
+    def set(self, value):
+        self[key] = int(value)
+    return get, set
+
+
+_START = _frame_field("frame_start_set", "frame_start")
+_END = _frame_field("frame_end_set", "frame_end")
+
+
 def solver_has(name, setting):
     """Whether solver `name` has `setting` (by the registry)."""
     entry = native.solver(name)
@@ -54,9 +102,10 @@ def solver_has(name, setting):
 
 
 class VolscatterSettings(bpy.types.PropertyGroup):
-    solver: EnumProperty(name="Solver", items=_solver_items, default=0)
-    # default 1: the registry's second preset, "preview"
-    quality: EnumProperty(name="Quality", items=_quality_items, default=1)
+    solver: EnumProperty(name="Solver", items=_solver_items, default=0, update=_show_preset)
+    # default 1: the registry's second preset, "preview" (the Custom fields' defaults below are
+    # the reference's and pop's preview values, so that they show what a new object runs)
+    quality: EnumProperty(name="Quality", items=_quality_items, default=1, update=_show_preset)
     grid_resolution: IntProperty(name="Grid Resolution", default=32, min=2, max=512,
                                  description="Cells along the longest side of the solver's grid")
     iterations: IntProperty(name="Iterations", default=400, min=1, max=100000,
@@ -74,13 +123,20 @@ class VolscatterSettings(bpy.types.PropertyGroup):
     )
     use_frame_range: BoolProperty(name="Frame Range", default=False,
                                   description="Compute one scattering VDB per frame of the range")
-    frame_start: IntProperty(name="Start", default=1)
-    frame_end: IntProperty(name="End", default=1)
+    frame_start: IntProperty(name="Start", get=_START[0], set=_START[1],
+                             description="First frame to compute (the scene's start until set)")
+    frame_end: IntProperty(name="End", get=_END[0], set=_END[1],
+                           description="Last frame to compute (the scene's end until set)")
     output_dir: StringProperty(name="Output", subtype='DIR_PATH', default="//volscatter/", options=_BLEND_RELATIVE,
                                description="Folder for the scattering VDB files (unsaved files: the temp folder)")
     hide_original: BoolProperty(name="Hide Original", default=True,
                                 description="Hide the source volume in renders once its scattering volume exists "
                                             "(the new volume carries its extinction)")
+
+    # What the last Compute Scattering made, for the panel: the result grid's largest side and
+    # the one asked for (a solver caps its grid at the source's voxels: said, not silent).
+    last_resolution: IntProperty(name="Result Resolution", default=0, options={'HIDDEN'})
+    last_requested: IntProperty(name="Requested Resolution", default=0, options={'HIDDEN'})
 
     def solver_settings(self):
         """The JSON settings for the chosen solver: its registry preset, or under Custom the
@@ -88,9 +144,7 @@ class VolscatterSettings(bpy.types.PropertyGroup):
         if self.quality == CUSTOM:
             s = {setting: getattr(self, field) for field, setting in CUSTOM_FIELDS if solver_has(self.solver, setting)}
         else:
-            entry = native.solver(self.solver)
-            preset = next((p for p in entry["presets"] if p["name"].upper() == self.quality), None) if entry else None
-            s = dict(preset["settings"]) if preset else {}
+            s = preset_settings(self.solver, self.quality) or {}
         if solver_has(self.solver, "seed"):
             s["seed"] = self.seed
         return s

@@ -10,6 +10,7 @@
 //! - Russian roulette after `rr_depth` scattering events; paths stop at `max_depth`.
 //! - One PCG stream per pixel (or grid point): deterministic for a seed, any thread count.
 
+mod on_voxels;
 mod tracer;
 
 use glam::{Vec3, Vec4};
@@ -39,6 +40,11 @@ pub struct ReferenceSettings {
     /// Scattering grid: largest dimension, and paths per grid point.
     pub grid_resolution: u32,
     pub grid_spp: u32,
+    /// Largest side of the returned grid, on the medium's voxels (at most): S = sigma_s of each
+    /// voxel times L interpolated from the `grid_resolution` grid (on_voxels.rs). 0: the
+    /// `grid_resolution` grid itself, with S point-sampled there (darker or brighter than the
+    /// path-traced image when coarser than the voxels: measured in on_voxels.rs).
+    pub output_resolution: u32,
     /// Cells per axis of the majorant grid.
     pub majorant_resolution: u32,
 }
@@ -53,6 +59,7 @@ impl Default for ReferenceSettings {
             transparent: false,
             grid_resolution: 32,
             grid_spp: 256,
+            output_resolution: 0,
             majorant_resolution: 64,
         }
     }
@@ -68,6 +75,9 @@ impl ReferenceSettings {
         }
         if !(2..=1024).contains(&self.grid_resolution) {
             return Err(Error::scene("solver.grid_resolution", format!("must be in 2..=1024, got {}", self.grid_resolution)));
+        }
+        if self.output_resolution != 0 && !(2..=1024).contains(&self.output_resolution) {
+            return Err(Error::scene("solver.output_resolution", format!("must be 0 or in 2..=1024, got {}", self.output_resolution)));
         }
         if !(1..=512).contains(&self.majorant_resolution) {
             return Err(Error::scene("solver.majorant_resolution", "must be in 1..=512"));
@@ -191,13 +201,69 @@ impl Reference {
     }
 }
 
+impl Reference {
+    /// The grid hosts get (on_voxels.rs): L traced on the `grid_resolution` grid at the points
+    /// some voxel with density interpolates from, S = sigma_s x L on the medium's voxels.
+    pub fn scattering_on_voxels(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
+        let s = &self.settings;
+        let medium = &scene.medium;
+        let (out, density) = timings.time("output grid", || on_voxels::output_frame(medium, s.output_resolution))?;
+        let mut radiance = ScatteringGrid::over_medium(medium, s.grid_resolution)?;
+        let needed = on_voxels::needed_points(&radiance, &out, &density);
+        let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
+        let [nx, ny, _] = radiance.dims;
+        let slab = (nx * ny) as usize;
+        let nz = radiance.dims[2] as usize;
+        let frame = radiance.index_to_world;
+        let done = AtomicUsize::new(0);
+        let cancelled = AtomicBool::new(false);
+        timings.time("scattering grid", || {
+            radiance.data.par_chunks_mut(slab).zip(needed.par_chunks(slab)).enumerate().for_each(|(k, (row, need))| {
+                if cancelled.load(Ordering::Relaxed) {
+                    return;
+                }
+                for (idx, l) in row.iter_mut().enumerate() {
+                    if !need[idx] {
+                        continue;
+                    }
+                    let (i, j) = (idx as u32 % nx, idx as u32 / nx);
+                    let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
+                    let view = (x - scene.camera.position).normalize_or(Vec3::Z);
+                    // The same stream per point as scattering_grid: equal L where both trace.
+                    let mut rng = Rng::new(s.seed ^ 0x5ca7, (k * slab + idx) as u64);
+                    let mut sum = Vec3::ZERO;
+                    for _ in 0..s.grid_spp {
+                        sum += tracer.in_scattered(x, view, &mut rng);
+                    }
+                    *l = sum / s.grid_spp as f32;
+                }
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                if !progress.update("scattering grid", n as f32 / nz as f32) {
+                    cancelled.store(true, Ordering::Relaxed);
+                }
+            })
+        });
+        if cancelled.load(Ordering::Relaxed) {
+            return Err(Error::Cancelled);
+        }
+        Ok(timings.time("upsampling", || on_voxels::scattering(medium, &radiance, out, &density)))
+    }
+}
+
 impl Solver for Reference {
     fn name(&self) -> &'static str {
         "reference"
     }
+    /// With `output_resolution`, S on the medium's voxels (`scattering_on_voxels`), the grid a
+    /// host renders next to the medium's own extinction; without, the point estimate on the
+    /// `grid_resolution` grid (`scattering_grid`, what the solver fixtures store).
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
         let mut timings = Timings::default();
-        let scattering = self.scattering_grid(scene, progress, &mut timings)?;
+        let scattering = if self.settings.output_resolution == 0 {
+            self.scattering_grid(scene, progress, &mut timings)?
+        } else {
+            self.scattering_on_voxels(scene, progress, &mut timings)?
+        };
         Ok(SolveOutput { scattering, timings })
     }
 }
