@@ -28,6 +28,7 @@
 //! 0.153 (cube g 0.7), 0.365 (plume g 0.9), 0.15-0.19 (local lights beside the plume), 0.73
 //! (dense cloud, too dark: needs the compensation).
 
+pub mod compensate;
 pub mod gather;
 pub mod settings;
 pub mod walks;
@@ -85,7 +86,7 @@ impl Vpl {
         if !progress.update("vpl gather", 0.0) {
             return Err(Error::Cancelled);
         }
-        let (merged, gstats) = timings.time("vpl gather", || gather::gather(medium, &mip, scene.camera.position, &walks, s))?;
+        let (merged, gstats) = timings.time("vpl gather", || gather::gather(scene, &mip, &walks, s))?;
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
         let mut scattering = timings.time("vpl upsample", || upsample(medium, &mip, &merged, &pop_like))?;
         let single = timings.time("vpl single scattering", || single_scattering_grid(scene, s.output_resolution, s.dome_directions))?;

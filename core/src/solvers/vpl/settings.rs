@@ -16,6 +16,10 @@ pub enum NearField {
     /// (medium::ball_mean_inverse_square): bounded (3/r^2 at the VPL) and with the same
     /// integral over space as 1/d^2, so no energy is lost, only blurred over r.
     Ball,
+    /// The clamp, and the clamped energy put back by the paper's bias compensation
+    /// (compensate.rs): new vertices within r of each gather point, connected to subsets of
+    /// the walks and to the lights, recursively.
+    Compensate,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -51,6 +55,15 @@ pub struct VplSettings {
     /// of the multiple scattering arrives from within r, so a radius of a cell lost most of it
     /// (white cloud furnace S / sigma_s 0.035 at 10 gather cells, measured).
     pub mean_free_paths: f32,
+    /// `near_field: compensate`: new vertices around each gather point (the first recursion
+    /// level; one per vertex below it).
+    pub compensation_vertices: u32,
+    /// `near_field: compensate`: recursion levels; at the last the vertices take the VPLs with
+    /// the ball kernel instead of the clamp (1: no recursion).
+    pub compensation_depth: u32,
+    /// `near_field: compensate`: walks each new vertex connects to (one random subset of the
+    /// walks, reweighted).
+    pub compensation_walks: u32,
     /// Largest side of the coarse grid on which VPLs are gathered.
     pub gather_resolution: u32,
     /// Largest side of the returned scattering grid (the single scattering is computed on it
@@ -80,6 +93,9 @@ impl Default for VplSettings {
             near_field: NearField::Ball,
             clamp_radius: 1.0,
             mean_free_paths: 0.25,
+            compensation_vertices: 4,
+            compensation_depth: 2,
+            compensation_walks: 256,
             gather_resolution: 16,
             output_resolution: 64,
             upsample: true,
@@ -104,6 +120,15 @@ impl VplSettings {
         }
         if !(self.mean_free_paths.is_finite() && self.mean_free_paths >= 0.0) {
             return Err(Error::scene("solver.mean_free_paths", format!("must be >= 0, got {}", self.mean_free_paths)));
+        }
+        if !(1..=256).contains(&self.compensation_vertices) {
+            return Err(Error::scene("solver.compensation_vertices", format!("must be in 1..=256, got {}", self.compensation_vertices)));
+        }
+        if !(1..=8).contains(&self.compensation_depth) {
+            return Err(Error::scene("solver.compensation_depth", format!("must be in 1..=8, got {}", self.compensation_depth)));
+        }
+        if self.compensation_walks == 0 {
+            return Err(Error::scene("solver.compensation_walks", "must be at least 1"));
         }
         if !(2..=256).contains(&self.gather_resolution) {
             return Err(Error::scene("solver.gather_resolution", format!("must be in 2..=256, got {}", self.gather_resolution)));

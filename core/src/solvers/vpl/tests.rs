@@ -125,14 +125,22 @@ fn vpl_explore() {
         gather_resolution: env_u32("VPL_GATHER", 12),
         output_resolution: env_u32("VPL_OUT", 24),
         mean_free_paths: env_u32("VPL_MFP100", 25) as f32 / 100.0,
-        near_field: if std::env::var("VPL_NEAR").as_deref() == Ok("clamp") { NearField::Clamp } else { NearField::Ball },
+        near_field: match std::env::var("VPL_NEAR").as_deref() {
+            Ok("clamp") => NearField::Clamp,
+            Ok("compensate") => NearField::Compensate,
+            _ => NearField::Ball,
+        },
+        compensation_vertices: env_u32("VPL_CV", 4),
+        compensation_depth: env_u32("VPL_CD", 2),
+        compensation_walks: env_u32("VPL_CW", 256),
+        clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0,
         ..Default::default()
     };
     let sc = case(&name);
     let t = std::time::Instant::now();
     let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
     let e = errors_against_fixture(&name, &sc, &out.scattering);
-    eprintln!("{name} {s:?}: {e:?} vpls {} power {:?} cut {} {:.2} s {:?}", rep.vpls, rep.vpl_power, rep.walks_cut, t.elapsed().as_secs_f64(), out.timings);
+    eprintln!("{name} {:?} walks {} gather {}: {e}; {:?}; {} vpls, {} cut, {:.2} s", s.near_field, s.walks, s.gather_resolution, rep.gather, rep.vpls, rep.walks_cut, t.elapsed().as_secs_f64());
 }
 
 /// Energy of the walks: around a point light inside a thick homogeneous box (optical radius
@@ -158,4 +166,56 @@ fn vpl_power_is_a_over_one_minus_a_around_a_point_light() {
     eprintln!("VPL power / light power {ratio:.4} (a/(1-a) = {expected}), {} VPLs", walks.vpls.len());
     assert!((ratio / expected - 1.0).abs() < 0.03, "{ratio} vs {expected}");
     assert_eq!(walks.cut, 0);
+}
+
+/// The white furnace box of testing/furnace.rs (8^3 voxels of 0.125 m, optical thickness 4
+/// across, g 0.6, albedo 1, uniform dome of radiance 1): S = sigma_s everywhere inside.
+fn furnace_box() -> Scene {
+    use crate::scene::{Camera, Environment, Light};
+    Scene {
+        medium: crate::solvers::testing::homogeneous_box(8, 0.125, 4.0, 1.0, 0.6),
+        lights: vec![Light::Dome(Environment { color: Vec3::ONE, map: None })],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.5), Vec3::ZERO, Vec3::Z, 22.0, 12, 12),
+        solver: Default::default(),
+    }
+}
+
+/// Mean S / sigma_s over the interior of `sc` (density above 0.99 of its peak), and the report.
+fn furnace_ratio(sc: &Scene, s: VplSettings) -> (f64, super::VplReport) {
+    let (out, rep) = Vpl::new(s).unwrap().solve_detailed(sc, &NoProgress, u32::MAX).unwrap();
+    let ratios = crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99);
+    assert!(ratios.len() > 8);
+    (ratios.iter().map(|&r| r as f64).sum::<f64>() / ratios.len() as f64, rep)
+}
+
+/// Exploration (not in CI): the white furnace box and cloud with each near field, settings
+/// from the environment as `vpl_explore`.
+#[test]
+#[ignore]
+fn vpl_explore_furnace() {
+    use crate::solvers::testing::env_u32;
+    let mut cloud = crate::solvers::testing::cloud::cloud_scene();
+    cloud.medium.albedo = Vec3::ONE;
+    cloud.lights = furnace_box().lights;
+    for (name, sc) in [("box", furnace_box()), ("cloud", cloud)] {
+        if !std::env::var("VPL_CASE").map(|c| name.contains(&c)).unwrap_or(true) {
+            continue;
+        }
+        for nf in [NearField::Ball, NearField::Clamp, NearField::Compensate] {
+            let s = VplSettings {
+                walks: env_u32("VPL_WALKS", 2048),
+                gather_resolution: env_u32("VPL_GATHER", 10),
+                output_resolution: env_u32("VPL_OUT", 12),
+                clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0,
+                compensation_vertices: env_u32("VPL_CV", 4),
+                compensation_depth: env_u32("VPL_CD", 2),
+                compensation_walks: env_u32("VPL_CW", 256),
+                near_field: nf,
+                ..Default::default()
+            };
+            let t = std::time::Instant::now();
+            let (m, rep) = furnace_ratio(&sc, s);
+            eprintln!("furnace {name} {nf:?}: S / sigma_s {m:.4}; {:?}; {:.1} s", rep.gather, t.elapsed().as_secs_f64());
+        }
+    }
 }
