@@ -121,8 +121,7 @@ impl<'a> Compensation<'a> {
                 let (vpl, _) = connect(m, list, xp, view, Kernel::Clamp(r), r, self.step, stats);
                 eps += vpl * scale + self.estimate(xp, w, level + 1, rng, stats);
             } else {
-                let ball = ball_radius(m, rho_p, r, self.mean_free_paths);
-                let (vpl, _) = connect(m, list, xp, view, Kernel::Ball(ball), ball, self.step, stats);
+                let (vpl, _) = connect(m, list, xp, view, Kernel::Ball(r), r, self.step, stats);
                 eps += vpl * scale;
             }
             sum += weight * m.sigma_s(rho_p) * eps;
