@@ -133,8 +133,8 @@ impl VplSettings {
         if !(1..=8).contains(&self.compensation_depth) {
             return Err(Error::scene("solver.compensation_depth", format!("must be in 1..=8, got {}", self.compensation_depth)));
         }
-        if self.compensation_walks == 0 {
-            return Err(Error::scene("solver.compensation_walks", "must be at least 1"));
+        if !(1..=(1 << 24)).contains(&self.compensation_walks) {
+            return Err(Error::scene("solver.compensation_walks", format!("must be in 1..=16777216, got {}", self.compensation_walks)));
         }
         if !(2..=256).contains(&self.gather_resolution) {
             return Err(Error::scene("solver.gather_resolution", format!("must be in 2..=256, got {}", self.gather_resolution)));
