@@ -107,13 +107,9 @@ pub const AREA_VPLS_PER_SIDE: u32 = 8;
 pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid> {
     let medium = &scene.medium;
     let mut grid = ScatteringGrid::over_medium(medium, max_dim)?;
-    let step = shadow_step(medium, &grid);
+    let direct = DirectLight::new(scene, shadow_step(medium, &grid), dome_directions, near_field_radius(&grid.index_to_world));
     let frame = grid.index_to_world;
     let [nx, ny, _] = grid.dims;
-    let g = medium.g;
-    let dome_dirs = dome_directions_of(scene, dome_directions);
-    let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
-    let near = near_field_radius(&grid.index_to_world);
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {
@@ -123,30 +119,59 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
                     continue;
                 }
                 let view = (x - scene.camera.position).normalize_or(Vec3::Z);
-                let tr = |w: Vec3, t_max: f32| (-optical_depth(medium, x, w, t_max, step, 512)).exp();
-                let mut sum = Vec3::ZERO;
-                for light in &scene.lights {
-                    match light {
-                        Light::Distant { direction, irradiance, .. } => {
-                            let w = -*direction;
-                            sum += *irradiance * hg(w.dot(view), g) * tr(w, f32::INFINITY);
-                        }
-                        Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
-                        Light::Dome(_) => {
-                            for &(w, weight) in &dome_dirs {
-                                sum += weight * hg(w.dot(view), g) * tr(w, f32::INFINITY);
-                            }
-                        }
-                    }
-                }
-                for e in &emitters {
-                    sum += emitter_single(e, x, view, g, near, &tr);
-                }
-                slab[(i + nx * j) as usize] = medium.sigma_s(dens) * sum;
+                slab[(i + nx * j) as usize] = medium.sigma_s(dens) * direct.inscattered(x, view);
             }
         }
     });
     Ok(grid)
+}
+
+/// The light arriving at a point straight from the scene's lights, scattered towards a viewer
+/// (before sigma_s): what `single_scattering_grid` stores at each grid point, at any point and
+/// for any view direction (vpl's bias compensation scatters it towards its gather points).
+pub struct DirectLight<'a> {
+    scene: &'a Scene,
+    /// Shadow rays' quadrature step (`shadow_step`).
+    step: f32,
+    dome: Vec<(Vec3, Vec3)>,
+    emitters: Vec<crate::translate::PointEmitter>,
+    /// Near-field radius of the local emitters (`emitter_single`).
+    near: f32,
+}
+
+impl<'a> DirectLight<'a> {
+    pub fn new(scene: &'a Scene, step: f32, dome_directions: u32, near: f32) -> Self {
+        let dome = dome_directions_of(scene, dome_directions);
+        let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
+        DirectLight { scene, step, dome, emitters, near }
+    }
+
+    /// p * L * T summed over the lights at `x`; `view` is the direction from the viewer to `x`
+    /// (the scattered light propagates along -view).
+    pub fn inscattered(&self, x: Vec3, view: Vec3) -> Vec3 {
+        let medium = &self.scene.medium;
+        let g = medium.g;
+        let tr = |w: Vec3, t_max: f32| (-optical_depth(medium, x, w, t_max, self.step, 512)).exp();
+        let mut sum = Vec3::ZERO;
+        for light in &self.scene.lights {
+            match light {
+                Light::Distant { direction, irradiance, .. } => {
+                    let w = -*direction;
+                    sum += *irradiance * hg(w.dot(view), g) * tr(w, f32::INFINITY);
+                }
+                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
+                Light::Dome(_) => {
+                    for &(w, weight) in &self.dome {
+                        sum += weight * hg(w.dot(view), g) * tr(w, f32::INFINITY);
+                    }
+                }
+            }
+        }
+        for e in &self.emitters {
+            sum += emitter_single(e, x, view, g, self.near, &tr);
+        }
+        sum
+    }
 }
 
 /// The shadow rays' quadrature step for a single-scattering grid: its own spacing, at least

@@ -329,16 +329,19 @@ const POP: SolverEntry = SolverEntry {
 const VPL: SolverEntry = SolverEntry {
     name: "vpl",
     label: "Virtual Point Lights",
-    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering",
+    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering, clamped near field with bias compensation. Accurate on thin and medium media: image rel. RMSE at 4096 walks 0.09 (cube g 0), 0.14 (cube g 0.7), 0.31 (plume g 0.9), white furnace within 1%; too dark on dense g 0.9 clouds (0.62, flux x0.66)",
     settings: &[
         SettingSpec::int("walks", "random walks from the lights (noise falls as 1/sqrt)").range(1.0, (1u32 << 24) as f64),
         SettingSpec::int("max_vertices", "most VPLs one walk leaves before it is cut").range(1.0, (1u32 << 20) as f64),
         SettingSpec::int("rr_depth", "scattering vertices before Russian roulette starts"),
         SettingSpec::int("walks_per_subset", "walks per interleaved subset gathered at each point").zero("every point uses every walk"),
-        SettingSpec { choices: &["clamp", "ball"], ..SettingSpec::new("near_field", SettingType::Choice, "near field of 1/d^2: clamp at the radius, or the lossless ball kernel") },
+        SettingSpec { choices: &["clamp", "ball", "compensate"], ..SettingSpec::new("near_field", SettingType::Choice, "near field of 1/d^2: clamp at the radius, the lossless ball kernel, or the clamp with bias compensation (default)") },
+        SettingSpec::int("compensation_vertices", "compensation: new vertices per gather point").range(1.0, 256.0),
+        SettingSpec::int("compensation_depth", "compensation: recursion levels (the last takes the VPLs with the ball kernel)").range(1.0, 8.0),
+        SettingSpec::int("compensation_walks", "compensation: walks each new vertex connects to").range(1.0, (1u32 << 24) as f64),
         SettingSpec::float("clamp_radius", "near-field radius, in gather-cell radii")
             .open_range(Range { min: Some(0.0), max: Some(16.0), min_exclusive: true, max_exclusive: false }),
-        SettingSpec::float("mean_free_paths", "the near-field radius is at most this many local mean free paths (0: no limit)")
+        SettingSpec::float("mean_free_paths", "the ball kernel's radius is at most this many local mean free paths (0: no limit)")
             .open_range(Range { min: Some(0.0), max: None, min_exclusive: false, max_exclusive: false }),
         SettingSpec::int("gather_resolution", "largest side of the coarse gather grid").range(2.0, 256.0),
         SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),

@@ -16,8 +16,11 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::compensate::Compensation;
 use super::settings::{NearField, VplSettings};
 use super::walks::{Vpl, Walks};
+use crate::rng::Rng;
+use crate::scene::Scene;
 use crate::medium::{ball_mean_inverse_square, near_field_radius, optical_depth, Medium};
 use crate::phase::hg;
 use crate::solvers::pop::merge::{footprint, Merged};
@@ -25,13 +28,81 @@ use crate::solvers::pop::mip::MediumMip;
 use crate::solvers::ScatteringGrid;
 use crate::error::Result;
 
-/// Energy bookkeeping of the near field (reported, for the clamp's loss).
+/// Energy bookkeeping of the near field: the connections made, and the near field's energy
+/// (sums over the gather points of sigma_s x J, channels added, per unit volume: comparable
+/// with each other, not absolute).
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
 pub struct GatherStats {
-    /// Connections made (point x VPL).
+    /// Connections made (point x VPL), the compensation's included.
     pub connections: u64,
     /// Connections shorter than the near-field radius.
     pub near: u64,
+    /// What the gather points received from the VPLs with the near-field kernel in use.
+    pub gathered: f64,
+    /// What the clamp took away at the gather points (the ball kernel's value minus the
+    /// clamped one, both from the same connections): zero with `near_field: ball`.
+    pub clamped: f64,
+    /// What the bias compensation put back (Sec. 4.3-4.4): zero without it.
+    pub restored: f64,
+    /// Compensation vertices sampled.
+    pub vertices: u64,
+}
+
+impl GatherStats {
+    fn add(&mut self, o: &GatherStats) {
+        self.connections += o.connections;
+        self.near += o.near;
+        self.gathered += o.gathered;
+        self.clamped += o.clamped;
+        self.restored += o.restored;
+        self.vertices += o.vertices;
+    }
+}
+
+/// How 1/d^2 is kept finite near a VPL.
+#[derive(Clone, Copy, Debug)]
+pub enum Kernel {
+    /// 1 / max(d, R)^2.
+    Clamp(f32),
+    /// The mean of 1/d^2 over a ball of this radius (medium::ball_mean_inverse_square).
+    Ball(f32),
+}
+
+/// Light from `vpls` at `x`, scattered towards a viewer looking along `view` (the scattered
+/// light propagates along -view), per unit sigma_s at `x`, with `kernel`; also what the clamp
+/// lost there against the ball kernel of radius `ball` (zero for `Kernel::Ball`).
+/// Transmittance to each VPL by a deterministic march of `step`.
+#[allow(clippy::too_many_arguments)]
+pub fn connect(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3) {
+    let g = medium.g;
+    let (mut sum, mut lost) = (Vec3::ZERO, Vec3::ZERO);
+    let radius = match kernel {
+        Kernel::Clamp(r) | Kernel::Ball(r) => r,
+    };
+    for v in vpls {
+        let to = x - v.position;
+        let d = to.length();
+        stats.connections += 1;
+        if d < radius {
+            stats.near += 1;
+        }
+        let w = to / d.max(1e-12);
+        // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
+        let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
+        let tr = if d > 1e-6 { (-optical_depth(medium, v.position, w, d, step, 1024)).exp() } else { Vec3::ONE };
+        let light = v.power * (p_vpl * p_view) * tr;
+        match kernel {
+            Kernel::Ball(r) => sum += light * ball_mean_inverse_square(d, r),
+            Kernel::Clamp(r) => {
+                let clamped = 1.0 / d.max(r).powi(2);
+                sum += light * clamped;
+                if d < r {
+                    lost += light * (ball_mean_inverse_square(d, ball) - clamped).max(0.0);
+                }
+            }
+        }
+    }
+    (sum, lost)
 }
 
 /// The subset of walks grid point (i, j, k) connects to.
@@ -41,8 +112,8 @@ fn subset_of(i: u32, j: u32, k: u32, subsets: u32) -> u32 {
     ((i % m) + m * (j % m) + m * m * (k % m)) % subsets
 }
 
-/// The VPLs of each subset, concatenated.
-fn subset_lists(walks: &Walks, subsets: u32) -> Vec<Vec<Vpl>> {
+/// The VPLs of each of `subsets` interleaved sets of walks (walk w in set w mod subsets).
+pub fn subset_lists(walks: &Walks, subsets: u32) -> Vec<Vec<Vpl>> {
     let mut lists = vec![Vec::new(); subsets as usize];
     for w in 0..walks.count() {
         lists[w % subsets as usize].extend_from_slice(walks.of_walk(w));
@@ -50,22 +121,36 @@ fn subset_lists(walks: &Walks, subsets: u32) -> Vec<Vec<Vpl>> {
     lists
 }
 
+/// The transmittance march's step for connections on a grid of this frame: its spacing, but
+/// at most half a mean free path of the densest voxel, and at least one voxel. Why: a midpoint
+/// march of steps several mean free paths long misses the dense parts between its samples (or
+/// lands only on them), and exp() of such an optical depth is biased bright on average
+/// (Jensen): on the white dense cloud (g 0.9), steps of the 10-cell gather grid's spacing (5
+/// mean free paths) gave the compensated furnace S / sigma_s 1.29, a voxel step 1.0x (below).
+pub fn march_step(medium: &Medium, frame: &glam::Affine3A) -> f32 {
+    let m = frame.matrix3;
+    let spacing = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
+    let sigma_max = medium.sigma_t(medium.grid.max_value()).max_element();
+    let mfp_step = if sigma_max > 0.0 { 0.5 / sigma_max } else { spacing };
+    spacing.min(mfp_step).max(medium.voxel_size_world().min_element())
+}
+
 /// J on the gather grid, with each point's mean density over its cell (the upsampling's guide).
-pub fn gather(medium: &Medium, mip: &MediumMip, camera: Vec3, walks: &Walks, s: &VplSettings) -> Result<(Merged, GatherStats)> {
+pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings) -> Result<(Merged, GatherStats)> {
+    let medium = &scene.medium;
+    let camera = scene.camera.position;
     let mut j = ScatteringGrid::over_medium(medium, s.gather_resolution)?;
     let fp = footprint(medium, &j);
     let subsets = s.subsets();
     let lists = subset_lists(walks, subsets);
-    let r = s.clamp_radius * near_field_radius(&j.index_to_world);
-    let spacing = {
-        let m = j.index_to_world.matrix3;
-        m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length())
-    };
-    let step = spacing.max(medium.voxel_size_world().min_element());
-    let g = medium.g;
+    let cell_radius = near_field_radius(&j.index_to_world);
+    let r = s.clamp_radius * cell_radius;
+    let step = march_step(medium, &j.index_to_world);
     let frame = j.index_to_world;
     let [nx, ny, nz] = j.dims;
     let w2i = medium.world_to_index;
+    let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step));
+    let cell_volume = glam::Mat3::from(frame.matrix3).determinant().abs() as f64;
     let rows: Vec<(Vec<Vec3>, Vec<f32>, GatherStats)> = (0..nz)
         .into_par_iter()
         .map(|k| {
@@ -82,26 +167,24 @@ pub fn gather(medium: &Medium, mip: &MediumMip, camera: Vec3, walks: &Walks, s: 
                         continue;
                     }
                     let view = (y - camera).normalize_or(Vec3::Z);
-                    let sigma_t = medium.sigma_t(rho).max_element();
-                    let r = if s.mean_free_paths > 0.0 && sigma_t > 0.0 { r.min(s.mean_free_paths / sigma_t) } else { r };
-                    let mut sum = Vec3::ZERO;
-                    for v in &lists[subset_of(i, jj, k, subsets) as usize] {
-                        let to = y - v.position;
-                        let d = to.length();
-                        stats.connections += 1;
-                        if d < r {
-                            stats.near += 1;
-                        }
-                        let (geometry, w) = match s.near_field {
-                            NearField::Clamp => (1.0 / d.max(r).powi(2), to / d.max(1e-12)),
-                            NearField::Ball => (ball_mean_inverse_square(d, r), to / d.max(1e-12)),
-                        };
-                        // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
-                        let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
-                        let tr = if d > 1e-6 { (-optical_depth(medium, v.position, w, d, step, 1024)).exp() } else { Vec3::ONE };
-                        sum += v.power * (p_vpl * p_view * geometry) * tr;
+                    let ball = ball_radius(medium, rho, r, s.mean_free_paths);
+                    let kernel = match s.near_field {
+                        NearField::Ball => Kernel::Ball(ball),
+                        NearField::Clamp | NearField::Compensate => Kernel::Clamp(r),
+                    };
+                    let (sum, lost) = connect(medium, &lists[subset_of(i, jj, k, subsets) as usize], y, view, kernel, ball, step, &mut stats);
+                    let mut total = sum * subsets as f32;
+                    let sigma_s = medium.sigma_s(rho);
+                    let energy = |v: Vec3| (sigma_s * v).element_sum() as f64 * cell_volume;
+                    stats.gathered += energy(total);
+                    stats.clamped += energy(lost * subsets as f32);
+                    if let Some(c) = &compensation {
+                        let mut rng = Rng::new(s.seed ^ 0x5eed_c0de, (i + nx * (jj + ny * k)) as u64);
+                        let back = c.estimate(y, -view, 1, &mut rng, &mut stats);
+                        stats.restored += energy(back);
+                        total += back;
                     }
-                    jv[idx] = sum * subsets as f32;
+                    jv[idx] = total;
                 }
             }
             (jv, dens, stats)
@@ -113,8 +196,14 @@ pub fn gather(medium: &Medium, mip: &MediumMip, camera: Vec3, walks: &Walks, s: 
         let base = k * (nx * ny) as usize;
         j.data[base..base + jv.len()].copy_from_slice(&jv);
         density.extend(dens);
-        stats.connections += st.connections;
-        stats.near += st.near;
+        stats.add(&st);
     }
     Ok((Merged { j, density }, stats))
+}
+
+/// Radius of the ball kernel at a point of density `rho`: `r`, at most `mean_free_paths` mean
+/// free paths there (0: no such limit; see the setting).
+pub fn ball_radius(medium: &Medium, rho: f32, r: f32, mean_free_paths: f32) -> f32 {
+    let sigma_t = medium.sigma_t(rho.max(0.0)).max_element();
+    if mean_free_paths > 0.0 && sigma_t > 0.0 { r.min(mean_free_paths / sigma_t) } else { r }
 }

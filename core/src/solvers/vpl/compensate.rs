@@ -1,0 +1,133 @@
+//! Bias compensation of the clamped near field (paper 03 Sec. 4.3-4.4).
+//!
+//! With G clamped to 1/R^2, a point x misses, from the light scattered within R of it,
+//!   M(x, o) = integral dw p(w . o) integral_0^R dt T(x, x') (1 - t^2/R^2) eps(x', w),
+//! x' = x - w t, o the direction the light leaves x in, eps(x', w) the light x' scatters
+//! towards x (per unit volume): sigma_s(x') [direct light scattered into w (the compositor's
+//! `DirectLight`) + the VPLs' light at x' (clamped again) + M(x', w)] -- the VPLs stand for the
+//! light scattered at least once, so the direct light is the compensation's first VPL.
+//! (1 - t^2/R^2) = t^2 (1/t^2 - 1/R^2) is the clamped fraction of G times the volume's
+//! Jacobian; it is the paper's weight max(0, (G - b)/G) restricted to t < R, where it is not
+//! zero.
+//!
+//! Sampling, as the paper: w from the phase function at x (its factor cancels), t in [0, R]
+//! from the locally homogeneous exponential p(t) = s exp(-s t) / (1 - exp(-s R)), s the
+//! extinction of the density mip around x; the true transmittance T(x, x') is ray marched, so
+//! the estimate stays unbiased whatever s is. Each new vertex connects to one randomly chosen
+//! subset of walks (Sec. 4.4, "sub-sampling random walks"), reweighted by the number of
+//! subsets. `compensation_vertices` vertices at the first level, one per vertex below it
+//! (Fig. 4's middle strategy); at the last level (`compensation_depth`) the vertices take the
+//! VPLs with the ball kernel of radius R instead of the clamp ("stopping the compensation
+//! using the unclamped contribution", Sec. 4.4): its integral is that of 1/d^2, so nothing is
+//! left out at any depth, and it stays bounded (3/R^2). Measured: a ball limited to a quarter
+//! mean free path there (as `near_field: ball`) gave the dense cloud image rel. RMSE 4.4 (x2.6)
+//! for one seed, from single near VPLs behind two g 0.9 lobes; the radius-R ball 0.62, and
+//! the white furnace box 0.991 (a quarter mean free path: 0.993).
+//!
+//! Departure: visibility is the medium's transmittance only (no surfaces in this project), so
+//! the paper's local-visibility approximation is not needed.
+
+use glam::Vec3;
+
+use super::gather::{connect, subset_lists, GatherStats, Kernel};
+use super::settings::VplSettings;
+use super::walks::{Vpl, Walks};
+use crate::compositor::DirectLight;
+use crate::medium::{optical_depth, Medium};
+use crate::phase::HenyeyGreenstein;
+use crate::rng::Rng;
+use crate::scene::Scene;
+use crate::solvers::pop::mip::MediumMip;
+
+/// Share of the compensation's distances drawn from the locally homogeneous exponential (the
+/// rest uniform on [0, R]).
+const EXPONENTIAL_SHARE: f32 = 0.75;
+
+pub struct Compensation<'a> {
+    medium: &'a Medium,
+    mip: &'a MediumMip,
+    /// Footprint (index units) of the mip lookups for the local extinction.
+    footprint: f32,
+    direct: DirectLight<'a>,
+    lists: Vec<Vec<Vpl>>,
+    /// Clamp radius R.
+    radius: f32,
+    /// Transmittance march step to the VPLs, and along the short segments x -> x'.
+    step: f32,
+    short_step: f32,
+    phase: HenyeyGreenstein,
+    vertices: u32,
+    depth: u32,
+}
+
+impl<'a> Compensation<'a> {
+    pub fn new(scene: &'a Scene, mip: &'a MediumMip, footprint: f32, walks: &Walks, s: &VplSettings, radius: f32, step: f32) -> Self {
+        let medium = &scene.medium;
+        let subsets = (walks.count() as u32 / s.compensation_walks.max(1)).clamp(1, walks.count().max(1) as u32);
+        let short_step = 0.5 * medium.voxel_size_world().min_element();
+        Compensation {
+            medium,
+            mip,
+            footprint,
+            direct: DirectLight::new(scene, step, s.dome_directions, radius),
+            lists: subset_lists(walks, subsets),
+            radius,
+            step,
+            short_step,
+            phase: HenyeyGreenstein::new(medium.g),
+            vertices: s.compensation_vertices,
+            depth: s.compensation_depth,
+        }
+    }
+
+    /// M(x, out) of the module doc, per unit sigma_s at x, at recursion `level` (1: new
+    /// vertices around a gather point).
+    pub fn estimate(&self, x: Vec3, out: Vec3, level: u32, rng: &mut Rng, stats: &mut GatherStats) -> Vec3 {
+        let m = self.medium;
+        let r = self.radius;
+        let n = if level == 1 { self.vertices } else { 1 };
+        let rho = self.mip.sample(m, m.world_to_index.transform_point3(x), self.footprint);
+        let s = m.sigma_t(rho.max(0.0)).max_element();
+        let alpha = -(-s * r).exp_m1();
+        let mut sum = Vec3::ZERO;
+        for _ in 0..n {
+            stats.vertices += 1;
+            // Propagation direction of the light arriving at x, density p(w . out).
+            let w = self.phase.sample(out, rng.pair());
+            // Defensive mixture: the exponential with probability 3/4, uniform on [0, R]
+            // otherwise, so that the weight T / pdf stays below 4 R where the medium is
+            // thinner than the mip's mean (the exponential alone gives exp(s R) / s there).
+            let u = rng.f32();
+            let t = if u < EXPONENTIAL_SHARE && s * r > 1e-4 {
+                let v = u / EXPONENTIAL_SHARE;
+                (-(-v * alpha).ln_1p() / s).min(r)
+            } else {
+                r * ((u - EXPONENTIAL_SHARE) / (1.0 - EXPONENTIAL_SHARE)).clamp(0.0, 1.0)
+            };
+            let exponential = if s * r > 1e-4 { s * (-s * t).exp() / alpha } else { 1.0 / r };
+            let pdf = EXPONENTIAL_SHARE * exponential + (1.0 - EXPONENTIAL_SHARE) / r;
+            let xp = x - w * t;
+            let rho_p = m.density_world(xp);
+            if rho_p <= 0.0 || pdf <= 0.0 {
+                continue;
+            }
+            let tr = (-optical_depth(m, xp, w, t, self.short_step, 256)).exp();
+            let weight = tr * ((1.0 - t * t / (r * r)).max(0.0) / pdf);
+            // At x' the viewer is x: the scattered light propagates along w, so view = -w.
+            let view = -w;
+            let mut eps = self.direct.inscattered(xp, view);
+            let k = (rng.f32() * self.lists.len() as f32) as usize;
+            let list = &self.lists[k.min(self.lists.len() - 1)];
+            let scale = self.lists.len() as f32;
+            if level < self.depth {
+                let (vpl, _) = connect(m, list, xp, view, Kernel::Clamp(r), r, self.step, stats);
+                eps += vpl * scale + self.estimate(xp, w, level + 1, rng, stats);
+            } else {
+                let (vpl, _) = connect(m, list, xp, view, Kernel::Ball(r), r, self.step, stats);
+                eps += vpl * scale;
+            }
+            sum += weight * m.sigma_s(rho_p) * eps;
+        }
+        sum / n.max(1) as f32
+    }
+}
