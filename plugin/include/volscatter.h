@@ -232,6 +232,24 @@ uint32_t vs_abi_version(void);
 const char *vs_status_message(int32_t status);
 
 /**
+ * Sets the memory budget in bytes: no single buffer whose size comes from input (a grid, an
+ * image, a decoded map, a solver cache) may be larger. 0 restores the default (a quarter of
+ * physical memory, at most half the address-space limit `ulimit -v`). Budgets below 1 MiB are
+ * refused with `VS_STATUS_INVALID_ARGUMENT` (nothing useful fits).
+ *
+ * Process-wide, read at each allocation: set it before solving. Thread safety: may be called
+ * from any thread at any time.
+ */
+VsStatus vs_set_memory_budget(uint64_t bytes);
+
+/**
+ * The memory budget now in force, in bytes (the default when none was set).
+ *
+ * Thread safety: may be called from any thread at any time.
+ */
+uint64_t vs_memory_budget(void);
+
+/**
  * Creates an empty scene (no medium, no lights, no camera, default solver) in `*out`.
  * `*out` is set to NULL on failure. Destroy it with `vs_scene_destroy`.
  *
