@@ -71,7 +71,22 @@ fn solve_in_session(
     progress: &dyn Progress,
     state: &mut SessionState,
 ) -> Result<(SolveOutput, DeviceUsed)> {
+    let (out, used) = solve_unchecked(choice, scene, name, settings, progress, state)?;
+    solvers::guard::check_finite(scene, "scattering grid", out.scattering.data.iter().copied())?;
+    Ok((out, used))
+}
+
+fn solve_unchecked(
+    choice: DeviceChoice,
+    scene: &Scene,
+    name: &str,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+) -> Result<(SolveOutput, DeviceUsed)> {
     let entry = registry::get(name)?;
+    // Media tracking cannot step and lights beyond float32 are refused on every device.
+    solvers::guard::check_scene(scene)?;
     let cpu = |state: &mut SessionState| solvers::by_name(name, settings)?.solve_in_session(scene, progress, state);
     let backend = match gpu_backend(name) {
         Some(b) if entry.gpu && choice != DeviceChoice::Cpu => b,

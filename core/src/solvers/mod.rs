@@ -6,6 +6,7 @@ pub mod network;
 pub mod photon_grid;
 pub mod pop;
 pub mod reference;
+pub mod guard;
 pub mod registry;
 pub mod session;
 pub mod vpl;

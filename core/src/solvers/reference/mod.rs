@@ -92,6 +92,7 @@ impl Reference {
     /// Path-traces the image directly (RGBA + AOVs `single`, `multiple`, `background`).
     pub fn render_image(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
         let s = &self.settings;
+        super::guard::check_scene(scene)?;
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
         let cam = &scene.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
@@ -140,6 +141,7 @@ impl Reference {
         let mut img = Image::new(cam.width, cam.height);
         img.rgba = rgba;
         img.aovs = vec![("single".into(), single), ("multiple".into(), multiple), ("background".into(), background)];
+        super::guard::check_finite(scene, "image", img.rgba.iter().map(|p| p.truncate()).chain(img.aovs.iter().flat_map(|a| a.1.iter().copied())))?;
         Ok(img)
     }
 
@@ -147,8 +149,9 @@ impl Reference {
     /// towards the camera, with `grid_spp` paths per point.
     pub fn scattering_grid(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
         let s = &self.settings;
-        let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
+        super::guard::check_scene(scene)?;
         let mut grid = ScatteringGrid::over_medium(&scene.medium, s.grid_resolution)?;
+        let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
         let [nx, ny, _] = grid.dims;
         let slab = (nx * ny) as usize;
         let nz = grid.dims[2] as usize;
