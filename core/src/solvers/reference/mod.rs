@@ -76,6 +76,14 @@ impl ReferenceSettings {
     }
 }
 
+/// Paths between two reads of the cancel flag (a path is microseconds to a few ms).
+const CANCEL_CHECK: u32 = 16;
+
+/// True once the solve is to stop: cancelled through a progress update or by the host.
+fn stop(cancelled: &AtomicBool, progress: &dyn Progress) -> bool {
+    cancelled.load(Ordering::Relaxed) || progress.cancelled()
+}
+
 pub struct Reference {
     pub settings: ReferenceSettings,
 }
@@ -116,7 +124,12 @@ impl Reference {
                         let mut rng = Rng::new(s.seed, (y * w + x) as u64);
                         let mut acc = PathRadiance::default();
                         let mut transmittance = Vec3::ZERO;
-                        for _ in 0..s.spp {
+                        for n in 0..s.spp {
+                            // A row may take minutes at high spp: a cancel is seen within a few
+                            // paths (a flag read every CANCEL_CHECK paths).
+                            if n % CANCEL_CHECK == 0 && stop(&cancelled, progress) {
+                                return;
+                            }
                             let d = cam.ray_dir(x as f32 + rng.f32(), y as f32 + rng.f32());
                             acc.add(&tracer.camera_path(cam.position, d, &mut rng));
                             transmittance += tracer.transmittance(cam.position, d, f32::INFINITY, &mut rng);
@@ -135,7 +148,7 @@ impl Reference {
                     }
                 })
         });
-        if cancelled.load(Ordering::Relaxed) {
+        if stop(&cancelled, progress) {
             return Err(Error::Cancelled);
         }
         let mut img = Image::new(cam.width, cam.height);
@@ -175,7 +188,10 @@ impl Reference {
                         let view = (x - scene.camera.position).normalize_or(Vec3::Z);
                         let mut rng = Rng::new(s.seed ^ 0x5ca7, (k * slab) as u64 + idx as u64);
                         let mut sum = Vec3::ZERO;
-                        for _ in 0..s.grid_spp {
+                        for n in 0..s.grid_spp {
+                            if n % CANCEL_CHECK == 0 && stop(&cancelled, progress) {
+                                return;
+                            }
                             sum += tracer.in_scattered(x, view, &mut rng);
                         }
                         out[idx] = medium.sigma_s(density) * sum / s.grid_spp as f32;
@@ -187,7 +203,7 @@ impl Reference {
                 }
             })
         });
-        if cancelled.load(Ordering::Relaxed) {
+        if stop(&cancelled, progress) {
             return Err(Error::Cancelled);
         }
         Ok(grid)
