@@ -100,6 +100,7 @@ fn run_with_beats(cancel_after: Duration, call: impl FnOnce(*mut c_void) -> i32)
     times.push(end);
     let gap = times.windows(2).map(|w| w[1] - w[0]).max().unwrap_or_default();
     let cancel_to_return = end.saturating_duration_since(beats.start + cancel_after);
+    eprintln!("{} callbacks, longest silence {gap:?}, cancel to return {cancel_to_return:?}", beats.calls.len());
     (st, gap, cancel_to_return)
 }
 
