@@ -89,6 +89,10 @@ pub fn cases(dir: &Path) -> Vec<(String, Value)> {
     add("no lights", &["reference", "pop"], &|v| v["lights"] = json!([]));
     add("camera inside the medium", &["reference"], &|v| v["camera"]["position"] = json!([0.01, 0.02, 0.03]));
     add("pop grid_resolution 512 (over the budget)", &["pop"], &|v| v["solver"]["grid_resolution"] = json!(512));
+    add("image of 8192x8192 (over the budget)", &["reference", "pop"], &|v| {
+        v["camera"]["width"] = json!(8192);
+        v["camera"]["height"] = json!(8192);
+    });
     add("procedural dims 1024 (over the budget)", &["reference"], &|v| v["medium"]["dims"] = json!([1024]));
     out
 }

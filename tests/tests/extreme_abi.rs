@@ -46,12 +46,26 @@ fn extreme_scenes_end_in_ok_and_finite_or_a_clear_error() {
         } else {
             let mut r: Res = null_mut();
             let st = unsafe { (a.vs_scene_solve)(s, None, null_mut(), &mut r) };
-            if st == OK {
+            if st != OK {
+                (st, a.scene_error(s))
+            } else {
                 let (_, data) = a.grid(r);
                 assert!(data.iter().all(|v| v.is_finite()), "{name}: status OK with non-finite values in the grid");
+                // And its composite: OK and finite, or an error on the result.
+                let mut img: Img = null_mut();
+                let st = unsafe { (a.vs_result_composite)(r, 0, 1, 0.5, &mut img) };
+                let msg = a.result_error(r);
+                if st == OK {
+                    let (mut w, mut h) = (0u32, 0u32);
+                    assert_eq!(unsafe { (a.vs_image_size)(img, &mut w, &mut h) }, OK);
+                    let mut rgba = vec![0f32; 4 * w as usize * h as usize];
+                    assert_eq!(unsafe { (a.vs_image_copy_rgba)(img, rgba.as_mut_ptr(), rgba.len()) }, OK);
+                    assert!(rgba.iter().all(|v| v.is_finite()), "{name}: composite OK with non-finite pixels");
+                    unsafe { (a.vs_image_destroy)(img) };
+                }
                 unsafe { (a.vs_result_destroy)(r) };
+                (st, msg)
             }
-            (st, a.scene_error(s))
         };
         let took = t.elapsed();
         unsafe { (a.vs_scene_destroy)(s) };

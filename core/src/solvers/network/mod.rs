@@ -69,6 +69,9 @@ impl Network {
             // Nothing scatters twice: S is its single scattering.
             return Ok((SolveOutput { scattering, timings }, report));
         }
+        // Radiance, source, first-scattering and visibility arrays: ~4 RGB values per
+        // (particle, direction) pair.
+        crate::budget::check_elements::<[glam::Vec3; 4]>("network arrays (solver.particles x solver.directions)", s.particles as u64 * s.directions as u64)?;
         let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
         if p.mean_sigma_t <= 0.0 {
             return Ok((SolveOutput { scattering, timings }, report));

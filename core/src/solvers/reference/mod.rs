@@ -101,6 +101,8 @@ impl Reference {
     pub fn render_image(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
         let s = &self.settings;
         super::guard::check_scene(scene)?;
+        Image::check_budget(scene.camera.width, scene.camera.height, "reference image")?;
+        crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
         let cam = &scene.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
@@ -164,6 +166,7 @@ impl Reference {
         let s = &self.settings;
         super::guard::check_scene(scene)?;
         let mut grid = ScatteringGrid::over_medium(&scene.medium, s.grid_resolution)?;
+        crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
         let [nx, ny, _] = grid.dims;
         let slab = (nx * ny) as usize;
