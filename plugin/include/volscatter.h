@@ -195,10 +195,13 @@ typedef struct VsSession VsSession;
  * is in [0, 1] within that stage. Return non-zero to continue, 0 to cancel: the call that
  * is running then returns `VS_STATUS_CANCELLED` soon after.
  *
- * It is called from the solver's worker threads, one call at a time (never concurrently for
- * one solve), possibly from a thread other than the caller's. It must not unwind (C++
- * exceptions, longjmp) through the library. It may call functions on other handles, and on
- * the scene being solved (the solve works on a snapshot taken when it started).
+ * It is called at least every 100 ms while a solve or render runs (repeating the last stage
+ * and fraction when the solver has nothing new), from the solver's worker threads or a
+ * heartbeat thread of the library, one call at a time (never concurrently for one solve),
+ * possibly from a thread other than the caller's, and never after the call that was given it
+ * returned. It must not unwind (C++ exceptions, longjmp) through the library. It may call
+ * functions on other handles, and on the scene being solved (the solve works on a snapshot
+ * taken when it started).
  */
 typedef int32_t (*VsProgressCallback)(void *user, const char *stage, float fraction);
 
