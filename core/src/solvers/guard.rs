@@ -62,7 +62,8 @@ pub fn check_medium(m: &Medium) -> Result<()> {
     }
     let sigma_max = m.density_scale.max_element() * m.grid.max_value();
     let depth = sigma_max * voxel.max_element();
-    if !(depth <= MAX_OPTICAL_DEPTH_PER_VOXEL) {
+    // NaN and infinity fail too (a density of 3e38 times a scale of 10).
+    if depth.is_nan() || depth > MAX_OPTICAL_DEPTH_PER_VOXEL {
         return Err(Error::scene(
             "medium.density_scale",
             format!(
@@ -146,7 +147,7 @@ fn suspect(scene: &Scene) -> String {
             Light::Area(a) => a.radiance.max_element(),
             Light::Dome(e) => (e.color * map_max(e)).max_element(),
         };
-        if !(v <= worst.0) {
+        if v.is_nan() || v > worst.0 {
             worst = (v, format!("lights[{i}]"));
         }
     }
