@@ -153,3 +153,28 @@ fn suspect(scene: &Scene) -> String {
     }
     format!("the largest value in the scene is {} ({:e}); lower it", worst.1, worst.0)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    /// The default scene passes; the hostile values are refused naming their field.
+    #[test]
+    fn hostile_values_are_refused_naming_the_field() {
+        let ok = Scene::default_scene();
+        check_scene(&ok).unwrap();
+        let mut s = Scene::default_scene();
+        s.medium.density_scale = Vec3::splat(1e8); // 64^3 plume over 2 m: ~4e6 per voxel
+        assert!(check_scene(&s).unwrap_err().to_string().contains("density_scale"));
+        let mut s = Scene::default_scene();
+        s.medium = Medium::new(s.medium.grid.clone(), glam::Affine3A::from_scale(Vec3::splat(1e-45)), Vec3::ONE, Vec3::ONE, 0.0);
+        assert!(check_scene(&s).unwrap_err().to_string().contains("not invertible"));
+        let mut s = Scene::default_scene();
+        s.lights = vec![Light::Point { position: Vec3::Z * 3.0, intensity: Vec3::ONE, radius: 1e-30 }];
+        assert!(check_scene(&s).unwrap_err().to_string().contains("lights[0].radius"));
+        let e = check_finite(&ok, "scattering grid", [Vec3::ONE, Vec3::NAN].into_iter()).unwrap_err().to_string();
+        assert!(e.contains("1 non-finite values of 2"), "{e}");
+        check_finite(&ok, "image", [Vec3::ONE].into_iter()).unwrap();
+    }
+}
