@@ -308,6 +308,7 @@ pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&
     }
     let medium = &scene.medium;
     let cam = &scene.camera;
+    Image::check_budget(cam.width, cam.height, "composited image")?;
     let ls = GridLookup::new(s);
     let ls1 = single.filter(|_| opts.aovs.needs_single()).map(GridLookup::new);
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);

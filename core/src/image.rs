@@ -25,6 +25,15 @@ impl Image {
         Image { width, height, rgba: vec![Vec4::ZERO; width as usize * height as usize], aovs: Vec::new() }
     }
 
+    /// Refuses a `width` x `height` image (camera.width/height) over the memory budget before
+    /// any of it is made: an image with its three AOVs and the per-pixel values it is
+    /// assembled from is ~96 B a pixel (RGBA 16, AOVs 36, pixels 40), which is what the
+    /// compositors and the reference's render allocate at their peak.
+    pub fn check_budget(width: u32, height: u32, what: &str) -> crate::Result<()> {
+        let pixels = width as u64 * height as u64;
+        crate::budget::check(&format!("{what} of {width}x{height} pixels (camera.width/height)"), pixels.saturating_mul(96))
+    }
+
     pub fn aov(&self, name: &str) -> Option<&[Vec3]> {
         self.aovs.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
     }

@@ -195,10 +195,13 @@ typedef struct VsSession VsSession;
  * is in [0, 1] within that stage. Return non-zero to continue, 0 to cancel: the call that
  * is running then returns `VS_STATUS_CANCELLED` soon after.
  *
- * It is called from the solver's worker threads, one call at a time (never concurrently for
- * one solve), possibly from a thread other than the caller's. It must not unwind (C++
- * exceptions, longjmp) through the library. It may call functions on other handles, and on
- * the scene being solved (the solve works on a snapshot taken when it started).
+ * It is called at least every 100 ms while a solve or render runs (repeating the last stage
+ * and fraction when the solver has nothing new), from the solver's worker threads or a
+ * heartbeat thread of the library, one call at a time (never concurrently for one solve),
+ * possibly from a thread other than the caller's, and never after the call that was given it
+ * returned. It must not unwind (C++ exceptions, longjmp) through the library. It may call
+ * functions on other handles, and on the scene being solved (the solve works on a snapshot
+ * taken when it started).
  */
 typedef int32_t (*VsProgressCallback)(void *user, const char *stage, float fraction);
 
@@ -230,6 +233,24 @@ uint32_t vs_abi_version(void);
  * Thread safety: may be called from any thread at any time.
  */
 const char *vs_status_message(int32_t status);
+
+/**
+ * Sets the memory budget in bytes: no single buffer whose size comes from input (a grid, an
+ * image, a decoded map, a solver cache) may be larger. 0 restores the default (a quarter of
+ * physical memory, at most half the address-space limit `ulimit -v`). Budgets below 1 MiB are
+ * refused with `VS_STATUS_INVALID_ARGUMENT` (nothing useful fits).
+ *
+ * Process-wide, read at each allocation: set it before solving. Thread safety: may be called
+ * from any thread at any time.
+ */
+VsStatus vs_set_memory_budget(uint64_t bytes);
+
+/**
+ * The memory budget now in force, in bytes (the default when none was set).
+ *
+ * Thread safety: may be called from any thread at any time.
+ */
+uint64_t vs_memory_budget(void);
 
 /**
  * Creates an empty scene (no medium, no lights, no camera, default solver) in `*out`.

@@ -276,7 +276,10 @@ impl GpuContext {
         if bytes > max {
             return Err(GpuError::TooLarge(format!("{what} needs {} MiB, the adapter allows {} MiB per buffer", bytes >> 20, max >> 20)));
         }
-        Ok(())
+        // Every upload is built in host memory first (and read back into it): the process's
+        // memory budget bounds it as it bounds the CPU solvers' buffers.
+        volscatter_core::budget::check(what, bytes).map_err(|e| GpuError::TooLarge(e.to_string()))
+
     }
 
     pub fn storage_buffer(&self, label: &str, data: &[u8]) -> Result<wgpu::Buffer, GpuError> {

@@ -72,13 +72,33 @@ fn solve_in_session(
     state: &mut SessionState,
 ) -> Result<(SolveOutput, DeviceUsed)> {
     let entry = registry::get(name)?;
+    // Media tracking cannot step and lights beyond float32 are refused on every device, and
+    // a non-finite result is an error, never status OK (solvers::guard).
+    solvers::guard::check_scene(scene)?;
+    let (out, used) = solve_on_device(choice, scene, name, settings, progress, state, entry.gpu)?;
+    solvers::guard::check_finite(scene, "scattering grid", out.scattering.data.iter().copied())?;
+    Ok((out, used))
+}
+
+/// `solve_in_session` once the scene is checked: the GPU backend when the solver has one
+/// (`has_gpu`) and `choice` allows it, else (or on a declined or failed GPU under `Auto`) the CPU.
+#[allow(clippy::too_many_arguments)] // the session's pieces, passed through unchanged
+fn solve_on_device(
+    choice: DeviceChoice,
+    scene: &Scene,
+    name: &str,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+    has_gpu: bool,
+) -> Result<(SolveOutput, DeviceUsed)> {
     let cpu = |state: &mut SessionState| solvers::by_name(name, settings)?.solve_in_session(scene, progress, state);
     let backend = match gpu_backend(name) {
-        Some(b) if entry.gpu && choice != DeviceChoice::Cpu => b,
+        Some(b) if has_gpu && choice != DeviceChoice::Cpu => b,
         _ => return Ok((cpu(state)?, DeviceUsed::Cpu)),
     };
     // Settings errors are the same on every device: reported before any adapter is opened.
-    (entry.cpu)(settings)?;
+    (registry::get(name)?.cpu)(settings)?;
     match try_gpu(choice, |ctx| backend(ctx, scene, settings, progress, state)) {
         Ok(Attempt::Ran(out, used)) => Ok((out, used)),
         Ok(Attempt::Declined(why)) => {

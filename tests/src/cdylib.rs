@@ -46,27 +46,39 @@ pub const LIB_NAME: &str = if cfg!(target_os = "windows") {
 /// Builds the cdylib if needed and returns its path. Panics with cargo's output on failure.
 pub fn cdylib() -> &'static Path {
     static PATH: OnceLock<PathBuf> = OnceLock::new();
-    PATH.get_or_init(|| {
-        if let Some(lib) = std::env::var_os("VOLSCATTER_LIB").map(PathBuf::from).filter(|p| p.is_file()) {
-            return lib;
-        }
-        let dir = profile_dir();
-        let target_dir = dir.parent().expect("profile dir has a parent");
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let out = Command::new(&cargo)
-            .current_dir(workspace_root())
-            .args(["build", "-p", "volscatter", "--lib", "--profile", &profile_name(&dir), "--target-dir"])
-            .arg(target_dir)
-            .env("CARGO_TERM_COLOR", "never")
-            .output()
-            .unwrap_or_else(|e| panic!("running {cargo:?} build: {e}"));
-        if !out.status.success() {
-            panic!("cargo build -p volscatter --lib failed:\n{}", String::from_utf8_lossy(&out.stderr));
-        }
-        let lib = dir.join(LIB_NAME);
-        assert!(lib.exists(), "{} missing after building", lib.display());
-        lib
-    })
+    PATH.get_or_init(|| built("VOLSCATTER_LIB", &["--lib"], LIB_NAME))
+}
+
+/// Builds the `volscatter` CLI if needed (or takes `VOLSCATTER_BIN`) and returns its path.
+pub fn cli_binary() -> &'static Path {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| built("VOLSCATTER_BIN", &["--bin", "volscatter"], if cfg!(windows) { "volscatter.exe" } else { "volscatter" }))
+}
+
+/// `env_var` when it names a file, else `cargo build -p volscatter <what>` with the running
+/// test binary's profile and target directory, then `<profile dir>/<file>`.
+fn built(env_var: &str, what: &[&str], file: &str) -> PathBuf {
+    if let Some(path) = std::env::var_os(env_var).map(PathBuf::from).filter(|p| p.is_file()) {
+        return path;
+    }
+    let dir = profile_dir();
+    let target_dir = dir.parent().expect("profile dir has a parent");
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = Command::new(&cargo)
+        .current_dir(workspace_root())
+        .args(["build", "-p", "volscatter"])
+        .args(what)
+        .args(["--profile", &profile_name(&dir), "--target-dir"])
+        .arg(target_dir)
+        .env("CARGO_TERM_COLOR", "never")
+        .output()
+        .unwrap_or_else(|e| panic!("running {cargo:?} build: {e}"));
+    if !out.status.success() {
+        panic!("cargo build -p volscatter {what:?} failed:\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let path = dir.join(file);
+    assert!(path.exists(), "{} missing after building", path.display());
+    path
 }
 
 /// A fresh scratch directory under the target directory, named after the test.

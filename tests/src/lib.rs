@@ -2,4 +2,5 @@
 //! [`cdylib`] builds and finds libvolscatter, [`vsapi`] loads it with libloading.
 
 pub mod cdylib;
+pub mod extreme;
 pub mod vsapi;

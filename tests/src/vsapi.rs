@@ -83,6 +83,9 @@ api! {
     vs_version: fn() -> Cs;
     vs_abi_version: fn() -> u32;
     vs_status_message: fn(i32) -> Cs;
+    // The memory budget (issue 22).
+    vs_set_memory_budget: fn(u64) -> S;
+    vs_memory_budget: fn() -> u64;
     vs_scene_new: fn(*mut Scene) -> S;
     vs_scene_destroy: fn(Scene) -> S;
     vs_scene_last_error: fn(Scene) -> Cs;

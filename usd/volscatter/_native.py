@@ -106,6 +106,8 @@ _SIGNATURES = {
     "vs_version": (c_char_p, []),
     "vs_abi_version": (c_uint32, []),
     "vs_status_message": (c_char_p, [c_int32]),
+    "vs_set_memory_budget": (c_int32, [c_uint64]),
+    "vs_memory_budget": (c_uint64, []),
     "vs_scene_new": (c_int32, [POINTER(_ScenePtr)]),
     "vs_scene_destroy": (c_int32, [_ScenePtr]),
     "vs_scene_last_error": (c_char_p, [_ScenePtr]),

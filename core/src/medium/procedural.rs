@@ -67,7 +67,9 @@ pub(crate) fn on_cube(n: u32, limits: GridLimits, density: impl Fn(Vec3) -> f32 
     let n = n.clamp(4, 1024) as i32;
     let voxel = 2.0 / n as f32;
     let to_world = Affine3A::from_translation(Vec3::splat(-1.0 + 0.5 * voxel)) * Affine3A::from_scale(Vec3::splat(voxel));
-    let mut values = vec![0.0f32; (n * n * n) as usize];
+    // Dense samples, then as many again in bricks while `from_dense` copies them: 8 B a voxel.
+    let count = crate::budget::check_elements::<[f32; 2]>(&format!("procedural medium of {n}^3 voxels (medium.dims)"), (n as u64).pow(3))?;
+    let mut values = vec![0.0f32; count];
     use rayon::prelude::*;
     values.par_chunks_mut((n * n) as usize).enumerate().for_each(|(z, slab)| {
         for y in 0..n {

@@ -16,6 +16,13 @@ use glam::{Affine3A, Vec3};
 use super::{MajorantGrid, Medium};
 use crate::rng::Rng;
 
+/// Most tentative collisions one flight or shadow ray may take before the medium is treated as
+/// opaque there: 2^22 (~0.1 s). A ray crossing 1000 voxels at the largest optical depth per
+/// voxel a scene may have (`solvers::guard::MAX_OPTICAL_DEPTH_PER_VOXEL`, 1e4) takes 1e7
+/// steps in the worst case, but its transmittance is exp(-1e7) long before: only a ray through
+/// a cell whose majorant far exceeds its density gets near this, and then it is bounded.
+pub const MAX_TENTATIVE_STEPS: u32 = 1 << 22;
+
 /// The outcome of one free flight.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FreeFlight {
@@ -50,10 +57,17 @@ impl<'a> Tracking<'a> {
     /// The tentative collisions of the ray from `x` along unit `d` over [0, t_max]: exponential
     /// steps at each majorant cell's rate, `visit(t, sigma_t, majorant, rng)` at each (RGB
     /// extinction at the point), which returns false to stop.
-    fn tentative_collisions(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng, mut visit: impl FnMut(f32, Vec3, f32, &mut Rng) -> bool) {
+    ///
+    /// Always ends: returns `Some(t)` when it gave up at `t` because the medium is beyond what
+    /// float32 tracking can step (a step that no longer advances t, or more than
+    /// `MAX_TENTATIVE_STEPS` in one call); callers treat the medium there as opaque. Scenes
+    /// get there only past `solvers::guard::check_medium`, which refuses such media up front.
+    fn tentative_collisions(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng, mut visit: impl FnMut(f32, Vec3, f32, &mut Rng) -> bool) -> Option<f32> {
         let (o, di) = self.index_ray(x, d);
         let scale = self.medium.density_scale;
         let grid = &self.medium.grid;
+        let mut steps = 0u32;
+        let mut gave_up = None;
         self.majorant.traverse(o, di, 0.0, t_max, |seg| {
             let m = seg.majorant;
             if m <= 0.0 {
@@ -61,7 +75,16 @@ impl<'a> Tracking<'a> {
             }
             let mut t = seg.t0;
             loop {
-                t -= (1.0 - rng.f32()).ln() / m;
+                let step = -(1.0 - rng.f32()).ln() / m;
+                let next = t + step;
+                steps += 1;
+                // A zero step (u = 0) is legitimate and rare; a positive one that leaves t
+                // where it was is float32 running out, and would repeat for ever.
+                if (step > 0.0 && next <= t) || !next.is_finite() || steps > MAX_TENTATIVE_STEPS {
+                    gave_up = Some(t);
+                    return false;
+                }
+                t = next;
                 if t >= seg.t1 {
                     return true;
                 }
@@ -70,6 +93,7 @@ impl<'a> Tracking<'a> {
                 }
             }
         });
+        gave_up
     }
 
     /// Samples a free flight from `x` along unit `d` over at most `t_max` (f32::INFINITY: to
@@ -92,7 +116,7 @@ impl<'a> Tracking<'a> {
     ) -> FreeFlight {
         let mut beta = throughput;
         let mut hit = None;
-        self.tentative_collisions(x, d, t_max, rng, |t, sigma_t, m, rng| {
+        let gave_up = self.tentative_collisions(x, d, t_max, rng, |t, sigma_t, m, rng| {
             visit(t, beta, sigma_t, m);
             let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
             let p_real_w = (beta * sigma_t).max_element();
@@ -110,7 +134,8 @@ impl<'a> Tracking<'a> {
             beta *= sigma_n / (m * (1.0 - p_real));
             true
         });
-        match hit {
+        // Opaque where tracking gave up: the flight ends in a collision there.
+        match hit.or(gave_up) {
             Some(t) => FreeFlight::Scattered { t, weight: beta },
             None => FreeFlight::Escaped { weight: beta },
         }
@@ -119,7 +144,7 @@ impl<'a> Tracking<'a> {
     /// Ratio-tracking estimate of the RGB transmittance from `x` along unit `d` over `t_max`.
     pub fn ratio_transmittance(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Vec3 {
         let mut tr = Vec3::ONE;
-        self.tentative_collisions(x, d, t_max, rng, |_, sigma_t, m, rng| {
+        let gave_up = self.tentative_collisions(x, d, t_max, rng, |_, sigma_t, m, rng| {
             tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
             // Russian roulette on small transmittance keeps thick media cheap, unbiased.
             let mx = tr.max_element();
@@ -132,6 +157,10 @@ impl<'a> Tracking<'a> {
             }
             true
         });
+        // Opaque where tracking gave up.
+        if gave_up.is_some() {
+            return Vec3::ZERO;
+        }
         tr
     }
 }

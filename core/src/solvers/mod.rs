@@ -7,6 +7,7 @@ pub mod network;
 pub mod photon_grid;
 pub mod pop;
 pub mod reference;
+pub mod guard;
 pub mod registry;
 pub mod session;
 pub mod vpl;
@@ -55,6 +56,7 @@ impl ScatteringGrid {
                 dims.x, dims.y, dims.z
             )));
         }
+        crate::budget::check_elements::<Vec3>(&format!("scattering grid of {}x{}x{} points", dims.x, dims.y, dims.z), count)?;
         // Grid point i sits at medium index lo + i * step, spanning [lo, hi] exactly.
         let step = (hi - lo).as_vec3() / (dims.as_vec3() - Vec3::ONE);
         let index_to_world = medium.index_to_world * Affine3A::from_translation(lo.as_vec3()) * Affine3A::from_scale(step);
@@ -94,6 +96,12 @@ impl ScatteringGrid {
 /// coordinating thread and from worker threads, hence `Sync`.
 pub trait Progress: Sync {
     fn update(&self, stage: &str, fraction: f32) -> bool;
+
+    /// True once the host has asked to stop (a cheap flag read, no callback): for loops too
+    /// fine-grained to report progress from, which must still stop within ~100 ms of a cancel.
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Ignores progress, never cancels.

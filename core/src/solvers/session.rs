@@ -106,7 +106,10 @@ impl Session {
     /// Solves `scene` on the CPU, reusing what the previous solves kept.
     pub fn solve(&mut self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
         self.state.begin_frame();
-        self.solver.solve_in_session(scene, progress, &mut self.state)
+        super::guard::check_scene(scene)?;
+        let out = self.solver.solve_in_session(scene, progress, &mut self.state)?;
+        super::guard::check_finite(scene, "scattering grid", out.scattering.data.iter().copied())?;
+        Ok(out)
     }
 }
 

@@ -49,6 +49,8 @@ _SIGNATURES = {
     "vs_version": (ctypes.c_char_p, []),
     "vs_abi_version": (ctypes.c_uint32, []),
     "vs_status_message": (ctypes.c_char_p, [ctypes.c_int32]),
+    "vs_set_memory_budget": (_st, [ctypes.c_uint64]),
+    "vs_memory_budget": (ctypes.c_uint64, []),
     "vs_scene_new": (_st, [ctypes.POINTER(_vp)]),
     "vs_scene_destroy": (_st, [_vp]),
     "vs_scene_last_error": (ctypes.c_char_p, [_vp]),

@@ -7,10 +7,12 @@
 //! slice is formed or memory allocated.
 
 use std::any::Any;
+use std::cell::RefCell;
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Once};
 
 use super::handle::{Handle, Registry};
 use super::status::{FfiError, FfiResult, VsStatus};
@@ -23,11 +25,60 @@ fn panic_message(payload: &(dyn Any + Send)) -> String {
     } else {
         "unknown panic".to_string()
     };
-    format!("internal error (please report): {what}")
+    // Where it happened, when the panic was on this thread (a worker thread's panic is
+    // re-raised here with its message; its location stayed on the worker).
+    let at = PANIC_LOCATION.with(|l| l.borrow_mut().take()).map(|l| format!(" at {l}")).unwrap_or_default();
+    format!("internal error (please report): {what}{at}")
 }
 
-/// Runs `body`; a panic becomes `on_panic(message)`.
+/// Exports running now, on any thread. While one runs, a panic anywhere in the library (its
+/// own thread or a rayon worker of its solve) is the export's to report: the host's stderr
+/// gets nothing (a Blender console full of Rust backtraces for an error the add-on already
+/// shows). Outside exports (the CLI, Rust hosts of the rlib) the previous hook runs as before.
+static IN_EXPORT: AtomicUsize = AtomicUsize::new(0);
+static QUIET_HOOK: Once = Once::new();
+
+thread_local! {
+    /// The location of the last panic on this thread inside an export, for its message.
+    static PANIC_LOCATION: RefCell<Option<String>> = const { RefCell::new(None) };
+}
+
+fn install_quiet_hook() {
+    QUIET_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if IN_EXPORT.load(Ordering::SeqCst) == 0 {
+                return previous(info);
+            }
+            let at = info.location().map(|l| format!("{}:{}", l.file(), l.line()));
+            // try_with: a panic while this thread's locals are being torn down records nothing.
+            let _ = PANIC_LOCATION.try_with(|slot| {
+                if let Ok(mut slot) = slot.try_borrow_mut() {
+                    *slot = at;
+                }
+            });
+        }));
+    });
+}
+
+/// Counts one export in flight for as long as it lives (a drop, so a panic still uncounts).
+struct InExport;
+impl InExport {
+    fn enter() -> Self {
+        install_quiet_hook();
+        IN_EXPORT.fetch_add(1, Ordering::SeqCst);
+        InExport
+    }
+}
+impl Drop for InExport {
+    fn drop(&mut self) {
+        IN_EXPORT.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Runs `body`; a panic becomes `on_panic(message)`. Nothing is printed (`install_quiet_hook`).
 pub(crate) fn protect<T>(body: impl FnOnce() -> T, on_panic: impl FnOnce(String) -> T) -> T {
+    let _in_export = InExport::enter();
     match catch_unwind(AssertUnwindSafe(body)) {
         Ok(v) => v,
         Err(payload) => {
@@ -222,6 +273,7 @@ mod tests {
         let handle = REG.get(h).unwrap();
         let msg = unsafe { CStr::from_ptr(handle.error.as_ptr()) }.to_str().unwrap().to_string();
         assert!(msg.contains("boom 42") && msg.contains("internal error"), "{msg}");
+        assert!(msg.contains("guard.rs:"), "the message says where: {msg}");
         // A panic while the state is locked poisons the mutex; the handle stays usable.
         let st = on_handle(&REG, h, |hd| {
             let _g = hd.state.lock();
@@ -237,6 +289,44 @@ mod tests {
         assert_eq!(REG.live_count(), 0);
         assert_eq!(on_handle(&REG, h, |_| Ok(())), VsStatus::InvalidHandle);
         assert_eq!(on_handle(&REG, std::ptr::null(), |_| Ok(())), VsStatus::NullArgument);
+    }
+
+    /// Run as a child by the test below: panics inside an export (on its own thread and on a
+    /// rayon worker) and outside one, then exits.
+    #[test]
+    fn panic_child() {
+        if std::env::var_os("VS_PANIC_CHILD").is_none() {
+            return; // only meaningful as the child of the test below
+        }
+        assert_eq!(call(|| panic!("own thread")), VsStatus::Internal);
+        let st = call(|| {
+            // As rayon does: the worker's panic is re-raised on the calling thread.
+            if let Err(payload) = std::thread::spawn(|| panic!("worker thread")).join() {
+                std::panic::resume_unwind(payload);
+            }
+            Ok(())
+        });
+        assert_eq!(st, VsStatus::Internal);
+        eprintln!("CHILD-DONE");
+        let _ = std::panic::catch_unwind(|| panic!("outside any export"));
+    }
+
+    /// A panic caught inside an export prints nothing to the host's stderr (its message goes to
+    /// the error instead); outside exports the default hook still prints.
+    #[test]
+    fn panics_inside_exports_print_nothing() {
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["ffi::guard::tests::panic_child", "--exact", "--nocapture", "--test-threads=1"])
+            .env("VS_PANIC_CHILD", "1")
+            .env("RUST_BACKTRACE", "1")
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "child failed: {stderr}");
+        assert!(stderr.contains("CHILD-DONE"), "the child ran: {stderr}");
+        let inside = stderr.split("CHILD-DONE").next().unwrap_or_default();
+        assert!(!inside.contains("own thread") && !inside.contains("worker thread") && !inside.contains("backtrace"), "printed: {stderr}");
+        assert!(stderr.contains("outside any export"), "the previous hook still runs outside exports: {stderr}");
     }
 
     #[test]

@@ -9,6 +9,7 @@
 // In header order: cbindgen emits items in the order it meets them.
 pub mod version;
 pub mod status;
+pub mod budget;
 pub mod progress;
 pub mod scene;
 pub mod result;

@@ -555,7 +555,7 @@ pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgres
         let name = snapshot.solver_name().unwrap_or("reference").to_string();
         let progress = CProgress::new(progress, user);
         // A GPU failure is `Error::Device`, hence VS_STATUS_DEVICE (under AUTO it ran on the CPU).
-        let (output, _used) = volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress)?;
+        let (output, _used) = progress.with_heartbeat(|| volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress))?;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
@@ -583,7 +583,7 @@ pub unsafe extern "C" fn vs_scene_render_reference(scene: *mut VsScene, progress
         let reference = Reference::from_settings(&settings)?;
         let progress = CProgress::new(progress, user);
         let mut timings = Timings::default();
-        let image = reference.render_image(&snapshot, &progress, &mut timings)?;
+        let image = progress.with_heartbeat(|| reference.render_image(&snapshot, &progress, &mut timings))?;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }

@@ -96,7 +96,7 @@ pub unsafe extern "C" fn vs_session_solve(
         let progress = CProgress::new(progress, user);
         let mut st = lock(&h.state);
         let device = st.device;
-        let (output, _used) = volscatter_gpu::solve_session(device, &mut st.session, &snapshot, &progress)?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
+        let (output, _used) = progress.with_heartbeat(|| volscatter_gpu::solve_session(device, &mut st.session, &snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }

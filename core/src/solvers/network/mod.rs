@@ -124,6 +124,9 @@ impl Network {
             // Nothing scatters twice: S is its single scattering.
             return Ok((SolveOutput { scattering, timings }, report));
         }
+        // Radiance, source, first-scattering and visibility arrays: ~4 RGB values per
+        // (particle, direction) pair.
+        crate::budget::check_elements::<[glam::Vec3; 4]>("network arrays (solver.particles x solver.directions)", s.particles as u64 * s.directions as u64)?;
         let key = timings.time("network medium key", || MediumKey::of(medium));
         let mut net = match kept.0.take().filter(|k| k.medium == key) {
             Some(k) => k,

@@ -53,7 +53,7 @@ pub struct Cache {
 impl Cache {
     pub fn new(medium: &Medium, resolution: u32) -> Result<Self> {
         let mut frame = ScatteringGrid::over_medium(medium, resolution)?;
-        let cells = vec![Cell::default(); frame.len()];
+        let cells = vec![Cell::default(); crate::budget::check_elements::<Cell>("photon cache (solver.cache_resolution)", frame.len() as u64)?];
         frame.data = Vec::new();
         let world_to_cell = frame.index_to_world.inverse();
         Ok(Cache { frame, world_to_cell, cells })

@@ -50,26 +50,15 @@ impl Lattice<f32> for &Level {
     }
 }
 
+/// Largest base level per axis for grids wider than any footprint asks for (a 1024^3 level is
+/// 4 GiB; footprint-chosen levels are about twice the solver's resolution, far below).
+const MAX_BASE_DIM: i64 = 1024;
+
 impl MediumMip {
-    /// Builds levels from `min_footprint` voxels per sample (the finest the caller will ask
-    /// for) up to one cell covering the whole grid.
-    pub fn new(medium: &Medium, min_footprint: f32) -> Self {
+    /// The base level by visiting every cell's `base`^3 voxels (cells over empty space are
+    /// skipped through `max_in_box`).
+    fn sum_cells(medium: &Medium, lo: IVec3, dims: IVec3, base: i32) -> Vec<f32> {
         let grid = &medium.grid;
-        if grid.is_empty() {
-            return MediumMip { lo: IVec3::ZERO, levels: vec![Level { dims: IVec3::ONE, factor: 1, data: vec![0.0] }] };
-        }
-        let (blo, bhi) = grid.bbox();
-        // One voxel of trilinear ramp on each side, as Medium::index_bounds.
-        let lo = blo - IVec3::ONE;
-        let hi = bhi + IVec3::ONE;
-        let extent = hi - lo + IVec3::ONE;
-        // Base factor: largest power of two not above half the finest footprint, so the
-        // finest requested level is still interpolated between two stored ones.
-        let mut base = 1i32;
-        while (base * 2) as f32 <= 0.5 * min_footprint.max(1.0) && base < 256 {
-            base *= 2;
-        }
-        let dims = (extent + IVec3::splat(base - 1)) / base;
         let mut data = vec![0.0f32; (dims.x * dims.y * dims.z) as usize];
         let inv = 1.0 / (base * base * base) as f32;
         data.par_chunks_mut((dims.x * dims.y) as usize).enumerate().for_each(|(cz, slab)| {
@@ -93,6 +82,58 @@ impl MediumMip {
                 }
             }
         });
+        data
+    }
+
+    /// The base level for huge cells (`base` > 256, where a cell holds more voxels than the
+    /// grid stores): each stored voxel is added to its cell, in i64 so that no index wraps.
+    fn sum_bricks(medium: &Medium, lo: IVec3, dims: IVec3, base: i32) -> Vec<f32> {
+        use crate::medium::grid::{BrickRef, BRICK};
+        let mut data = vec![0.0f64; (dims.x * dims.y * dims.z) as usize];
+        let inv = 1.0 / (base as f64).powi(3);
+        medium.grid.for_each_brick(|origin, brick| {
+            for i in 0..(BRICK * BRICK * BRICK) as usize {
+                let v = match brick {
+                    BrickRef::Dense(values) => values[i],
+                    BrickRef::Constant(c) => c,
+                };
+                let o = IVec3::new(i as i32 & 7, (i as i32 >> 3) & 7, i as i32 >> 6);
+                let c = ((origin + o).as_i64vec3() - lo.as_i64vec3()) / base as i64;
+                if v != 0.0 && c.cmpge(glam::I64Vec3::ZERO).all() && c.cmplt(dims.as_i64vec3()).all() {
+                    data[(c.x + dims.x as i64 * (c.y + dims.y as i64 * c.z)) as usize] += v as f64 * inv;
+                }
+            }
+        });
+        data.into_iter().map(|v| v as f32).collect()
+    }
+
+    /// Builds levels from `min_footprint` voxels per sample (the finest the caller will ask
+    /// for) up to one cell covering the whole grid.
+    pub fn new(medium: &Medium, min_footprint: f32) -> Self {
+        let grid = &medium.grid;
+        if grid.is_empty() {
+            return MediumMip { lo: IVec3::ZERO, levels: vec![Level { dims: IVec3::ONE, factor: 1, data: vec![0.0] }] };
+        }
+        let (blo, bhi) = grid.bbox();
+        // One voxel of trilinear ramp on each side, as Medium::index_bounds (saturating: a
+        // voxel at the end of the i32 range loses its ramp, not the process).
+        let lo = blo.saturating_sub(IVec3::ONE);
+        let hi = bhi.saturating_add(IVec3::ONE);
+        // In i64: voxels 2^31 apart overflow an i32 extent (issue 22).
+        let extent = hi.as_i64vec3() - lo.as_i64vec3() + glam::I64Vec3::ONE;
+        // Base factor: largest power of two not above half the finest footprint, so the
+        // finest requested level is still interpolated between two stored ones.
+        let mut base = 1i32;
+        while (base * 2) as f32 <= 0.5 * min_footprint.max(1.0) && base < 256 {
+            base *= 2;
+        }
+        // A sparse grid far wider than any footprint asks for (two voxels 2^31 apart): coarser
+        // cells, so that the base level stays at most MAX_BASE_DIM per axis.
+        while extent.max_element() > MAX_BASE_DIM * base as i64 && base < 1 << 30 {
+            base *= 2;
+        }
+        let dims = ((extent + glam::I64Vec3::splat(base as i64 - 1)) / base as i64).as_ivec3();
+        let data = if base > 256 { Self::sum_bricks(medium, lo, dims, base) } else { Self::sum_cells(medium, lo, dims, base) };
         let mut levels = vec![Level { dims, factor: base, data }];
         while levels.last().unwrap().dims.max_element() > 1 {
             let prev = levels.last().unwrap();
@@ -110,7 +151,7 @@ impl MediumMip {
                     }
                 }
             });
-            let factor = prev.factor * 2;
+            let factor = prev.factor.saturating_mul(2);
             levels.push(Level { dims: nd, factor, data: nd_data });
         }
         MediumMip { lo, levels }
@@ -162,5 +203,30 @@ impl MediumMip {
             return a;
         }
         a * (1.0 - t) + self.sample_level(l1, p_index) * t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::{DensityGridBuilder, GridLimits};
+    use glam::Affine3A;
+
+    /// Two voxels 2^20 apart (issue 22: 2^31 apart overflowed the i32 extent and panicked):
+    /// the base level is coarsened to at most MAX_BASE_DIM + 1 cells per axis instead of 2^20,
+    /// built from the stored voxels, and keeps their total density (2 voxels of 1) to 1e-4
+    /// (f32 cell means of f64 sums).
+    #[test]
+    fn voxels_far_apart_give_a_bounded_mip_that_keeps_the_mass() {
+        let mut b = DensityGridBuilder::new(GridLimits::default());
+        b.set(IVec3::ZERO, 1.0).unwrap();
+        b.set(IVec3::new(1 << 20, 0, 0), 1.0).unwrap();
+        let medium = Medium::new(b.build().unwrap(), Affine3A::IDENTITY, glam::Vec3::ONE, glam::Vec3::ONE, 0.0);
+        let mip = MediumMip::new(&medium, 1.0);
+        let (dims, factor, data) = mip.levels().next().unwrap();
+        assert!(dims.max_element() as i64 <= MAX_BASE_DIM + 1, "base level {dims}");
+        let mass: f64 = data.iter().map(|&v| v as f64).sum::<f64>() * (factor as f64).powi(3);
+        assert!((mass - 2.0).abs() < 1e-4, "mass {mass} (factor {factor})");
+        assert!(mip.levels().last().unwrap().0.max_element() == 1);
     }
 }

@@ -86,6 +86,14 @@ impl ReferenceSettings {
     }
 }
 
+/// Paths between two reads of the cancel flag (a path is microseconds to a few ms).
+const CANCEL_CHECK: u32 = 16;
+
+/// True once the solve is to stop: cancelled through a progress update or by the host.
+fn stop(cancelled: &AtomicBool, progress: &dyn Progress) -> bool {
+    cancelled.load(Ordering::Relaxed) || progress.cancelled()
+}
+
 pub struct Reference {
     pub settings: ReferenceSettings,
 }
@@ -102,6 +110,9 @@ impl Reference {
     /// Path-traces the image directly (RGBA + AOVs `single`, `multiple`, `background`).
     pub fn render_image(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
         let s = &self.settings;
+        super::guard::check_scene(scene)?;
+        Image::check_budget(scene.camera.width, scene.camera.height, "reference image")?;
+        crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
         let cam = &scene.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
@@ -125,7 +136,12 @@ impl Reference {
                         let mut rng = Rng::new(s.seed, (y * w + x) as u64);
                         let mut acc = PathRadiance::default();
                         let mut transmittance = Vec3::ZERO;
-                        for _ in 0..s.spp {
+                        for n in 0..s.spp {
+                            // A row may take minutes at high spp: a cancel is seen within a few
+                            // paths (a flag read every CANCEL_CHECK paths).
+                            if n % CANCEL_CHECK == 0 && stop(&cancelled, progress) {
+                                return;
+                            }
                             let d = cam.ray_dir(x as f32 + rng.f32(), y as f32 + rng.f32());
                             acc.add(&tracer.camera_path(cam.position, d, &mut rng));
                             transmittance += tracer.transmittance(cam.position, d, f32::INFINITY, &mut rng);
@@ -144,12 +160,13 @@ impl Reference {
                     }
                 })
         });
-        if cancelled.load(Ordering::Relaxed) {
+        if stop(&cancelled, progress) {
             return Err(Error::Cancelled);
         }
         let mut img = Image::new(cam.width, cam.height);
         img.rgba = rgba;
         img.aovs = vec![("single".into(), single), ("multiple".into(), multiple), ("background".into(), background)];
+        super::guard::check_finite(scene, "image", img.rgba.iter().map(|p| p.truncate()).chain(img.aovs.iter().flat_map(|a| a.1.iter().copied())))?;
         Ok(img)
     }
 
@@ -157,8 +174,10 @@ impl Reference {
     /// towards the camera, with `grid_spp` paths per point.
     pub fn scattering_grid(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
         let s = &self.settings;
-        let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
+        super::guard::check_scene(scene)?;
         let mut grid = ScatteringGrid::over_medium(&scene.medium, s.grid_resolution)?;
+        crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;
+        let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
         let [nx, ny, _] = grid.dims;
         let slab = (nx * ny) as usize;
         let nz = grid.dims[2] as usize;
@@ -182,7 +201,10 @@ impl Reference {
                         let view = (x - scene.camera.position).normalize_or(Vec3::Z);
                         let mut rng = Rng::new(s.seed ^ 0x5ca7, (k * slab) as u64 + idx as u64);
                         let mut sum = Vec3::ZERO;
-                        for _ in 0..s.grid_spp {
+                        for n in 0..s.grid_spp {
+                            if n % CANCEL_CHECK == 0 && stop(&cancelled, progress) {
+                                return;
+                            }
                             sum += tracer.in_scattered(x, view, &mut rng);
                         }
                         out[idx] = medium.sigma_s(density) * sum / s.grid_spp as f32;
@@ -194,7 +216,7 @@ impl Reference {
                 }
             })
         });
-        if cancelled.load(Ordering::Relaxed) {
+        if stop(&cancelled, progress) {
             return Err(Error::Cancelled);
         }
         Ok(grid)

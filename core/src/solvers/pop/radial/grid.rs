@@ -66,6 +66,7 @@ impl RadialGrid {
         }
         let voxel = medium.voxel_size_world().min_element();
         let w2i = medium.world_to_index;
+        crate::budget::check(&format!("pop radial grids of {n}x{n}x{shells} cells (solver.radial_resolution)"), (count as u64).saturating_mul(96))?;
         let mut density = vec![0.0f32; count];
         density.par_chunks_mut(slab).enumerate().for_each(|(k, out)| {
             let (r0, r1) = (radii[k], radii[k + 1]);

@@ -1,0 +1,171 @@
+//! The extreme-value scenes of `volscatter_tests::extreme` through the C ABI, and the C ABI's
+//! progress contract (issue 22): the callback is called at least every 100 ms during every
+//! solve and render, and a cancel ends a long solve quickly with VS_STATUS_CANCELLED.
+
+use std::ffi::{c_char, c_void};
+use std::ptr::null_mut;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use volscatter_tests::cdylib::{cdylib, scratch_dir};
+use volscatter_tests::extreme::{cases, TEST_BUDGET};
+use volscatter_tests::vsapi::{cstr, status::*, Api, Img, Res, Scene};
+
+fn api() -> &'static Api {
+    static API: OnceLock<Api> = OnceLock::new();
+    API.get_or_init(|| {
+        let api = Api::load(cdylib()).unwrap_or_else(|e| panic!("loading {}: {e}", cdylib().display()));
+        // Over-budget cases must be refused on any machine, whatever its memory.
+        assert_eq!(unsafe { (api.vs_set_memory_budget)(TEST_BUDGET) }, OK);
+        assert_eq!(unsafe { (api.vs_memory_budget)() }, TEST_BUDGET);
+        api
+    })
+}
+
+/// Seconds any one case may take: each is a small scene that ends well under a second on
+/// one core when it runs, or is refused at once. 20 s is 20x that, for a loaded CI machine;
+/// a hang (what this catches) never ends.
+const CASE_LIMIT: Duration = Duration::from_secs(20);
+
+/// Every case ends in OK with a finite grid, or an error other than INTERNAL whose message is
+/// not empty; none takes longer than CASE_LIMIT. The cases the issue names as wrong answers or
+/// hangs must be the error, not OK.
+#[test]
+fn extreme_scenes_end_in_ok_and_finite_or_a_clear_error() {
+    let a = api();
+    let dir = scratch_dir("extreme-abi");
+    let dir_c = cstr(dir.to_str().unwrap());
+    let mut report = Vec::new();
+    for (name, scene) in cases(&dir) {
+        eprintln!("case {name}");
+        let s: Scene = a.new_scene();
+        let t = Instant::now();
+        let st = unsafe { (a.vs_scene_load_json)(s, cstr(&scene.to_string()).as_ptr(), dir_c.as_ptr()) };
+        let (st, msg) = if st != OK {
+            (st, a.scene_error(s))
+        } else {
+            let mut r: Res = null_mut();
+            let st = unsafe { (a.vs_scene_solve)(s, None, null_mut(), &mut r) };
+            if st != OK {
+                (st, a.scene_error(s))
+            } else {
+                let (_, data) = a.grid(r);
+                assert!(data.iter().all(|v| v.is_finite()), "{name}: status OK with non-finite values in the grid");
+                // And its composite: OK and finite, or an error on the result.
+                let mut img: Img = null_mut();
+                let st = unsafe { (a.vs_result_composite)(r, 0, 1, 0.5, &mut img) };
+                let msg = a.result_error(r);
+                if st == OK {
+                    let (mut w, mut h) = (0u32, 0u32);
+                    assert_eq!(unsafe { (a.vs_image_size)(img, &mut w, &mut h) }, OK);
+                    let mut rgba = vec![0f32; 4 * w as usize * h as usize];
+                    assert_eq!(unsafe { (a.vs_image_copy_rgba)(img, rgba.as_mut_ptr(), rgba.len()) }, OK);
+                    assert!(rgba.iter().all(|v| v.is_finite()), "{name}: composite OK with non-finite pixels");
+                    unsafe { (a.vs_image_destroy)(img) };
+                }
+                unsafe { (a.vs_result_destroy)(r) };
+                (st, msg)
+            }
+        };
+        let took = t.elapsed();
+        unsafe { (a.vs_scene_destroy)(s) };
+        assert!(took < CASE_LIMIT, "{name}: took {took:?}");
+        assert_ne!(st, INTERNAL, "{name}: internal error {msg}");
+        if st != OK {
+            assert!(!msg.is_empty(), "{name}: status {st} without a message");
+        }
+        let must_fail = ["1e8", "3e38", "1e30", "1e-45", "radius 1e-30", "over the budget"];
+        if must_fail.iter().any(|w| name.contains(w)) && !name.contains("empty") && !name.contains("dome colour 1e30") {
+            assert_ne!(st, OK, "{name}: must be refused");
+        }
+        if name.contains("over the budget") {
+            assert_eq!(st, TOO_LARGE, "{name}: {msg}");
+            assert!(msg.contains("budget") && msg.contains("1.0 GiB"), "{name}: the refusal names the budget: {msg}");
+        }
+        report.push(format!("{name}: status {st} in {:.2} s: {msg}", took.as_secs_f64()));
+    }
+    eprintln!("{}", report.join("\n"));
+    assert!(report.len() >= 30, "{} cases", report.len());
+}
+
+/// What a progress callback saw: when it was called, and when to start cancelling.
+struct Beats {
+    start: Instant,
+    calls: Vec<Instant>,
+    cancel_after: Duration,
+}
+
+unsafe extern "C" fn record(user: *mut c_void, _stage: *const c_char, _fraction: f32) -> i32 {
+    let beats = &mut *(user as *mut Beats);
+    let now = Instant::now();
+    beats.calls.push(now);
+    i32::from(now - beats.start < beats.cancel_after)
+}
+
+/// Runs `call` with the recording callback (cancelling after `cancel_after`), returns its
+/// status, the largest gap between the start, the calls and the return, and the time from
+/// the cancel to the return.
+fn run_with_beats(cancel_after: Duration, call: impl FnOnce(*mut c_void) -> i32) -> (i32, Duration, Duration) {
+    let mut beats = Beats { start: Instant::now(), calls: Vec::new(), cancel_after };
+    let st = call(&mut beats as *mut Beats as *mut c_void);
+    let end = Instant::now();
+    let mut times = vec![beats.start];
+    times.extend(&beats.calls);
+    times.push(end);
+    let gap = times.windows(2).map(|w| w[1] - w[0]).max().unwrap_or_default();
+    let cancel_to_return = end.saturating_duration_since(beats.start + cancel_after);
+    eprintln!("{} callbacks, longest silence {gap:?}, cancel to return {cancel_to_return:?}", beats.calls.len());
+    (st, gap, cancel_to_return)
+}
+
+/// A scene whose reference solve and render take minutes (2^20 paths per pixel and per grid
+/// point) unless cancelled.
+fn long_scene() -> Scene {
+    api().scene_from_json(
+        r#"{"format": 1, "medium": {"procedural": "plume", "dims": [16], "density_scale": 10.0, "albedo": 0.9},
+            "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": 1.0}],
+            "camera": {"position": [0, -6, 0.2], "look_at": [0, 0, 0], "width": 16, "height": 12},
+            "solver": {"name": "reference", "spp": 1048576, "grid_resolution": 8, "grid_spp": 1048576}}"#,
+    )
+}
+
+/// Longest a cancel may take to end the call: the reference reads the flag every 16 paths
+/// (each well under a millisecond here), the heartbeat calls the host every 100 ms. 2 s is
+/// slack for a loaded machine; without the fix the call never returned.
+const CANCEL_LIMIT: Duration = Duration::from_secs(2);
+/// Longest silence allowed between callbacks: the heartbeat aims at 100 ms; 3x for a loaded
+/// two-core CI machine (measured here: about 100 ms).
+const GAP_LIMIT: Duration = Duration::from_millis(300);
+
+#[test]
+fn render_reference_reports_every_100ms_and_cancels_quickly() {
+    let a = api();
+    let s = long_scene();
+    let mut img: Img = null_mut();
+    let (st, gap, cancel) = run_with_beats(Duration::from_millis(800), |user| unsafe { (a.vs_scene_render_reference)(s, Some(record), user, &mut img) });
+    assert_eq!(st, CANCELLED, "{}", a.scene_error(s));
+    assert!(img.is_null());
+    assert!(gap < GAP_LIMIT, "longest silence {gap:?}");
+    assert!(cancel < CANCEL_LIMIT, "cancel took {cancel:?}");
+    unsafe { (a.vs_scene_destroy)(s) };
+}
+
+#[test]
+fn solve_reports_every_100ms_and_cancels_quickly() {
+    let a = api();
+    let s = long_scene();
+    let mut r: Res = null_mut();
+    let (st, gap, cancel) = run_with_beats(Duration::from_millis(800), |user| unsafe { (a.vs_scene_solve)(s, Some(record), user, &mut r) });
+    assert_eq!(st, CANCELLED, "{}", a.scene_error(s));
+    assert!(r.is_null());
+    assert!(gap < GAP_LIMIT, "longest silence {gap:?}");
+    assert!(cancel < CANCEL_LIMIT, "cancel took {cancel:?}");
+    // A session solve of the same scene: the same contract.
+    let mut sess = null_mut();
+    assert_eq!(unsafe { (a.vs_session_new)(s, &mut sess) }, OK);
+    let (st, gap, cancel) = run_with_beats(Duration::from_millis(500), |user| unsafe { (a.vs_session_solve)(sess, s, Some(record), user, &mut r) });
+    assert_eq!(st, CANCELLED, "{}", a.session_error(sess));
+    assert!(gap < GAP_LIMIT && cancel < CANCEL_LIMIT, "session: silence {gap:?}, cancel {cancel:?}");
+    unsafe { (a.vs_session_destroy)(sess) };
+    unsafe { (a.vs_scene_destroy)(s) };
+}
