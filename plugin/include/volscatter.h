@@ -535,6 +535,15 @@ const char *vs_result_last_error(const VsResult *result);
 VsStatus vs_result_dims(const VsResult *result, uint32_t *dims);
 
 /**
+ * Writes where the solve that made this result ran to `*out`: `VS_DEVICE_CPU` (0) or
+ * `VS_DEVICE_GPU` (1), never `VS_DEVICE_AUTO`. A scene set to GPU or AUTO still gives the CPU
+ * for a solver without a GPU backend, and AUTO gives the CPU when no hardware adapter works.
+ *
+ * Thread safety: any thread; calls on one result are serialised.
+ */
+VsStatus vs_result_device(const VsResult *result, uint32_t *out);
+
+/**
  * Writes the number of floats `vs_result_copy_rgb` needs (nx * ny * nz * 3) to `*out`.
  *
  * Thread safety: any thread; calls on one result are serialised.

@@ -1102,6 +1102,56 @@ def test_gpu_failure_falls_back_to_the_cpu_with_a_warning(fresh, monkeypatch):
     assert any("camera: broken" in m for k, m in op.reports), op.reports
 
 
+def _ran(ob, fresh, device, solver):
+    """Runs Compute Scattering on `device` with `solver`; returns (where the library says it
+    ran, the operator's reports)."""
+    _tiny(ob, fresh, solver=solver)
+    ob.volscatter.device = device
+    H = _modal_harness()
+    op, ctx = H(), _UIContext(ob)
+    op.reports = []
+    assert _drive(op, ctx) == {'FINISHED'}, op.reports
+    return op.ran_on(), op.reports
+
+
+def test_the_device_that_ran_is_the_one_asked_and_reported(fresh):
+    """vs_result_device says where a solve ran, and the report says it: Device CPU runs on the
+    CPU; Device GPU with a solver that has a GPU backend runs on the GPU when an adapter works
+    (lavapipe counts: GPU is an explicit request), else falls back to the CPU with a warning;
+    a solver without a GPU backend runs on the CPU whatever the menu says."""
+    native = _native()
+    ob = bs.standard_scene(res=6, points=False)
+    entries = native.solvers()["solvers"]
+    with_gpu = [e["name"] for e in entries if e["gpu"]]
+    without = [e["name"] for e in entries if not e["gpu"]]
+    assert with_gpu and without
+    ran, reports = _ran(ob, fresh, 'CPU', with_gpu[0])
+    assert ran == "CPU", reports
+    assert any("solved on the CPU" in m for k, m in reports if 'INFO' in k), reports
+    ran, reports = _ran(ob, fresh, 'GPU', without[0])
+    assert ran == "CPU", reports
+    # Is there an adapter at all? Ask the library directly, as the operator does.
+    doc = {"format": 1, "medium": {"procedural": "plume", "dims": [8]},
+           "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": [1, 1, 1]}],
+           "camera": {"position": [0, -6, 0], "look_at": [0, 0, 0], "width": 8, "height": 8},
+           "solver": {"name": with_gpu[0], "grid_resolution": 6}}
+    with native.Scene.from_json(doc) as sc:
+        sc.set_device('GPU')
+        try:
+            sc.solve().close()
+            adapter = True
+        except native.VolscatterError as e:
+            assert e.status == native.STATUS_DEVICE, e
+            adapter = False
+    ran, reports = _ran(ob, fresh, 'GPU', with_gpu[0])
+    if not adapter:
+        assert ran == "CPU", reports
+        assert any("GPU failed" in m and "solved on the CPU" in m for k, m in reports if 'WARNING' in k), reports
+        pytest.skip("no GPU adapter (not even lavapipe): Device GPU fell back to the CPU, as reported")
+    assert ran == "GPU", reports
+    assert any("solved on the GPU" in m for k, m in reports if 'INFO' in k), reports
+
+
 # ---------------------------------------------------------------------------------------------
 # an artist's first animation (issue 20): ranges, re-runs, panel values, smoke domains
 

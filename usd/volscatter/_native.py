@@ -133,6 +133,7 @@ _SIGNATURES = {
     "vs_result_destroy": (c_int32, [_ResultPtr]),
     "vs_result_last_error": (c_char_p, [_ResultPtr]),
     "vs_result_dims": (c_int32, [_ResultPtr, POINTER(c_uint32)]),
+    "vs_result_device": (c_int32, [_ResultPtr, POINTER(c_uint32)]),
     "vs_result_float_count": (c_int32, [_ResultPtr, POINTER(c_size_t)]),
     "vs_result_index_to_world": (c_int32, [_ResultPtr, _F]),
     "vs_result_copy_rgb": (c_int32, [_ResultPtr, _F, c_size_t]),
@@ -483,6 +484,12 @@ class Result(_Handle):
         d = (c_uint32 * 3)()
         self._check(lib().vs_result_dims(self._p(), d), "result dims")
         return tuple(int(v) for v in d)
+
+    def device(self) -> str:
+        """Where the solve ran: "cpu" or "gpu" (never "auto"; ``vs_result_device``)."""
+        d = c_uint32()
+        self._check(lib().vs_result_device(self._p(), ctypes.byref(d)), "result device")
+        return {v: k for k, v in DEVICES.items()}[d.value]
 
     def index_to_world(self):
         """Row-major 4x4 (16 floats): grid point (i, j, k) sits at M (i, j, k, 1)."""

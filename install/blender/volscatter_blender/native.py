@@ -61,6 +61,7 @@ _SIGNATURES = {
     "vs_result_destroy": (_st, [_vp]),
     "vs_result_last_error": (ctypes.c_char_p, [_vp]),
     "vs_result_dims": (_st, [_vp, _u32p]),
+    "vs_result_device": (_st, [_vp, _u32p]),
     "vs_result_float_count": (_st, [_vp, _szp]),
     "vs_result_index_to_world": (_st, [_vp, _f32p]),
     "vs_result_copy_rgb": (_st, [_vp, _f32p, ctypes.c_size_t]),
@@ -338,6 +339,12 @@ class Result(_Handle):
         d = (ctypes.c_uint32 * 3)()
         self._call("vs_result_dims", d)
         return tuple(d)
+
+    def device(self):
+        """Where the solve ran: "CPU" or "GPU" (never "AUTO"; `vs_result_device`)."""
+        d = ctypes.c_uint32()
+        self._call("vs_result_device", ctypes.byref(d))
+        return {v: k for k, v in DEVICES.items()}[d.value]
 
     def index_to_world(self):
         m = _floats(16)

@@ -164,6 +164,7 @@ class _JobOperator:
         self._frames = self.frames(context)
         self._index = 0
         self._values = []
+        self._ran_on = set()  # "CPU" / "GPU": where the library says each frame's solve ran
         self._warned = set()
         self._out = _out_dir(self._settings)
         self._solver = {"name": self._settings.solver}
@@ -175,6 +176,11 @@ class _JobOperator:
         note = device_note(self._settings.solver, self._settings.device)
         if note:
             self._warn(note)
+
+    def ran_on(self):
+        """Where the solves ran, for the report: "CPU", "GPU" or "CPU and GPU" (a GPU that failed
+        mid-range leaves the rest of the frames on the CPU)."""
+        return " and ".join(d for d in ("CPU", "GPU") if d in self._ran_on) or "nowhere"
 
     def _warn(self, msg):
         if msg not in self._warned:
@@ -214,6 +220,7 @@ class _JobOperator:
             with native.Scene.from_json(doc) as sc:
                 job = self if len(self._frames) > 1 else None  # a range: one session
                 with _solve_on(sc, self._settings.device, progress, state.notes, job) as result:
+                    self._ran_on.add(result.device())  # read back from the library, not assumed
                     state.value = self.per_frame(result, frame)
         except BaseException as e:  # reported on the main thread
             state.error = e
@@ -653,8 +660,8 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         if ob.name in context.view_layer.objects:
             ob.select_set(True)
             context.view_layer.objects.active = ob
-        self.report({'INFO'}, "volscatter: '%s' holds the scattering of '%s' (%d frame%s, %s)"
-                    % (ob.name, self._obj.name, len(paths), "" if len(paths) == 1 else "s", self._out))
+        self.report({'INFO'}, "volscatter: '%s' holds the scattering of '%s' (%d frame%s, solved on the %s, %s)"
+                    % (ob.name, self._obj.name, len(paths), "" if len(paths) == 1 else "s", self.ran_on(), self._out))
 
     def _note_resolution(self):
         """Records the result's resolution for the panel and says when the solver capped it
@@ -705,7 +712,7 @@ class VOLSCATTER_OT_render_preview(_JobOperator, bpy.types.Operator):
             img = bpy.data.images.new(self.image_name, w, h, alpha=True, float_buffer=True)
         img.pixels.foreach_set(px)
         img.update()
-        self.report({'INFO'}, "volscatter: preview %dx%d in image '%s'" % (w, h, img.name))
+        self.report({'INFO'}, "volscatter: preview %dx%d in image '%s' (solved on the %s)" % (w, h, img.name, self.ran_on()))
 
 
 classes = (VOLSCATTER_OT_compute_scattering, VOLSCATTER_OT_render_preview)

@@ -7,13 +7,13 @@ use std::sync::Arc;
 use volscatter_core::compositor::{self, Aovs, CompositeOptions};
 use volscatter_core::solvers::{ScatteringGrid, SolveOutput, Timings};
 use volscatter_core::{vdb, Scene};
-use volscatter_gpu::DeviceChoice;
+use volscatter_gpu::{DeviceChoice, DeviceUsed};
 
 use super::guard::{self, clear_out, finite_arg, on_handle, out_slice, path_arg, write_out};
 use super::handle::{lock, Handle, Registry};
 use super::image::{ImageState, IMAGES};
 use super::status::{FfiError, FfiResult, VsStatus};
-use super::version::VS_COMPOSITE_TRANSPARENT;
+use super::version::{VS_COMPOSITE_TRANSPARENT, VS_DEVICE_CPU, VS_DEVICE_GPU};
 use super::VsImage;
 
 /// Opaque result handle, made by `vs_scene_solve`, destroyed with `vs_result_destroy`.
@@ -63,12 +63,15 @@ pub(crate) struct ResultState {
     pub scene: Arc<Scene>,
     /// The scene's device choice when it was solved (used by `vs_result_composite`).
     pub device: DeviceChoice,
+    /// Where the solve actually ran (`vs_result_device`): under AUTO, or for a solver without a
+    /// GPU backend, the CPU even though the GPU was allowed.
+    pub used: DeviceUsed,
     #[allow(dead_code)]
     pub timings: Timings,
 }
 
 impl ResultState {
-    pub fn new(output: SolveOutput, scene: Arc<Scene>, device: DeviceChoice) -> FfiResult<Self> {
+    pub fn new(output: SolveOutput, scene: Arc<Scene>, device: DeviceChoice, used: DeviceUsed) -> FfiResult<Self> {
         let g = &output.scattering;
         let count = g.dims.iter().map(|&d| d as u64).product::<u64>();
         if count != g.data.len() as u64 {
@@ -77,7 +80,7 @@ impl ResultState {
                 format!("solver returned a {:?} grid with {} values", g.dims, g.data.len()),
             ));
         }
-        Ok(ResultState { grid: output.scattering, scene, device, timings: output.timings })
+        Ok(ResultState { grid: output.scattering, scene, device, used, timings: output.timings })
     }
     fn float_count(&self) -> usize {
         self.grid.data.len() * 3
@@ -119,6 +122,22 @@ pub unsafe extern "C" fn vs_result_dims(result: *const VsResult, dims: *mut u32)
         let out = out_slice(dims, 3, 3, "dims")?;
         out.copy_from_slice(&r.grid.dims);
         Ok(())
+    })
+}
+
+/// Writes where the solve that made this result ran to `*out`: `VS_DEVICE_CPU` (0) or
+/// `VS_DEVICE_GPU` (1), never `VS_DEVICE_AUTO`. A scene set to GPU or AUTO still gives the CPU
+/// for a solver without a GPU backend, and AUTO gives the CPU when no hardware adapter works.
+///
+/// Thread safety: any thread; calls on one result are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_result_device(result: *const VsResult, out: *mut u32) -> VsStatus {
+    with_result(result, |r| {
+        let code = match r.used {
+            DeviceUsed::Cpu => VS_DEVICE_CPU,
+            DeviceUsed::Gpu(_) => VS_DEVICE_GPU,
+        };
+        write_out(out, code, "out")
     })
 }
 

@@ -555,11 +555,11 @@ pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgres
         let name = snapshot.solver_name().unwrap_or("reference").to_string();
         let progress = CProgress::new(progress, user);
         // A GPU failure is `Error::Device`, hence VS_STATUS_DEVICE (under AUTO it ran on the CPU).
-        let (output, _used) = progress.with_heartbeat(|| volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress))?;
+        let (output, used) = progress.with_heartbeat(|| volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress))?;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
-        let state = ResultState::new(output, snapshot, device)?;
+        let state = ResultState::new(output, snapshot, device, used)?;
         write_out(out, RESULTS.insert(state)?, "out")
     })
 }

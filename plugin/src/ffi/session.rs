@@ -96,11 +96,11 @@ pub unsafe extern "C" fn vs_session_solve(
         let progress = CProgress::new(progress, user);
         let mut st = lock(&h.state);
         let device = st.device;
-        let (output, _used) = progress.with_heartbeat(|| volscatter_gpu::solve_session(device, &mut st.session, &snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
+        let (output, used) = progress.with_heartbeat(|| volscatter_gpu::solve_session(device, &mut st.session, &snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
-        let state = ResultState::new(output, snapshot, device)?;
+        let state = ResultState::new(output, snapshot, device, used)?;
         write_out(out, RESULTS.insert(state)?, "out")
     })
 }
