@@ -1152,6 +1152,55 @@ def test_the_device_that_ran_is_the_one_asked_and_reported(fresh):
     assert any("solved on the GPU" in m for k, m in reports if 'INFO' in k), reports
 
 
+def test_preview_gives_a_dim_world_few_dome_ordinates(fresh, monkeypatch):
+    """pop's Preview with Blender's dim default-like world (grey 0.05 under a sun: 17% of the
+    light) passes 6 dome ordinates without importance (scripts/bench_preview_dome.py: error
+    0.140 -> 0.143 against the reference) and says so; a bright world (over 30%), Final, or a
+    solver without dome ordinates keep the solver's own settings. The panel states the rule."""
+    native, panel = _native(), sys.modules[MODULE + ".panel"]
+    pd = sys.modules[MODULE + ".preview_dome"]
+    sent = []
+    real = native.Scene.from_json.__func__
+
+    def spy(cls, doc, base_dir=None):
+        sent.append(dict(doc["solver"]))
+        return real(cls, doc, base_dir)
+    monkeypatch.setattr(native.Scene, "from_json", classmethod(spy))
+    ob = bs.standard_scene(res=6, points=False)
+    world = bpy.context.scene.world or bpy.data.worlds.new("World")
+    bpy.context.scene.world = world
+
+    def run(quality, grey, solver="pop"):
+        _tiny(ob, fresh, solver=solver)
+        ob.volscatter.quality = quality
+        if bpy.app.version < (5, 0, 0):
+            world.use_nodes = True
+        bg = world.node_tree.nodes["Background"]
+        bg.inputs["Color"].default_value = (grey, grey, grey, 1.0)
+        bg.inputs["Strength"].default_value = 1.0
+        del sent[:]
+        H = _modal_harness()
+        op, ctx = H(), _UIContext(ob)
+        op.reports = []
+        assert _drive(op, ctx) == {'FINISHED'}, op.reports
+        return sent[-1], [m for k, m in op.reports if "dome directions" in m or "approximates it by" in m]
+
+    solver, notes = run('PREVIEW', 0.005)
+    assert solver.get("dome_ordinates") == 6 and solver.get("dome_importance") is False, solver
+    assert len(notes) == 1 and "6 directions" in notes[0], notes
+    solver, notes = run('PREVIEW', 50.0)  # the world brings most of the light
+    assert "dome_ordinates" not in solver and not notes, (solver, notes)
+    solver, notes = run('FINAL', 0.005)
+    assert "dome_ordinates" not in solver and not notes, (solver, notes)
+    assert pd.world_share([{"type": "dome", "color": [0.05] * 3}, {"type": "distant", "irradiance": [3.0] * 3}],
+                          [0, 0, 0]) == pytest.approx(0.173, abs=0.001)
+    assert pd.world_share([{"type": "dome", "texture": "sky.exr", "intensity": 1.0}], [0, 0, 0]) is None
+    ob.volscatter.solver, ob.volscatter.quality = "pop", 'PREVIEW'
+    assert "6 dome directions" in panel.dome_note(ob.volscatter)
+    ob.volscatter.quality = 'FINAL'
+    assert panel.dome_note(ob.volscatter) is None
+
+
 # ---------------------------------------------------------------------------------------------
 # an artist's first animation (issue 20): ranges, re-runs, panel values, smoke domains
 

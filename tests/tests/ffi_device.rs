@@ -1,6 +1,6 @@
 //! `vs_scene_set_device` when no GPU adapter exists: GPU gives `VS_STATUS_DEVICE` (its own
 //! status, not a message prefix) with the adapter failure in the message; AUTO solves on the
-//! CPU. The adapter is hidden by WGPU_BACKEND=metal (no Metal on this platform; on macOS the test
+//! CPU, and its result says so (`vs_result_device`). The adapter is hidden by WGPU_BACKEND=metal (no Metal on this platform; on macOS the test
 //! reports itself skipped). Its own test binary: the variable must be set before the library
 //! opens any device, and must not leak into other tests' processes.
 
@@ -29,18 +29,23 @@ fn gpu_without_adapter_is_a_device_error_and_auto_falls_back() {
             assert_eq!((a.vs_scene_set_device)(s, device), OK, "{}", a.scene_error(s));
             let mut r = null_mut();
             let st = (a.vs_scene_solve)(s, None, null_mut(), &mut r);
+            let mut ran = u32::MAX;
             if !r.is_null() {
+                assert_eq!((a.vs_result_device)(r, &mut ran), OK);
+                assert_eq!((a.vs_result_device)(r, null_mut()), NULL_ARGUMENT, "a NULL out is refused");
                 assert_eq!((a.vs_result_destroy)(r), OK);
             }
-            (st, a.scene_error(s))
+            (st, a.scene_error(s), ran)
         };
-        let (st, msg) = solve(1);
+        let (st, msg, _) = solve(1);
         assert_eq!(st, DEVICE, "GPU without an adapter: status {st}, message {msg}");
         assert!(msg.contains("no GPU adapter"), "{msg}");
-        let (st, msg) = solve(2);
+        let (st, msg, ran) = solve(2);
         assert_eq!(st, OK, "AUTO without an adapter should solve on the CPU: {msg}");
-        let (st, msg) = solve(0);
+        assert_eq!(ran, 0, "AUTO without an adapter ran on VS_DEVICE_CPU (0), not {ran}");
+        let (st, msg, ran) = solve(0);
         assert_eq!(st, OK, "{msg}");
+        assert_eq!(ran, 0, "CPU asked, VS_DEVICE_CPU (0) ran, not {ran}");
         assert_eq!((a.vs_scene_destroy)(s), OK);
     }
 }

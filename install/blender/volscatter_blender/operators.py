@@ -16,9 +16,10 @@ import threading
 import time
 
 import bpy
+import mathutils
 from bpy.props import StringProperty
 
-from . import mantaflow, native, scene_export
+from . import mantaflow, native, preview_dome, properties, scene_export
 from .scene_export import ExportError
 
 RESULT_TAG = "volscatter_source"
@@ -204,7 +205,22 @@ class _JobOperator:
             raise ExportError(error)
         if warning:
             self._warn(warning)
+        self._preview_dome(doc)
         return doc
+
+    def _preview_dome(self, doc):
+        """Preview with a solver that places dome ordinates (pop): a world bringing little of
+        the light gets few ordinates (preview_dome), said once in the report."""
+        s = self._settings
+        if s.quality != 'PREVIEW' or not properties.solver_has(s.solver, "dome_ordinates"):
+            return
+        doc["solver"] = dict(doc["solver"])  # this frame's copy: the next frame decides anew
+        bb = [self._obj.matrix_world @ mathutils.Vector(c) for c in self._obj.bound_box]
+        centre = [sum(v[i] for v in bb) / len(bb) for i in range(3)]
+        note = preview_dome.apply(doc, centre)
+        if note and not getattr(self, "_dome_noted", False):
+            self._dome_noted = True
+            self.report({'INFO'}, note)
 
     def image_size(self, context):
         return None

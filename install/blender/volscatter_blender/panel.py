@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import mantaflow, operators, properties
+from . import mantaflow, operators, preview_dome, properties
 
 
 def preset_rows(s):
@@ -14,6 +14,15 @@ def preset_rows(s):
         return []
     shown = {setting for _, setting in properties.CUSTOM_FIELDS}
     return [(k.replace("_", " ").title(), str(v)) for k, v in preset.items() if k not in shown]
+
+
+def dome_note(s):
+    """The panel's line under Preview for a solver that places dome ordinates (pop): what a
+    dim world gets (preview_dome), else None."""
+    if s.quality != 'PREVIEW' or not properties.solver_has(s.solver, "dome_ordinates"):
+        return None
+    return "A world under %.0f%% of the light: %d dome directions, no importance" % (
+        100 * preview_dome.SMALL_SHARE, preview_dome.FEW_ORDINATES["dome_ordinates"])
 
 
 def cap_note(s):
@@ -56,6 +65,9 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
             row = sub.row()
             row.label(text=key)
             row.label(text=value)
+        note = dome_note(s)
+        if note:
+            sub.label(text=note)
         if properties.solver_has(s.solver, "seed"):
             col.prop(s, "seed")
         col.prop(s, "device")
