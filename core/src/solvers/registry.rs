@@ -329,7 +329,7 @@ const POP: SolverEntry = SolverEntry {
 const VPL: SolverEntry = SolverEntry {
     name: "vpl",
     label: "Virtual Point Lights",
-    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering, clamped near field with bias compensation. Accurate on thin and medium media: image rel. RMSE at 4096 walks 0.09 (cube g 0), 0.14 (cube g 0.7), 0.31 (plume g 0.9), white furnace within 1%; too dark on dense g 0.9 clouds (0.62, flux x0.66)",
+    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering, clamped near field with bias compensation. Accurate on thin and medium media: image rel. RMSE at 4096 walks 0.09 (cube g 0), 0.14 (cube g 0.7), 0.31 (plume g 0.9), white furnace within 1%; at 8192 walks 0.11 (cube g 0.7), 0.19 (point light beside the plume); too dark on dense g 0.9 clouds (0.58, flux x0.59); compensation is heavy-tailed on the plume (one 8192-walk run 1.47, x1.62: use near_field ball there) (BENCHMARKS.md vpl)",
     settings: &[
         SettingSpec::int("walks", "random walks from the lights (noise falls as 1/sqrt)").range(1.0, (1u32 << 24) as f64),
         SettingSpec::int("max_vertices", "most VPLs one walk leaves before it is cut").range(1.0, (1u32 << 20) as f64),

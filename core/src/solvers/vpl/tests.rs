@@ -312,3 +312,78 @@ fn vpl_double_scattering_matches_reference_order_two() {
     eprintln!("order 2 only: vpl / reference multiple AOV mean x{ratio:.4}, rel. RMSE {err:.4}");
     assert!((ratio - 1.0).abs() < 0.08, "double scattering mean ratio {ratio}");
 }
+
+/// Benchmark driver (not in CI; scripts/bench_vpl.py runs it and writes BENCHMARKS.md): for
+/// each fixture case in VPL_BENCH_CASES (comma list) prints one `BENCH {json}` line per
+/// near field and walk count in VPL_BENCH_WALKS (seconds, image / grid rel. RMSE and image
+/// mean ratio against the converged fixture), and one per reference path-tracer sample count
+/// in VPL_BENCH_SPP (its image's time and error against the same fixture).
+#[test]
+#[ignore]
+fn vpl_bench() {
+    use crate::solvers::reference::{Reference, ReferenceSettings};
+    use crate::solvers::testing::{load_fixture, rgb, Errors};
+    let list = |key: &str, default: &str| -> Vec<String> {
+        std::env::var(key).unwrap_or_else(|_| default.into()).split(',').filter(|s| !s.is_empty()).map(String::from).collect()
+    };
+    for name in list("VPL_BENCH_CASES", "cube_g07") {
+        let sc = case(&name);
+        for spp in list("VPL_BENCH_SPP", "4,16") {
+            let spp: u32 = spp.parse().unwrap();
+            let t = std::time::Instant::now();
+            let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
+            let img = r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap();
+            let secs = t.elapsed().as_secs_f64();
+            let fx = load_fixture(&name);
+            let image = rgb(&img);
+            let e = Errors::between(&image, &[], &[], &fx.image(), &[], None);
+            println!("BENCH {{\"case\":\"{name}\",\"solver\":\"reference\",\"spp\":{spp},\"seconds\":{secs:.4},\"image\":{:.5},\"image_ratio\":{:.5}}}", e.image, e.image_ratio);
+        }
+        for walks in list("VPL_BENCH_WALKS", "1024,4096") {
+            let walks: u32 = walks.parse().unwrap();
+            for (nf, label) in [(NearField::Clamp, "clamp"), (NearField::Ball, "ball"), (NearField::Compensate, "compensate")] {
+                let s = VplSettings { walks, near_field: nf, ..test_settings() };
+                let t = std::time::Instant::now();
+                let (out, _) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+                let secs = t.elapsed().as_secs_f64();
+                let e = errors_against_fixture(&name, &sc, &out.scattering);
+                println!(
+                    "BENCH {{\"case\":\"{name}\",\"solver\":\"vpl\",\"near_field\":\"{label}\",\"walks\":{walks},\"seconds\":{secs:.4},\"image\":{:.5},\"grid\":{:.5},\"image_ratio\":{:.5}}}",
+                    e.image, e.grid, e.image_ratio
+                );
+            }
+        }
+    }
+}
+
+/// Exploration (not in CI): the image flux of several seeds against a fixture (VPL_CASE,
+/// VPL_WALKS, VPL_SEEDS, VPL_GATHER, VPL_OUT, VPL_NEAR=clamp|ball, default compensate).
+/// Measured on cube_g0 (image mean ratio, mean over seeds 1-8 unless said): 1024 walks,
+/// 12-cell gather: compensate x1.111 (x1.054-x1.171), ball x1.079 (x1.026-x1.136): every seed
+/// bright, a bias, so issue 16's "8 seeds within 2%" is not met at the tests' settings. The
+/// 12-cell gather is most of it: ball at a 24-cell gather x1.008 over seeds 1-4 (3.7 s each);
+/// compensate at 24 cells and 512 walks x1.049 (x0.900-x1.201, ~10 s each: heavy-tailed).
+/// VPL_OUT 48 changes nothing on the cube (its 16 voxels cap the output grid).
+#[test]
+#[ignore]
+fn vpl_explore_seeds() {
+    use crate::solvers::testing::env_u32;
+    let name = std::env::var("VPL_CASE").unwrap_or_else(|_| "cube_g0".into());
+    let sc = case(&name);
+    let walks = env_u32("VPL_WALKS", 1024);
+    let mut ratios = Vec::new();
+    for seed in 1..=env_u32("VPL_SEEDS", 8) as u64 {
+        let t = std::time::Instant::now();
+        let near_field = match std::env::var("VPL_NEAR").as_deref() {
+            Ok("clamp") => NearField::Clamp,
+            Ok("ball") => NearField::Ball,
+            _ => NearField::Compensate,
+        };
+        let s = VplSettings { walks, seed, near_field, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), ..Default::default() };
+        let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
+        let e = errors_against_fixture(&name, &sc, &out.scattering);
+        eprintln!("{name} seed {seed}: {e} ({:.2} s)", t.elapsed().as_secs_f64());
+        ratios.push(e.image_ratio);
+    }
+    eprintln!("mean image ratio {:.4}", ratios.iter().sum::<f64>() / ratios.len() as f64);
+}
