@@ -43,11 +43,15 @@ pub struct VplSettings {
     /// parts' multiple scattering (a heavy-tailed estimator: its typical value is below its
     /// mean until enough walks are gathered).
     pub walks_per_subset: u32,
-    /// Near-field handling of the VPL connections (see `NearField`). `compensate`, the
-    /// default, is the only one that is right both in a furnace and on the fixtures (tests.rs,
-    /// 4096 walks, 12-cell gather): white furnace box S / sigma_s 0.996 (ball 0.957, clamp
-    /// 0.824); image rel. RMSE cube g 0.7 0.138 (ball 0.153), plume 0.310 (0.365), dense
-    /// cloud 0.58 (0.75); at 1.3x (plume) to 1.8x (cube, cloud) the ball's gather time.
+    /// Near-field handling of the VPL connections (see `NearField`). `ball`, the default,
+    /// because at equal cost it is as good or better on every fixture (scripts/bench_vpl.py,
+    /// BENCHMARKS.md `vpl`, 8192 walks): cube g 0.7 0.114 (compensate 0.112), point light
+    /// beside the plume 0.16 (0.19), dense cloud 0.57 with flux x0.80 (0.58, x0.59), and on the
+    /// plume the compensation is heavy-tailed (one run 1.47, flux x1.62; ball 0.41); its
+    /// 8-seed flux on cube g 0 is x1.08 (compensate x1.11) and the energy balance 1.0345
+    /// (compensate 1.0725). `compensate` is what a furnace lit from everywhere wants (white
+    /// furnace box S / sigma_s 0.996 against the ball's 0.957 and the clamp's 0.824) and stays
+    /// a setting; it costs 1.3x (plume) to 1.8x (cube, cloud) the ball's gather time.
     pub near_field: NearField,
     /// Radius r of the near field, in units of the gather grid's cell radius (the radius of
     /// the ball with one gather cell's volume, medium::near_field_radius): the clamp radius R
@@ -96,7 +100,7 @@ impl Default for VplSettings {
             max_vertices: 4096,
             rr_depth: 4,
             walks_per_subset: 0,
-            near_field: NearField::Compensate,
+            near_field: NearField::Ball,
             clamp_radius: 1.0,
             mean_free_paths: 0.25,
             compensation_vertices: 4,

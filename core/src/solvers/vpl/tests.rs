@@ -262,11 +262,13 @@ fn vpl_white_furnace_clamp_loses_compensation_restores() {
 /// diverge after their first flight (the tracking's draws depend on the entry point). One
 /// stream per walk *and vertex* measured 0.039, but re-draws every walk and so moves the
 /// fixture ratchets' noise realisation (left for a later change with re-measured bounds).
-/// Bounds: 0.065 (measured + 10% + ~0.005) and below the seeds' difference.
+/// Bounds: 0.065 (measured + 10% + ~0.005) and below the seeds' difference. Measured with
+/// `compensate`, so pinned to it; the default `ball` measured 0.075 against 0.100 between
+/// two seeds (its noise is larger, so is its change).
 #[test]
 fn vpl_light_moved_one_degree_changes_s_little() {
     let sc = case("cube_g0");
-    let s = VplSettings { walks: 1024, gather_resolution: 8, output_resolution: 12, ..Default::default() };
+    let s = VplSettings { walks: 1024, gather_resolution: 8, output_resolution: 12, near_field: NearField::Compensate, ..Default::default() };
     let solve = |sc: &Scene, seed: u64| Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(sc, &NoProgress).unwrap().scattering.data;
     let a = solve(&sc, 1);
     let mut moved = sc.clone();
