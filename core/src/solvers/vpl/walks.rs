@@ -15,6 +15,7 @@ use crate::medium::{FreeFlight, MajorantGrid, Tracking};
 use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
 use crate::scene::Scene;
+use crate::solvers::Progress;
 use crate::translate::LightSampler;
 
 /// One virtual point light.
@@ -50,7 +51,9 @@ impl Walks {
 
 /// `max_orders`: keep only the first this many VPLs of each walk and stop it there (tests: 1
 /// gives double scattering alone); u32::MAX for full transport.
-pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32) -> Walks {
+/// Once `progress` is cancelled the remaining walks are skipped (each walk is microseconds):
+/// the caller checks `progress.cancelled()` and discards the result.
+pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32, progress: &dyn Progress) -> Walks {
     let medium = &scene.medium;
     let sampler = LightSampler::new(scene);
     let majorant = MajorantGrid::new(medium, 32);
@@ -60,31 +63,36 @@ pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32) -> Walks {
     let per_walk: Vec<(Vec<Vpl>, bool)> = (0..n)
         .into_par_iter()
         .map(|w| {
+            // None ends the collection (`while_some`): visiting millions of skipped walks
+            // would itself take most of a second.
+            if progress.cancelled() {
+                return None;
+            }
             let mut out = Vec::new();
             let mut rng = Rng::new(settings.seed, w as u64);
-            let Some(ray) = sampler.sample_rng(&mut rng) else { return (out, false) };
+            let Some(ray) = sampler.sample_rng(&mut rng) else { return Some((out, false)) };
             let (mut x, mut d) = (ray.origin, ray.direction);
             let start = ray.power / n as f32;
             let mut beta = start;
             let limit = settings.max_vertices.min(max_orders);
             loop {
                 if out.len() as u32 >= limit {
-                    return (out, limit == settings.max_vertices && max_orders == u32::MAX);
+                    return Some((out, limit == settings.max_vertices && max_orders == u32::MAX));
                 }
                 match tracking.sample_free_flight(x, d, f32::INFINITY, beta, &mut rng) {
-                    FreeFlight::Escaped { .. } => return (out, false),
+                    FreeFlight::Escaped { .. } => return Some((out, false)),
                     FreeFlight::Scattered { t, weight } => {
                         x += d * t;
                         beta = weight * medium.albedo;
                         if beta.max_element() <= 0.0 {
-                            return (out, false);
+                            return Some((out, false));
                         }
                         out.push(Vpl { position: x, incident: d, power: beta });
                         if out.len() as u32 >= settings.rr_depth {
                             // Survival in proportion to the throughput left (at most 1).
                             let p = (beta.max_element() / start.max_element().max(1e-30)).min(1.0);
                             if rng.f32() >= p {
-                                return (out, false);
+                                return Some((out, false));
                             }
                             beta /= p;
                         }
@@ -93,6 +101,7 @@ pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32) -> Walks {
                 }
             }
         })
+        .while_some()
         .collect();
     let mut offsets = Vec::with_capacity(per_walk.len() + 1);
     offsets.push(0);
