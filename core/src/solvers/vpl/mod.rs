@@ -81,7 +81,7 @@ impl Vpl {
         if !progress.update("vpl walks", 0.0) {
             return Err(Error::Cancelled);
         }
-        let walks = timings.time("vpl walks", || walks::trace(scene, s, max_orders, progress));
+        let walks = timings.time("vpl walks", || walks::trace(scene, s, max_orders, progress))?;
         if progress.cancelled() {
             return Err(Error::Cancelled);
         }

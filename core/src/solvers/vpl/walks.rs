@@ -14,6 +14,7 @@ use super::settings::VplSettings;
 use crate::medium::{FreeFlight, MajorantGrid, Tracking};
 use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
+use crate::error::Result;
 use crate::scene::Scene;
 use crate::solvers::Progress;
 use crate::translate::LightSampler;
@@ -53,13 +54,16 @@ impl Walks {
 /// gives double scattering alone); u32::MAX for full transport.
 /// Once `progress` is cancelled the remaining walks are skipped (each walk is microseconds):
 /// the caller checks `progress.cancelled()` and discards the result.
-pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32, progress: &dyn Progress) -> Walks {
+pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32, progress: &dyn Progress) -> Result<Walks> {
     let medium = &scene.medium;
     let sampler = LightSampler::new(scene);
     let majorant = MajorantGrid::new(medium, 32);
     let tracking = Tracking::new(medium, &majorant);
     let phase = HenyeyGreenstein::new(medium.g);
     let n = settings.walks;
+    // One (list, cut) entry per walk before they are packed; the VPLs themselves are not
+    // known in advance (a few per walk in the media this is meant for).
+    crate::budget::check_elements::<(Vec<Vpl>, bool)>("vpl walk lists (solver.walks)", n as u64)?;
     let per_walk: Vec<(Vec<Vpl>, bool)> = (0..n)
         .into_par_iter()
         .map(|w| {
@@ -112,5 +116,5 @@ pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32, progress: &
         offsets.push(vpls.len());
         cut += c as u32;
     }
-    Walks { vpls, offsets, cut }
+    Ok(Walks { vpls, offsets, cut })
 }
