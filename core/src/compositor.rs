@@ -105,6 +105,12 @@ pub const AREA_VPLS_PER_SIDE: u32 = 8;
 /// over the medium, with the view direction from the camera. Transmittance by deterministic
 /// ray marching; the dome by a fixed importance-sampled set of directions.
 pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid> {
+    single_scattering_grid_cancellable(scene, max_dim, dome_directions, &crate::solvers::NoProgress)
+}
+
+/// `single_scattering_grid` that stops within a row of grid points (each a few shadow rays)
+/// once `progress` is cancelled, with `Error::Cancelled` (issue 22: a 1024^3 grid takes minutes).
+pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_directions: u32, progress: &dyn crate::solvers::Progress) -> Result<ScatteringGrid> {
     let medium = &scene.medium;
     let mut grid = ScatteringGrid::over_medium(medium, max_dim)?;
     let direct = DirectLight::new(scene, shadow_step(medium, &grid), dome_directions, near_field_radius(&grid.index_to_world));
@@ -112,6 +118,9 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
     let [nx, ny, _] = grid.dims;
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
+            if progress.cancelled() {
+                return;
+            }
             for i in 0..nx {
                 let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
                 let dens = medium.density_world(x);
@@ -123,6 +132,9 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
             }
         }
     });
+    if progress.cancelled() {
+        return Err(Error::Cancelled);
+    }
     Ok(grid)
 }
 

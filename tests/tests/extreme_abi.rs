@@ -169,3 +169,65 @@ fn solve_reports_every_100ms_and_cancels_quickly() {
     unsafe { (a.vs_session_destroy)(sess) };
     unsafe { (a.vs_scene_destroy)(s) };
 }
+
+/// Settings that keep each registered solver busy for many seconds (minutes for most) on this
+/// scene, so that a cancel after 50 ms lands inside its long loops, not after it finished.
+/// A solver added to the registry must be added here (the test fails naming it otherwise).
+fn heavy_settings(name: &str) -> &'static str {
+    match name {
+        "reference" => r#"{"spp": 1048576, "grid_resolution": 16, "grid_spp": 1048576}"#,
+        "pop" => r#"{"grid_resolution": 96, "max_iterations": 100000, "residual_threshold": 0, "output_resolution": 256}"#,
+        "vpl" => r#"{"walks": 16777216, "gather_resolution": 64, "output_resolution": 256}"#,
+        "photon-grid" => r#"{"photons": 1073741824, "cache_resolution": 128, "output_resolution": 256}"#,
+        "network" => r#"{"particles": 65536, "directions": 1024, "max_iterations": 100000, "residual_threshold": 0, "output_resolution": 256}"#,
+        "lpm" => r#"{"grid_resolution": 128, "max_orders": 100000, "epsilon": 1e-9, "output_resolution": 256}"#,
+        other => panic!("solver {other:?} has no heavy settings in this test: add them"),
+    }
+}
+
+/// A cancel must end a solve within this. The solvers read the flag at a stride of about
+/// 10 ms of work on one core (issue 22 asks for 100 ms); 500 ms is 5x the contract, slack for
+/// a two-core CI machine running other tests, where a worker may wait a time slice or two
+/// before it sees the flag, and for dropping the solver's buffers.
+const SOLVER_CANCEL_LIMIT: Duration = Duration::from_millis(500);
+
+/// When the callback cancels: early (set-up, first walks or photons) and later (propagation,
+/// gather, iterations), so that more than one stage of each solver is hit.
+const CANCEL_POINTS: [Duration; 2] = [Duration::from_millis(50), Duration::from_millis(400)];
+
+/// Every registered solver, started with settings that take seconds to minutes and cancelled
+/// from the callback after 50 ms and (a second solve) after 400 ms, returns VS_STATUS_CANCELLED
+/// within SOLVER_CANCEL_LIMIT, with no result. Measured here (2 loaded cores): 6-185 ms.
+#[test]
+fn every_solver_cancels_within_500ms() {
+    let a = api();
+    let mut failures = Vec::new();
+    let t0 = Instant::now();
+    for &name in volscatter_core::solvers::SOLVER_NAMES {
+        let scene = format!(
+            r#"{{"format": 1, "medium": {{"procedural": "plume", "dims": [48], "density_scale": 10.0, "albedo": 0.9}},
+                "lights": [{{"type": "distant", "direction": [0, 0, -1], "irradiance": 1.0}},
+                           {{"type": "point", "position": [0.3, 0.2, 1.5], "intensity": 1.0}},
+                           {{"type": "dome", "color": [0.2, 0.3, 0.4]}}],
+                "camera": {{"position": [0, -6, 0.2], "look_at": [0, 0, 0], "width": 16, "height": 12}},
+                "solver": {{"name": "{name}"}}}}"#
+        );
+        let s = a.scene_from_json(&scene);
+        let settings = cstr(heavy_settings(name));
+        assert_eq!(unsafe { (a.vs_scene_set_solver)(s, cstr(name).as_ptr(), settings.as_ptr()) }, OK, "{name}: {}", a.scene_error(s));
+        for after in CANCEL_POINTS {
+            let mut r: Res = null_mut();
+            eprintln!("solver {name}, cancel after {after:?} (test at {:?})", t0.elapsed());
+            let (st, gap, cancel) = run_with_beats(after, |user| unsafe { (a.vs_scene_solve)(s, Some(record), user, &mut r) });
+            // The heartbeat stops at the cancel, so the silence after it is the cancel's own time.
+            if st != CANCELLED || !r.is_null() || cancel >= SOLVER_CANCEL_LIMIT || gap >= GAP_LIMIT.max(SOLVER_CANCEL_LIMIT) {
+                failures.push(format!("{name} cancelled after {after:?}: status {st} ({}), cancel took {cancel:?}, longest silence {gap:?}", a.scene_error(s)));
+            }
+            if !r.is_null() {
+                unsafe { (a.vs_result_destroy)(r) };
+            }
+        }
+        unsafe { (a.vs_scene_destroy)(s) };
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

@@ -41,7 +41,7 @@ use super::pop::mip::MediumMip;
 use super::pop::upsample::upsample;
 use super::pop::PopSettings;
 use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
-use crate::compositor::single_scattering_grid;
+use crate::compositor::single_scattering_grid_cancellable;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use directions::{Directions, FACES};
@@ -108,7 +108,7 @@ impl Lpm {
         let single = if ov.j_only {
             out_probe.clone()
         } else {
-            timings.time("lpm single scattering", || single_scattering_grid(scene, s.output_resolution, s.dome_directions))?
+            timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
         };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
             return Ok((SolveOutput { scattering: single, timings }, report));

@@ -28,13 +28,19 @@ pub struct Iterated {
     pub residuals: Vec<f64>,
 }
 
-pub fn iterate(links: &[DirectionLinks], phase: &[f32], first: &[Vec3], albedo: Vec3, max_iterations: u32, threshold: f32, start: Option<Vec<Vec3>>) -> Iterated {
+/// Stops before the next iteration once `progress` is cancelled (an iteration is well under
+/// 100 ms at the largest settings on one core); the caller then discards the result.
+#[allow(clippy::too_many_arguments)]
+pub fn iterate(links: &[DirectionLinks], phase: &[f32], first: &[Vec3], albedo: Vec3, max_iterations: u32, threshold: f32, start: Option<Vec<Vec3>>, progress: &dyn crate::solvers::Progress) -> Iterated {
     let d = links.len();
     let n = first.len() / d.max(1);
     let mut radiance = start.filter(|s| s.len() == n * d).unwrap_or_else(|| vec![Vec3::ZERO; n * d]);
     let mut source = vec![Vec3::ZERO; n * d];
     let mut residuals = Vec::new();
     for _ in 0..max_iterations {
+        if progress.cancelled() {
+            break;
+        }
         source.par_chunks_mut(d).zip(radiance.par_chunks(d)).zip(first.par_chunks(d)).for_each(|((q, i_in), e)| {
             for (i, qi) in q.iter_mut().enumerate() {
                 let row = &phase[i * d..(i + 1) * d];

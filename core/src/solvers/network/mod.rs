@@ -117,7 +117,7 @@ impl Network {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut scattering = timings.time("network single scattering", || {
-            crate::compositor::single_scattering_grid(scene, s.output_resolution, s.dome_directions)
+            crate::compositor::single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
         })?;
         let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
@@ -154,7 +154,7 @@ impl Network {
         } else {
             let start = (!net.radiance.is_empty()).then(|| std::mem::take(&mut net.radiance));
             report.start = if start.is_some() { Start::Warm } else { Start::Cold };
-            let it = timings.time("network iterate", || iterate::iterate(&net.links, &net.phase, &first, medium.albedo, s.max_iterations, s.residual_threshold, start));
+            let it = timings.time("network iterate", || iterate::iterate(&net.links, &net.phase, &first, medium.albedo, s.max_iterations, s.residual_threshold, start, progress));
             report.residuals = it.residuals;
             net.radiance = it.radiance;
             net.first = first;

@@ -32,7 +32,7 @@ pub use reconstruct::Lobe;
 pub use settings::{PhotonGridSettings, Similarity, SingleScattering};
 pub use trace::EnergyReport;
 
-use crate::compositor::{dome_directions_for, single_scattering_grid, CompositeOptions};
+use crate::compositor::{dome_directions_for, single_scattering_grid_cancellable, CompositeOptions};
 use crate::error::{Error, Result};
 use crate::medium::MajorantGrid;
 use crate::scene::Scene;
@@ -74,7 +74,7 @@ impl PhotonGrid {
     }
 
     /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns.
-    fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings) -> Result<(cache::Cache, Vec<Generation>)> {
+    fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings, progress: &dyn Progress) -> Result<(cache::Cache, Vec<Generation>)> {
         use rayon::prelude::*;
         let s = &self.settings;
         let medium = &scene.medium;
@@ -90,6 +90,7 @@ impl PhotonGrid {
             settings: s,
             deposit_unscattered: s.single_scattering == SingleScattering::Photons,
             split_order: SPLIT_ORDER,
+            progress,
         };
         let generations = timings.time("trace", || {
             generations
@@ -100,14 +101,18 @@ impl PhotonGrid {
                 })
                 .collect()
         });
+        // Cut-short generations must not reach a session's ring.
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
         Ok((empty, generations))
     }
 
     /// The ring of generations first..first + m, traced afresh: the one-off solve when
     /// `first` is 0.
-    fn fresh_ring(&self, scene: &Scene, first: u64, timings: &mut Timings) -> Result<Ring> {
+    fn fresh_ring(&self, scene: &Scene, first: u64, timings: &mut Timings, progress: &dyn Progress) -> Result<Ring> {
         let gens: Vec<u64> = (first..first + self.settings.generations as u64).collect();
-        let (cache, traced) = self.trace(scene, &gens, timings)?;
+        let (cache, traced) = self.trace(scene, &gens, timings, progress)?;
         Ok(Ring::new(&self.settings, cache, traced))
     }
 
@@ -122,7 +127,7 @@ impl PhotonGrid {
         let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(medium, &tallies, scene.camera.position, res))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
-            let single = timings.time("single scattering", || single_scattering_grid(scene, res, dirs))?;
+            let single = timings.time("single scattering", || single_scattering_grid_cancellable(scene, res, dirs, progress))?;
             // Same medium, same max_dim: the same frame (ScatteringGrid::over_medium).
             debug_assert_eq!(single.dims, s.dims);
             for (a, b) in s.data.iter_mut().zip(&single.data) {
@@ -145,7 +150,7 @@ impl PhotonGrid {
         if !progress.update("photons", 0.0) {
             return Err(Error::Cancelled);
         }
-        let ring = self.fresh_ring(scene, first, &mut timings)?;
+        let ring = self.fresh_ring(scene, first, &mut timings, progress)?;
         self.finish(scene, &ring, timings, progress)
     }
 
@@ -164,13 +169,13 @@ impl PhotonGrid {
         match kept.0.as_mut().filter(|r| r.traced_with(&self.settings)) {
             Some(ring) => {
                 let next = ring.next_generation();
-                let (cache, mut traced) = self.trace(scene, &[next], &mut timings)?;
+                let (cache, mut traced) = self.trace(scene, &[next], &mut timings, progress)?;
                 ring.move_to(&cache);
                 if let Some(g) = traced.pop() {
                     ring.replace(g);
                 }
             }
-            None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings)?),
+            None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress)?),
         }
         match kept.0.as_ref() {
             Some(ring) => self.finish(scene, ring, timings, progress),
@@ -182,7 +187,7 @@ impl PhotonGrid {
     /// scattered less than `SPLIT_ORDER` times; in `exact` mode without the unscattered light):
     /// the cache as a host could keep it to re-light from any view.
     pub fn lobes(&self, scene: &Scene, points: &[glam::Vec3]) -> Result<Vec<Lobe>> {
-        let ring = self.fresh_ring(scene, 0, &mut Timings::default())?;
+        let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::solvers::NoProgress)?;
         let first = cache::Tallies::from_fixed(&scene.medium, ring.cache(), &ring.total()[0]);
         Ok(points.iter().map(|&p| first.lobe(p)).collect())
     }

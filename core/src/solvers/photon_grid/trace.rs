@@ -90,7 +90,14 @@ pub struct Tracer<'a> {
     pub deposit_unscattered: bool,
     /// Deposits of photons scattered this often or more go to the second lobe.
     pub split_order: u32,
+    /// Read every `CANCEL_STRIDE` photons: once cancelled the batches stop early and the
+    /// caller discards their tallies.
+    pub progress: &'a dyn crate::solvers::Progress,
 }
+
+/// Photons between two reads of the cancel flag: a photon is microseconds (longer in dense
+/// media), so a worker sees a cancel within milliseconds.
+const CANCEL_STRIDE: u64 = 256;
 
 impl Tracer<'_> {
     /// Traces generation `generation` (`count` photons, each of power 1 / `total` of its
@@ -107,7 +114,10 @@ impl Tracer<'_> {
                 let mut report = EnergyReport::default();
                 let mut rng = Rng::new(self.settings.seed, generation * BATCHES as u64 + b as u64 + 1);
                 let (lo, hi) = (count as u64 * b as u64 / BATCHES as u64, count as u64 * (b as u64 + 1) / BATCHES as u64);
-                for _ in lo..hi {
+                for p in lo..hi {
+                    if p % CANCEL_STRIDE == 0 && self.progress.cancelled() {
+                        break;
+                    }
                     if let Some(ray) = sampler.sample_rng(&mut rng) {
                         self.photon(ray.origin, ray.direction, ray.power / total as f32, &mut rng, &mut cache, &mut report);
                     }

@@ -26,7 +26,8 @@ use crate::phase::hg;
 use crate::solvers::pop::merge::{footprint, Merged};
 use crate::solvers::pop::mip::MediumMip;
 use crate::solvers::ScatteringGrid;
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::solvers::Progress;
 
 /// Energy bookkeeping of the near field: the connections made, and the near field's energy
 /// (sums over the gather points of sigma_s x J, channels added, per unit volume: comparable
@@ -136,10 +137,14 @@ pub fn march_step(medium: &Medium, frame: &glam::Affine3A) -> f32 {
 }
 
 /// J on the gather grid, with each point's mean density over its cell (the upsampling's guide).
-pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings) -> Result<(Merged, GatherStats)> {
+/// Ends with `Error::Cancelled` within a row of gather points once `progress` is cancelled.
+pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
     let medium = &scene.medium;
     let camera = scene.camera.position;
     let mut j = ScatteringGrid::over_medium(medium, s.gather_resolution)?;
+    // Per-row radiance and density (16 bytes a point) and the merged density (4): the grid
+    // itself was checked by `over_medium`.
+    crate::budget::check_elements::<[f32; 5]>("vpl gather buffers (solver.gather_resolution)", j.len() as u64)?;
     let fp = footprint(medium, &j);
     let subsets = s.subsets();
     let lists = subset_lists(walks, subsets);
@@ -158,6 +163,9 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings) ->
             let mut dens = vec![0.0f32; (nx * ny) as usize];
             let mut stats = GatherStats::default();
             for jj in 0..ny {
+                if progress.cancelled() {
+                    break;
+                }
                 for i in 0..nx {
                     let y = frame.transform_point3(Vec3::new(i as f32, jj as f32, k as f32));
                     let rho = mip.sample(medium, w2i.transform_point3(y), fp);
@@ -190,6 +198,9 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings) ->
             (jv, dens, stats)
         })
         .collect();
+    if progress.cancelled() {
+        return Err(Error::Cancelled);
+    }
     let mut density = Vec::with_capacity(j.len());
     let mut stats = GatherStats::default();
     for (k, (jv, dens, st)) in rows.into_iter().enumerate() {

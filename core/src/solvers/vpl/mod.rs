@@ -41,7 +41,7 @@ use super::pop::mip::MediumMip;
 use super::pop::settings::PopSettings;
 use super::pop::upsample::upsample;
 use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
-use crate::compositor::single_scattering_grid;
+use crate::compositor::single_scattering_grid_cancellable;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use gather::GatherStats;
@@ -81,7 +81,10 @@ impl Vpl {
         if !progress.update("vpl walks", 0.0) {
             return Err(Error::Cancelled);
         }
-        let walks = timings.time("vpl walks", || walks::trace(scene, s, max_orders));
+        let walks = timings.time("vpl walks", || walks::trace(scene, s, max_orders, progress))?;
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
         let out_probe = super::ScatteringGrid::over_medium(medium, s.output_resolution)?;
         let gather_probe = super::ScatteringGrid::over_medium(medium, s.gather_resolution)?;
         let min_fp = super::pop::merge::footprint(medium, &out_probe).min(super::pop::merge::footprint(medium, &gather_probe));
@@ -89,10 +92,10 @@ impl Vpl {
         if !progress.update("vpl gather", 0.0) {
             return Err(Error::Cancelled);
         }
-        let (merged, gstats) = timings.time("vpl gather", || gather::gather(scene, &mip, &walks, s))?;
+        let (merged, gstats) = timings.time("vpl gather", || gather::gather(scene, &mip, &walks, s, progress))?;
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
         let mut scattering = timings.time("vpl upsample", || upsample(medium, &mip, &merged, &pop_like))?;
-        let single = timings.time("vpl single scattering", || single_scattering_grid(scene, s.output_resolution, s.dome_directions))?;
+        let single = timings.time("vpl single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?;
         debug_assert_eq!(single.dims, scattering.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {
             *a += *b;

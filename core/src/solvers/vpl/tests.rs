@@ -172,7 +172,7 @@ fn vpl_power_is_a_over_one_minus_a_around_a_point_light() {
         solver: Default::default(),
     };
     let s = VplSettings { walks: 4096, gather_resolution: 2, output_resolution: 2, ..Default::default() };
-    let walks = super::walks::trace(&sc, &s, u32::MAX);
+    let walks = super::walks::trace(&sc, &s, u32::MAX, &crate::solvers::NoProgress).unwrap();
     let light_power = 4.0 * std::f32::consts::PI;
     let ratio = walks.total_power().x / light_power;
     let expected = a / (1.0 - a);

@@ -14,7 +14,9 @@ use super::settings::VplSettings;
 use crate::medium::{FreeFlight, MajorantGrid, Tracking};
 use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
+use crate::error::Result;
 use crate::scene::Scene;
+use crate::solvers::Progress;
 use crate::translate::LightSampler;
 
 /// One virtual point light.
@@ -50,41 +52,51 @@ impl Walks {
 
 /// `max_orders`: keep only the first this many VPLs of each walk and stop it there (tests: 1
 /// gives double scattering alone); u32::MAX for full transport.
-pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32) -> Walks {
+/// Once `progress` is cancelled the remaining walks are skipped (each walk is microseconds):
+/// the caller checks `progress.cancelled()` and discards the result.
+pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32, progress: &dyn Progress) -> Result<Walks> {
     let medium = &scene.medium;
     let sampler = LightSampler::new(scene);
     let majorant = MajorantGrid::new(medium, 32);
     let tracking = Tracking::new(medium, &majorant);
     let phase = HenyeyGreenstein::new(medium.g);
     let n = settings.walks;
+    // One (list, cut) entry per walk before they are packed; the VPLs themselves are not
+    // known in advance (a few per walk in the media this is meant for).
+    crate::budget::check_elements::<(Vec<Vpl>, bool)>("vpl walk lists (solver.walks)", n as u64)?;
     let per_walk: Vec<(Vec<Vpl>, bool)> = (0..n)
         .into_par_iter()
         .map(|w| {
+            // None ends the collection (`while_some`): visiting millions of skipped walks
+            // would itself take most of a second.
+            if progress.cancelled() {
+                return None;
+            }
             let mut out = Vec::new();
             let mut rng = Rng::new(settings.seed, w as u64);
-            let Some(ray) = sampler.sample_rng(&mut rng) else { return (out, false) };
+            let Some(ray) = sampler.sample_rng(&mut rng) else { return Some((out, false)) };
             let (mut x, mut d) = (ray.origin, ray.direction);
             let start = ray.power / n as f32;
             let mut beta = start;
             let limit = settings.max_vertices.min(max_orders);
             loop {
                 if out.len() as u32 >= limit {
-                    return (out, limit == settings.max_vertices && max_orders == u32::MAX);
+                    return Some((out, limit == settings.max_vertices && max_orders == u32::MAX));
                 }
                 match tracking.sample_free_flight(x, d, f32::INFINITY, beta, &mut rng) {
-                    FreeFlight::Escaped { .. } => return (out, false),
+                    FreeFlight::Escaped { .. } => return Some((out, false)),
                     FreeFlight::Scattered { t, weight } => {
                         x += d * t;
                         beta = weight * medium.albedo;
                         if beta.max_element() <= 0.0 {
-                            return (out, false);
+                            return Some((out, false));
                         }
                         out.push(Vpl { position: x, incident: d, power: beta });
                         if out.len() as u32 >= settings.rr_depth {
                             // Survival in proportion to the throughput left (at most 1).
                             let p = (beta.max_element() / start.max_element().max(1e-30)).min(1.0);
                             if rng.f32() >= p {
-                                return (out, false);
+                                return Some((out, false));
                             }
                             beta /= p;
                         }
@@ -93,6 +105,7 @@ pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32) -> Walks {
                 }
             }
         })
+        .while_some()
         .collect();
     let mut offsets = Vec::with_capacity(per_walk.len() + 1);
     offsets.push(0);
@@ -103,5 +116,5 @@ pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32) -> Walks {
         offsets.push(vpls.len());
         cut += c as u32;
     }
-    Walks { vpls, offsets, cut }
+    Ok(Walks { vpls, offsets, cut })
 }
