@@ -64,6 +64,18 @@ pub(crate) fn load_fixture(name: &str) -> Fixture {
 }
 
 /// An unsigned setting of a `regenerate_*` / `explore*` test from the environment.
+/// The scene of any shared fixture by name: the dense cloud, the local-light cases
+/// (`plume_*`, `fig10_*`, pop/radial/tests.rs) and the distant-light cases (pop/tests.rs).
+pub(crate) fn fixture_scene(name: &str) -> Scene {
+    if name == "cloud" {
+        cloud::cloud_scene()
+    } else if name.starts_with("plume_") || name.starts_with("fig10") {
+        crate::solvers::pop::radial::tests::case(name)
+    } else {
+        crate::solvers::pop::tests::case(name)
+    }
+}
+
 pub(crate) fn env_u32(key: &str, default: u32) -> u32 {
     std::env::var(key).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }

@@ -9,15 +9,7 @@ use crate::solvers::testing::{errors_against_fixture, homogeneous_box, s_over_si
 use crate::solvers::{NoProgress, ScatteringGrid};
 
 /// The fixtures' scenes (as vpl/tests.rs).
-fn case(name: &str) -> Scene {
-    if name == "cloud" {
-        crate::solvers::testing::cloud::cloud_scene()
-    } else if name.starts_with("plume_") || name.starts_with("fig10") {
-        crate::solvers::pop::radial::tests::case(name)
-    } else {
-        crate::solvers::pop::tests::case(name)
-    }
-}
+use crate::solvers::testing::fixture_scene as case;
 
 fn run(sc: &Scene, s: LpmSettings, ov: Overrides) -> (ScatteringGrid, LpmReport) {
     let (out, rep) = Lpm::new(s).unwrap().solve_detailed(sc, &NoProgress, ov).unwrap();

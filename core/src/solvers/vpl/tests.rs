@@ -9,15 +9,7 @@ use crate::solvers::testing::errors_against_fixture;
 use crate::solvers::{NoProgress, Solver};
 
 /// The fixtures' scenes: pop's (cubes, plume) and its radial tests' (local lights).
-fn case(name: &str) -> Scene {
-    if name == "cloud" {
-        crate::solvers::testing::cloud::cloud_scene()
-    } else if name.starts_with("plume_") || name.starts_with("fig10") {
-        crate::solvers::pop::radial::tests::case(name)
-    } else {
-        crate::solvers::pop::tests::case(name)
-    }
-}
+use crate::solvers::testing::fixture_scene as case;
 
 /// Small and fast (each case a few seconds in release on one core).
 fn test_settings() -> VplSettings {
