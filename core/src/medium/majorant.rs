@@ -77,7 +77,8 @@ impl MajorantGrid {
         let pick_min = |v: Vec3| [v.x, v.y, v.z].into_iter().filter(|x| !x.is_nan()).fold(f32::INFINITY, f32::min);
         let mut t = t_min.max(pick_max(tnear));
         let t_end = t_max.min(pick_min(tfar));
-        if !(t < t_end) {
+        // NaN (a degenerate ray) counts as empty, like t >= t_end.
+        if t.partial_cmp(&t_end) != Some(std::cmp::Ordering::Less) {
             return;
         }
         let p = (o + d * t - gmin) / self.cell;

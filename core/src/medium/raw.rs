@@ -9,7 +9,7 @@ use crate::error::{Error, Result};
 
 pub fn read_raw_f32(path: &Path, dims: [u32; 3], limits: GridLimits) -> Result<DensityGrid> {
     let count = dims.iter().map(|&d| d as u64).product::<u64>();
-    if dims.iter().any(|&d| d == 0) {
+    if dims.contains(&0) {
         return Err(Error::format(path, "raw grid dimensions must be positive"));
     }
     if count * 4 > limits.max_bytes || count > limits.max_extent_voxels {

@@ -15,6 +15,7 @@ use super::directions::Directions;
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::propagate::FaceFrame;
+use crate::solvers::Progress;
 
 /// What collect adds to, and where the viewer is.
 pub struct Targets<'a> {
@@ -26,9 +27,10 @@ pub struct Targets<'a> {
 }
 
 /// Adds the slab `w0..w1` of face `ff`: `t` holds the face's directions' buffers one after
-/// the other, each `(w1 - w0) x map` long.
+/// the other, each `(w1 - w0) x map` long. Planes not yet started when the host cancels are
+/// skipped (the caller reports the cancel and discards U).
 #[allow(clippy::too_many_arguments)]
-pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceFrame, t: &[Vec3], w0: usize, w1: usize, targets: Targets) {
+pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceFrame, t: &[Vec3], w0: usize, w1: usize, targets: Targets, progress: &dyn Progress) {
     let m = table.m;
     let n = table.n;
     let [nx, ny, _] = grid.dims;
@@ -44,6 +46,9 @@ pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceF
     let by_incoming: Vec<f32> = face_dirs.clone().flat_map(|i| (0..m).map(move |d| table.storage[d * n + i])).collect();
     let Targets { u_cur, j, camera, albedo } = targets;
     let work = |z: usize, u_plane: &mut [Vec3], mut j_plane: Option<&mut [Vec3]>| {
+        if progress.cancelled() {
+            return;
+        }
         let mut acc = vec![Vec3::ZERO; m];
         for y in yr.clone() {
             for x in xr.clone() {

@@ -24,6 +24,7 @@ use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::settings::FirstOrder;
 use crate::scene::{Light, Scene};
+use crate::solvers::Progress;
 
 /// Boundary radiance of each propagation direction for the first propagation.
 pub fn boundary(scene: &Scene, dirs: &Directions, mode: FirstOrder) -> Vec<Vec3> {
@@ -68,8 +69,10 @@ pub fn emission_source(scene: &Scene, grid: &LpmGrid, m: usize, u: &mut [Vec3]) 
 }
 
 /// Adds the exact first scattering of the distant lights (in `exact` mode) and of the local
-/// lights to U (m values a cell).
-pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, mode: FirstOrder, u: &mut [Vec3]) {
+/// lights to U (m values a cell). Each cell traces a shadow ray per light (a second or more
+/// at 128^3), so planes not started when the host cancels are skipped: the caller checks
+/// `progress.cancelled()` and discards U.
+pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, mode: FirstOrder, u: &mut [Vec3], progress: &dyn Progress) {
     let medium = &scene.medium;
     let m = table.m;
     let g = medium.g;
@@ -96,6 +99,9 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
     let near = crate::medium::near_field_radius(&grid.frame());
     let [nx, ny, _] = grid.dims;
     u.par_chunks_mut(nx * ny * m).enumerate().for_each(|(z, plane)| {
+        if progress.cancelled() {
+            return;
+        }
         for y in 0..ny {
             for x in 0..nx {
                 let c = [x, y, z];

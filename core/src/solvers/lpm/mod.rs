@@ -124,15 +124,16 @@ impl Lpm {
         let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
         let m = table.m;
         let cells = grid.len() as u64;
-        let u_count = crate::budget::check_elements::<Vec3>("lpm U (cells x storage directions)", cells * m as u64)?;
-        let mut u_prev = vec![Vec3::ZERO; u_count];
-        let mut u_cur = vec![Vec3::ZERO; u_count];
-        let mut j = vec![Vec3::ZERO; grid.len()];
+        let mut u_prev = stream::filled("lpm U (cells x storage directions)", cells * m as u64, progress)?;
+        let mut u_cur = stream::filled("lpm U (cells x storage directions)", cells * m as u64, progress)?;
+        let u_count = u_cur.len();
+        let mut j = stream::filled("lpm J", cells, progress)?;
         report.cell_bytes = cells * 16 + (2 * u_count + grid.len()) as u64 * 12;
         report.layers = match ov.layers {
             Some(l) => [l.max(1); FACES],
             None => stream::plan(grid.dims, &dirs, s.memory_budget)?,
         };
+        let mut buffers = stream::SweepBuffers::new(&grid, &dirs, &report.layers, progress)?;
         let camera = scene.camera.position;
         let albedo = medium.albedo;
         let zero_boundary = vec![Vec3::ZERO; dirs.len()];
@@ -143,9 +144,12 @@ impl Lpm {
         timings.time("lpm first order", || -> Result<()> {
             if lights::first_propagation_needed(&boundary, scene) {
                 lights::emission_source(scene, &grid, m, &mut u_prev);
-                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &boundary, &mut u_cur, None, camera, albedo, &mut report.sweep)?;
+                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &boundary, &mut u_cur, None, camera, albedo, &mut buffers, &mut report.sweep, progress)?;
             }
-            lights::add_first_order(scene, &grid, &dirs, &table, s.first_order, &mut u_cur);
+            lights::add_first_order(scene, &grid, &dirs, &table, s.first_order, &mut u_cur, progress);
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             Ok(())
         })?;
         std::mem::swap(&mut u_prev, &mut u_cur);
@@ -158,7 +162,7 @@ impl Lpm {
             while first_max > 0.0 && report.orders < s.max_orders as usize && *report.max_u.last().unwrap_or(&0.0) > s.epsilon * first_max {
                 u_cur.iter_mut().for_each(|v| *v = Vec3::ZERO);
                 let before = ov.keep_orders.then(|| j.clone());
-                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &zero_boundary, &mut u_cur, Some(&mut j), camera, albedo, &mut report.sweep)?;
+                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &zero_boundary, &mut u_cur, Some(&mut j), camera, albedo, &mut buffers, &mut report.sweep, progress)?;
                 if let Some(b) = before {
                     report.j_per_order.push(j.iter().zip(&b).map(|(a, b)| *a - *b).collect());
                 }
@@ -174,6 +178,7 @@ impl Lpm {
         })?;
         drop(u_prev);
         drop(u_cur);
+        drop(buffers);
         let j_grid = grid.as_scattering_grid(j);
         if ov.j_only {
             report.j = Some(j_grid);

@@ -112,11 +112,16 @@ pub fn propagate(
     w0: usize,
     w1: usize,
     t: &mut [Vec3],
+    progress: &dyn crate::solvers::Progress,
 ) {
     let (nu, nv) = (ff.nu, ff.nv);
     let dl = grid.h * (1.0 + dir.a * dir.a + dir.b * dir.b).sqrt();
     let d = dir.storage;
     for w in w0..w1 {
+        // A layer is at most a few ms; the caller reports the cancel.
+        if progress.cancelled() {
+            return;
+        }
         if w == 0 {
             map.fill(boundary);
         } else {

@@ -18,6 +18,7 @@ use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::propagate::{propagate, FaceFrame};
 use crate::error::{Error, Result};
+use crate::solvers::Progress;
 
 /// Bytes of the propagation's working buffers for a face whose map has `map_len` cells, `p`
 /// directions and slabs of `layers` layers: the maps and the slab's T.
@@ -61,8 +62,57 @@ pub struct SweepStats {
     pub slabs: usize,
 }
 
+/// The propagation's working buffers (the maps and one slab's T), sized for the largest face
+/// and allocated once per solve: at 128^3 and 25 directions T is 630 MB, whose first touch
+/// alone takes about a second, too long to repeat per face and order or to do without
+/// looking at the cancel flag.
+pub struct SweepBuffers {
+    maps: Vec<Vec3>,
+    t: Vec<Vec3>,
+}
+
+/// Bytes touched between two looks at the cancel flag while the buffers are first filled.
+const FILL_CHUNK: usize = 1 << 20;
+
+impl SweepBuffers {
+    pub fn new(grid: &LpmGrid, dirs: &Directions, layers: &[usize; FACES], progress: &dyn Progress) -> Result<Self> {
+        let p = dirs.per_face();
+        let (mut maps_len, mut t_len) = (0u64, 0u64);
+        for (f, &l) in layers.iter().enumerate() {
+            let ff = FaceFrame::new(grid, f);
+            let s = l.clamp(1, ff.nw.max(1)) as u64;
+            maps_len = maps_len.max(p as u64 * ff.map_len() as u64);
+            t_len = t_len.max(p as u64 * s * ff.map_len() as u64);
+        }
+        let maps = filled("lpm propagation maps", maps_len, progress)?;
+        let t = filled("lpm slice buffer", t_len, progress)?;
+        Ok(SweepBuffers { maps, t })
+    }
+
+    fn bytes(&self) -> u64 {
+        ((self.maps.capacity() + self.t.capacity()) * std::mem::size_of::<Vec3>()) as u64
+    }
+}
+
+/// A zeroed buffer of `len` values, checked against the memory budget and filled a chunk at a
+/// time so that a cancel lands within milliseconds.
+pub fn filled(what: &str, len: u64, progress: &dyn Progress) -> Result<Vec<Vec3>> {
+    let len = crate::budget::check_elements::<Vec3>(what, len)?;
+    let mut v = Vec::with_capacity(len);
+    while v.len() < len {
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
+        let n = (len - v.len()).min(FILL_CHUNK / std::mem::size_of::<Vec3>());
+        v.resize(v.len() + n, Vec3::ZERO);
+    }
+    Ok(v)
+}
+
 /// One propagation order over all six faces: propagate from U of the previous order and the
 /// boundary radiance (one value per direction), collect into U of this order (and J).
+/// One order over a 128^3 grid takes seconds, so propagate and collect look at the cancel
+/// flag every layer; a cancelled sweep returns `Error::Cancelled` and its U is garbage.
 #[allow(clippy::too_many_arguments)]
 pub fn sweep(
     grid: &LpmGrid,
@@ -75,19 +125,18 @@ pub fn sweep(
     mut j: Option<&mut [Vec3]>,
     camera: Vec3,
     albedo: Vec3,
+    buffers: &mut SweepBuffers,
     stats: &mut SweepStats,
+    progress: &dyn Progress,
 ) -> Result<()> {
     let p = dirs.per_face();
     let m = table.m;
+    stats.peak_working_bytes = stats.peak_working_bytes.max(buffers.bytes());
     for (f, &layers) in layers.iter().enumerate() {
         let ff = FaceFrame::new(grid, f);
         let s = layers.clamp(1, ff.nw.max(1));
-        let map_count = crate::budget::check_elements::<Vec3>("lpm propagation maps", p as u64 * ff.map_len() as u64)?;
-        let t_count = crate::budget::check_elements::<Vec3>("lpm slice buffer", (p * s) as u64 * ff.map_len() as u64)?;
-        let mut maps = vec![Vec3::ZERO; map_count];
-        let mut t = vec![Vec3::ZERO; t_count];
-        let bytes = ((maps.capacity() + t.capacity()) * std::mem::size_of::<Vec3>()) as u64;
-        stats.peak_working_bytes = stats.peak_working_bytes.max(bytes);
+        let maps = &mut buffers.maps[..p * ff.map_len()];
+        let t = &mut buffers.t[..p * s * ff.map_len()];
         let first = f * p;
         let mut w0 = 0;
         while w0 < ff.nw {
@@ -95,10 +144,13 @@ pub fn sweep(
             let slab = (w1 - w0) * ff.map_len();
             t[..p * slab].par_chunks_mut(slab).zip(maps.par_chunks_mut(ff.map_len())).enumerate().for_each(|(li, (tc, map))| {
                 let dir = &dirs.dirs[first + li];
-                propagate(grid, &ff, dir, m, u_prev, boundary[first + li], map, w0, w1, tc);
+                propagate(grid, &ff, dir, m, u_prev, boundary[first + li], map, w0, w1, tc, progress);
             });
             let targets = Targets { u_cur: &mut *u_cur, j: j.as_deref_mut(), camera, albedo };
-            collect(grid, dirs, table, &ff, &t[..p * slab], w0, w1, targets);
+            collect(grid, dirs, table, &ff, &t[..p * slab], w0, w1, targets, progress);
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             stats.slabs += 1;
             w0 = w1;
         }

@@ -10,6 +10,7 @@ use super::directions::phase_row;
 use super::particles::Particles;
 use crate::medium::{ball_mean_inverse_square, optical_depth, Medium};
 use crate::scene::{Light, Scene};
+use crate::solvers::Progress;
 use crate::translate::dome::dome_directions_of;
 use crate::translate::scene_emitters;
 
@@ -20,7 +21,8 @@ const AREA_VPLS: u32 = crate::compositor::AREA_VPLS_PER_SIDE;
 /// a x sum over lights of W x (the light's HG weights over the D directions, normalised) x D /
 /// 4 pi. Normalising keeps each light's scattered power exact whatever D and g; the D / 4 pi
 /// turns a weight that sums to one into radiance (each direction stands for 4 pi / D sr).
-pub fn first_scattering(scene: &Scene, p: &Particles, dirs: &[Vec3], dome_directions: u32) -> Vec<Vec3> {
+/// `None` once the host cancels (checked per particle).
+pub fn first_scattering(scene: &Scene, p: &Particles, dirs: &[Vec3], dome_directions: u32, progress: &dyn Progress) -> Option<Vec<Vec3>> {
     let medium = &scene.medium;
     let dome = dome_directions_of(scene, dome_directions);
     let emitters = scene_emitters(scene, AREA_VPLS);
@@ -29,6 +31,9 @@ pub fn first_scattering(scene: &Scene, p: &Particles, dirs: &[Vec3], dome_direct
     let per_sr = d as f32 / (4.0 * std::f32::consts::PI);
     let mut out = vec![Vec3::ZERO; p.len() * d];
     out.par_chunks_mut(d).enumerate().for_each(|(i, row)| {
+        if progress.cancelled() {
+            return;
+        }
         let x = p.position[i];
         let incoming = incoming_direct(scene, medium, x, p.radius[i], &dome, &emitters, step);
         for (travel, w) in incoming {
@@ -40,7 +45,7 @@ pub fn first_scattering(scene: &Scene, p: &Particles, dirs: &[Vec3], dome_direct
             *o *= medium.albedo * per_sr;
         }
     });
-    out
+    (!progress.cancelled()).then_some(out)
 }
 
 /// The direct light arriving at `x` as (direction of travel, irradiance-like weight W with the

@@ -138,7 +138,7 @@ impl Network {
                 let dirs = directions::fibonacci(s.directions);
                 let sphere = BoundingSphere::of(medium);
                 let window = visibility::window_side(s.window, s.directions, sphere.radius, p.mean_sigma_t, p.len());
-                let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, window, s.opacity));
+                let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, window, s.opacity, progress)).ok_or(Error::Cancelled)?;
                 let phase = directions::phase_matrix(&dirs, medium.g, self.normalise_phase);
                 Kept { medium: key, particles: p, dirs, links, phase, window, first: Vec::new(), radiance: Vec::new() }
             }
@@ -147,7 +147,11 @@ impl Network {
         if !progress.update("network visibility", 0.3) {
             return Err(Error::Cancelled);
         }
-        let first = timings.time("network direct", || direct::first_scattering(scene, &net.particles, &net.dirs, s.dome_directions));
+        let Some(first) = timings.time("network direct", || direct::first_scattering(scene, &net.particles, &net.dirs, s.dome_directions, progress)) else {
+            // The network itself is whole: kept for the session's next solve.
+            kept.0 = Some(net);
+            return Err(Error::Cancelled);
+        };
         let same_light = first.len() == net.first.len() && first.iter().zip(&net.first).all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits));
         if same_light && !net.radiance.is_empty() {
             report.start = Start::Kept;

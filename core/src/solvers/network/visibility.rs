@@ -13,6 +13,7 @@ use super::particles::Particles;
 use super::settings::Opacity;
 use crate::medium::{optical_depth, Medium};
 use crate::sampling::orthonormal_basis;
+use crate::solvers::Progress;
 
 /// No upstream particle: the column starts at the medium's boundary.
 pub const NONE: u32 = u32::MAX;
@@ -41,11 +42,16 @@ pub fn window_side(requested: u32, directions: u32, radius: f32, mean_sigma_t: f
     m.clamp(2, ((particles as f32).sqrt() as u32).max(2))
 }
 
-/// The links of every direction in `dirs` (directions light travels).
-pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius: f32, m: u32, opacity: Opacity) -> Vec<DirectionLinks> {
+/// The links of every direction in `dirs` (directions light travels); `None` once the host
+/// cancels (a direction is a few ms, the whole build seconds at 8192 x 1024).
+#[allow(clippy::too_many_arguments)]
+pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius: f32, m: u32, opacity: Opacity, progress: &dyn Progress) -> Option<Vec<DirectionLinks>> {
     let step = medium.voxel_size_world().min_element() * 0.5;
     dirs.par_iter()
         .map(|&w| {
+            if progress.cancelled() {
+                return None;
+            }
             let (u, v) = orthonormal_basis(w);
             let pixel = |x: Vec3| {
                 let r = x - centre;
@@ -99,7 +105,7 @@ pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius
             }
             // Each pixel's list is contiguous and upstream first, which is all a sweep needs.
             let order = keyed.iter().map(|k| k.2).collect();
-            DirectionLinks { order, up, alpha }
+            Some(DirectionLinks { order, up, alpha })
         })
         .collect()
 }
