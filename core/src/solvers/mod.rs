@@ -130,6 +130,14 @@ pub struct SolveOutput {
     pub timings: Timings,
 }
 
+impl SolveOutput {
+    /// Build outputs with this, not a struct literal: fields added later (what a solver chose
+    /// and why) then get their defaults without touching every solver.
+    pub fn new(scattering: ScatteringGrid, timings: Timings) -> Self {
+        SolveOutput { scattering, timings }
+    }
+}
+
 pub trait Solver: Send + Sync {
     fn name(&self) -> &'static str;
     fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput>;

@@ -111,7 +111,7 @@ impl Lpm {
             timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
         };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
-            return Ok((SolveOutput { scattering: single, timings }, report));
+            return Ok((SolveOutput::new(single, timings), report));
         }
         // The mip serves both the cells' mean density and the upsampling.
         let (lo, hi) = medium.world_bounds();
@@ -182,7 +182,7 @@ impl Lpm {
         let j_grid = grid.as_scattering_grid(j);
         if ov.j_only {
             report.j = Some(j_grid);
-            return Ok((SolveOutput { scattering: single, timings }, report));
+            return Ok((SolveOutput::new(single, timings), report));
         }
         let merged = Merged { j: j_grid, density: grid.density.clone() };
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
@@ -193,7 +193,7 @@ impl Lpm {
         }
         report.j = Some(merged.j);
         progress.update("lpm upsample", 1.0);
-        Ok((SolveOutput { scattering, timings }, report))
+        Ok((SolveOutput::new(scattering, timings), report))
     }
 }
 

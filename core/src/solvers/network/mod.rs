@@ -122,7 +122,7 @@ impl Network {
         let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
             // Nothing scatters twice: S is its single scattering.
-            return Ok((SolveOutput { scattering, timings }, report));
+            return Ok((SolveOutput::new(scattering, timings), report));
         }
         // Radiance, source, first-scattering and visibility arrays: ~4 RGB values per
         // (particle, direction) pair.
@@ -133,7 +133,7 @@ impl Network {
             None => {
                 let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
                 if p.mean_sigma_t <= 0.0 {
-                    return Ok((SolveOutput { scattering, timings }, report));
+                    return Ok((SolveOutput::new(scattering, timings), report));
                 }
                 let dirs = directions::fibonacci(s.directions);
                 let sphere = BoundingSphere::of(medium);
@@ -172,7 +172,7 @@ impl Network {
         });
         progress.update("network splat", 1.0);
         kept.0 = Some(net);
-        Ok((SolveOutput { scattering, timings }, report))
+        Ok((SolveOutput::new(scattering, timings), report))
     }
 }
 

@@ -286,7 +286,7 @@ impl Solver for Reference {
         } else {
             self.scattering_on_voxels(scene, progress, &mut timings)?
         };
-        Ok(SolveOutput { scattering, timings })
+        Ok(SolveOutput::new(scattering, timings))
     }
 }
 

@@ -102,7 +102,7 @@ impl Vpl {
         }
         progress.update("vpl upsample", 1.0);
         let report = VplReport { walks: s.walks, vpls: walks.vpls.len(), vpl_power: walks.total_power().to_array(), walks_cut: walks.cut, gather: gstats };
-        Ok((SolveOutput { scattering, timings }, report))
+        Ok((SolveOutput::new(scattering, timings), report))
     }
 }
 
