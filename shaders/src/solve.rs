@@ -6,8 +6,10 @@
 //! note on stderr.
 
 use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
+use crate::photon_grid::GpuPhotonBackend;
 use crate::pop::backend::GpuBackend;
 use crate::GpuContext;
+use volscatter_core::solvers::photon_grid::PhotonGrid;
 use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
 use volscatter_core::solvers::session::{Session, SessionState};
@@ -24,6 +26,7 @@ type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Val
 fn gpu_backend(name: &str) -> Option<GpuSolve> {
     match name {
         "pop" => Some(pop_on_gpu),
+        "photon-grid" => Some(photon_grid_on_gpu),
         _ => None,
     }
 }
@@ -40,6 +43,20 @@ fn pop_on_gpu(
     let pop_solver = Pop::from_settings(settings)?;
     let reuse = state.kept(PopReuse::default);
     let (out, _report) = pop_solver.solve_reusing(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY), Some(reuse))?;
+    Ok(out)
+}
+
+/// `photon-grid` with its photon tracing on the GPU (the ring, reconstruction and exact single
+/// scattering on the CPU: photon_grid/mod.rs says why); a session's ring lives in `state`.
+fn photon_grid_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let solver = PhotonGrid::from_settings(settings)?;
+    let (out, _report) = solver.solve_in_session_with(scene, progress, state, &GpuPhotonBackend::new(ctx))?;
     Ok(out)
 }
 

@@ -408,7 +408,7 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
         Preset { name: "final", help: FINAL, settings_json: r#"{"photons": 2097152, "cache_resolution": 48, "output_resolution": 128}"# },
     ],
     cpu: |m| Ok(Box::new(photon_grid::PhotonGrid::from_settings(m)?)),
-    gpu: false,
+    gpu: true,
 };
 
 const NETWORK: SolverEntry = SolverEntry {

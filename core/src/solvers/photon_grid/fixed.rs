@@ -27,6 +27,31 @@ pub fn unfix(v: i128) -> f64 {
     v as f64 / ONE
 }
 
+/// A fixed-point value with 64 fraction bits from `v` units of `unit` (an integer count of
+/// `unit`, as the GPU's 64-bit atomics sum them: volscatter-gpu photon_grid). Exact while the
+/// result is within range and `unit` >= 2^-64 / 2^24 (its mantissa shifted stays an integer);
+/// below that it rounds to the nearest 2^-64.
+pub fn fix_units(v: i64, unit: f32) -> i128 {
+    if v == 0 || unit == 0.0 || !unit.is_finite() {
+        return 0;
+    }
+    // unit = m 2^e with an integer mantissa m < 2^24.
+    let bits = unit.abs().to_bits();
+    let (exp, frac) = ((bits >> 23) as i32, (bits & 0x7f_ffff) as i128);
+    let (m, e) = if exp == 0 { (frac, -149) } else { (frac | 0x80_0000, exp - 150) };
+    let m = if unit < 0.0 { -m } else { m };
+    let shift = e + 64;
+    let p = v as i128 * m;
+    if shift >= 0 {
+        p.saturating_mul(1i128 << shift.min(126))
+    } else {
+        // Round half away from zero, like `fix`.
+        let s = (-shift).min(127) as u32;
+        let half = 1i128 << (s - 1);
+        if p >= 0 { (p + half) >> s } else { -((-p + half) >> s) }
+    }
+}
+
 #[inline]
 fn fix3(v: Vec3) -> [i128; 3] {
     [fix(v.x), fix(v.y), fix(v.z)]
@@ -143,5 +168,18 @@ mod tests {
         assert_eq!(unfix(sum.weight) as f32, b.weight);
         // In f32 the same round trip is not exact: what the integers avoid.
         assert_ne!((a.flux.x + b.flux.x) - a.flux.x, b.flux.x);
+    }
+
+    /// Counts of a unit land on the same fixed point as the f32 value they stand for, where
+    /// that is exact (units from 2^-40, as the GPU uses them), and round to 2^-64 below.
+    #[test]
+    fn units_convert_exactly() {
+        for (v, unit) in [(3i64, 0.75f32), (-5, 0.0009765625), (1 << 40, 2.0f32.powi(-32)), (-(1 << 20), 1.5e-9)] {
+            assert_eq!(fix_units(v, unit), fix(v as f32 * unit), "{v} x {unit}");
+        }
+        assert_eq!(fix_units(1, 2.0f32.powi(-70)), 0);
+        assert_eq!(fix_units(3, 2.0f32.powi(-65)), 2);
+        assert_eq!(fix_units(-3, 2.0f32.powi(-65)), -2);
+        assert_eq!(fix_units(7, 0.0), 0);
     }
 }

@@ -10,14 +10,18 @@
 //! The temporal ring of partial caches (ring.rs) keeps m generations of photons in a session,
 //! summed in fixed point (fixed.rs); a one-off solve traces all m.
 //!
-//! Not yet (issue 17): the paper's physically based upsampling, the GPU kernel.
+//! Tracing goes through a `PhotonBackend` (backend.rs): the CPU's trace.rs, or the GPU's
+//! kernel in volscatter-gpu; the modules it needs (cache, fixed, ring, trace) are public for it.
+//!
+//! Not yet (issue 17): the paper's physically based upsampling.
 
-mod cache;
-mod fixed;
+pub mod backend;
+pub mod cache;
+pub mod fixed;
 mod reconstruct;
-mod ring;
+pub mod ring;
 pub mod settings;
-mod trace;
+pub mod trace;
 
 #[cfg(test)]
 mod bench;
@@ -38,6 +42,7 @@ use crate::medium::MajorantGrid;
 use crate::scene::Scene;
 use crate::solvers::session::SessionState;
 use crate::solvers::{parse_settings, Progress, SolveOutput, Solver, Timings};
+use backend::{CpuBackend, PhotonBackend, TraceJob};
 use ring::{Generation, KeptRing, Ring};
 use crate::translate::LightSampler;
 
@@ -73,9 +78,9 @@ impl PhotonGrid {
         PhotonGrid::new(parse_settings(map)?)
     }
 
-    /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns.
-    fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings, progress: &dyn Progress) -> Result<(cache::Cache, Vec<Generation>)> {
-        use rayon::prelude::*;
+    /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns, on
+    /// `backend`.
+    fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(cache::Cache, Vec<Generation>)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let empty = cache::Cache::new(medium, s.cache_resolution)?;
@@ -92,15 +97,8 @@ impl PhotonGrid {
             split_order: SPLIT_ORDER,
             progress,
         };
-        let generations = timings.time("trace", || {
-            generations
-                .par_iter()
-                .map(|&g| {
-                    let (tallies, energy) = tracer.run_generation(&sampler, &empty, g, ring::photons_of(g, s.photons, s.generations), s.photons);
-                    Generation { index: g, tallies, energy }
-                })
-                .collect()
-        });
+        let job = TraceJob { tracer: &tracer, sampler: &sampler, empty: &empty };
+        let generations = timings.time("trace", || backend.trace_generations(&job, generations))?;
         // Cut-short generations must not reach a session's ring.
         if progress.cancelled() {
             return Err(Error::Cancelled);
@@ -110,9 +108,9 @@ impl PhotonGrid {
 
     /// The ring of generations first..first + m, traced afresh: the one-off solve when
     /// `first` is 0.
-    fn fresh_ring(&self, scene: &Scene, first: u64, timings: &mut Timings, progress: &dyn Progress) -> Result<Ring> {
+    fn fresh_ring(&self, scene: &Scene, first: u64, timings: &mut Timings, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<Ring> {
         let gens: Vec<u64> = (first..first + self.settings.generations as u64).collect();
-        let (cache, traced) = self.trace(scene, &gens, timings, progress)?;
+        let (cache, traced) = self.trace(scene, &gens, timings, progress, backend)?;
         Ok(Ring::new(&self.settings, cache, traced))
     }
 
@@ -146,11 +144,16 @@ impl PhotonGrid {
     /// The one-off solve from generations first..first + m (`solve_detailed` is first 0): what
     /// a session's ring holds m frames after the scene last changed.
     pub fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
+        self.solve_generations_with(scene, first, progress, &CpuBackend)
+    }
+
+    /// `solve_generations` with its tracing on `backend`.
+    pub fn solve_generations_with(&self, scene: &Scene, first: u64, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
             return Err(Error::Cancelled);
         }
-        let ring = self.fresh_ring(scene, first, &mut timings, progress)?;
+        let ring = self.fresh_ring(scene, first, &mut timings, progress, backend)?;
         self.finish(scene, &ring, timings, progress)
     }
 
@@ -158,8 +161,13 @@ impl PhotonGrid {
     /// (or one after the settings changed) fills the ring, each later one traces a single
     /// new generation into it (ring.rs). With one generation, the one-off solve.
     pub fn solve_in_session_detailed(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<(SolveOutput, PhotonGridReport)> {
+        self.solve_in_session_with(scene, progress, state, &CpuBackend)
+    }
+
+    /// `solve_in_session_detailed` with its tracing on `backend`.
+    pub fn solve_in_session_with(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
         if self.settings.generations == 1 {
-            return self.solve_detailed(scene, progress);
+            return self.solve_generations_with(scene, 0, progress, backend);
         }
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
@@ -169,13 +177,13 @@ impl PhotonGrid {
         match kept.0.as_mut().filter(|r| r.traced_with(&self.settings)) {
             Some(ring) => {
                 let next = ring.next_generation();
-                let (cache, mut traced) = self.trace(scene, &[next], &mut timings, progress)?;
+                let (cache, mut traced) = self.trace(scene, &[next], &mut timings, progress, backend)?;
                 ring.move_to(&cache);
                 if let Some(g) = traced.pop() {
                     ring.replace(g);
                 }
             }
-            None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress)?),
+            None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress, backend)?),
         }
         match kept.0.as_ref() {
             Some(ring) => self.finish(scene, ring, timings, progress),
@@ -187,7 +195,7 @@ impl PhotonGrid {
     /// scattered less than `SPLIT_ORDER` times; in `exact` mode without the unscattered light):
     /// the cache as a host could keep it to re-light from any view.
     pub fn lobes(&self, scene: &Scene, points: &[glam::Vec3]) -> Result<Vec<Lobe>> {
-        let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::solvers::NoProgress)?;
+        let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::solvers::NoProgress, &CpuBackend)?;
         let first = cache::Tallies::from_fixed(&scene.medium, ring.cache(), &ring.total()[0]);
         Ok(points.iter().map(|&p| first.lobe(p)).collect())
     }

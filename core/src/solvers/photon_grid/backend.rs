@@ -1,0 +1,51 @@
+//! Where `photon-grid` traces its photons: the heavy stage (every photon's Woodcock tracking
+//! with a deposit at each tentative collision) goes through a `PhotonBackend`, the CPU code of
+//! trace.rs (`CpuBackend`) or the GPU port in volscatter-gpu. Everything else (the ring of
+//! generations in integers, the cache's mass, the reconstruction, exact single scattering)
+//! stays with the solver: it is linear in cells, not photons.
+
+use rayon::prelude::*;
+
+use super::cache::Cache;
+use super::ring::{self, Generation};
+use super::trace::Tracer;
+use crate::error::Result;
+use crate::translate::LightSampler;
+
+/// What tracing a generation needs: the tracer (media, majorants, settings, lobe split,
+/// progress), the lights, the cache's (empty) frame.
+pub struct TraceJob<'a> {
+    pub tracer: &'a Tracer<'a>,
+    pub sampler: &'a LightSampler<'a>,
+    pub empty: &'a Cache,
+}
+
+impl TraceJob<'_> {
+    /// Photons of generation `g` (ring.rs `photons_of`).
+    pub fn photons_of(&self, g: u64) -> u32 {
+        let s = self.tracer.settings;
+        ring::photons_of(g, s.photons, s.generations)
+    }
+}
+
+pub trait PhotonBackend: Sync {
+    /// Traces `generations` (ring.rs), returned in the order given. A cancelled trace may
+    /// return cut-short generations: the caller checks `progress` and discards them.
+    fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>>;
+}
+
+/// Tracing on the CPU (trace.rs), the generations in parallel.
+pub struct CpuBackend;
+
+impl PhotonBackend for CpuBackend {
+    fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>> {
+        let total = job.tracer.settings.photons;
+        Ok(generations
+            .par_iter()
+            .map(|&g| {
+                let (tallies, energy) = job.tracer.run_generation(job.sampler, job.empty, g, job.photons_of(g), total);
+                Generation { index: g, tallies, energy }
+            })
+            .collect())
+    }
+}

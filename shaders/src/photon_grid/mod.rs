@@ -1,0 +1,222 @@
+//! `photon-grid`'s tracing on the GPU (`trace.wgsl`): a `PhotonBackend` whose generations are
+//! traced one invocation per photon, their deposits summed in 64-bit fixed point by integer
+//! atomics and read back as the CPU's `FixedTallies`, so that the ring (ring.rs), the cache's
+//! reconstruction and exact single scattering run unchanged on the CPU.
+//!
+//! Photons' rays (origin, direction, power) are drawn on the CPU by the shared `LightSampler`
+//! and uploaded a chunk at a time: every light type (sun, dome with its importance map, point,
+//! spot, area, emissive medium) comes for free, and drawing a ray is a few hundred nanoseconds
+//! against the microseconds to milliseconds of tracking it. Tracking draws its random numbers
+//! on the GPU (trace.wgsl says why they are not the CPU's stream): GPU and CPU agree in
+//! distribution, not photon by photon; the GPU agrees with itself exactly (integer sums).
+//!
+//! Fixed-point units are powers of two picked per solve from the largest deposit possible
+//! (the brightest photon's power over the smallest extinction scale: rho / majorant is at most
+//! 1 / scale), so that a deposit of at most 2^32 units takes the low word and a cell overflows
+//! only after 2^31 such deposits; the smallest deposits keep 2^-32 of the largest's resolution.
+
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+use std::mem::size_of;
+
+use crate::context::GpuContext;
+use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
+use volscatter_core::medium::Medium;
+use volscatter_core::rng::Rng;
+use volscatter_core::solvers::photon_grid::backend::{PhotonBackend, TraceJob};
+use volscatter_core::solvers::photon_grid::fixed::{fix_units, FixedCell, FixedTallies};
+use volscatter_core::solvers::photon_grid::ring::Generation;
+use volscatter_core::solvers::photon_grid::trace::EnergyReport;
+use volscatter_core::{Error, Result};
+
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box"], "photon_grid/trace.wgsl");
+
+/// Mirrors `struct Phase` in trace.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub struct PhaseParams {
+    pub scale: [f32; 4],
+    pub albedo: [f32; 4],
+}
+
+/// Mirrors `struct Params` in trace.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub struct TraceParams {
+    pub density_w2i: [[f32; 4]; 3],
+    pub density_brick_min: [i32; 4],
+    pub density_brick_dims: [u32; 4],
+    pub cell_w2i: [[f32; 4]; 3],
+    pub cell_dims: [u32; 4],
+    pub box_lo: [f32; 4],
+    pub box_hi: [f32; 4],
+    pub full: PhaseParams,
+    pub reduced: PhaseParams,
+    pub units: [f32; 4],
+    pub flags: [u32; 4],
+    pub seeds: [u32; 4],
+    pub first: [u32; 4],
+}
+const _: () = assert!(size_of::<TraceParams>() == 304);
+
+/// Words per cell and lobe (trace.wgsl CELL_WORDS): flux RGB, moment XYZ, weight, order sum,
+/// count, each a (low, high) pair.
+const CELL_WORDS: usize = 18;
+/// Words of the energy sums: escaped, absorbed, cut (RGB), scatterings, switched.
+const ENERGY_WORDS: usize = 22;
+/// Photons per dispatch: the cancel flag is read between two, and one dispatch stays well
+/// under a second on a GPU (drivers reset a device after a few).
+const CHUNK: u32 = 1 << 15;
+/// Random streams of the rays drawn on the CPU: chunk c of generation g draws from stream
+/// g x STREAMS_PER_GENERATION + c (photons <= 2^30 give at most 2^15 chunks).
+const STREAMS_PER_GENERATION: u64 = 1 << 16;
+/// Bits below the largest deposit (and the brightest photon, for the energy sums) kept.
+const FRACTION_BITS: i32 = 32;
+/// Order sums (weight x scattering order) get 2^ORDER_SHIFT times coarser units: orders of
+/// thousands stay in range.
+const ORDER_SHIFT: i32 = 8;
+
+/// The GPU tracer.
+pub struct GpuPhotonBackend<'c> {
+    ctx: &'c GpuContext,
+}
+
+impl<'c> GpuPhotonBackend<'c> {
+    pub fn new(ctx: &'c GpuContext) -> Self {
+        GpuPhotonBackend { ctx }
+    }
+}
+
+/// The smallest power of two at or above `v` (positive, finite), times 2^-bits.
+fn unit_above(v: f32, bits: i32) -> f32 {
+    let e = v.max(f32::MIN_POSITIVE).log2().ceil() as i32;
+    2.0f32.powi((e - bits).clamp(-149, 127))
+}
+
+fn phase_params(medium: &Medium, majorant: f32) -> PhaseParams {
+    PhaseParams { scale: medium.density_scale.extend(majorant).to_array(), albedo: medium.albedo.extend(medium.g).to_array() }
+}
+
+/// A 64-bit integer from its (low, high) words.
+fn word_pair(w: &[u32], i: usize) -> i64 {
+    ((w[i + 1] as u64) << 32 | w[i] as u64) as i64
+}
+
+impl PhotonBackend for GpuPhotonBackend<'_> {
+    fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>> {
+        let ctx = self.ctx;
+        let tracer = job.tracer;
+        let s = tracer.settings;
+        let medium = tracer.medium;
+        let cells = job.empty.cells.len();
+        let cache_bytes = (2 * cells * CELL_WORDS * 4) as u64;
+        ctx.check_storage_size("photon cache", cache_bytes)?;
+        ctx.check_storage_size("photon rays", CHUNK as u64 * 48)?;
+        ctx.check_storage_size("medium density", bricked_density_bytes(medium))?;
+        let bricks = bricked_density(medium);
+        let density = ctx.storage_buffer("density", bytemuck::cast_slice(&bricks.words))?;
+
+        // Units (module doc). A ray's power is its light's over the light's probability, which
+        // LightSampler makes proportional to the light's RGB sum: no channel of a ray exceeds
+        // the lights' total RGB sum per photon; x16 leaves room for a dome whose importance
+        // map is not proportional to each channel and for spectral tracking weights above 1.
+        let sampler = job.sampler;
+        let max_power = sampler.total_power().element_sum() / s.photons as f32 * 16.0;
+        let reduced = tracer.reduced;
+        let min_scale = reduced.map_or(f32::INFINITY, |(m, _)| m.density_scale.max_element()).min(medium.density_scale.max_element());
+        let unit_d = unit_above(max_power / min_scale.max(1e-30), FRACTION_BITS);
+        let unit_o = unit_d * 2.0f32.powi(ORDER_SHIFT);
+        let unit_e = unit_above(max_power, FRACTION_BITS - 4);
+        let (lo, hi) = medium.world_bounds();
+        let frame = &job.empty.frame;
+        let base = TraceParams {
+            density_w2i: affine_rows(&medium.world_to_index),
+            density_brick_min: bricks.brick_min,
+            density_brick_dims: bricks.brick_dims,
+            cell_w2i: affine_rows(&job.empty.world_to_cell),
+            cell_dims: [frame.dims[0], frame.dims[1], frame.dims[2], cells as u32],
+            box_lo: lo.extend(s.cutoff).to_array(),
+            box_hi: hi.extend(0.0).to_array(),
+            full: phase_params(medium, tracer.majorant.max()),
+            reduced: reduced.map_or(PhaseParams::zeroed(), |(m, maj)| phase_params(m, maj.max())),
+            units: [1.0 / unit_d, 1.0 / unit_o, 1.0 / unit_e, 0.0],
+            flags: [
+                reduced.and(s.switch_order(medium.g)).unwrap_or(0),
+                tracer.split_order,
+                tracer.deposit_unscattered as u32,
+                0,
+            ],
+            seeds: [s.seed as u32, (s.seed >> 32) as u32, 0, 0],
+            first: [0; 4],
+        };
+        let pipeline = ctx.pipeline("photon_grid/trace.wgsl", WGSL, "main")?;
+        let mut out = Vec::with_capacity(generations.len());
+        for &g in generations {
+            let count = job.photons_of(g);
+            let cache = ctx.zeroed_storage("photon cache", cache_bytes)?;
+            let energy_buf = ctx.zeroed_storage("photon energy", (ENERGY_WORDS * 4) as u64)?;
+            let mut energy = EnergyReport::default();
+            let total = s.photons as f32;
+            let mut first = 0u32;
+            for (c, start) in (0..count).step_by(CHUNK as usize).enumerate() {
+                if tracer.progress.cancelled() {
+                    break;
+                }
+                let mut rng = Rng::new(s.seed, g.wrapping_mul(STREAMS_PER_GENERATION) + c as u64);
+                let mut rays: Vec<[f32; 4]> = Vec::with_capacity(3 * CHUNK as usize);
+                for _ in start..(start + CHUNK).min(count) {
+                    if let Some(ray) = sampler.sample_rng(&mut rng) {
+                        let power = ray.power / total;
+                        energy.photons += 1;
+                        energy.emitted += power.as_dvec3();
+                        rays.extend([ray.origin.extend(0.0).to_array(), ray.direction.extend(0.0).to_array(), power.extend(0.0).to_array()]);
+                    }
+                }
+                let n = (rays.len() / 3) as u32;
+                if n == 0 {
+                    continue;
+                }
+                let params = TraceParams { seeds: [base.seeds[0], base.seeds[1], g as u32, (g >> 32) as u32], first: [first, 0, 0, 0], flags: [base.flags[0], base.flags[1], base.flags[2], n], ..base };
+                first += n;
+                let params = ctx.uniform("photon trace params", bytemuck::bytes_of(&params));
+                let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;
+                let groups = n.div_ceil(64);
+                let mut enc = ctx.device.create_command_encoder(&Default::default());
+                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &cache, &energy_buf], [groups, 1, 1]);
+                ctx.submit_and_wait(enc)?;
+            }
+            let words: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cache, cache_bytes)?).to_vec();
+            let e: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&energy_buf, (ENERGY_WORDS * 4) as u64)?).to_vec();
+            let rgb = |q: usize| DVec3::from_array([0, 1, 2].map(|k| word_pair(&e, 6 * q + 2 * k) as f64 * unit_e as f64));
+            energy.escaped = rgb(0);
+            energy.absorbed = rgb(1);
+            energy.cut = rgb(2);
+            energy.scatterings = word_pair(&e, 18) as u64;
+            energy.switched = word_pair(&e, 20) as u64;
+            let lobe = |l: usize| FixedTallies {
+                cells: words[l * cells * CELL_WORDS..(l + 1) * cells * CELL_WORDS]
+                    .chunks_exact(CELL_WORDS)
+                    .map(|w| {
+                        let q = |i: usize, unit: f32| fix_units(word_pair(w, 2 * i), unit);
+                        FixedCell {
+                            flux: [q(0, unit_d), q(1, unit_d), q(2, unit_d)],
+                            moment: [q(3, unit_d), q(4, unit_d), q(5, unit_d)],
+                            weight: q(6, unit_d),
+                            order: q(7, unit_o),
+                            count: word_pair(w, 16) as u64,
+                        }
+                    })
+                    .collect(),
+            };
+            out.push(Generation { index: g, tallies: [lobe(0), lobe(1)], energy });
+        }
+        if out.len() != generations.len() {
+            return Err(Error::Device("photon tracing stopped early".into()));
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+#[path = "tests.rs"]
+mod tests;

@@ -1,0 +1,317 @@
+// photon-grid's tracing (volscatter-core solvers/photon_grid/trace.rs `Tracer::photon`): one
+// invocation per photon, from its ray (drawn on the CPU by the shared LightSampler) to its
+// end: Woodcock / spectral tracking with a deposit into the cache at every tentative
+// collision, HG scattering, the transmittance cutoff and the similarity switch.
+//
+// Departures from the CPU, each for the GPU:
+// - one majorant for the whole medium per phase (the CPU walks a majorant grid by DDA): an
+//   unbiased estimator all the same, with more null collisions in sparse media;
+// - random numbers from xoshiro128** seeded per photon (hash of seed, generation, photon
+//   index): the CPU's batches draw from one PCG32 stream in photon order, which invocations
+//   running side by side cannot share;
+// - deposits are summed as 64-bit fixed-point integers with 32-bit atomics (low word, then the
+//   carry into the high word): integer sums do not depend on the order in which invocations
+//   add, so a generation's tallies are the same on every run (f32 atomics would not be).
+//   The cache (cells x 2 lobes x 9 sums) is far beyond workgroup memory (16 KiB), so the
+//   atomics go to device memory directly.
+// density_at, ray_box come from the preludes (shaders/src/wgsl).
+
+struct Phase {
+    scale: vec4<f32>,   // density_scale (RGB), w: the majorant (max scaled extinction)
+    albedo: vec4<f32>,  // albedo (RGB), w: HG g
+};
+
+struct Params {
+    density_w2i: array<vec4<f32>, 3>,
+    density_brick_min: vec4<i32>,
+    density_brick_dims: vec4<u32>,
+    cell_w2i: array<vec4<f32>, 3>,
+    cell_dims: vec4<u32>,   // cache cells nx, ny, nz; w: cells in all
+    box_lo: vec4<f32>,      // the medium's world box; w: cutoff
+    box_hi: vec4<f32>,
+    full: Phase,
+    reduced: Phase,
+    units: vec4<f32>,       // 1 / unit of: deposits (flux, moment, weight), order sums, energy
+    flags: vec4<u32>,       // order of the similarity switch (0: none), split order, deposit unscattered, photons in this dispatch
+    seeds: vec4<u32>,       // seed (lo, hi), generation (lo, hi)
+    first: vec4<u32>,       // index of this dispatch's first photon in its generation
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> density: array<u32>;
+// Three vec4 per photon: origin, direction, power (RGB, already / photon count).
+@group(0) @binding(2) var<storage, read> rays: array<vec4<f32>>;
+// Per lobe and cell, CELL_WORDS words: 9 sums as (low, high) words of 64-bit integers.
+@group(0) @binding(3) var<storage, read_write> cache: array<atomic<u32>>;
+// ENERGY_WORDS words: escaped, absorbed, cut (RGB), scatterings, switched as 64-bit pairs.
+@group(0) @binding(4) var<storage, read_write> energy: array<atomic<u32>>;
+
+const CELL_WORDS: u32 = 18u;
+const MAX_TENTATIVE_STEPS: u32 = 4194304u; // medium/tracking.rs
+const TWO_PI: f32 = 6.28318530717959;
+
+// ---- random numbers: xoshiro128** (Blackman, Vigna), seeded by hashing ----
+var<private> rng_s: vec4<u32>;
+
+fn fmix32(x0: u32) -> u32 {
+    var x = x0;
+    x ^= x >> 16u;
+    x *= 0x85ebca6bu;
+    x ^= x >> 13u;
+    x *= 0xc2b2ae35u;
+    x ^= x >> 16u;
+    return x;
+}
+
+fn rotl(x: u32, k: u32) -> u32 {
+    return (x << k) | (x >> (32u - k));
+}
+
+fn rng_seed(photon: u32) {
+    let a = fmix32(params.seeds.x ^ fmix32(params.seeds.y + 0x9e3779b9u));
+    let b = fmix32(params.seeds.z ^ fmix32(params.seeds.w + 0x7f4a7c15u));
+    let p = fmix32(photon + 0x632be5abu);
+    rng_s = vec4<u32>(fmix32(a ^ p), fmix32(b ^ p ^ 0x1b873593u), fmix32(a ^ b ^ p ^ 0xe6546b64u), fmix32(p ^ 0xcc9e2d51u) | 1u);
+}
+
+fn rng_u32() -> u32 {
+    let result = rotl(rng_s.y * 5u, 7u) * 9u;
+    let t = rng_s.y << 9u;
+    rng_s.z ^= rng_s.x;
+    rng_s.w ^= rng_s.y;
+    rng_s.y ^= rng_s.z;
+    rng_s.x ^= rng_s.w;
+    rng_s.z ^= t;
+    rng_s.w = rotl(rng_s.w, 11u);
+    return result;
+}
+
+// Uniform in [0, 1) with 24 bits, as rng.rs.
+fn rng_f32() -> f32 {
+    return f32(rng_u32() >> 8u) * (1.0 / 16777216.0);
+}
+
+// ---- 64-bit fixed-point sums with 32-bit atomics ----
+
+// x (already in units) rounded to a 64-bit two's complement integer (low, high). |x| < 2^62.
+fn to_fixed(x: f32) -> vec2<u32> {
+    let a = min(abs(x), 4.6e18);
+    let hi_f = floor(a * 2.3283064365386963e-10);
+    // Exact: a and hi_f 2^32 are both multiples of a's last bit.
+    let lo_f = round(a - hi_f * 4294967296.0);
+    var lo = u32(lo_f);
+    var hi = u32(hi_f);
+    if (x < 0.0) {
+        lo = ~lo + 1u;
+        hi = ~hi + select(0u, 1u, lo == 0u);
+    }
+    return vec2<u32>(lo, hi);
+}
+
+fn cache_add(i: u32, x: f32) {
+    let v = to_fixed(x);
+    if (v.x == 0u && v.y == 0u) {
+        return;
+    }
+    let old = atomicAdd(&cache[i], v.x);
+    // The low words wrapped: carry one into the high word.
+    let carry = select(0u, 1u, old + v.x < old);
+    if (v.y + carry != 0u) {
+        atomicAdd(&cache[i + 1u], v.y + carry);
+    }
+}
+
+fn energy_add(i: u32, x: f32) {
+    let v = to_fixed(x);
+    if (v.x == 0u && v.y == 0u) {
+        return;
+    }
+    let old = atomicAdd(&energy[i], v.x);
+    let carry = select(0u, 1u, old + v.x < old);
+    if (v.y + carry != 0u) {
+        atomicAdd(&energy[i + 1u], v.y + carry);
+    }
+}
+
+fn energy_add3(q: u32, v: vec3<f32>) {
+    let s = v * params.units.z;
+    energy_add(6u * q, s.x);
+    energy_add(6u * q + 2u, s.y);
+    energy_add(6u * q + 4u, s.z);
+}
+
+fn energy_count(word: u32) {
+    let old = atomicAdd(&energy[word], 1u);
+    if (old == 0xffffffffu) {
+        atomicAdd(&energy[word + 1u], 1u);
+    }
+}
+
+// cache.rs `Cache::cell_of`: the cell whose centre is nearest, or none.
+fn cell_of(x: vec3<f32>) -> i32 {
+    let p = round(affine(params.cell_w2i, x));
+    let d = vec3<f32>(params.cell_dims.xyz);
+    if (any(p < vec3<f32>(0.0)) || any(p >= d)) {
+        return -1;
+    }
+    let c = vec3<u32>(p);
+    return i32(c.x + params.cell_dims.x * (c.y + params.cell_dims.y * c.z));
+}
+
+// cache.rs `Cache::deposit`: RGB flux f, scalar weight (mean of f), moment, order, count.
+fn deposit(x: vec3<f32>, f: vec3<f32>, dir: vec3<f32>, order: u32, lobe: u32) {
+    let cell = cell_of(x);
+    if (cell < 0) {
+        return;
+    }
+    let base = (lobe * params.cell_dims.w + u32(cell)) * CELL_WORDS;
+    let w = (f.x + f.y + f.z) / 3.0;
+    let k = params.units.x;
+    cache_add(base, f.x * k);
+    cache_add(base + 2u, f.y * k);
+    cache_add(base + 4u, f.z * k);
+    cache_add(base + 6u, dir.x * w * k);
+    cache_add(base + 8u, dir.y * w * k);
+    cache_add(base + 10u, dir.z * w * k);
+    cache_add(base + 12u, w * k);
+    cache_add(base + 14u, w * f32(order) * params.units.y);
+    let old = atomicAdd(&cache[base + 16u], 1u);
+    if (old == 0xffffffffu) {
+        atomicAdd(&cache[base + 17u], 1u);
+    }
+}
+
+// ---- directions (sampling.rs, phase.rs) ----
+
+fn uniform_sphere(u0: f32, u1: f32) -> vec3<f32> {
+    let z = 1.0 - 2.0 * u0;
+    let r = sqrt(max(1.0 - z * z, 0.0));
+    let phi = TWO_PI * u1;
+    return vec3<f32>(r * cos(phi), r * sin(phi), z);
+}
+
+fn hg_sample(dir_in: vec3<f32>, g: f32, u0: f32, u1: f32) -> vec3<f32> {
+    var cos_theta = 1.0 - 2.0 * u0;
+    if (abs(g) >= 1e-3) {
+        let s = (1.0 - g * g) / (1.0 + g - 2.0 * g * u0);
+        cos_theta = clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
+    }
+    let sin_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0));
+    let phi = TWO_PI * u1;
+    // sampling.rs orthonormal_basis
+    let n = dir_in;
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let t = vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let bb = vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+    return normalize(t * (sin_theta * cos(phi)) + bb * (sin_theta * sin(phi)) + dir_in * cos_theta);
+}
+
+fn max3(v: vec3<f32>) -> f32 {
+    return max(v.x, max(v.y, v.z));
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let id = gid.x + gid.y * groups.x * 64u;
+    if (id >= params.flags.w) {
+        return;
+    }
+    rng_seed(params.first.x + id);
+    var x = rays[3u * id].xyz;
+    var d = rays[3u * id + 1u].xyz;
+    let power = rays[3u * id + 2u].xyz;
+    var beta = vec3<f32>(1.0);
+    var order = 0u;
+    var reduced = false;
+    let lo = params.box_lo.xyz;
+    let hi = params.box_hi.xyz;
+    let cutoff = params.box_lo.w;
+    let switch_at = params.flags.x;
+    loop {
+        let span = ray_box(x, d, lo, hi);
+        if (!(span.x < span.y)) {
+            break;
+        }
+        var phase = params.full;
+        if (reduced) {
+            phase = params.reduced;
+        }
+        let m = phase.scale.w;
+        let inv_scale = 1.0 / max(max3(phase.scale.xyz), 1e-30);
+        let deposits = order > 0u || params.flags.z != 0u;
+        let lobe = select(0u, 1u, order >= params.flags.y);
+        // Free flight (tracking.rs `sample_free_flight_visiting`) over the box.
+        var t = span.x;
+        var hit = false;
+        var steps = 0u;
+        if (m > 0.0) {
+            loop {
+                let step = -log(1.0 - rng_f32()) / m;
+                let next = t + step;
+                steps += 1u;
+                // Float32 running out, or too many steps: opaque here (as on the CPU).
+                if ((step > 0.0 && next <= t) || steps > MAX_TENTATIVE_STEPS) {
+                    hit = true;
+                    break;
+                }
+                t = next;
+                if (t >= span.y) {
+                    break;
+                }
+                let p = x + d * t;
+                let rho = density_at(p);
+                let sigma_t = phase.scale.xyz * rho;
+                if (rho > 0.0 && deposits) {
+                    // rho from its largest channel, as trace.rs `track`.
+                    deposit(p, power * beta * (max3(sigma_t) * inv_scale / m), d, order, lobe);
+                }
+                let sigma_n = max(vec3<f32>(m) - sigma_t, vec3<f32>(0.0));
+                let p_real_w = max3(beta * sigma_t);
+                let p_null_w = max3(beta * sigma_n);
+                let total = p_real_w + p_null_w;
+                if (total <= 0.0) {
+                    continue;
+                }
+                let p_real = p_real_w / total;
+                if (rng_f32() < p_real) {
+                    beta *= sigma_t / (m * p_real);
+                    hit = true;
+                    break;
+                }
+                beta *= sigma_n / (m * (1.0 - p_real));
+            }
+        }
+        if (!hit) {
+            break;
+        }
+        // Real collision: scatter with the albedo, the rest is absorbed.
+        x += d * t;
+        var albedo = vec3<f32>(1.0);
+        if (density_at(x) > 0.0) {
+            albedo = phase.albedo.xyz;
+        }
+        energy_add3(1u, power * beta * (vec3<f32>(1.0) - albedo));
+        beta *= albedo;
+        order += 1u;
+        energy_count(18u);
+        if (max3(beta) < cutoff || max3(beta) <= 0.0) {
+            energy_add3(2u, power * beta);
+            return;
+        }
+        if (switch_at > 0u && order == switch_at && !reduced) {
+            reduced = true;
+            energy_count(20u);
+        }
+        let g = select(params.full.albedo.w, params.reduced.albedo.w, reduced);
+        let u0 = rng_f32();
+        let u1 = rng_f32();
+        if (g == 0.0) {
+            d = uniform_sphere(u0, u1);
+        } else {
+            d = hg_sample(d, g, u0, u1);
+        }
+    }
+    energy_add3(0u, power * beta);
+}
