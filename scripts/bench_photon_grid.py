@@ -4,10 +4,15 @@ flicker on a moving sun with and without the temporal ring. Writes the "photon-g
 BENCHMARKS.md.
 
     python3 scripts/bench_photon_grid.py
+    python3 scripts/bench_photon_grid.py --gpu [--quick]
 
 Runs the ignored tests of core/src/solvers/photon_grid/bench.rs (they time, never assert; they
 need the crate's fixtures and internals) and reads their `BENCH_JSON` lines. Wall-clock on
 whatever cores the machine lends (shared: pessimistic).
+
+`--gpu` instead runs shaders/src/photon_grid/bench.rs (the tracing stage on the CPU and the GPU
+backend, paper Fig. 12's settings) and writes the "photon-grid-gpu" section with the adapter's
+name and absolute times: on a machine with a GPU, rerun it as is. `--quick`: the first setting only.
 """
 
 from __future__ import annotations
@@ -25,11 +30,11 @@ sys.path.insert(0, str(REPO_ROOT / "scripts"))
 from benchmarks_md import write_section  # noqa: E402
 
 
-def run_benches(module: str) -> dict:
-    cmd = ["cargo", "test", "--release", "-q", "-p", "volscatter-core", "--lib", "--", "--ignored", f"{module}::bench",
+def run_benches(module: str, crate: str = "volscatter-core", env: dict | None = None) -> dict:
+    cmd = ["cargo", "test", "--release", "-q", "-p", crate, "--lib", "--", "--ignored", f"{module}::bench",
            "--nocapture", "--test-threads", "1"]
     print("$", " ".join(cmd), file=sys.stderr, flush=True)
-    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True)
+    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, env={**os.environ, **(env or {})})
     sys.stderr.write(out.stderr[-4000:])
     if out.returncode != 0:
         sys.exit(f"{module} benches failed ({out.returncode})")
@@ -43,7 +48,38 @@ def run_benches(module: str) -> dict:
     return found
 
 
+def gpu_main(quick: bool) -> None:
+    b = run_benches("photon_grid", "volscatter-gpu", {"VOLSCATTER_BENCH_QUICK": "1" if quick else "0"})["gpu"]
+    device = b["device"]
+    label = "lavapipe (software, for correctness only)" if b["software"] else "GPU"
+    lines = [
+        "## photon-grid on the GPU (tracing kernel, issue 17; `scripts/bench_photon_grid.py --gpu`)",
+        "",
+        f"{datetime.date.today().isoformat()}, {platform.machine()}, {os.cpu_count()} CPU cores shared with other jobs;"
+        f" adapter: {device}. GPU column: {label}." + (" Quick run (first setting only)." if quick else ""),
+        "",
+        "Paper Fig. 12's settings on the 48 x 62 x 90 cumulus (sigma_t 25, albedo 0.99, g 0.9). `trace`: the photon"
+        " tracing stage alone (on the GPU: drawing rays on the CPU, uploading them, the kernel, reading the cache back);"
+        " `solve`: the whole one-off solve (the majorant grid, the cells' mass, the reconstruction and the exact single"
+        " scattering stay on the CPU in both columns). A session frame traces photons / m (m = 100): its row is a"
+        " one-off solve of that many photons. The paper's GPU frame times: 4.8 / 9.1 / 33.4 ms.",
+        "",
+        f"| cache res | photons | run | CPU trace s | CPU solve s | {label} trace s | {label} solve s |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in b["rows"]:
+        lines.append(f"| {r['cache_resolution']} | {r['photons']} | {r['run']} | {r['cpu_trace']:.3f} | {r['cpu_total']:.3f} |"
+                     f" {r['gpu_trace']:.3f} | {r['gpu_total']:.3f} |")
+    if b["software"]:
+        lines += ["", "lavapipe runs the kernel on the same shared CPU cores: these times say nothing of a GPU's speed."]
+    path = write_section("photon-grid-gpu", "\n".join(lines) + "\n")
+    print(f"wrote {path}", file=sys.stderr)
+
+
 def main() -> None:
+    if "--gpu" in sys.argv[1:]:
+        gpu_main("--quick" in sys.argv[1:])
+        return
     b = run_benches("solvers::photon_grid")
     lines = [
         "## photon-grid (photon beams into HG-lobe caches, paper 04; `scripts/bench_photon_grid.py`)",
@@ -65,7 +101,7 @@ def main() -> None:
         "",
         "The cumulus of `medium/cumulus.rs` sampled on the paper's lattice (sigma_t 25, albedo 0.99, g 0.9, the dense"
         " cloud's sun). A one-off solve traces all photons; a session frame traces photons / m and replaces the oldest"
-        " generation (ring.rs). The paper's GPU frame times: 4.8 / 9.1 / 33.4 ms. No GPU kernel here yet.",
+        " generation (ring.rs). The paper's GPU frame times: 4.8 / 9.1 / 33.4 ms (GPU: the photon-grid-gpu section).",
         "",
         "| cache res | cells (paper) | photons | one-off s (trace s) | session frame s (trace s) |",
         "|---|---|---|---|---|",

@@ -1,6 +1,6 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
 //! A solver whose registry entry has `gpu` set (today: `pop`: sweep, propagation, merge,
-//! upsampling) runs its GPU backend from `gpu_backend`; the others, and every solver under
+//! upsampling; `photon-grid`: photon tracing) runs its GPU backend from `gpu_backend`; the others, and every solver under
 //! `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a software adapter or a GPU failure (no
 //! adapter, out of memory, lost device: `Error::Device`) runs the CPU solver instead, with a
 //! note on stderr.

@@ -117,3 +117,23 @@ fn gpu_tracing_is_exact_run_to_run_and_through_the_ring() {
     let (fresh, _) = solver.solve_generations_with(&scene, 3, &NoProgress, &backend).unwrap();
     assert_eq!(ring.scattering.data, fresh.scattering.data);
 }
+
+/// A host's cancel stops the GPU trace between dispatches: the solve returns `Cancelled`
+/// (the flag here is raised before the first dispatch; progress callbacks still answer yes).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn gpu_tracing_stops_on_cancel() {
+    struct Cancelled;
+    impl volscatter_core::solvers::Progress for Cancelled {
+        fn update(&self, _: &str, _: f32) -> bool {
+            true
+        }
+        fn cancelled(&self) -> bool {
+            true
+        }
+    }
+    let ctx = gpu_or_skip();
+    let solver = PhotonGrid::new(settings(1 << 16, 1)).unwrap();
+    let r = solver.solve_generations_with(&Scene::default_scene(), 0, &Cancelled, &GpuPhotonBackend::new(&ctx));
+    assert!(matches!(r, Err(Error::Cancelled)), "{:?}", r.err());
+}

@@ -3,13 +3,13 @@
 //! "photon-grid" section. `cargo test --release -p volscatter-core --lib -- --ignored
 //! photon_grid::bench --nocapture --test-threads 1`
 
-use glam::{Affine3A, IVec3, Quat, Vec3};
+use glam::{IVec3, Quat, Vec3};
 use serde_json::json;
 use std::time::Instant;
 
 use super::tests::case;
 use super::*;
-use crate::medium::{cumulus::cumulus_density, DensityGrid, GridLimits, Medium};
+use crate::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
 use crate::scene::Light;
 use crate::solvers::testing::errors_against_fixture;
 use crate::solvers::NoProgress;
@@ -40,19 +40,7 @@ fn bench_photon_grid_error_vs_time() {
 /// The paper's cumulus size (48 x 62 x 90 voxels, the cumulus of medium/cumulus.rs sampled on
 /// that lattice over its 2 m box, sigma_t 25, albedo 0.99, g 0.9, the dense cloud's sun).
 fn paper_cumulus() -> Scene {
-    let dims = IVec3::new(48, 62, 90);
-    let mut vals = Vec::with_capacity((dims.x * dims.y * dims.z) as usize);
-    for k in 0..dims.z {
-        for j in 0..dims.y {
-            for i in 0..dims.x {
-                let p = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / dims.as_vec3() * 2.0 - 1.0;
-                vals.push(cumulus_density(p));
-            }
-        }
-    }
-    let grid = DensityGrid::from_dense(IVec3::ZERO, dims, &vals, GridLimits::default()).unwrap();
-    let voxel = Vec3::splat(2.0) / dims.as_vec3();
-    let to_world = Affine3A::from_translation(Vec3::splat(-1.0) + 0.5 * voxel) * Affine3A::from_scale(voxel);
+    let (grid, to_world) = cumulus_on_lattice(IVec3::new(48, 62, 90), GridLimits::default()).unwrap();
     let mut sc = case("cloud");
     sc.medium = Medium::new(grid, to_world, Vec3::splat(25.0), Vec3::splat(0.99), 0.9);
     sc

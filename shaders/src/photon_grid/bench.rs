@@ -1,0 +1,64 @@
+//! Measurements for `scripts/bench_photon_grid.py --gpu` (an ignored test: it times, never
+//! asserts). Prints one line `BENCH_JSON {...}`: paper Fig. 12's three (cells, photons)
+//! settings on the 48 x 62 x 90 cumulus, the tracing stage on the CPU backend and on the GPU
+//! backend, for a one-off solve (all photons) and for a session frame's share (photons / m,
+//! m = 100), with the adapter's name. `VOLSCATTER_BENCH_QUICK=1`: the first setting only.
+
+use glam::{IVec3, Vec3};
+use serde_json::json;
+use std::time::Instant;
+
+use super::GpuPhotonBackend;
+use crate::test_support::gpu_or_skip;
+use volscatter_core::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
+use volscatter_core::scene::{Camera, Light};
+use volscatter_core::solvers::photon_grid::backend::{CpuBackend, PhotonBackend};
+use volscatter_core::solvers::photon_grid::{PhotonGrid, PhotonGridSettings};
+use volscatter_core::solvers::NoProgress;
+use volscatter_core::Scene;
+
+/// The cumulus of core's photon_grid/bench.rs `paper_cumulus`: sigma_t 25, albedo 0.99, g 0.9,
+/// lit by the dense cloud's sun (45 degrees up, from +x and the camera's side).
+fn paper_cumulus() -> Scene {
+    let (grid, to_world) = cumulus_on_lattice(IVec3::new(48, 62, 90), GridLimits::default()).unwrap();
+    let e = 45f32.to_radians();
+    let to_sun = (Vec3::new(0.8, -0.6, 0.0) * e.cos() + Vec3::Z * e.sin()).normalize();
+    Scene {
+        medium: Medium::new(grid, to_world, Vec3::splat(25.0), Vec3::splat(0.99), 0.9),
+        lights: vec![Light::Distant { direction: -to_sun, irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -6.0, 0.2), Vec3::new(0.0, 0.0, 0.1), Vec3::Z, 21.0, 64, 64),
+        solver: Default::default(),
+    }
+}
+
+/// (trace seconds, whole solve seconds) of a one-off solve.
+fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &dyn PhotonBackend) -> (f64, f64) {
+    let t = Instant::now();
+    let (out, _) = PhotonGrid::new(s.clone()).unwrap().solve_generations_with(scene, 0, &NoProgress, backend).unwrap();
+    let total = t.elapsed().as_secs_f64();
+    (out.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum(), total)
+}
+
+#[test]
+#[ignore = "benchmark: scripts/bench_photon_grid.py --gpu runs it"]
+fn bench_photon_grid_gpu() {
+    let ctx = gpu_or_skip();
+    let gpu = GpuPhotonBackend::new(&ctx);
+    let scene = paper_cumulus();
+    let quick = std::env::var("VOLSCATTER_BENCH_QUICK").is_ok_and(|v| v == "1");
+    let settings: &[(u32, u32)] = if quick { &[(9, 102_400)] } else { &[(9, 102_400), (18, 819_200), (36, 4_096_000)] };
+    // Warm-up: the pipeline's compilation is not part of a frame.
+    timed(&scene, &PhotonGridSettings { photons: 1024, ..Default::default() }, &gpu);
+    let mut rows = Vec::new();
+    for &(res, photons) in settings {
+        for (what, n) in [("one-off", photons), ("frame (photons / 100)", photons / 100)] {
+            let s = PhotonGridSettings { photons: n, cache_resolution: res, ..Default::default() };
+            let (cpu_trace, cpu_total) = timed(&scene, &s, &CpuBackend);
+            let (gpu_trace, gpu_total) = timed(&scene, &s, &gpu);
+            rows.push(json!({"cache_resolution": res, "photons": n, "run": what, "cpu_trace": cpu_trace, "cpu_total": cpu_total,
+                "gpu_trace": gpu_trace, "gpu_total": gpu_total}));
+        }
+    }
+    let doc = json!({"bench": "gpu", "data": {"device": ctx.describe(), "software": ctx.is_software(), "rows": rows}});
+    println!("BENCH_JSON {doc}");
+}
