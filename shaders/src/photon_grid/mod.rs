@@ -4,7 +4,7 @@
 //! reconstruction and exact single scattering run unchanged on the CPU.
 //!
 //! Photons' rays (origin, direction, power) are drawn on the CPU by the shared `LightSampler`
-//! and uploaded a chunk at a time: every light type (sun, dome with its importance map, point,
+//! (in parallel) and uploaded a chunk at a time: every light type (sun, dome with its importance map, point,
 //! spot, area, emissive medium) comes for free, and drawing a ray is a few hundred nanoseconds
 //! against the microseconds to milliseconds of tracking it. Tracking draws its random numbers
 //! on the GPU (trace.wgsl says why they are not the CPU's stream): GPU and CPU agree in
@@ -17,6 +17,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
+use rayon::prelude::*;
 use std::mem::size_of;
 
 use crate::context::GpuContext;
@@ -64,12 +65,17 @@ const _: () = assert!(size_of::<TraceParams>() == 304);
 const CELL_WORDS: usize = 18;
 /// Words of the energy sums: escaped, absorbed, cut (RGB), scatterings, switched.
 const ENERGY_WORDS: usize = 22;
-/// Photons per dispatch: the cancel flag is read between two, and one dispatch stays well
-/// under a second on a GPU (drivers reset a device after a few).
-const CHUNK: u32 = 1 << 15;
-/// Random streams of the rays drawn on the CPU: chunk c of generation g draws from stream
-/// g x STREAMS_PER_GENERATION + c (photons <= 2^30 give at most 2^15 chunks).
-const STREAMS_PER_GENERATION: u64 = 1 << 16;
+/// Photons per dispatch: the cancel flag is read between two. On a GPU, 2^20 fill it (an H100
+/// runs ~2^18 invocations at once) and stay well under a second even in a dense cloud (drivers
+/// reset a device after a few); a software adapter (lavapipe, on the CPU's cores) takes 2^15
+/// so that a cancel is seen within about a second.
+const CHUNK_GPU: u32 = 1 << 20;
+const CHUNK_SOFTWARE: u32 = 1 << 15;
+/// Rays are drawn on the CPU in blocks of this many photons, in parallel: block b of
+/// generation g from random stream g x 2^20 + b (photons <= 2^30 give at most 2^20 blocks),
+/// so the rays do not depend on the chunk size or the thread count.
+const BLOCK: u32 = 1 << 10;
+const _: () = assert!(CHUNK_GPU.is_multiple_of(BLOCK) && CHUNK_SOFTWARE.is_multiple_of(BLOCK));
 /// Bits below the largest deposit (and the brightest photon, for the energy sums) kept.
 const FRACTION_BITS: i32 = 32;
 /// Order sums (weight x scattering order) get 2^ORDER_SHIFT times coarser units: orders of
@@ -109,9 +115,12 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
         let s = tracer.settings;
         let medium = tracer.medium;
         let cells = job.empty.cells.len();
-        let cache_bytes = (2 * cells * CELL_WORDS * 4) as u64;
-        ctx.check_storage_size("photon cache", cache_bytes)?;
-        ctx.check_storage_size("photon rays", CHUNK as u64 * 48)?;
+        // Both lobes' cells, then the energy sums (trace.wgsl `sums`).
+        let sum_words = 2 * cells * CELL_WORDS + ENERGY_WORDS;
+        let sum_bytes = (sum_words * 4) as u64;
+        ctx.check_storage_size("photon cache", sum_bytes)?;
+        let chunk = if ctx.is_software() { CHUNK_SOFTWARE } else { CHUNK_GPU };
+        ctx.check_storage_size("photon rays", chunk as u64 * 48)?;
         ctx.check_storage_size("medium density", bricked_density_bytes(medium))?;
         let bricks = bricked_density(medium);
         let density = ctx.storage_buffer("density", bytemuck::cast_slice(&bricks.words))?;
@@ -153,24 +162,36 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
         let mut out = Vec::with_capacity(generations.len());
         for &g in generations {
             let count = job.photons_of(g);
-            let cache = ctx.zeroed_storage("photon cache", cache_bytes)?;
-            let energy_buf = ctx.zeroed_storage("photon energy", (ENERGY_WORDS * 4) as u64)?;
+            let sums = ctx.zeroed_storage("photon cache", sum_bytes)?;
             let mut energy = EnergyReport::default();
             let total = s.photons as f32;
             let mut first = 0u32;
-            for (c, start) in (0..count).step_by(CHUNK as usize).enumerate() {
+            for start in (0..count).step_by(chunk as usize) {
                 if tracer.progress.cancelled() {
                     return Err(Error::Cancelled);
                 }
-                let mut rng = Rng::new(s.seed, g.wrapping_mul(STREAMS_PER_GENERATION) + c as u64);
-                let mut rays: Vec<[f32; 4]> = Vec::with_capacity(3 * CHUNK as usize);
-                for _ in start..(start + CHUNK).min(count) {
-                    if let Some(ray) = sampler.sample_rng(&mut rng) {
-                        let power = ray.power / total;
-                        energy.photons += 1;
-                        energy.emitted += power.as_dvec3();
-                        rays.extend([ray.origin.extend(0.0).to_array(), ray.direction.extend(0.0).to_array(), power.extend(0.0).to_array()]);
-                    }
+                let end = (start + chunk).min(count);
+                let blocks: Vec<(Vec<[f32; 4]>, DVec3)> = (start / BLOCK..end.div_ceil(BLOCK))
+                    .into_par_iter()
+                    .map(|b| {
+                        let mut rng = Rng::new(s.seed, (g << 20).wrapping_add(b as u64));
+                        let mut rays = Vec::with_capacity(3 * BLOCK as usize);
+                        let mut emitted = DVec3::ZERO;
+                        for _ in b * BLOCK..((b + 1) * BLOCK).min(end) {
+                            if let Some(ray) = sampler.sample_rng(&mut rng) {
+                                let power = ray.power / total;
+                                emitted += power.as_dvec3();
+                                rays.extend([ray.origin.extend(0.0).to_array(), ray.direction.extend(0.0).to_array(), power.extend(0.0).to_array()]);
+                            }
+                        }
+                        (rays, emitted)
+                    })
+                    .collect();
+                let mut rays: Vec<[f32; 4]> = Vec::with_capacity(3 * (end - start) as usize);
+                for (r, e) in blocks {
+                    energy.photons += (r.len() / 3) as u64;
+                    energy.emitted += e;
+                    rays.extend(r);
                 }
                 let n = (rays.len() / 3) as u32;
                 if n == 0 {
@@ -182,17 +203,17 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
                 let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;
                 let groups = n.div_ceil(64);
                 let mut enc = ctx.device.create_command_encoder(&Default::default());
-                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &cache, &energy_buf], [groups, 1, 1]);
+                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &sums], [groups, 1, 1]);
                 ctx.submit_and_wait(enc)?;
             }
-            let words: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cache, cache_bytes)?).to_vec();
-            let e: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&energy_buf, (ENERGY_WORDS * 4) as u64)?).to_vec();
-            let rgb = |q: usize| DVec3::from_array([0, 1, 2].map(|k| word_pair(&e, 6 * q + 2 * k) as f64 * unit_e as f64));
+            let words: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&sums, sum_bytes)?).to_vec();
+            let e = &words[2 * cells * CELL_WORDS..];
+            let rgb = |q: usize| DVec3::from_array([0, 1, 2].map(|k| word_pair(e, 6 * q + 2 * k) as f64 * unit_e as f64));
             energy.escaped = rgb(0);
             energy.absorbed = rgb(1);
             energy.cut = rgb(2);
-            energy.scatterings = word_pair(&e, 18) as u64;
-            energy.switched = word_pair(&e, 20) as u64;
+            energy.scatterings = word_pair(e, 18) as u64;
+            energy.switched = word_pair(e, 20) as u64;
             let lobe = |l: usize| FixedTallies {
                 cells: words[l * cells * CELL_WORDS..(l + 1) * cells * CELL_WORDS]
                     .chunks_exact(CELL_WORDS)

@@ -12,8 +12,9 @@
 // - deposits are summed as 64-bit fixed-point integers with 32-bit atomics (low word, then the
 //   carry into the high word): integer sums do not depend on the order in which invocations
 //   add, so a generation's tallies are the same on every run (f32 atomics would not be).
-//   The cache (cells x 2 lobes x 9 sums) is far beyond workgroup memory (16 KiB), so the
-//   atomics go to device memory directly.
+//   The cache (cells x 2 lobes x 9 sums of 8 bytes) does not fit workgroup memory (wgpu's
+//   16 KiB: Fig. 12's smallest cache, 315 cells, takes 45 KiB; the default ~1 MiB), so the
+//   atomics go to device memory directly, with no second reduction pass.
 // density_at, ray_box come from the preludes (shaders/src/wgsl).
 
 struct Phase {
@@ -41,10 +42,9 @@ struct Params {
 @group(0) @binding(1) var<storage, read> density: array<u32>;
 // Three vec4 per photon: origin, direction, power (RGB, already / photon count).
 @group(0) @binding(2) var<storage, read> rays: array<vec4<f32>>;
-// Per lobe and cell, CELL_WORDS words: 9 sums as (low, high) words of 64-bit integers.
-@group(0) @binding(3) var<storage, read_write> cache: array<atomic<u32>>;
-// ENERGY_WORDS words: escaped, absorbed, cut (RGB), scatterings, switched as 64-bit pairs.
-@group(0) @binding(4) var<storage, read_write> energy: array<atomic<u32>>;
+// Per lobe and cell, CELL_WORDS words: 9 sums as (low, high) words of 64-bit integers; then
+// the energy's: escaped, absorbed, cut (RGB), scatterings, switched as 64-bit pairs.
+@group(0) @binding(3) var<storage, read_write> sums: array<atomic<u32>>;
 
 const CELL_WORDS: u32 = 18u;
 const MAX_TENTATIVE_STEPS: u32 = 4194304u; // medium/tracking.rs
@@ -108,43 +108,37 @@ fn to_fixed(x: f32) -> vec2<u32> {
     return vec2<u32>(lo, hi);
 }
 
-fn cache_add(i: u32, x: f32) {
+// Adds x (in units) to the 64-bit sum at words i, i + 1.
+fn add_fixed(i: u32, x: f32) {
     let v = to_fixed(x);
     if (v.x == 0u && v.y == 0u) {
         return;
     }
-    let old = atomicAdd(&cache[i], v.x);
+    let old = atomicAdd(&sums[i], v.x);
     // The low words wrapped: carry one into the high word.
     let carry = select(0u, 1u, old + v.x < old);
     if (v.y + carry != 0u) {
-        atomicAdd(&cache[i + 1u], v.y + carry);
+        atomicAdd(&sums[i + 1u], v.y + carry);
     }
 }
 
-fn energy_add(i: u32, x: f32) {
-    let v = to_fixed(x);
-    if (v.x == 0u && v.y == 0u) {
-        return;
+fn add_count(i: u32) {
+    let old = atomicAdd(&sums[i], 1u);
+    if (old == 0xffffffffu) {
+        atomicAdd(&sums[i + 1u], 1u);
     }
-    let old = atomicAdd(&energy[i], v.x);
-    let carry = select(0u, 1u, old + v.x < old);
-    if (v.y + carry != 0u) {
-        atomicAdd(&energy[i + 1u], v.y + carry);
-    }
+}
+
+// The energy sums' first word: after both lobes' cells.
+fn energy_word(w: u32) -> u32 {
+    return 2u * params.cell_dims.w * CELL_WORDS + w;
 }
 
 fn energy_add3(q: u32, v: vec3<f32>) {
     let s = v * params.units.z;
-    energy_add(6u * q, s.x);
-    energy_add(6u * q + 2u, s.y);
-    energy_add(6u * q + 4u, s.z);
-}
-
-fn energy_count(word: u32) {
-    let old = atomicAdd(&energy[word], 1u);
-    if (old == 0xffffffffu) {
-        atomicAdd(&energy[word + 1u], 1u);
-    }
+    add_fixed(energy_word(6u * q), s.x);
+    add_fixed(energy_word(6u * q + 2u), s.y);
+    add_fixed(energy_word(6u * q + 4u), s.z);
 }
 
 // cache.rs `Cache::cell_of`: the cell whose centre is nearest, or none.
@@ -167,18 +161,15 @@ fn deposit(x: vec3<f32>, f: vec3<f32>, dir: vec3<f32>, order: u32, lobe: u32) {
     let base = (lobe * params.cell_dims.w + u32(cell)) * CELL_WORDS;
     let w = (f.x + f.y + f.z) / 3.0;
     let k = params.units.x;
-    cache_add(base, f.x * k);
-    cache_add(base + 2u, f.y * k);
-    cache_add(base + 4u, f.z * k);
-    cache_add(base + 6u, dir.x * w * k);
-    cache_add(base + 8u, dir.y * w * k);
-    cache_add(base + 10u, dir.z * w * k);
-    cache_add(base + 12u, w * k);
-    cache_add(base + 14u, w * f32(order) * params.units.y);
-    let old = atomicAdd(&cache[base + 16u], 1u);
-    if (old == 0xffffffffu) {
-        atomicAdd(&cache[base + 17u], 1u);
-    }
+    add_fixed(base, f.x * k);
+    add_fixed(base + 2u, f.y * k);
+    add_fixed(base + 4u, f.z * k);
+    add_fixed(base + 6u, dir.x * w * k);
+    add_fixed(base + 8u, dir.y * w * k);
+    add_fixed(base + 10u, dir.z * w * k);
+    add_fixed(base + 12u, w * k);
+    add_fixed(base + 14u, w * f32(order) * params.units.y);
+    add_count(base + 16u);
 }
 
 // ---- directions (sampling.rs, phase.rs) ----
@@ -295,14 +286,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         energy_add3(1u, power * beta * (vec3<f32>(1.0) - albedo));
         beta *= albedo;
         order += 1u;
-        energy_count(18u);
+        add_count(energy_word(18u));
         if (max3(beta) < cutoff || max3(beta) <= 0.0) {
             energy_add3(2u, power * beta);
             return;
         }
         if (switch_at > 0u && order == switch_at && !reduced) {
             reduced = true;
-            energy_count(20u);
+            add_count(energy_word(20u));
         }
         let g = select(params.full.albedo.w, params.reduced.albedo.w, reduced);
         let u0 = rng_f32();
