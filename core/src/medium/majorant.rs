@@ -54,6 +54,12 @@ impl MajorantGrid {
         MajorantGrid { origin: lo, cell, dims, values }
     }
 
+    /// The grid as stored, for a GPU port of `traverse` (volscatter-gpu photon_grid): its
+    /// minimum corner in index space, cell edge in voxels, cells per axis and values (x fastest).
+    pub fn storage(&self) -> (Vec3, f32, IVec3, &[f32]) {
+        (self.origin, self.cell, self.dims, &self.values)
+    }
+
     pub fn max(&self) -> f32 {
         self.values.iter().fold(0.0, |m, &v| m.max(v))
     }

@@ -57,8 +57,10 @@ pub struct TraceParams {
     pub flags: [u32; 4],
     pub seeds: [u32; 4],
     pub first: [u32; 4],
+    pub maj_origin: [f32; 4],
+    pub maj_dims: [i32; 4],
 }
-const _: () = assert!(size_of::<TraceParams>() == 304);
+const _: () = assert!(size_of::<TraceParams>() == 336);
 
 /// Words per cell and lobe (trace.wgsl CELL_WORDS): flux RGB, moment XYZ, weight, order sum,
 /// count, each a (low, high) pair.
@@ -99,8 +101,8 @@ fn unit_above(v: f32, bits: i32) -> f32 {
     2.0f32.powi((e - bits).clamp(-149, 127))
 }
 
-fn phase_params(medium: &Medium, majorant: f32) -> PhaseParams {
-    PhaseParams { scale: medium.density_scale.extend(majorant).to_array(), albedo: medium.albedo.extend(medium.g).to_array() }
+fn phase_params(medium: &Medium) -> PhaseParams {
+    PhaseParams { scale: medium.density_scale.extend(0.0).to_array(), albedo: medium.albedo.extend(medium.g).to_array() }
 }
 
 /// A 64-bit integer from its (low, high) words.
@@ -136,6 +138,18 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
         let unit_d = unit_above(max_power / min_scale.max(1e-30), FRACTION_BITS);
         let unit_o = unit_d * 2.0f32.powi(ORDER_SHIFT);
         let unit_e = unit_above(max_power, FRACTION_BITS - 4);
+        // Both majorant grids (the reduced medium's has the same cells: same density grid and
+        // resolution), full first.
+        let (maj_origin, maj_cell, maj_dims, full_values) = tracer.majorant.storage();
+        let mut values = full_values.to_vec();
+        if let Some((_, maj)) = reduced {
+            let (_, _, dims, v) = maj.storage();
+            if dims != maj_dims {
+                return Err(Error::Device(format!("photon tracing: reduced majorant grid {dims} differs from the medium's {maj_dims}")));
+            }
+            values.extend_from_slice(v);
+        }
+        let majorants = ctx.storage_buffer("majorant grids", bytemuck::cast_slice(&values))?;
         let (lo, hi) = medium.world_bounds();
         let frame = &job.empty.frame;
         let base = TraceParams {
@@ -146,8 +160,8 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
             cell_dims: [frame.dims[0], frame.dims[1], frame.dims[2], cells as u32],
             box_lo: lo.extend(s.cutoff).to_array(),
             box_hi: hi.extend(0.0).to_array(),
-            full: phase_params(medium, tracer.majorant.max()),
-            reduced: reduced.map_or(PhaseParams::zeroed(), |(m, maj)| phase_params(m, maj.max())),
+            full: phase_params(medium),
+            reduced: reduced.map_or(PhaseParams::zeroed(), |(m, _)| phase_params(m)),
             units: [1.0 / unit_d, 1.0 / unit_o, 1.0 / unit_e, 0.0],
             flags: [
                 reduced.and(s.switch_order(medium.g)).unwrap_or(0),
@@ -157,6 +171,8 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
             ],
             seeds: [s.seed as u32, (s.seed >> 32) as u32, 0, 0],
             first: [0; 4],
+            maj_origin: maj_origin.extend(maj_cell).to_array(),
+            maj_dims: [maj_dims.x, maj_dims.y, maj_dims.z, full_values.len() as i32],
         };
         let pipeline = ctx.pipeline("photon_grid/trace.wgsl", WGSL, "main")?;
         let mut out = Vec::with_capacity(generations.len());
@@ -203,7 +219,7 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
                 let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;
                 let groups = n.div_ceil(64);
                 let mut enc = ctx.device.create_command_encoder(&Default::default());
-                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &sums], [groups, 1, 1]);
+                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &sums, &majorants], [groups, 1, 1]);
                 ctx.submit_and_wait(enc)?;
             }
             let words: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&sums, sum_bytes)?).to_vec();

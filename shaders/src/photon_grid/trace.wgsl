@@ -3,9 +3,9 @@
 // end: Woodcock / spectral tracking with a deposit into the cache at every tentative
 // collision, HG scattering, the transmittance cutoff and the similarity switch.
 //
-// Departures from the CPU, each for the GPU:
-// - one majorant for the whole medium per phase (the CPU walks a majorant grid by DDA): an
-//   unbiased estimator all the same, with more null collisions in sparse media;
+// Tracking walks the CPU's majorant grids (full and reduced medium) by the same DDA
+// (medium/majorant.rs `traverse`, in the density's index space). Departures from the CPU,
+// each for the GPU:
 // - random numbers from xoshiro128** seeded per photon (hash of seed, generation, photon
 //   index): the CPU's batches draw from one PCG32 stream in photon order, which invocations
 //   running side by side cannot share;
@@ -15,10 +15,10 @@
 //   The cache (cells x 2 lobes x 9 sums of 8 bytes) does not fit workgroup memory (wgpu's
 //   16 KiB: Fig. 12's smallest cache, 315 cells, takes 45 KiB; the default ~1 MiB), so the
 //   atomics go to device memory directly, with no second reduction pass.
-// density_at, ray_box come from the preludes (shaders/src/wgsl).
+// affine, density_at, ray_box come from the preludes (shaders/src/wgsl).
 
 struct Phase {
-    scale: vec4<f32>,   // density_scale (RGB), w: the majorant (max scaled extinction)
+    scale: vec4<f32>,   // density_scale (RGB), w: unused
     albedo: vec4<f32>,  // albedo (RGB), w: HG g
 };
 
@@ -36,6 +36,8 @@ struct Params {
     flags: vec4<u32>,       // order of the similarity switch (0: none), split order, deposit unscattered, photons in this dispatch
     seeds: vec4<u32>,       // seed (lo, hi), generation (lo, hi)
     first: vec4<u32>,       // index of this dispatch's first photon in its generation
+    maj_origin: vec4<f32>,  // majorant grid's minimum corner (index space), w: cell edge (voxels)
+    maj_dims: vec4<i32>,    // its cells per axis, w: where the reduced medium's values start
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -45,6 +47,8 @@ struct Params {
 // Per lobe and cell, CELL_WORDS words: 9 sums as (low, high) words of 64-bit integers; then
 // the energy's: escaped, absorbed, cut (RGB), scatterings, switched as 64-bit pairs.
 @group(0) @binding(3) var<storage, read_write> sums: array<atomic<u32>>;
+// The full medium's majorant grid values, then the reduced medium's (same cells).
+@group(0) @binding(4) var<storage, read> majorant: array<f32>;
 
 const CELL_WORDS: u32 = 18u;
 const MAX_TENTATIVE_STEPS: u32 = 4194304u; // medium/tracking.rs
@@ -203,6 +207,74 @@ fn max3(v: vec3<f32>) -> f32 {
     return max(v.x, max(v.y, v.z));
 }
 
+// ---- the majorant grid's DDA (medium/majorant.rs `traverse`), one segment per call ----
+const BIG: f32 = 3.4e38;
+var<private> dda_t: f32;
+var<private> dda_end: f32;
+var<private> dda_c: vec3<i32>;
+var<private> dda_step: vec3<i32>;
+var<private> dda_next: vec3<f32>;
+var<private> dda_delta: vec3<f32>;
+var<private> dda_done: bool;
+var<private> dda_values: i32;
+
+// Starts the walk of the index-space ray o + t di (t >= 0) over the grid whose values start at
+// `values`; dda_done when it misses.
+fn dda_start(o: vec3<f32>, di: vec3<f32>, values: i32) {
+    let dims = params.maj_dims.xyz;
+    let cell = params.maj_origin.w;
+    let gmin = params.maj_origin.xyz;
+    let gmax = gmin + vec3<f32>(dims) * cell;
+    dda_values = values;
+    dda_done = any(dims <= vec3<i32>(0));
+    let inv = 1.0 / di;
+    let ta = (gmin - o) * inv;
+    let tb = (gmax - o) * inv;
+    // A NaN slab (a ray parallel to and on a boundary) does not constrain.
+    let nan = (ta != ta) | (tb != tb);
+    let tnear = select(min(ta, tb), vec3<f32>(-BIG), nan);
+    let tfar = select(max(ta, tb), vec3<f32>(BIG), nan);
+    dda_t = max(0.0, max3(tnear));
+    dda_end = min(tfar.x, min(tfar.y, tfar.z));
+    if (!(dda_t < dda_end)) {
+        dda_done = true;
+        return;
+    }
+    let p = (o + di * dda_t - gmin) / cell;
+    dda_c = clamp(vec3<i32>(floor(p)), vec3<i32>(0), dims - vec3<i32>(1));
+    dda_step = select(vec3<i32>(-1), vec3<i32>(1), di > vec3<f32>(0.0));
+    let edge = gmin + vec3<f32>(dda_c + select(vec3<i32>(0), vec3<i32>(1), di > vec3<f32>(0.0))) * cell;
+    dda_next = select((edge - o) / di, vec3<f32>(BIG), di == vec3<f32>(0.0));
+    dda_delta = abs(vec3<f32>(cell) * inv);
+}
+
+// The next segment (t0, t1, majorant); advances the walk, setting dda_done after the last.
+// Use it only if t1 > t0.
+fn dda_segment() -> vec3<f32> {
+    var axis = 2;
+    if (dda_next.x < dda_next.y && dda_next.x < dda_next.z) {
+        axis = 0;
+    } else if (dda_next.y < dda_next.z) {
+        axis = 1;
+    }
+    let t1 = min(dda_next[axis], dda_end);
+    let dims = params.maj_dims.xyz;
+    let idx = dda_c.x + dims.x * (dda_c.y + dims.y * dda_c.z);
+    let seg = vec3<f32>(dda_t, t1, majorant[dda_values + idx]);
+    if (dda_next[axis] >= dda_end) {
+        dda_done = true;
+        return seg;
+    }
+    dda_t = t1;
+    dda_c[axis] += dda_step[axis];
+    if (dda_c[axis] < 0 || dda_c[axis] >= dims[axis]) {
+        dda_done = true;
+        return seg;
+    }
+    dda_next[axis] += dda_delta[axis];
+    return seg;
+}
+
 @compute @workgroup_size(64, 1, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let id = gid.x + gid.y * groups.x * 64u;
@@ -229,15 +301,24 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         if (reduced) {
             phase = params.reduced;
         }
-        let m = phase.scale.w;
         let inv_scale = 1.0 / max(max3(phase.scale.xyz), 1e-30);
         let deposits = order > 0u || params.flags.z != 0u;
         let lobe = select(0u, 1u, order >= params.flags.y);
-        // Free flight (tracking.rs `sample_free_flight_visiting`) over the box.
-        var t = span.x;
+        // Free flight (tracking.rs `sample_free_flight_visiting`): exponential steps at each
+        // majorant cell's rate, restarted at every cell's entry (memoryless).
+        let w2i = params.density_w2i;
+        let di = vec3<f32>(dot(w2i[0].xyz, d), dot(w2i[1].xyz, d), dot(w2i[2].xyz, d));
+        dda_start(affine(w2i, x), di, select(0, params.maj_dims.w, reduced));
+        var t = 0.0;
         var hit = false;
         var steps = 0u;
-        if (m > 0.0) {
+        while (!dda_done && !hit) {
+            let seg = dda_segment();
+            let m = seg.z;
+            if (!(seg.y > seg.x) || m <= 0.0) {
+                continue;
+            }
+            t = seg.x;
             loop {
                 let step = -log(1.0 - rng_f32()) / m;
                 let next = t + step;
@@ -248,7 +329,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
                     break;
                 }
                 t = next;
-                if (t >= span.y) {
+                if (t >= seg.y) {
                     break;
                 }
                 let p = x + d * t;
