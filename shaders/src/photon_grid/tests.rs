@@ -140,3 +140,23 @@ fn gpu_tracing_stops_on_cancel() {
     let r = solver.solve_generations_with(&Scene::default_scene(), 0, &Cancelled, &GpuPhotonBackend::new(&ctx));
     assert!(matches!(r, Err(Error::Cancelled)), "{:?}", r.err());
 }
+
+/// The host's path (`solve` with `--device gpu`, the CLI's and the C ABI's entry point) runs
+/// photon-grid's GPU backend, with exact single scattering from the compositor as on the CPU:
+/// the result is the CPU's within noise (the same bound as `check_against_cpu`, against the
+/// CPU's seed-to-seed relative RMSE).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn device_gpu_runs_the_gpu_backend() {
+    use crate::device::{DeviceChoice, DeviceUsed};
+    let scene = Scene::default_scene();
+    let map = |seed: u64| serde_json::json!({"photons": 1 << 14, "seed": seed, "cache_resolution": 12, "output_resolution": 24}).as_object().unwrap().clone();
+    let (gpu, used) = crate::solve(DeviceChoice::Gpu, &scene, "photon-grid", &map(1), &NoProgress).unwrap();
+    assert!(matches!(used, DeviceUsed::Gpu(_)), "ran on {used}");
+    let (cpu1, _) = crate::solve(DeviceChoice::Cpu, &scene, "photon-grid", &map(1), &NoProgress).unwrap();
+    let (cpu2, _) = crate::solve(DeviceChoice::Cpu, &scene, "photon-grid", &map(2), &NoProgress).unwrap();
+    let noise = relative_rmse(&cpu2.scattering.data, &cpu1.scattering.data);
+    let e = relative_rmse(&gpu.scattering.data, &cpu1.scattering.data);
+    eprintln!("--device gpu: S relative RMSE against the CPU {e:.4}, CPU seed to seed {noise:.4}");
+    assert!(noise > 0.0 && e < 1.5 * noise, "gpu vs cpu {e}, noise {noise}");
+}
