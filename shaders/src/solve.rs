@@ -1,6 +1,6 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
 //! A solver whose registry entry has `gpu` set (today: `pop`: sweep, propagation, merge,
-//! upsampling; `photon-grid`: photon tracing) runs its GPU backend from `gpu_backend`; the others, and every solver under
+//! upsampling; `photon-grid`: photon tracing, exact single scattering) runs its GPU backend from `gpu_backend`; the others, and every solver under
 //! `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a software adapter or a GPU failure (no
 //! adapter, out of memory, lost device: `Error::Device`) runs the CPU solver instead, with a
 //! note on stderr.
@@ -46,8 +46,9 @@ fn pop_on_gpu(
     Ok(out)
 }
 
-/// `photon-grid` with its photon tracing on the GPU (the ring, reconstruction and exact single
-/// scattering on the CPU: photon_grid/mod.rs says why); a session's ring lives in `state`.
+/// `photon-grid` with its photon tracing and exact single scattering on the GPU (the ring and
+/// the reconstruction on the CPU: photon_grid/mod.rs says why); a session's ring lives in
+/// `state`.
 fn photon_grid_on_gpu(
     ctx: &GpuContext,
     scene: &Scene,

@@ -367,7 +367,7 @@ const VPL: SolverEntry = SolverEntry {
 const PHOTON_GRID: SolverEntry = SolverEntry {
     name: "photon-grid",
     label: "Photon Grid",
-    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20); noise falls as photons^-0.47. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve). On a GPU the photon tracing runs on the device (other random numbers: equal in distribution, S within the noise of two seeds on lavapipe)",
+    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20); noise falls as photons^-0.47. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve). On a GPU the photon tracing and exact single scattering run on the device (other random numbers: equal in distribution, S within the noise of two seeds on lavapipe)",
     settings: &[
         SettingSpec::int("photons", "photons traced per solve, equal flux each").range(1.0, (1u32 << 30) as f64),
         SettingSpec::int("seed", "random seed (deterministic for a seed, any thread count)"),

@@ -1,7 +1,8 @@
 //! `photon-grid`'s tracing on the GPU (`trace.wgsl`): a `PhotonBackend` whose generations are
 //! traced one invocation per photon, their deposits summed in 64-bit fixed point by integer
-//! atomics and read back as the CPU's `FixedTallies`, so that the ring (ring.rs), the cache's
-//! reconstruction and exact single scattering run unchanged on the CPU.
+//! atomics and read back as the CPU's `FixedTallies`, so that the ring (ring.rs) and the
+//! cache's reconstruction run unchanged on the CPU; exact single scattering runs the
+//! compositor's GPU kernel.
 //!
 //! Photons' rays (origin, direction, power) are drawn on the CPU by the shared `LightSampler`
 //! (in parallel) and uploaded a chunk at a time: every light type (sun, dome with its importance map, point,
@@ -28,7 +29,8 @@ use volscatter_core::solvers::photon_grid::backend::{PhotonBackend, TraceJob};
 use volscatter_core::solvers::photon_grid::fixed::{fix_units, FixedCell, FixedTallies};
 use volscatter_core::solvers::photon_grid::ring::Generation;
 use volscatter_core::solvers::photon_grid::trace::EnergyReport;
-use volscatter_core::{Error, Result};
+use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::{Error, Result, Scene};
 
 pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box"], "photon_grid/trace.wgsl");
 
@@ -248,6 +250,15 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
             out.push(Generation { index: g, tallies: [lobe(0), lobe(1)], energy });
         }
         Ok(out)
+    }
+
+    /// The compositor's single-scattering kernel (composite/single.rs: equal to the CPU's
+    /// within 1e-5 relative RMSE); one dispatch, so the cancel flag is read before it.
+    fn single_scattering(&self, scene: &Scene, resolution: u32, dome_directions: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
+        Ok(crate::composite::single::single_scattering_grid(self.ctx, scene, resolution, dome_directions)?)
     }
 }
 

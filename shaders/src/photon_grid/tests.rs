@@ -142,8 +142,8 @@ fn gpu_tracing_stops_on_cancel() {
 }
 
 /// The host's path (`solve` with `--device gpu`, the CLI's and the C ABI's entry point) runs
-/// photon-grid's GPU backend, with exact single scattering from the compositor as on the CPU:
-/// the result is the CPU's within noise (the same bound as `check_against_cpu`, against the
+/// photon-grid's GPU backend, exact single scattering included (the compositor's GPU kernel,
+/// within 1e-5 of the CPU's): the result is the CPU's within noise (the same bound as `check_against_cpu`, against the
 /// CPU's seed-to-seed relative RMSE).
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]

@@ -1,15 +1,18 @@
-//! Where `photon-grid` traces its photons: the heavy stage (every photon's Woodcock tracking
-//! with a deposit at each tentative collision) goes through a `PhotonBackend`, the CPU code of
-//! trace.rs (`CpuBackend`) or the GPU port in volscatter-gpu. Everything else (the ring of
-//! generations in integers, the cache's mass, the reconstruction, exact single scattering)
-//! stays with the solver: it is linear in cells, not photons.
+//! Where `photon-grid` runs its heavy stages: the tracing (every photon's Woodcock tracking
+//! with a deposit at each tentative collision) and exact single scattering go through a
+//! `PhotonBackend`, the CPU code (`CpuBackend`: trace.rs, the compositor) or the GPU port in
+//! volscatter-gpu. The rest (the ring of generations in integers, the cache's mass, the
+//! reconstruction) stays with the solver: it is linear in cells, not photons.
 
 use rayon::prelude::*;
 
 use super::cache::Cache;
 use super::ring::{self, Generation};
 use super::trace::Tracer;
+use crate::compositor::single_scattering_grid_cancellable;
 use crate::error::Result;
+use crate::scene::Scene;
+use crate::solvers::{Progress, ScatteringGrid};
 use crate::translate::LightSampler;
 
 /// What tracing a generation needs: the tracer (media, majorants, settings, lobe split,
@@ -32,6 +35,12 @@ pub trait PhotonBackend: Sync {
     /// Traces `generations` (ring.rs), returned in the order given. A cancelled trace may
     /// return cut-short generations: the caller checks `progress` and discards them.
     fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>>;
+
+    /// Exact single scattering (`SingleScattering::Exact`): the compositor's grid at
+    /// `resolution` with `dome_directions`, on the CPU unless the backend has its own.
+    fn single_scattering(&self, scene: &Scene, resolution: u32, dome_directions: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
+        single_scattering_grid_cancellable(scene, resolution, dome_directions, progress)
+    }
 }
 
 /// Tracing on the CPU (trace.rs), the generations in parallel.

@@ -36,7 +36,7 @@ pub use reconstruct::Lobe;
 pub use settings::{PhotonGridSettings, Similarity, SingleScattering};
 pub use trace::EnergyReport;
 
-use crate::compositor::{dome_directions_for, single_scattering_grid_cancellable, CompositeOptions};
+use crate::compositor::{dome_directions_for, CompositeOptions};
 use crate::error::{Error, Result};
 use crate::medium::MajorantGrid;
 use crate::scene::Scene;
@@ -115,7 +115,7 @@ impl PhotonGrid {
     }
 
     /// S from the ring's cache: its lobes towards the camera, plus exact single scattering.
-    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
+    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
         }
@@ -125,7 +125,7 @@ impl PhotonGrid {
         let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(medium, &tallies, scene.camera.position, res))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
-            let single = timings.time("single scattering", || single_scattering_grid_cancellable(scene, res, dirs, progress))?;
+            let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;
             // Same medium, same max_dim: the same frame (ScatteringGrid::over_medium).
             debug_assert_eq!(single.dims, s.dims);
             for (a, b) in s.data.iter_mut().zip(&single.data) {
@@ -154,7 +154,7 @@ impl PhotonGrid {
             return Err(Error::Cancelled);
         }
         let ring = self.fresh_ring(scene, first, &mut timings, progress, backend)?;
-        self.finish(scene, &ring, timings, progress)
+        self.finish(scene, &ring, timings, progress, backend)
     }
 
     /// One frame of a session (`Solver::solve_in_session`) with its report: the first frame
@@ -186,7 +186,7 @@ impl PhotonGrid {
             None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress, backend)?),
         }
         match kept.0.as_ref() {
-            Some(ring) => self.finish(scene, ring, timings, progress),
+            Some(ring) => self.finish(scene, ring, timings, progress, backend),
             None => unreachable!("the ring was set just above"),
         }
     }
