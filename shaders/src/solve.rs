@@ -1,6 +1,6 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
-//! A solver whose registry entry has `gpu` set (today: `pop`: sweep, propagation, merge,
-//! upsampling) runs its GPU backend from `gpu_backend`; the others, and every solver under
+//! A solver whose registry entry has `gpu` set (`pop`: sweep, propagation, merge,
+//! upsampling; `network`: the iteration) runs its GPU backend from `gpu_backend`; the others, and every solver under
 //! `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a software adapter or a GPU failure (no
 //! adapter, out of memory, lost device: `Error::Device`) runs the CPU solver instead, with a
 //! note on stderr.
@@ -8,6 +8,7 @@
 use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
 use crate::pop::backend::GpuBackend;
 use crate::GpuContext;
+use volscatter_core::solvers::network::Network;
 use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
 use volscatter_core::solvers::session::{Session, SessionState};
@@ -24,6 +25,7 @@ type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Val
 fn gpu_backend(name: &str) -> Option<GpuSolve> {
     match name {
         "pop" => Some(pop_on_gpu),
+        "network" => Some(network_on_gpu),
         _ => None,
     }
 }
@@ -40,6 +42,20 @@ fn pop_on_gpu(
     let pop_solver = Pop::from_settings(settings)?;
     let reuse = state.kept(PopReuse::default);
     let (out, _report) = pop_solver.solve_reusing(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY), Some(reuse))?;
+    Ok(out)
+}
+
+/// `network` with its iteration on the GPU; the network and its radiance are kept in `state`
+/// on the host, as on the CPU (a camera move re-splats without iterating).
+fn network_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let backend = crate::network::GpuBackend::new(ctx, crate::network::CHECK_EVERY);
+    let (out, _report) = Network::from_settings(settings)?.solve_on(scene, progress, &backend, Some(state))?;
     Ok(out)
 }
 
