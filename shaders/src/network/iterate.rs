@@ -151,4 +151,4 @@ pub fn iterate(ctx: &GpuContext, input: &IterationInput, start: Option<Vec<Vec3>
 
 #[cfg(test)]
 #[path = "iterate_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -2,14 +2,16 @@
 //! The network (particles, visibility lists and opacities, phase matrix) and the direct light
 //! are built on the CPU and kept there across a session's frames; this backend uploads what
 //! the iteration needs on every call (the GPU buffers are rebuilt per frame: a camera move,
-//! which keeps I, uploads nothing). The splat runs on the CPU.
+//! which keeps I, uploads nothing to the iteration). The splat's accumulation (points x
+//! particles) runs on the GPU too (splat.rs).
 
 pub mod iterate;
+pub mod splat;
 
 use glam::Vec3;
 
 use crate::GpuContext;
-use volscatter_core::solvers::network::backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput};
+use volscatter_core::solvers::network::backend::{IterationInput, NetworkBackend, SplatInput};
 use volscatter_core::solvers::network::iterate::Iterated;
 use volscatter_core::solvers::{Progress, ScatteringGrid};
 use volscatter_core::Result;
@@ -35,7 +37,7 @@ impl NetworkBackend for GpuBackend<'_> {
         Ok(iterate::iterate(self.ctx, input, start, self.check_every, progress)?)
     }
 
-    fn splat(&self, grid: &mut ScatteringGrid, input: &SplatInput) -> Result<()> {
-        CpuBackend.splat(grid, input)
+    fn splat(&self, grid: &mut ScatteringGrid, input: &SplatInput, progress: &dyn Progress) -> Result<()> {
+        splat::splat(self.ctx, grid, input, progress)
     }
 }

@@ -44,8 +44,9 @@ pub trait NetworkBackend {
     /// what it has, once `progress` is cancelled (the caller then discards it).
     fn iterate(&self, input: &IterationInput, start: Option<Vec<Vec3>>, progress: &dyn Progress) -> Result<Iterated>;
 
-    /// Adds sigma_s x the particles' splatted radiance towards the camera into `grid`.
-    fn splat(&self, grid: &mut ScatteringGrid, input: &SplatInput) -> Result<()>;
+    /// Adds sigma_s x the particles' splatted radiance towards the camera into `grid`; may
+    /// return `Error::Cancelled` once `progress` is cancelled.
+    fn splat(&self, grid: &mut ScatteringGrid, input: &SplatInput, progress: &dyn Progress) -> Result<()>;
 }
 
 /// The CPU stages.
@@ -56,7 +57,8 @@ impl NetworkBackend for CpuBackend {
         Ok(iterate::iterate(x.links, x.phase, x.first, x.albedo, x.max_iterations, x.threshold, start, progress))
     }
 
-    fn splat(&self, grid: &mut ScatteringGrid, x: &SplatInput) -> Result<()> {
+    /// Not cancellable inside (as before the backend split): the solve looks before and after.
+    fn splat(&self, grid: &mut ScatteringGrid, x: &SplatInput, _progress: &dyn Progress) -> Result<()> {
         let values = splat::towards_viewer(x.particles, x.radiance, x.dirs, x.medium.g, x.camera);
         splat::splat_into(grid, x.medium, x.particles, &values, x.kernel_radius, x.range_sigma);
         Ok(())

@@ -30,7 +30,7 @@ mod directions;
 pub mod iterate;
 pub mod particles;
 pub mod settings;
-mod splat;
+pub mod splat;
 pub mod visibility;
 #[cfg(test)]
 mod bench;
@@ -199,7 +199,7 @@ impl Network {
             kernel_radius: s.kernel_radius,
             range_sigma: s.range_sigma,
         };
-        let splatted = timings.time("network splat", || backend.splat(&mut scattering, &input));
+        let splatted = timings.time("network splat", || backend.splat(&mut scattering, &input, progress));
         // Kept whether or not the splat succeeded: a failed GPU splat leaves a whole network
         // and I for the CPU fallback or the next frame.
         kept.0 = Some(net);
