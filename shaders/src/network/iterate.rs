@@ -124,9 +124,13 @@ pub fn iterate(ctx: &GpuContext, input: &IterationInput, start: Option<Vec<Vec3>
     let source_k = ctx.pipeline("network/source.wgsl", SOURCE_WGSL, "main")?;
     let sweep_k = ctx.pipeline("network/sweep.wgsl", SWEEP_WGSL, "main")?;
     let residual_k = ctx.pipeline("network/residual.wgsl", RESIDUAL_WGSL, "main")?;
+    // A batch's source products cost N D^2 multiply-adds per iteration: at most ~2^31 of
+    // them between two looks at cancellation (tens of ms on a current GPU; one iteration per
+    // batch at the largest settings).
+    let per_batch = check_every.clamp(1, ((1u64 << 31) / (pairs * d as u64)).clamp(1, u32::MAX as u64) as u32);
     let (mut recorded, mut count) = (0u32, 0u32);
     while recorded < input.max_iterations && !progress.cancelled() {
-        let batch = check_every.max(1).min(input.max_iterations - recorded);
+        let batch = per_batch.min(input.max_iterations - recorded);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         for _ in 0..batch {
             ctx.record(&mut enc, &source_k, &[&params_buf, &state, &phase, &first, &radiance, &source], [(d as u32).div_ceil(TILE), (n as u32).div_ceil(TILE), 1]);

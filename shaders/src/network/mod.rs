@@ -7,6 +7,8 @@
 
 pub mod iterate;
 pub mod splat;
+#[cfg(test)]
+mod bench;
 
 use glam::Vec3;
 
