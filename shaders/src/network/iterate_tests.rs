@@ -153,3 +153,29 @@ fn gpu_network_session_keeps_the_network() {
     eprintln!("warm GPU ({} iterations) against cold CPU ({}): S rel. RMSE {e:e}", rep.residuals.len(), cold_rep.residuals.len());
     assert!(e < 1e-3, "warm GPU against cold CPU: S relative RMSE {e}");
 }
+
+/// Through the dispatch table (what the CLI and the C ABI call): `--device gpu` runs network
+/// on the GPU, one-off and in a session (a camera move keeps I: the frame equals its one-off
+/// GPU solve bit for bit), and `--device cpu` gives the CPU's S, within the splat's exp
+/// rounding (1e-5 relative RMSE, as above).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
+fn gpu_device_choice_runs_network_on_the_gpu() {
+    use crate::{solve, solve_session, DeviceChoice, DeviceUsed};
+    use volscatter_core::solvers::session::Session;
+    let settings = serde_json::json!({"particles": 512, "directions": 32, "output_resolution": 12}).as_object().unwrap().clone();
+    let mut session = Session::new("network", &settings).unwrap();
+    for f in 0..2 {
+        let mut sc = cube_g07();
+        sc.camera = Camera::look_at(Quat::from_rotation_z(0.4 * f as f32) * sc.camera.position, Vec3::ZERO, Vec3::Z, 22.0, 16, 16);
+        let (gpu, used) = solve(DeviceChoice::Gpu, &sc, "network", &settings, &NoProgress).unwrap();
+        assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: ran on {used}");
+        let (kept, used) = solve_session(DeviceChoice::Gpu, &mut session, &sc, &NoProgress).unwrap();
+        assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: session ran on {used}");
+        assert_eq!(kept.scattering.data, gpu.scattering.data, "frame {f}: session against one-off");
+        let (cpu, used) = solve(DeviceChoice::Cpu, &sc, "network", &settings, &NoProgress).unwrap();
+        assert_eq!(used, DeviceUsed::Cpu);
+        let e = relative_rmse(&gpu.scattering.data, &cpu.scattering.data);
+        assert!(e < 1e-5, "frame {f}: GPU against CPU S relative RMSE {e}");
+    }
+}
