@@ -3,17 +3,25 @@ shared fixtures, time per iteration on the paper's cloud (N 512 / 1024, D 128) a
 a camera-orbit frame in a session against a full solve. Writes the "network" section of
 BENCHMARKS.md.
 
-    python3 scripts/bench_network.py
+    python3 scripts/bench_network.py               # CPU section, then the GPU section
+    python3 scripts/bench_network.py --gpu-only    # only the "network-gpu" section
+    python3 scripts/bench_network.py --gpu-only --quick   # small sizes (a software adapter)
 
 Runs the ignored tests of core/src/solvers/network/bench.rs (they time, never assert on
-speed; they need the crate's fixtures and internals) and reads their `BENCH_JSON` lines.
+speed; they need the crate's fixtures and internals) and of shaders/src/network/bench.rs (the
+CPU and GPU backends on the same scenes, with the adapter's name), and reads their
+`BENCH_JSON` lines. The GPU section records the adapter and absolute times: on a machine
+with a real GPU, rerun `--gpu-only` to replace it.
 """
 
 from __future__ import annotations
 
+import argparse
 import datetime
+import json
 import os
 import platform
+import subprocess
 import sys
 from pathlib import Path
 
@@ -23,7 +31,63 @@ from benchmarks_md import write_section  # noqa: E402
 from bench_photon_grid import run_benches  # noqa: E402
 
 
+def run_gpu_bench(quick: bool) -> dict:
+    """shaders/src/network/bench.rs: its one BENCH_JSON document's data."""
+    cmd = ["cargo", "test", "--release", "-q", "-p", "volscatter-gpu", "--lib", "--", "--ignored", "network::bench",
+           "--nocapture", "--test-threads", "1"]
+    env = dict(os.environ, NETWORK_BENCH_QUICK="1" if quick else "0")
+    print("$", " ".join(cmd), file=sys.stderr, flush=True)
+    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, env=env)
+    sys.stderr.write(out.stderr[-4000:])
+    if out.returncode != 0:
+        sys.exit(f"network GPU bench failed ({out.returncode})")
+    for line in out.stdout.splitlines():
+        at = line.find("BENCH_JSON ")
+        if at >= 0:
+            return json.loads(line[at + len("BENCH_JSON "):])["data"]
+    sys.exit("network GPU bench printed no BENCH_JSON line")
+
+
+def gpu_section(quick: bool) -> None:
+    g = run_gpu_bench(quick)
+    kind = ("lavapipe (software, for correctness only: NOT GPU speed)" if g["software"] else "hardware GPU")
+    lines = [
+        "## network on the GPU (`scripts/bench_network.py --gpu-only`)",
+        "",
+        f"{datetime.date.today().isoformat()}, adapter: {g['device']}: {kind}; CPU {platform.machine()},"
+        f" {os.cpu_count()} cores{' (quick sizes)' if g['quick'] else ''}. Wall-clock seconds of the same solve on the CPU"
+        " backend and on the GPU backend (iteration: source product, column sweep, residual; splat: the"
+        " points x particles accumulation); the network, direct light and single scattering are on the CPU in both.",
+        "Scene: the paper's cloud (2 R tau = 20, albedo 0.9, g 0, two distant lights and a sky) on the 64^3 cumulus.",
+        "",
+        "| N | D | output | iterations | CPU ms/iteration | GPU ms/iteration | CPU splat s | GPU splat s | CPU solve s | GPU solve s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in g["rows"]:
+        c, q = r["cpu"], r["gpu"]
+        its = f"{c['iterations']}" if c["iterations"] == q["iterations"] else f"{c['iterations']} / {q['iterations']}"
+        lines.append(f"| {r['particles']} | {r['directions']} | {r['output_resolution']} | {its} |"
+                     f" {c['per_iteration_ms']:.2f} | {q['per_iteration_ms']:.2f} | {c['splat_seconds']:.3f} |"
+                     f" {q['splat_seconds']:.3f} | {c['solve_seconds']:.3f} | {q['solve_seconds']:.3f} |")
+    lines += [
+        "",
+        "The paper reports 45 and 26 frames per second at N 512 and 1024 (D 128) for its whole GPU frame.",
+    ]
+    path = write_section("network-gpu", "\n".join(lines) + "\n")
+    print(f"wrote {path}", file=sys.stderr)
+
+
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gpu-only", action="store_true", help="only the GPU section (network-gpu)")
+    ap.add_argument("--quick", action="store_true", help="GPU section at small sizes (for a software adapter)")
+    args = ap.parse_args()
+    if not args.gpu_only:
+        cpu_section()
+    gpu_section(args.quick)
+
+
+def cpu_section() -> None:
     b = run_benches("solvers::network")
     lines = [
         "## network (illumination networks, paper 02; `scripts/bench_network.py`)",

@@ -14,6 +14,7 @@ pub mod composite;
 pub mod context;
 pub mod device;
 pub mod photon_grid;
+pub mod network;
 pub mod pop;
 pub mod solve;
 pub mod upload;

@@ -1,6 +1,6 @@
 //! Solving on the device the host chose: the shared entry point of the CLI and the C ABI.
-//! A solver whose registry entry has `gpu` set (today: `pop`: sweep, propagation, merge,
-//! upsampling; `photon-grid`: photon tracing, exact single scattering) runs its GPU backend from `gpu_backend`; the others, and every solver under
+//! A solver whose registry entry has `gpu` set runs its GPU backend from `gpu_backend` (what
+//! each runs on the GPU is said at its function below); the others, and every solver under
 //! `DeviceChoice::Cpu`, run on the CPU. Under `Auto`, a software adapter or a GPU failure (no
 //! adapter, out of memory, lost device: `Error::Device`) runs the CPU solver instead, with a
 //! note on stderr.
@@ -9,6 +9,7 @@ use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
 use crate::photon_grid::GpuPhotonBackend;
 use crate::pop::backend::GpuBackend;
 use crate::GpuContext;
+use volscatter_core::solvers::network::Network;
 use volscatter_core::solvers::photon_grid::PhotonGrid;
 use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
@@ -27,6 +28,7 @@ fn gpu_backend(name: &str) -> Option<GpuSolve> {
     match name {
         "pop" => Some(pop_on_gpu),
         "photon-grid" => Some(photon_grid_on_gpu),
+        "network" => Some(network_on_gpu),
         _ => None,
     }
 }
@@ -58,6 +60,21 @@ fn photon_grid_on_gpu(
 ) -> Result<SolveOutput> {
     let solver = PhotonGrid::from_settings(settings)?;
     let (out, _report) = solver.solve_in_session_with(scene, progress, state, &GpuPhotonBackend::new(ctx))?;
+    Ok(out)
+}
+
+/// `network` with its iteration and its splat's accumulation on the GPU; the network and its
+/// radiance are kept in `state` on the host, as on the CPU (a camera move re-splats without
+/// iterating).
+fn network_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let backend = crate::network::GpuBackend::new(ctx, crate::network::CHECK_EVERY);
+    let (out, _report) = Network::from_settings(settings)?.solve_on(scene, progress, &backend, Some(state))?;
     Ok(out)
 }
 

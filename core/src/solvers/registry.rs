@@ -442,7 +442,7 @@ const NETWORK: SolverEntry = SolverEntry {
         Preset { name: "final", help: FINAL, settings_json: r#"{"particles": 8192, "directions": 128, "output_resolution": 128}"# },
     ],
     cpu: |m| Ok(Box::new(network::Network::from_settings(m)?)),
-    gpu: false,
+    gpu: true,
 };
 
 const LPM: SolverEntry = SolverEntry {

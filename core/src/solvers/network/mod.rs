@@ -19,15 +19,19 @@
 //! one-off answer), a change of the lights iterates from it (warm start: the same fixed point to
 //! the residual threshold, not bit for bit).
 //!
-//! Not yet here (issue 18): the GPU backend.
+//! The stages over every (particle, direction) pair and every output cell (the iteration, the
+//! splat) run through a `NetworkBackend` (backend.rs): the CPU code here, or volscatter-gpu's
+//! port. The network itself (particles, visibility, phase matrix) and the direct light are
+//! built on the CPU.
 
+pub mod backend;
 mod direct;
 mod directions;
-mod iterate;
-mod particles;
+pub mod iterate;
+pub mod particles;
 pub mod settings;
-mod splat;
-mod visibility;
+pub mod splat;
+pub mod visibility;
 #[cfg(test)]
 mod bench;
 #[cfg(test)]
@@ -36,6 +40,8 @@ mod session_tests;
 mod tests;
 
 pub use settings::NetworkSettings;
+
+use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput};
 
 use super::pop::reuse::MediumKey;
 use super::session::SessionState;
@@ -101,7 +107,17 @@ impl Network {
 
     /// Solves and returns what the iteration did along with S and the timings.
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, NetworkReport)> {
-        self.solve_keeping(scene, progress, &mut KeptNetwork(None))
+        self.solve_keeping(scene, progress, &CpuBackend, &mut KeptNetwork(None))
+    }
+
+    /// A solve with the iteration and the splat on `backend`; with `state`, one frame of a
+    /// session (as `solve_in_session_detailed`: the network and I are kept on the host, so
+    /// a camera move costs only the backend's splat).
+    pub fn solve_on(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, state: Option<&mut SessionState>) -> Result<(SolveOutput, NetworkReport)> {
+        match state {
+            Some(state) => self.solve_keeping(scene, progress, backend, state.kept(KeptNetwork::default)),
+            None => self.solve_keeping(scene, progress, backend, &mut KeptNetwork(None)),
+        }
     }
 
     /// One frame of a session with its report: the network (particles, visibility links,
@@ -109,10 +125,10 @@ impl Network {
     /// transform and material); I is kept as is when the direct light is bit-identical too
     /// (a camera move: S is exactly the one-off solve's), else iterated from the previous I.
     pub fn solve_in_session_detailed(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<(SolveOutput, NetworkReport)> {
-        self.solve_keeping(scene, progress, state.kept(KeptNetwork::default))
+        self.solve_keeping(scene, progress, &CpuBackend, state.kept(KeptNetwork::default))
     }
 
-    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, kept: &mut KeptNetwork) -> Result<(SolveOutput, NetworkReport)> {
+    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, kept: &mut KeptNetwork) -> Result<(SolveOutput, NetworkReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -158,7 +174,15 @@ impl Network {
         } else {
             let start = (!net.radiance.is_empty()).then(|| std::mem::take(&mut net.radiance));
             report.start = if start.is_some() { Start::Warm } else { Start::Cold };
-            let it = timings.time("network iterate", || iterate::iterate(&net.links, &net.phase, &first, medium.albedo, s.max_iterations, s.residual_threshold, start, progress));
+            let input = IterationInput { links: &net.links, phase: &net.phase, first: &first, albedo: medium.albedo, max_iterations: s.max_iterations, threshold: s.residual_threshold };
+            let it = match timings.time("network iterate", || backend.iterate(&input, start, progress)) {
+                Ok(it) => it,
+                Err(e) => {
+                    // The network itself is whole (I is dropped: the next solve iterates cold).
+                    kept.0 = Some(net);
+                    return Err(e);
+                }
+            };
             report.residuals = it.residuals;
             net.radiance = it.radiance;
             net.first = first;
@@ -166,12 +190,21 @@ impl Network {
         if !progress.update("network iterate", 0.9) {
             return Err(Error::Cancelled);
         }
-        timings.time("network splat", || {
-            let values = splat::towards_viewer(&net.particles, &net.radiance, &net.dirs, medium.g, scene.camera.position);
-            splat::splat_into(&mut scattering, medium, &net.particles, &values, s.kernel_radius, s.range_sigma);
-        });
-        progress.update("network splat", 1.0);
+        let input = SplatInput {
+            medium,
+            particles: &net.particles,
+            radiance: &net.radiance,
+            dirs: &net.dirs,
+            camera: scene.camera.position,
+            kernel_radius: s.kernel_radius,
+            range_sigma: s.range_sigma,
+        };
+        let splatted = timings.time("network splat", || backend.splat(&mut scattering, &input, progress));
+        // Kept whether or not the splat succeeded: a failed GPU splat leaves a whole network
+        // and I for the CPU fallback or the next frame.
         kept.0 = Some(net);
+        splatted?;
+        progress.update("network splat", 1.0);
         Ok((SolveOutput::new(scattering, timings), report))
     }
 }

@@ -28,6 +28,10 @@ impl Particles {
     pub fn len(&self) -> usize {
         self.position.len()
     }
+
+    pub fn is_empty(&self) -> bool {
+        self.position.is_empty()
+    }
 }
 
 /// `n` particles, stratified: the i-th takes u = (i + xi) / n in the cells' CDF of density,

@@ -29,9 +29,24 @@ pub fn towards_viewer(p: &Particles, radiance: &[Vec3], dirs: &[Vec3], g: f32, c
         .collect()
 }
 
-/// sigma_s(x) x the kernel-weighted mean of `values` at every point of `grid` inside the
-/// medium, added to `grid`. A point no kernel reaches takes its nearest particle's value.
-pub fn splat_into(grid: &mut ScatteringGrid, medium: &Medium, p: &Particles, values: &[Vec3], kernel_radius: f32, range_sigma: f32) {
+/// A particle's kernel: the grid points it reaches (inclusive index box) and 1 / (2 sigma^2).
+#[derive(Clone, Copy, Debug)]
+pub struct Footprint {
+    pub lo: glam::IVec3,
+    pub hi: glam::IVec3,
+    pub inv_spatial: f32,
+}
+
+/// What the accumulation over particles reads besides them (the part a GPU backend ports).
+pub struct SplatPrep {
+    /// Unscaled density at every grid point (0 outside the medium: such points take nothing).
+    pub dens: Vec<f32>,
+    /// 1 / (2 (range_sigma x the largest density)^2).
+    pub inv_range: f32,
+    pub footprints: Vec<Footprint>,
+}
+
+pub fn prepare(grid: &ScatteringGrid, medium: &Medium, p: &Particles, kernel_radius: f32, range_sigma: f32) -> SplatPrep {
     let [nx, ny, nz] = grid.dims;
     let dens: Vec<f32> = (0..grid.len())
         .map(|c| {
@@ -44,15 +59,32 @@ pub fn splat_into(grid: &mut ScatteringGrid, medium: &Medium, p: &Particles, val
     let to_grid = grid.index_to_world.inverse();
     let m = grid.index_to_world.matrix3;
     let spacing = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
+    let footprints = p
+        .position
+        .iter()
+        .zip(&p.radius)
+        .map(|(&x, &radius)| {
+            let sigma = kernel_radius * radius;
+            let q = to_grid.transform_point3(x);
+            let half = ((3.0 * sigma / spacing).ceil() as i32).clamp(1, MAX_HALF_EXTENT);
+            Footprint {
+                lo: (q.round().as_ivec3() - half).max(glam::IVec3::ZERO),
+                hi: (q.round().as_ivec3() + half).min(glam::IVec3::new(nx as i32 - 1, ny as i32 - 1, nz as i32 - 1)),
+                inv_spatial: 1.0 / (2.0 * sigma * sigma),
+            }
+        })
+        .collect();
+    SplatPrep { dens, inv_range, footprints }
+}
+
+/// Per grid point, the kernel-weighted sum of `values` and the sum of the weights, particles
+/// in index order.
+pub fn accumulate(grid: &ScatteringGrid, p: &Particles, values: &[Vec3], prep: &SplatPrep) -> (Vec<Vec3>, Vec<f32>) {
+    let dens = &prep.dens;
     let mut num = vec![Vec3::ZERO; grid.len()];
     let mut den = vec![0.0f32; grid.len()];
     for (i, (&x, &value)) in p.position.iter().zip(values).enumerate() {
-        let sigma = kernel_radius * p.radius[i];
-        let inv_spatial = 1.0 / (2.0 * sigma * sigma);
-        let q = to_grid.transform_point3(x);
-        let half = ((3.0 * sigma / spacing).ceil() as i32).clamp(1, MAX_HALF_EXTENT);
-        let lo = (q.round().as_ivec3() - half).max(glam::IVec3::ZERO);
-        let hi = (q.round().as_ivec3() + half).min(glam::IVec3::new(nx as i32 - 1, ny as i32 - 1, nz as i32 - 1));
+        let Footprint { lo, hi, inv_spatial } = prep.footprints[i];
         for k in lo.z..=hi.z {
             for j in lo.y..=hi.y {
                 for ii in lo.x..=hi.x {
@@ -62,13 +94,20 @@ pub fn splat_into(grid: &mut ScatteringGrid, medium: &Medium, p: &Particles, val
                     }
                     let ds = (grid.position(ii as u32, j as u32, k as u32) - x).length_squared();
                     let dr = dens[c] - p.density[i];
-                    let w = (-ds * inv_spatial - dr * dr * inv_range).exp();
+                    let w = (-ds * inv_spatial - dr * dr * prep.inv_range).exp();
                     num[c] += value * w;
                     den[c] += w;
                 }
             }
         }
     }
+    (num, den)
+}
+
+/// Adds sigma_s x the weighted mean (`num` / `den`) into `grid` at every point inside the
+/// medium; a point no kernel reaches takes its nearest particle's value.
+pub fn finish(grid: &mut ScatteringGrid, medium: &Medium, p: &Particles, values: &[Vec3], dens: &[f32], num: &[Vec3], den: &[f32]) {
+    let [nx, ny, _] = grid.dims;
     for c in 0..grid.len() {
         if dens[c] <= 0.0 {
             continue;
@@ -83,4 +122,12 @@ pub fn splat_into(grid: &mut ScatteringGrid, medium: &Medium, p: &Particles, val
         };
         grid.data[c] += medium.sigma_s(dens[c]) * mean;
     }
+}
+
+/// sigma_s(x) x the kernel-weighted mean of `values` at every point of `grid` inside the
+/// medium, added to `grid`. A point no kernel reaches takes its nearest particle's value.
+pub fn splat_into(grid: &mut ScatteringGrid, medium: &Medium, p: &Particles, values: &[Vec3], kernel_radius: f32, range_sigma: f32) {
+    let prep = prepare(grid, medium, p, kernel_radius, range_sigma);
+    let (num, den) = accumulate(grid, p, values, &prep);
+    finish(grid, medium, p, values, &prep.dens, &num, &den);
 }
