@@ -13,6 +13,7 @@
 pub mod composite;
 pub mod context;
 pub mod device;
+pub mod lpm;
 pub mod pop;
 pub mod solve;
 pub mod upload;

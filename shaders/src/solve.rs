@@ -6,8 +6,10 @@
 //! note on stderr.
 
 use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
+use crate::lpm::GpuSweeps;
 use crate::pop::backend::GpuBackend;
 use crate::GpuContext;
+use volscatter_core::solvers::lpm::{Lpm, Overrides};
 use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
 use volscatter_core::solvers::session::{Session, SessionState};
@@ -24,6 +26,7 @@ type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Val
 fn gpu_backend(name: &str) -> Option<GpuSolve> {
     match name {
         "pop" => Some(pop_on_gpu),
+        "lpm" => Some(lpm_on_gpu),
         _ => None,
     }
 }
@@ -41,6 +44,18 @@ fn pop_on_gpu(
     let reuse = state.kept(PopReuse::default);
     let (out, _report) = pop_solver.solve_reusing(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY), Some(reuse))?;
     Ok(out)
+}
+
+/// `lpm` with its sweeps (propagate and collect, every order) on the GPU.
+fn lpm_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    _state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let solver = Lpm::from_settings(settings)?;
+    Ok(solver.solve_with(scene, progress, Overrides::default(), &GpuSweeps::new(ctx))?.0)
 }
 
 /// Solves `scene` with solver `name` and `settings` on `choice`.
