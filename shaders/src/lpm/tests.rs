@@ -96,7 +96,7 @@ fn gpu_lpm_refuses_a_layer_larger_than_a_binding() {
     let max = (ctx.limits.max_storage_buffer_binding_size as u64).min(ctx.limits.max_buffer_size);
     // A square map whose one layer of T (256 directions, 16 bytes each) exceeds the binding.
     let side = ((max / (256 * 16)) as f64).sqrt() as usize + 2;
-    let err = gpu_layers(&ctx, [side, side, side], 256, 6, &[1; FACES]).err().expect("refused");
+    let err = gpu_layers(&ctx, [side, side, side], 256, 6, &[1; FACES]).expect_err("refused");
     assert!(matches!(err, GpuError::TooLarge(_)), "{err}");
     let ok = gpu_layers(&ctx, [24, 24, 24], 9, 6, &[24; FACES]).unwrap();
     assert_eq!(ok, [24; FACES]);
