@@ -1,17 +1,24 @@
-"""Light propagation maps (`lpm`, paper 05, issue 19): CPU times of the paper's cases and a
-streamed solve under a memory budget; writes the "lpm" section of BENCHMARKS.md.
+"""Light propagation maps (`lpm`, paper 05, issue 19): CPU and GPU times of the paper's cases
+and a streamed solve under a memory budget; writes the "lpm" section of BENCHMARKS.md.
 
-    python3 scripts/bench_lpm.py [--quick] [--large N]
+    python3 scripts/bench_lpm.py [--quick] [--large N] [--before BIN]
 
 1. The paper's 64^3 (417 ms on a GTX 580) and 128^3 (2291 ms) cases: the procedural plume at
    64^3 / 128^3 voxels, a propagation grid of the same size, 25 directions per face, 3 orders
    (`max_orders 3`), 6 storage directions. Timed: the solver's phases (`lpm *`) from the
-   render report, and the whole run's peak RSS.
+   render report, and the whole run's peak RSS; on the CPU (`--device cpu`) and on the GPU
+   (`--device gpu`: the sweeps' propagate and collect kernels, shaders/src/lpm/), with the
+   adapter's name as the report gives it and the GPU image against the CPU's. On Mesa's
+   lavapipe the GPU column is software, for correctness only; a session with a real GPU
+   reruns this script as it is.
 2. A larger procedural cumulus (`--large` voxels a side, default 256) on a 128^3 propagation
    grid, solved in memory (`memory_budget 0`: one slab per face) and streamed under a
    `memory_budget` of 1/16 of the one-slab working set: time, peak RSS, and the streamed
    scattering grid against the in-memory one (relative RMSE; 0 expected, the arithmetic is
    the same).
+
+`--before BIN`: the paper's cases also on the CPU with another build of the CLI (the code
+before a CPU speed-up), in a "before" column, and its image against this build's.
 
 Uses the `volscatter` CLI ($VOLSCATTER_BIN, default target/release/volscatter) and numpy +
 Mitsuba's EXR reader for the comparison (skipped, and said so, without them).
@@ -71,15 +78,18 @@ def peak_rss_kib_of(cmd: list[str]) -> tuple[int, float, subprocess.CompletedPro
     return rss, time.perf_counter() - t, p
 
 
-def solve(work: Path, tag: str, sc: dict, settings: dict) -> dict:
+def solve(work: Path, tag: str, sc: dict, settings: dict, device: str = "cpu", binary: Path | None = None) -> dict:
     path = work / f"{tag}.json"
     path.write_text(json.dumps(sc))
     report = work / f"{tag}.report.json"
-    cmd = [str(volscatter_bin()), "render", str(path), "--solver", "lpm", "--out", str(work / f"{tag}.exr"), "--report", str(report)]
+    cmd = [str(binary or volscatter_bin()), "render", str(path), "--solver", "lpm", "--device", device, "--out", str(work / f"{tag}.exr"), "--report", str(report)]
     for k, v in settings.items():
         cmd += ["--set", f"{k}={json.dumps(v)}"]
     rss, wall, p = peak_rss_kib_of(cmd)
     if p.returncode != 0:
+        if device == "gpu":
+            log(f"{tag}: no GPU solve: {p.stderr[-500:]}")
+            return {"tag": tag, "solver_s": None, "device": f"unavailable ({p.stderr.strip().splitlines()[-1] if p.stderr.strip() else p.returncode})"}
         raise SystemExit(f"{tag}: volscatter failed: {p.stderr[-2000:]}")
     rep = json.loads(report.read_text())
     phases = rep.get("phases_seconds", {})
@@ -87,7 +97,8 @@ def solve(work: Path, tag: str, sc: dict, settings: dict) -> dict:
         phases = {k: v for k, v in phases}
     solver_s = sum(v for k, v in phases.items() if k.startswith("lpm ") and k != "lpm single scattering")
     log(f"{tag}: lpm {solver_s:.2f} s (wall {wall:.1f} s), peak RSS {rss / 1024:.0f} MiB")
-    return {"tag": tag, "solver_s": solver_s, "phases": phases, "wall_s": wall, "rss_mib": rss / 1024, "exr": work / f"{tag}.exr"}
+    used = rep.get("device", {}).get("solve", device) if isinstance(rep.get("device"), dict) else device
+    return {"tag": tag, "solver_s": solver_s, "phases": phases, "wall_s": wall, "rss_mib": rss / 1024, "exr": work / f"{tag}.exr", "device": used}
 
 
 def rel_rmse(a_exr: Path, b_exr: Path) -> str:
@@ -109,14 +120,22 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="64^3 only, small large case")
     ap.add_argument("--large", type=int, default=256, help="voxels a side of the streamed cumulus")
+    ap.add_argument("--before", type=Path, help="another volscatter CLI: the paper's cases on the CPU before a change")
+    ap.add_argument("--before-note", default="", help="what the --before build lacks, for the table's note")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         paper = [(64, 417)] if args.quick else [(64, 417), (128, 2291)]
         for n, paper_ms in paper:
-            r = solve(work, f"plume{n}", scene("plume", n, 0.6, 0.95), {"grid_resolution": n, "directions": 25, "max_orders": 3, "output_resolution": n})
-            rows.append((n, paper_ms, r))
+            settings = {"grid_resolution": n, "directions": 25, "max_orders": 3, "output_resolution": n}
+            r = solve(work, f"plume{n}", scene("plume", n, 0.6, 0.95), settings)
+            g = solve(work, f"plume{n}_gpu", scene("plume", n, 0.6, 0.95), settings, device="gpu")
+            g["agree"] = rel_rmse(g["exr"], r["exr"]) if g["solver_s"] is not None else "-"
+            if args.before:
+                b = solve(work, f"plume{n}_before", scene("plume", n, 0.6, 0.95), settings, binary=args.before)
+                r["before"] = f"{b['solver_s']:.2f} (image vs now: {rel_rmse(r['exr'], b['exr'])})"
+            rows.append((n, paper_ms, r, g))
         large = 96 if args.quick else args.large
         grid = 64 if args.quick else 128
         sc = scene("cumulus", large, 0.6, 0.95)
@@ -131,14 +150,23 @@ def main() -> None:
     lines = [
         "## lpm (light propagation maps, paper 05)",
         "",
-        f"Written by `scripts/bench_lpm.py` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared). CPU solver only (no GPU kernels yet).",
+        f"Written by `scripts/bench_lpm.py` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared). GPU: the sweeps (propagate + collect kernels, host packing and readback per slab included).",
         "Solve time = the `lpm *` phases of the render report (grid, phase table, first order, propagation, upsampling), without the compositor's single scattering and the composite.",
         "",
-        "| case | propagation grid | directions | orders | lpm CPU (s) | paper (GPU, ms) | peak RSS (MiB) |",
-        "|---|---|---|---|---|---|---|",
+        "| case | propagation grid | directions | orders | lpm CPU before (s) | lpm CPU (s) | lpm GPU (s) | GPU image vs CPU (rel. RMSE) | paper (GPU, ms) | peak RSS CPU (MiB) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for n, paper_ms, r in rows:
-        lines.append(f"| plume {n}^3 | {n}^3 | 25 x 6 | 3 | {r['solver_s']:.2f} | {paper_ms} | {r['rss_mib']:.0f} |")
+    for n, paper_ms, r, g in rows:
+        gs = f"{g['solver_s']:.2f}" if g["solver_s"] is not None else "-"
+        lines.append(f"| plume {n}^3 | {n}^3 | 25 x 6 | 3 | {r.get('before', '-')} | {r['solver_s']:.2f} | {gs} | {g['agree']} | {paper_ms} | {r['rss_mib']:.0f} |")
+    if args.before:
+        lines += ["", f"CPU before: {args.before_note or 'the CLI given with --before'}; its image against this build's in brackets."]
+    gpu_dev = rows[0][3]["device"] if rows else "none"
+    soft = any(w in gpu_dev.lower() for w in ("llvmpipe", "lavapipe", "softpipe", "swiftshader"))
+    lines += [
+        "",
+        f"GPU column: device `{gpu_dev}`" + (" -- lavapipe (software, for correctness only): not GPU speed." if soft else "."),
+    ]
     lines += [
         "",
         f"Streaming: procedural cumulus {large}^3 voxels on a {grid}^3 propagation grid, 25 x 6 directions, 3 orders.",

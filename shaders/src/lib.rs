@@ -13,8 +13,9 @@
 pub mod composite;
 pub mod context;
 pub mod device;
-pub mod photon_grid;
+pub mod lpm;
 pub mod network;
+pub mod photon_grid;
 pub mod pop;
 pub mod solve;
 pub mod upload;

@@ -6,9 +6,11 @@
 //! note on stderr.
 
 use crate::device::{try_gpu, Attempt, DeviceChoice, DeviceUsed};
+use crate::lpm::GpuSweeps;
 use crate::photon_grid::GpuPhotonBackend;
 use crate::pop::backend::GpuBackend;
 use crate::GpuContext;
+use volscatter_core::solvers::lpm::{Lpm, Overrides};
 use volscatter_core::solvers::network::Network;
 use volscatter_core::solvers::photon_grid::PhotonGrid;
 use volscatter_core::solvers::pop::reuse::PopReuse;
@@ -29,6 +31,7 @@ fn gpu_backend(name: &str) -> Option<GpuSolve> {
         "pop" => Some(pop_on_gpu),
         "photon-grid" => Some(photon_grid_on_gpu),
         "network" => Some(network_on_gpu),
+        "lpm" => Some(lpm_on_gpu),
         _ => None,
     }
 }
@@ -76,6 +79,18 @@ fn network_on_gpu(
     let backend = crate::network::GpuBackend::new(ctx, crate::network::CHECK_EVERY);
     let (out, _report) = Network::from_settings(settings)?.solve_on(scene, progress, &backend, Some(state))?;
     Ok(out)
+}
+
+/// `lpm` with its sweeps (propagate and collect, every order) on the GPU.
+fn lpm_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    _state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let solver = Lpm::from_settings(settings)?;
+    Ok(solver.solve_with(scene, progress, Overrides::default(), &GpuSweeps::new(ctx))?.0)
 }
 
 /// Solves `scene` with solver `name` and `settings` on `choice`.

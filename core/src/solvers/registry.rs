@@ -477,7 +477,7 @@ const LPM: SolverEntry = SolverEntry {
         Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "directions": 49, "output_resolution": 128}"# },
     ],
     cpu: |m| Ok(Box::new(lpm::Lpm::from_settings(m)?)),
-    gpu: false,
+    gpu: true,
 };
 
 /// Every solver, in menu order (the first is the hosts' default).

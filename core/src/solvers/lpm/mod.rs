@@ -18,8 +18,9 @@
 //! (propagate.rs); J from the fine bins (collect.rs); exact first order for distant and local
 //! lights (lights.rs); the phase table normalised (phase_table.rs).
 //!
-//! Not yet here (issue 19): the GPU kernels, the VDB read per region and S written per slice
-//! (the per-cell arrays stay in memory, stream.rs).
+//! The sweeps run through a `stream::SweepBackend`: the CPU's here, the GPU's kernels in
+//! volscatter-gpu (its lpm module). Not yet here (issue 19): the VDB read per region and S
+//! written per slice (the per-cell arrays stay in memory, stream.rs).
 
 mod collect;
 pub mod directions;
@@ -100,6 +101,11 @@ impl Lpm {
     }
 
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides) -> Result<(SolveOutput, LpmReport)> {
+        self.solve_with(scene, progress, ov, &stream::CpuSweeps)
+    }
+
+    /// `solve_detailed` with the sweeps (propagate and collect, every order) on `backend`.
+    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -133,9 +139,9 @@ impl Lpm {
             Some(l) => [l.max(1); FACES],
             None => stream::plan(grid.dims, &dirs, s.memory_budget)?,
         };
-        let mut buffers = stream::SweepBuffers::new(&grid, &dirs, &report.layers, progress)?;
-        let camera = scene.camera.position;
-        let albedo = medium.albedo;
+        let layers = report.layers;
+        let setup = stream::SweepSetup { grid: &grid, dirs: &dirs, table: &table, layers: &layers, camera: scene.camera.position, albedo: medium.albedo };
+        let mut sweeper = backend.start(setup, progress)?;
         let zero_boundary = vec![Vec3::ZERO; dirs.len()];
 
         // First order: the first propagation (dome, emission, sun as boundary) and the exact
@@ -144,7 +150,7 @@ impl Lpm {
         timings.time("lpm first order", || -> Result<()> {
             if lights::first_propagation_needed(&boundary, scene) {
                 lights::emission_source(scene, &grid, m, &mut u_prev);
-                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &boundary, &mut u_cur, None, camera, albedo, &mut buffers, &mut report.sweep, progress)?;
+                sweeper.sweep(&u_prev, &boundary, &mut u_cur, None, &mut report.sweep, progress)?;
             }
             lights::add_first_order(scene, &grid, &dirs, &table, s.first_order, &mut u_cur, progress);
             if progress.cancelled() {
@@ -162,7 +168,7 @@ impl Lpm {
             while first_max > 0.0 && report.orders < s.max_orders as usize && *report.max_u.last().unwrap_or(&0.0) > s.epsilon * first_max {
                 u_cur.iter_mut().for_each(|v| *v = Vec3::ZERO);
                 let before = ov.keep_orders.then(|| j.clone());
-                stream::sweep(&grid, &dirs, &table, &report.layers, &u_prev, &zero_boundary, &mut u_cur, Some(&mut j), camera, albedo, &mut buffers, &mut report.sweep, progress)?;
+                sweeper.sweep(&u_prev, &zero_boundary, &mut u_cur, Some(&mut j), &mut report.sweep, progress)?;
                 if let Some(b) = before {
                     report.j_per_order.push(j.iter().zip(&b).map(|(a, b)| *a - *b).collect());
                 }
@@ -178,7 +184,7 @@ impl Lpm {
         })?;
         drop(u_prev);
         drop(u_cur);
-        drop(buffers);
+        drop(sweeper);
         let j_grid = grid.as_scattering_grid(j);
         if ov.j_only {
             report.j = Some(j_grid);

@@ -109,10 +109,58 @@ pub fn filled(what: &str, len: u64, progress: &dyn Progress) -> Result<Vec<Vec3>
     Ok(v)
 }
 
+/// What every sweep of a solve shares: the grid, the directions and their phase table, each
+/// face's slab thickness, the viewer and the albedo.
+#[derive(Clone, Copy)]
+pub struct SweepSetup<'a> {
+    pub grid: &'a LpmGrid,
+    pub dirs: &'a Directions,
+    pub table: &'a PhaseTable,
+    pub layers: &'a [usize; FACES],
+    pub camera: Vec3,
+    pub albedo: Vec3,
+}
+
+/// Where the sweeps run: the CPU (`CpuSweeps`, below) or the GPU (volscatter-gpu's lpm
+/// module). `start` is called once per solve, after the grid is built, and returns the
+/// sweeper that keeps its working buffers (host or device memory) from order to order.
+pub trait SweepBackend {
+    fn start<'a>(&'a self, setup: SweepSetup<'a>, progress: &dyn Progress) -> Result<Box<dyn Sweeper + 'a>>;
+}
+
 /// One propagation order over all six faces: propagate from U of the previous order and the
-/// boundary radiance (one value per direction), collect into U of this order (and J).
+/// boundary radiance (one value per direction), collect into U of this order (adding to
+/// `u_cur`) and, when given, into J. A cancelled sweep returns `Error::Cancelled` and its U is
+/// garbage.
+pub trait Sweeper {
+    fn sweep(&mut self, u_prev: &[Vec3], boundary: &[Vec3], u_cur: &mut [Vec3], j: Option<&mut [Vec3]>, stats: &mut SweepStats, progress: &dyn Progress) -> Result<()>;
+}
+
+/// The CPU backend: `sweep` below with buffers allocated once per solve.
+pub struct CpuSweeps;
+
+struct CpuSweeper<'a> {
+    setup: SweepSetup<'a>,
+    buffers: SweepBuffers,
+}
+
+impl SweepBackend for CpuSweeps {
+    fn start<'a>(&'a self, setup: SweepSetup<'a>, progress: &dyn Progress) -> Result<Box<dyn Sweeper + 'a>> {
+        let buffers = SweepBuffers::new(setup.grid, setup.dirs, setup.layers, progress)?;
+        Ok(Box::new(CpuSweeper { setup, buffers }))
+    }
+}
+
+impl Sweeper for CpuSweeper<'_> {
+    fn sweep(&mut self, u_prev: &[Vec3], boundary: &[Vec3], u_cur: &mut [Vec3], j: Option<&mut [Vec3]>, stats: &mut SweepStats, progress: &dyn Progress) -> Result<()> {
+        let s = &self.setup;
+        sweep(s.grid, s.dirs, s.table, s.layers, u_prev, boundary, u_cur, j, s.camera, s.albedo, &mut self.buffers, stats, progress)
+    }
+}
+
+/// One propagation order over all six faces on the CPU (see `Sweeper`).
 /// One order over a 128^3 grid takes seconds, so propagate and collect look at the cancel
-/// flag every layer; a cancelled sweep returns `Error::Cancelled` and its U is garbage.
+/// flag every layer.
 #[allow(clippy::too_many_arguments)]
 pub fn sweep(
     grid: &LpmGrid,
