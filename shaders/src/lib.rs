@@ -14,6 +14,7 @@ pub mod composite;
 pub mod context;
 pub mod device;
 pub mod pop;
+pub mod vpl;
 pub mod solve;
 pub mod upload;
 mod wgsl;

@@ -24,6 +24,7 @@ type GpuSolve = fn(&GpuContext, &Scene, &serde_json::Map<String, serde_json::Val
 fn gpu_backend(name: &str) -> Option<GpuSolve> {
     match name {
         "pop" => Some(pop_on_gpu),
+        "vpl" => Some(vpl_on_gpu),
         _ => None,
     }
 }
@@ -40,6 +41,20 @@ fn pop_on_gpu(
     let pop_solver = Pop::from_settings(settings)?;
     let reuse = state.kept(PopReuse::default);
     let (out, _report) = pop_solver.solve_reusing(scene, progress, &GpuBackend::new(ctx, CHECK_EVERY), Some(reuse))?;
+    Ok(out)
+}
+
+/// `vpl` with its gather's connections, upsampling and single scattering on the GPU (the walks
+/// and the compensation on the CPU); it keeps nothing between frames.
+fn vpl_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    _state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let solver = volscatter_core::solvers::vpl::Vpl::from_settings(settings)?;
+    let (out, _report) = solver.solve_with(scene, progress, u32::MAX, &crate::vpl::GpuBackend::new(ctx))?;
     Ok(out)
 }
 
