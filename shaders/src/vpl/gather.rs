@@ -15,6 +15,7 @@ use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
 use volscatter_core::medium::Medium;
 use volscatter_core::solvers::pop::merge::Merged;
 use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::solvers::vpl::compensate::{Compensation, Vertex};
 use volscatter_core::solvers::vpl::gather::{GatherPlan, GatherPoint, Kernel};
 use volscatter_core::solvers::vpl::{GatherStats, VplSettings};
 use volscatter_core::solvers::vpl::walks::Walks;
@@ -151,7 +152,9 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
         .collect())
 }
 
-/// `volscatter_core::solvers::vpl::gather::gather` with the connections on the GPU.
+/// `volscatter_core::solvers::vpl::gather::gather` with the connections on the GPU: the
+/// gather points' to their subsets, then (`near_field: compensate`) the compensation vertices'
+/// to theirs, all vertices sampled on the CPU first (`Compensation::vertices`).
 pub fn gather(ctx: &GpuContext, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
     let plan = GatherPlan::new(scene, mip, walks, s)?;
     let [nx, ny, nz] = plan.grid.dims;
@@ -167,27 +170,61 @@ pub fn gather(ctx: &GpuContext, scene: &Scene, mip: &MediumMip, walks: &Walks, s
         }
     }
     let connected = connect_points(ctx, &scene.medium, &plan.lists, &points, plan.step, progress)?;
-    // The finish (with the compensation, when on) per point on the CPU, in parallel.
-    let finished: Vec<(Vec3, GatherStats)> = points
+    let mut stats = GatherStats::default();
+    let back = match plan.compensation() {
+        Some(c) => Some(compensate(ctx, &plan, c, &points, progress, &mut stats)?),
+        None => None,
+    };
+    if progress.cancelled() {
+        return Err(Error::Cancelled);
+    }
+    let mut j = plan.grid.clone();
+    for (n, (p, c)) in points.iter().zip(&connected).enumerate() {
+        stats.connections += plan.lists[p.subset as usize].len() as u64;
+        stats.near += c.near;
+        j.data[p.index as usize] = plan.finish_with(p, c.sum, c.lost, back.as_ref().map(|b| b[n]), &mut stats);
+    }
+    Ok((Merged { j, density }, stats))
+}
+
+/// The compensation's estimate at every point (`Compensation::estimate`), its connections on
+/// the GPU: the vertices of all points sampled on the CPU (in parallel, each point its own
+/// random numbers as on the CPU), connected in one batch, combined on the CPU.
+fn compensate(ctx: &GpuContext, plan: &GatherPlan, c: &Compensation, points: &[GatherPoint], progress: &dyn Progress, stats: &mut GatherStats) -> Result<Vec<Vec3>> {
+    let trees: Vec<(Vec<Vertex>, GatherStats)> = points
         .par_iter()
-        .zip(&connected)
-        .map(|(p, c)| {
-            let mut stats = GatherStats { connections: plan.lists[p.subset as usize].len() as u64, near: c.near, ..Default::default() };
+        .map(|p| {
+            let mut st = GatherStats::default();
             if progress.cancelled() {
-                return (Vec3::ZERO, stats);
+                return (Vec::new(), st);
             }
-            let j = plan.finish(p, c.sum, c.lost, &mut stats);
-            (j, stats)
+            let nodes = c.vertices(p.position, -p.view, &mut plan.compensation_rng(p), &mut st);
+            (nodes, st)
         })
         .collect();
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
-    let mut j = plan.grid;
-    let mut stats = GatherStats::default();
-    for (p, (v, st)) in points.iter().zip(&finished) {
-        j.data[p.index as usize] = *v;
+    let queries: Vec<GatherPoint> = trees
+        .iter()
+        .flat_map(|(nodes, _)| nodes.iter())
+        .map(|v| {
+            let (kernel, ball) = c.kernel(v);
+            GatherPoint { index: 0, position: v.position, view: v.view, rho: 0.0, kernel, ball, subset: v.list }
+        })
+        .collect();
+    let connected = connect_points(ctx, plan.medium(), c.lists(), &queries, c.step(), progress)?;
+    let mut at = 0;
+    let mut back = Vec::with_capacity(points.len());
+    for (nodes, st) in &trees {
         stats.add(st);
+        let light: Vec<Vec3> = connected[at..at + nodes.len()].iter().map(|q| q.sum).collect();
+        for (v, q) in nodes.iter().zip(&connected[at..at + nodes.len()]) {
+            stats.connections += c.lists()[v.list as usize].len() as u64;
+            stats.near += q.near;
+        }
+        back.push(c.combine(nodes, &light));
+        at += nodes.len();
     }
-    Ok((Merged { j, density }, stats))
+    Ok(back)
 }

@@ -45,8 +45,9 @@ fn test_settings(near_field: NearField) -> VplSettings {
 }
 
 /// The GPU gather against the CPU's (`gather::gather`) on the same walks: the plume lit by
-/// the sun and the plume beside a point light, with each near field (ball, clamp, compensate)
-/// and interleaved subsets once. Same points, kernels and march positions; the GPU sums each
+/// the sun and the plume beside a point light, with each near field (ball, clamp, compensate:
+/// the compensation's vertices sampled on the CPU, connected on the GPU; depths 2 and 3) and
+/// interleaved subsets twice. Same points, kernels and march positions; the GPU sums each
 /// point's VPLs in a tree of 64 partial sums (the CPU in list order) and its exp/log/sqrt
 /// round differently, so J differs in float32 rounding only. Measured on lavapipe: at most
 /// 2.2e-6 relative RMSE on J (plume, ball); tolerance 2e-5 (a sum of ~10^3 positive terms,
@@ -56,15 +57,15 @@ fn test_settings(near_field: NearField) -> VplSettings {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_gather_matches_cpu() {
     let ctx = gpu_or_skip();
-    for (name, near_field, per_subset) in [
-        ("plume", NearField::Ball, 0),
-        ("plume", NearField::Clamp, 128),
-        ("plume", NearField::Compensate, 0),
-        ("plume_point", NearField::Ball, 0),
-        ("plume_point", NearField::Compensate, 0),
+    for (name, near_field, per_subset, depth) in [
+        ("plume", NearField::Ball, 0, 2),
+        ("plume", NearField::Clamp, 128, 2),
+        ("plume", NearField::Compensate, 0, 2),
+        ("plume_point", NearField::Ball, 0, 2),
+        ("plume_point", NearField::Compensate, 128, 3),
     ] {
         let scene = fixture_scene(name);
-        let s = VplSettings { walks_per_subset: per_subset, ..test_settings(near_field) };
+        let s = VplSettings { walks_per_subset: per_subset, compensation_depth: depth, ..test_settings(near_field) };
         let w = walks::trace(&scene, &s, u32::MAX, &NoProgress).unwrap();
         let out = volscatter_core::solvers::ScatteringGrid::over_medium(&scene.medium, s.output_resolution).unwrap();
         let g = volscatter_core::solvers::ScatteringGrid::over_medium(&scene.medium, s.gather_resolution).unwrap();
@@ -106,3 +107,4 @@ fn gpu_vpl_solve_matches_cpu() {
         assert!(e < 1e-5, "{name}: S relative RMSE {e}");
     }
 }
+

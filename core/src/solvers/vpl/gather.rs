@@ -230,14 +230,32 @@ impl<'a> GatherPlan<'a> {
     /// J at a point from its connection's (sum, lost) (`connect`): the subset reweighted, the
     /// energy report, and the bias compensation when it is on.
     pub fn finish(&self, p: &GatherPoint, sum: Vec3, lost: Vec3, stats: &mut GatherStats) -> Vec3 {
+        let back = self.compensation.as_ref().map(|c| c.estimate(p.position, -p.view, &mut self.compensation_rng(p), stats));
+        self.finish_with(p, sum, lost, back, stats)
+    }
+
+    pub fn medium(&self) -> &'a Medium {
+        self.medium
+    }
+
+    /// The compensation of `near_field: compensate`, if on.
+    pub fn compensation(&self) -> Option<&Compensation<'a>> {
+        self.compensation.as_ref()
+    }
+
+    /// The random numbers of a point's compensation (`Compensation::vertices`).
+    pub fn compensation_rng(&self, p: &GatherPoint) -> Rng {
+        Rng::new(self.seed ^ 0x5eed_c0de, p.index as u64)
+    }
+
+    /// `finish` with the compensation's estimate `back` already made (None: off).
+    pub fn finish_with(&self, p: &GatherPoint, sum: Vec3, lost: Vec3, back: Option<Vec3>, stats: &mut GatherStats) -> Vec3 {
         let mut total = sum * self.subsets as f32;
         let sigma_s = self.medium.sigma_s(p.rho);
         let energy = |v: Vec3| (sigma_s * v).element_sum() as f64 * self.cell_volume;
         stats.gathered += energy(total);
         stats.clamped += energy(lost * self.subsets as f32);
-        if let Some(c) = &self.compensation {
-            let mut rng = Rng::new(self.seed ^ 0x5eed_c0de, p.index as u64);
-            let back = c.estimate(p.position, -p.view, 1, &mut rng, stats);
+        if let Some(back) = back {
             stats.restored += energy(back);
             total += back;
         }

@@ -19,8 +19,9 @@
 //! - Transmittance to VPLs is ray marched (deterministic) at the gather grid's spacing but at
 //!   most half a mean free path of the densest voxel (gather::march_step).
 //! - The gather, upsampling and single scattering run on a backend (backend.rs): the CPU, or
-//!   the GPU (volscatter-gpu, shaders/src/vpl); the walks and the compensation's vertices stay
-//!   on the CPU.
+//!   the GPU (volscatter-gpu, shaders/src/vpl), where the connections to the VPLs (the gather
+//!   points' and the compensation vertices') run in WGSL; the walks, the compensation's vertex
+//!   sampling and the direct light at its vertices stay on the CPU on both.
 //! - A VPL sits at every collision of a walk in the medium, the first included: light from a
 //!   source to a point is the single scattering (exact, from the compositor), light from a
 //!   walk's first collision to a point is double scattering, and so on. (Counting the light
