@@ -351,7 +351,8 @@ fn vpl_bench() {
 }
 
 /// Exploration (not in CI): the image flux of several seeds against a fixture (VPL_CASE,
-/// VPL_WALKS, VPL_SEEDS, VPL_GATHER, VPL_OUT, VPL_NEAR=clamp|ball, default compensate).
+/// VPL_WALKS, VPL_SEEDS, VPL_GATHER, VPL_OUT, VPL_UPSAMPLE=0 for trilinear, VPL_NEAR=clamp|ball,
+/// default compensate).
 /// Measured on cube_g0 (image mean ratio, mean over seeds 1-8 unless said): 1024 walks,
 /// 12-cell gather: compensate x1.111 (x1.054-x1.171), ball x1.079 (x1.026-x1.136): every seed
 /// bright, a bias, so issue 16's "8 seeds within 2%" is not met at the tests' settings. The
@@ -373,7 +374,8 @@ fn vpl_explore_seeds() {
             Ok("ball") => NearField::Ball,
             _ => NearField::Compensate,
         };
-        let s = VplSettings { walks, seed, near_field, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), ..Default::default() };
+        let upsample = env_u32("VPL_UPSAMPLE", 1) != 0;
+        let s = VplSettings { walks, seed, near_field, upsample, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), ..Default::default() };
         let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
         let e = errors_against_fixture(&name, &sc, &out.scattering);
         eprintln!("{name} seed {seed}: {e} ({:.2} s)", t.elapsed().as_secs_f64());
