@@ -5,6 +5,7 @@ section of BENCHMARKS.md.
 
     python3 scripts/bench_vpl.py [--quick] [--cases cube_g07,plume,plume_point,cloud]
                                  [--walks 512,2048,8192] [--spp 4,16,64]
+                                 [--gpu-only | --no-gpu] [--gpu-walks 1024,4096] [--gpu-gathers 12,24]
 
 Runs the ignored Rust test `vpl_bench` (core/src/solvers/vpl/tests.rs) through cargo nextest,
 which solves each fixture scene (core/src/solvers/fixtures/) in-process and compares it with
@@ -13,6 +14,12 @@ mean ratio, and the solve's wall time. The reference path tracer's own error and
 samples per pixel on the same scene give the "time to the same error" comparison. Equal cost:
 for each strategy the error at the compensated run's time is interpolated log-log between the
 strategy's walk counts (each strategy's error falls with its time at its own rate).
+
+GPU rows ("vpl-gpu" section): shaders/examples/bench_vpl.rs times every stage of the same
+solve on the GPU backend (gather connections, upsampling, single scattering) and on the CPU,
+with the adapter's name and absolute times; on a machine without a GPU that adapter is Mesa's
+lavapipe (software: its times say nothing of GPU speed). `--gpu-only` reruns just these rows
+(what a session with an H100 needs); `--no-gpu` skips them.
 """
 
 from __future__ import annotations
@@ -62,6 +69,48 @@ def run_bench(cases: str, walks: str, spp: str) -> list[dict]:
     return rows
 
 
+def run_gpu_bench(walks: str, gathers: str) -> list[dict]:
+    cmd = ["cargo", "run", "--release", "-q", "-p", "volscatter-gpu", "--example", "bench_vpl", "--",
+           "--walks", walks, "--gathers", gathers]
+    log("running:", " ".join(cmd))
+    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True)
+    if out.returncode == 2:
+        log("no GPU adapter: GPU rows skipped")
+        return []
+    if out.returncode != 0:
+        raise SystemExit(f"bench_vpl example failed ({out.returncode}):\n{out.stderr}")
+    rows = [json.loads(l) for l in out.stdout.splitlines() if l.startswith("{")]
+    for r in rows:
+        log(json.dumps(r))
+    return rows
+
+
+def gpu_section(rows: list[dict]) -> str:
+    adapter = rows[0]["adapter"]
+    software = rows[0]["software"]
+    label = "lavapipe (software, for correctness only)" if software else adapter
+    lines = [
+        "## vpl on the GPU (issue 16)",
+        "",
+        f"Written by `scripts/bench_vpl.py` on {datetime.date.today()}: GPU adapter {adapter};",
+        f"CPU {platform.processor() or platform.machine()}, {rows[0]['threads']} rayon threads (shared with other jobs).",
+        "The same solve (same walks, seed 1, near_field ball, 64-cell output) with the gather's connections, the",
+        "upsampling and the single scattering on the GPU backend, and all on the CPU; the walks stay on the CPU in both.",
+        "Times in seconds (the GPU's include uploads and readbacks; kernels compiled by an untimed first solve);",
+        "rel. RMSE = the GPU's S against the CPU's.",
+    ]
+    if software:
+        lines += ["", f"**GPU column: {label}.** Mesa's lavapipe runs the kernels on the CPU cores: these times are",
+                  "NOT GPU speed. A session with a GPU reruns `python3 scripts/bench_vpl.py --gpu-only`."]
+    lines += ["", "| scene | walks (VPLs) | gather cells | connections | gather CPU | gather GPU | single CPU | single GPU | total CPU | total GPU | rel. RMSE |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        c, g = r["cpu"], r["gpu"]
+        lines.append(f"| {r['case']} | {r['walks']} ({r['vpls']}) | {r['gather']} | {r['connections']:.3g} | {c.get('gather', 0):.3f} | {g.get('gather', 0):.3f} "
+                     f"| {c.get('single_scattering', 0):.3f} | {g.get('single_scattering', 0):.3f} | {r['cpu_total']:.3f} | {r['gpu_total']:.3f} | {r['rel_rmse']:.1e} |")
+    return "\n".join(lines) + "\n"
+
+
 def interp_loglog(points: list[tuple[float, float]], x: float) -> float | None:
     """Error at time x from (time, error) points, linear in log-log, extrapolating one step at
     most (None when x is outside twice the measured range)."""
@@ -93,9 +142,23 @@ def main() -> None:
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("--from-log", action="append", default=[],
                     help="reuse the BENCH lines of an earlier run's log (repeatable); runs only what --walks/--spp still ask for")
+    ap.add_argument("--gpu-only", action="store_true", help="only the GPU rows (section vpl-gpu)")
+    ap.add_argument("--no-gpu", action="store_true", help="skip the GPU rows")
+    ap.add_argument("--gpu-walks", default="1024,4096")
+    ap.add_argument("--gpu-gathers", default="12,24")
     args = ap.parse_args()
     if args.quick:
         args.cases, args.walks, args.spp = "cube_g07,plume", "512,2048", "4,16"
+        args.gpu_walks, args.gpu_gathers = "512,2048", "12"
+    if not args.no_gpu:
+        gpu_rows = run_gpu_bench(args.gpu_walks, args.gpu_gathers)
+        if gpu_rows:
+            text = gpu_section(gpu_rows)
+            if not args.no_write:
+                write_section("vpl-gpu", text)
+            print(text)
+    if args.gpu_only:
+        return
     rows = [json.loads(l[6:]) for f in args.from_log for l in Path(f).read_text().splitlines() if l.startswith("BENCH ")]
     if args.walks or args.spp:
         rows += run_bench(args.cases, args.walks, args.spp)

@@ -19,6 +19,7 @@ pub mod photon_grid;
 pub mod pop;
 pub mod solve;
 pub mod upload;
+pub mod vpl;
 mod wgsl;
 
 #[cfg(test)]

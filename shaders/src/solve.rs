@@ -32,6 +32,7 @@ fn gpu_backend(name: &str) -> Option<GpuSolve> {
         "photon-grid" => Some(photon_grid_on_gpu),
         "network" => Some(network_on_gpu),
         "lpm" => Some(lpm_on_gpu),
+        "vpl" => Some(vpl_on_gpu),
         _ => None,
     }
 }
@@ -91,6 +92,20 @@ fn lpm_on_gpu(
 ) -> Result<SolveOutput> {
     let solver = Lpm::from_settings(settings)?;
     Ok(solver.solve_with(scene, progress, Overrides::default(), &GpuSweeps::new(ctx))?.0)
+}
+
+/// `vpl` with its gather's connections, upsampling and single scattering on the GPU (the walks
+/// and the compensation on the CPU); it keeps nothing between frames.
+fn vpl_on_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn Progress,
+    _state: &mut SessionState,
+) -> Result<SolveOutput> {
+    let solver = volscatter_core::solvers::vpl::Vpl::from_settings(settings)?;
+    let (out, _report) = solver.solve_with(scene, progress, u32::MAX, &crate::vpl::GpuBackend::new(ctx))?;
+    Ok(out)
 }
 
 /// Solves `scene` with solver `name` and `settings` on `choice`.

@@ -361,7 +361,7 @@ const VPL: SolverEntry = SolverEntry {
         Preset { name: "final", help: FINAL, settings_json: r#"{"walks": 16384, "gather_resolution": 24, "output_resolution": 128}"# },
     ],
     cpu: |m| Ok(Box::new(vpl::Vpl::from_settings(m)?)),
-    gpu: false,
+    gpu: true,
 };
 
 const PHOTON_GRID: SolverEntry = SolverEntry {

@@ -14,7 +14,7 @@ use volscatter_core::scene::Light;
 use volscatter_core::{ScatteringGrid, Scene};
 
 /// The kernel with its preludes (shaders/src/wgsl) in front.
-pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box", "hg"], "composite/single.wgsl");
+pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box", "hg", "optics"], "composite/single.wgsl");
 
 /// Mirrors `struct Params` in single.wgsl.
 #[repr(C)]

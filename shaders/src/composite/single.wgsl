@@ -5,7 +5,7 @@
 // their weights), kind 1 = point emitter (position, peak intensity, angular profile: volscatter-
 // core `translate::Profile`; spots and area-light VPLs arrive as such). Same order and steps as
 // the CPU.
-// density_at, affine, ray_box, hg and PI come from the preludes (shaders/src/wgsl), prepended.
+// density_at, affine, ray_box, hg, PI, optical_depth and ball_mean_inverse_square come from the preludes (shaders/src/wgsl), prepended.
 
 struct Params {
     density_w2i: array<vec4<f32>, 3>,
@@ -51,38 +51,9 @@ fn profile_factor(light: Light, w: vec3<f32>) -> f32 {
 @group(0) @binding(2) var<storage, read> lights: array<Light>;
 @group(0) @binding(3) var<storage, read_write> out_grid: array<vec4<f32>>;
 
-// medium::optics::optical_depth: midpoint quadrature, at most 512 steps of at least min_step.
+// medium::optics::optical_depth (wgsl/optics.wgsl) at most 512 steps of at least the minimum step.
 fn transmittance(x: vec3<f32>, d: vec3<f32>, t_max: f32) -> vec3<f32> {
-    let span = ray_box(x, d, params.bounds_lo.xyz, params.bounds_hi.xyz);
-    let t0 = span.x;
-    let t1 = min(span.y, t_max);
-    if (!(t0 < t1)) {
-        return vec3<f32>(1.0);
-    }
-    let n = clamp(u32(ceil((t1 - t0) / params.misc.y)), 1u, 512u);
-    let h = (t1 - t0) / f32(n);
-    var tau = 0.0;
-    for (var i = 0u; i < n; i++) {
-        tau += density_at(x + d * (t0 + (f32(i) + 0.5) * h));
-    }
-    return exp(-params.density_scale.xyz * tau * h);
-}
-
-// medium::optics::ball_mean_inverse_square: the mean of 1/|y|^2 over a ball of radius r at distance d.
-fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
-    if (r <= 0.0) {
-        return 1.0 / (d * d);
-    }
-    if (d < 1e-4 * r) {
-        return 3.0 / (r * r);
-    }
-    let x = r / d;
-    if (x < 0.25) {
-        let x2 = x * x;
-        return (1.0 + x2 * (0.2 + x2 * (3.0 / 35.0 + x2 / 21.0))) / (d * d);
-    }
-    let gap = max(abs(r - d), 1e-7 * r);
-    return 1.5 / (r * r * r * d) * (0.5 * (r * r - d * d) * log((r + d) / gap) + d * r);
+    return exp(-optical_depth(x, d, t_max, params.misc.y, 512u));
 }
 
 @compute @workgroup_size(4, 4, 4)

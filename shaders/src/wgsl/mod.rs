@@ -2,9 +2,10 @@
 //! affine maps), `trilinear` (the lattice cell, corner offsets, the lerps and trilinear
 //! combination of volscatter-core `medium::trilinear`, clamped indices, brick offsets),
 //! `density` (the bricked density lookup), `mip` (POP's density mip), `j_grid` (the J grid that
-//! POP's merge and upsampling read), `ray_box`, `hg` (phase function and the propagation's lobe
-//! helpers), `propagation` (what POP's two propagation kernels share), `network` (the
-//! parameters of network's iteration kernels) and `columns` (one
+//! POP's merge and upsampling read), `ray_box`, `optics` (optical depth by midpoint quadrature,
+//! the ball kernel), `hg` (phase function and the propagation's lobe helpers), `propagation`
+//! (what POP's two propagation kernels share), `network` (the parameters of network's
+//! iteration kernels) and `columns` (one
 //! invocation per grid column). A prelude may read names the kernel declares (its `params`,
 //! buffers): WGSL resolves module-scope names in any order.
 

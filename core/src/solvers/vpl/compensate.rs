@@ -24,6 +24,11 @@
 //! for one seed, from single near VPLs behind two g 0.9 lobes; the radius-R ball 0.62, and
 //! the white furnace box 0.991 (a quarter mean free path: 0.993).
 //!
+//! The estimate is made in two steps, `vertices` (every random number, the direct light) then
+//! `combine` over the vertices' connections to their VPLs, which use no random number: the
+//! CPU connects vertex by vertex (`estimate`), the GPU backend all vertices of all gather
+//! points in one batch; both combine in the same order.
+//!
 //! Departure: visibility is the medium's transmittance only (no surfaces in this project), so
 //! the paper's local-visibility approximation is not needed.
 
@@ -80,16 +85,53 @@ impl<'a> Compensation<'a> {
         }
     }
 
-    /// M(x, out) of the module doc, per unit sigma_s at x, at recursion `level` (1: new
-    /// vertices around a gather point).
-    pub fn estimate(&self, x: Vec3, out: Vec3, level: u32, rng: &mut Rng, stats: &mut GatherStats) -> Vec3 {
+    /// M(x, out) of the module doc, per unit sigma_s at x (new vertices around a gather point,
+    /// recursively): `vertices`, each connected on the CPU, then `combine`.
+    pub fn estimate(&self, x: Vec3, out: Vec3, rng: &mut Rng, stats: &mut GatherStats) -> Vec3 {
+        let nodes = self.vertices(x, out, rng, stats);
+        let light: Vec<Vec3> = nodes
+            .iter()
+            .map(|v| {
+                let (kernel, ball) = self.kernel(v);
+                connect(self.medium, &self.lists[v.list as usize], v.position, v.view, kernel, ball, self.step, stats).0
+            })
+            .collect();
+        self.combine(&nodes, &light)
+    }
+
+    /// The VPL lists the vertices connect to (`Vertex::list` indexes them).
+    pub fn lists(&self) -> &[Vec<Vpl>] {
+        &self.lists
+    }
+
+    /// Transmittance march step of the vertices' connections.
+    pub fn step(&self) -> f32 {
+        self.step
+    }
+
+    /// The kernel a vertex takes the VPLs with, and the ball radius of `connect`'s report.
+    pub fn kernel(&self, v: &Vertex) -> (Kernel, f32) {
+        (if v.last { Kernel::Ball(self.radius) } else { Kernel::Clamp(self.radius) }, self.radius)
+    }
+
+    /// The compensation's vertices around a gather point x (light leaving it along `out`), in
+    /// depth-first order, each followed by its subtree: everything of the estimate but the
+    /// connections to the VPLs, which depend on no random number (so a backend may make
+    /// them all at once, then `combine`).
+    pub fn vertices(&self, x: Vec3, out: Vec3, rng: &mut Rng, stats: &mut GatherStats) -> Vec<Vertex> {
+        let mut nodes = Vec::new();
+        self.sample(x, out, 1, rng, stats, &mut nodes);
+        nodes
+    }
+
+    /// Vertices at recursion `level` (1: around a gather point) appended to `nodes`.
+    fn sample(&self, x: Vec3, out: Vec3, level: u32, rng: &mut Rng, stats: &mut GatherStats, nodes: &mut Vec<Vertex>) {
         let m = self.medium;
         let r = self.radius;
         let n = if level == 1 { self.vertices } else { 1 };
         let rho = self.mip.sample(m, m.world_to_index.transform_point3(x), self.footprint);
         let s = m.sigma_t(rho.max(0.0)).max_element();
         let alpha = -(-s * r).exp_m1();
-        let mut sum = Vec3::ZERO;
         for _ in 0..n {
             stats.vertices += 1;
             // Propagation direction of the light arriving at x, density p(w . out).
@@ -115,19 +157,60 @@ impl<'a> Compensation<'a> {
             let weight = tr * ((1.0 - t * t / (r * r)).max(0.0) / pdf);
             // At x' the viewer is x: the scattered light propagates along w, so view = -w.
             let view = -w;
-            let mut eps = self.direct.inscattered(xp, view);
+            let direct = self.direct.inscattered(xp, view);
             let k = (rng.f32() * self.lists.len() as f32) as usize;
-            let list = &self.lists[k.min(self.lists.len() - 1)];
-            let scale = self.lists.len() as f32;
-            if level < self.depth {
-                let (vpl, _) = connect(m, list, xp, view, Kernel::Clamp(r), r, self.step, stats);
-                eps += vpl * scale + self.estimate(xp, w, level + 1, rng, stats);
-            } else {
-                let (vpl, _) = connect(m, list, xp, view, Kernel::Ball(r), r, self.step, stats);
-                eps += vpl * scale;
+            let at = nodes.len();
+            let last = level >= self.depth;
+            nodes.push(Vertex { position: xp, view, list: k.min(self.lists.len() - 1) as u32, last, factor: weight * m.sigma_s(rho_p), direct, subtree: 1 });
+            if !last {
+                self.sample(xp, w, level + 1, rng, stats, nodes);
+                nodes[at].subtree = (nodes.len() - at) as u32;
             }
-            sum += weight * m.sigma_s(rho_p) * eps;
+        }
+    }
+
+    /// The estimate from the vertices (`vertices`) and each one's connection to its VPLs
+    /// (`connect`'s sum, same order).
+    pub fn combine(&self, nodes: &[Vertex], light: &[Vec3]) -> Vec3 {
+        self.combine_group(nodes, light, 0, nodes.len(), self.vertices)
+    }
+
+    /// The mean over `n` samples of the vertices nodes[start..end] (siblings and their subtrees).
+    fn combine_group(&self, nodes: &[Vertex], light: &[Vec3], start: usize, end: usize, n: u32) -> Vec3 {
+        let scale = self.lists.len() as f32;
+        let mut sum = Vec3::ZERO;
+        let mut i = start;
+        while i < end {
+            let v = &nodes[i];
+            let next = i + v.subtree as usize;
+            let mut eps = v.direct;
+            if v.last {
+                eps += light[i] * scale;
+            } else {
+                eps += light[i] * scale + self.combine_group(nodes, light, i + 1, next, 1);
+            }
+            sum += v.factor * eps;
+            i = next;
         }
         sum / n.max(1) as f32
     }
+}
+
+/// One vertex of the compensation (`Compensation::vertices`).
+#[derive(Clone, Copy, Debug)]
+pub struct Vertex {
+    pub position: Vec3,
+    /// Direction the vertex is seen from (`connect`'s view): the light it scatters goes to
+    /// its parent.
+    pub view: Vec3,
+    /// Its subset of walks (an index into `Compensation::lists`).
+    pub list: u32,
+    /// At the last recursion level: takes the VPLs with the ball kernel, has no children.
+    pub last: bool,
+    /// Its weight (transmittance / pdf, the clamp's share) times sigma_s there.
+    pub factor: Vec3,
+    /// The direct light it scatters towards its parent.
+    pub direct: Vec3,
+    /// Nodes in its subtree, itself included.
+    pub subtree: u32,
 }

@@ -50,7 +50,7 @@ pub struct GatherStats {
 }
 
 impl GatherStats {
-    fn add(&mut self, o: &GatherStats) {
+    pub fn add(&mut self, o: &GatherStats) {
         self.connections += o.connections;
         self.near += o.near;
         self.gathered += o.gathered;
@@ -136,26 +136,139 @@ pub fn march_step(medium: &Medium, frame: &glam::Affine3A) -> f32 {
     spacing.min(mfp_step).max(medium.voxel_size_world().min_element())
 }
 
+/// What every gather point needs, built once per solve and shared by the backends
+/// (backend.rs): the CPU connects point by point, the GPU all points at once, and both finish
+/// each point the same way (`finish`: reweighting, energy report, compensation).
+pub struct GatherPlan<'a> {
+    medium: &'a Medium,
+    mip: &'a MediumMip,
+    camera: Vec3,
+    /// The gather grid (J still zero).
+    pub grid: ScatteringGrid,
+    fp: f32,
+    subsets: u32,
+    /// The VPLs of each interleaved subset of walks.
+    pub lists: Vec<Vec<Vpl>>,
+    /// Near-field radius R.
+    r: f32,
+    /// Transmittance march step to the VPLs (`march_step`).
+    pub step: f32,
+    near_field: NearField,
+    mean_free_paths: f32,
+    seed: u64,
+    compensation: Option<Compensation<'a>>,
+    cell_volume: f64,
+}
+
+/// One gather point's connection: where, seen from where, with which kernel, to which subset.
+#[derive(Clone, Copy, Debug)]
+pub struct GatherPoint {
+    /// Index in the gather grid, i + nx (j + ny k).
+    pub index: u32,
+    pub position: Vec3,
+    /// Direction from the camera to the point.
+    pub view: Vec3,
+    /// Mean density over the point's cell.
+    pub rho: f32,
+    pub kernel: Kernel,
+    /// The ball kernel's radius there (what the clamp's loss is measured against).
+    pub ball: f32,
+    /// Its subset of walks (an index into `GatherPlan::lists`).
+    pub subset: u32,
+}
+
+impl<'a> GatherPlan<'a> {
+    pub fn new(scene: &'a Scene, mip: &'a MediumMip, walks: &Walks, s: &VplSettings) -> Result<Self> {
+        let medium = &scene.medium;
+        let grid = ScatteringGrid::over_medium(medium, s.gather_resolution)?;
+        // Per-row radiance and density (16 bytes a point) and the merged density (4): the grid
+        // itself was checked by `over_medium`.
+        crate::budget::check_elements::<[f32; 5]>("vpl gather buffers (solver.gather_resolution)", grid.len() as u64)?;
+        let fp = footprint(medium, &grid);
+        let subsets = s.subsets();
+        let r = s.clamp_radius * near_field_radius(&grid.index_to_world);
+        let step = march_step(medium, &grid.index_to_world);
+        let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step));
+        let cell_volume = glam::Mat3::from(grid.index_to_world.matrix3).determinant().abs() as f64;
+        Ok(GatherPlan {
+            medium,
+            mip,
+            camera: scene.camera.position,
+            grid,
+            fp,
+            subsets,
+            lists: subset_lists(walks, subsets),
+            r,
+            step,
+            near_field: s.near_field,
+            mean_free_paths: s.mean_free_paths,
+            seed: s.seed,
+            compensation,
+            cell_volume,
+        })
+    }
+
+    /// Grid point (i, j, k): its mean density, and its connection where there is density.
+    pub fn point(&self, i: u32, jj: u32, k: u32) -> (f32, Option<GatherPoint>) {
+        let medium = self.medium;
+        let [nx, ny, _] = self.grid.dims;
+        let y = self.grid.index_to_world.transform_point3(Vec3::new(i as f32, jj as f32, k as f32));
+        let rho = self.mip.sample(medium, medium.world_to_index.transform_point3(y), self.fp);
+        if rho <= 0.0 {
+            return (rho, None);
+        }
+        let view = (y - self.camera).normalize_or(Vec3::Z);
+        let ball = ball_radius(medium, rho, self.r, self.mean_free_paths);
+        let kernel = match self.near_field {
+            NearField::Ball => Kernel::Ball(ball),
+            NearField::Clamp | NearField::Compensate => Kernel::Clamp(self.r),
+        };
+        let point = GatherPoint { index: i + nx * (jj + ny * k), position: y, view, rho, kernel, ball, subset: subset_of(i, jj, k, self.subsets) };
+        (rho, Some(point))
+    }
+
+    /// J at a point from its connection's (sum, lost) (`connect`): the subset reweighted, the
+    /// energy report, and the bias compensation when it is on.
+    pub fn finish(&self, p: &GatherPoint, sum: Vec3, lost: Vec3, stats: &mut GatherStats) -> Vec3 {
+        let back = self.compensation.as_ref().map(|c| c.estimate(p.position, -p.view, &mut self.compensation_rng(p), stats));
+        self.finish_with(p, sum, lost, back, stats)
+    }
+
+    pub fn medium(&self) -> &'a Medium {
+        self.medium
+    }
+
+    /// The compensation of `near_field: compensate`, if on.
+    pub fn compensation(&self) -> Option<&Compensation<'a>> {
+        self.compensation.as_ref()
+    }
+
+    /// The random numbers of a point's compensation (`Compensation::vertices`).
+    pub fn compensation_rng(&self, p: &GatherPoint) -> Rng {
+        Rng::new(self.seed ^ 0x5eed_c0de, p.index as u64)
+    }
+
+    /// `finish` with the compensation's estimate `back` already made (None: off).
+    pub fn finish_with(&self, p: &GatherPoint, sum: Vec3, lost: Vec3, back: Option<Vec3>, stats: &mut GatherStats) -> Vec3 {
+        let mut total = sum * self.subsets as f32;
+        let sigma_s = self.medium.sigma_s(p.rho);
+        let energy = |v: Vec3| (sigma_s * v).element_sum() as f64 * self.cell_volume;
+        stats.gathered += energy(total);
+        stats.clamped += energy(lost * self.subsets as f32);
+        if let Some(back) = back {
+            stats.restored += energy(back);
+            total += back;
+        }
+        total
+    }
+}
+
 /// J on the gather grid, with each point's mean density over its cell (the upsampling's guide).
 /// Ends with `Error::Cancelled` within a row of gather points once `progress` is cancelled.
 pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
+    let plan = GatherPlan::new(scene, mip, walks, s)?;
     let medium = &scene.medium;
-    let camera = scene.camera.position;
-    let mut j = ScatteringGrid::over_medium(medium, s.gather_resolution)?;
-    // Per-row radiance and density (16 bytes a point) and the merged density (4): the grid
-    // itself was checked by `over_medium`.
-    crate::budget::check_elements::<[f32; 5]>("vpl gather buffers (solver.gather_resolution)", j.len() as u64)?;
-    let fp = footprint(medium, &j);
-    let subsets = s.subsets();
-    let lists = subset_lists(walks, subsets);
-    let cell_radius = near_field_radius(&j.index_to_world);
-    let r = s.clamp_radius * cell_radius;
-    let step = march_step(medium, &j.index_to_world);
-    let frame = j.index_to_world;
-    let [nx, ny, nz] = j.dims;
-    let w2i = medium.world_to_index;
-    let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step));
-    let cell_volume = glam::Mat3::from(frame.matrix3).determinant().abs() as f64;
+    let [nx, ny, nz] = plan.grid.dims;
     let rows: Vec<(Vec<Vec3>, Vec<f32>, GatherStats)> = (0..nz)
         .into_par_iter()
         .map(|k| {
@@ -168,32 +281,12 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
                     if progress.cancelled() {
                         break 'rows;
                     }
-                    let y = frame.transform_point3(Vec3::new(i as f32, jj as f32, k as f32));
-                    let rho = mip.sample(medium, w2i.transform_point3(y), fp);
                     let idx = (i + nx * jj) as usize;
+                    let (rho, point) = plan.point(i, jj, k);
                     dens[idx] = rho;
-                    if rho <= 0.0 {
-                        continue;
-                    }
-                    let view = (y - camera).normalize_or(Vec3::Z);
-                    let ball = ball_radius(medium, rho, r, s.mean_free_paths);
-                    let kernel = match s.near_field {
-                        NearField::Ball => Kernel::Ball(ball),
-                        NearField::Clamp | NearField::Compensate => Kernel::Clamp(r),
-                    };
-                    let (sum, lost) = connect(medium, &lists[subset_of(i, jj, k, subsets) as usize], y, view, kernel, ball, step, &mut stats);
-                    let mut total = sum * subsets as f32;
-                    let sigma_s = medium.sigma_s(rho);
-                    let energy = |v: Vec3| (sigma_s * v).element_sum() as f64 * cell_volume;
-                    stats.gathered += energy(total);
-                    stats.clamped += energy(lost * subsets as f32);
-                    if let Some(c) = &compensation {
-                        let mut rng = Rng::new(s.seed ^ 0x5eed_c0de, (i + nx * (jj + ny * k)) as u64);
-                        let back = c.estimate(y, -view, 1, &mut rng, &mut stats);
-                        stats.restored += energy(back);
-                        total += back;
-                    }
-                    jv[idx] = total;
+                    let Some(p) = point else { continue };
+                    let (sum, lost) = connect(medium, &plan.lists[p.subset as usize], p.position, p.view, p.kernel, p.ball, plan.step, &mut stats);
+                    jv[idx] = plan.finish(&p, sum, lost, &mut stats);
                 }
             }
             (jv, dens, stats)
@@ -202,6 +295,7 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
+    let mut j = plan.grid;
     let mut density = Vec::with_capacity(j.len());
     let mut stats = GatherStats::default();
     for (k, (jv, dens, st)) in rows.into_iter().enumerate() {

@@ -18,7 +18,10 @@
 //!   scattering-grid interface).
 //! - Transmittance to VPLs is ray marched (deterministic) at the gather grid's spacing but at
 //!   most half a mean free path of the densest voxel (gather::march_step).
-//! - CPU only for now.
+//! - The gather, upsampling and single scattering run on a backend (backend.rs): the CPU, or
+//!   the GPU (volscatter-gpu, shaders/src/vpl), where the connections to the VPLs (the gather
+//!   points' and the compensation vertices') run in WGSL; the walks, the compensation's vertex
+//!   sampling and the direct light at its vertices stay on the CPU on both.
 //! - A VPL sits at every collision of a walk in the medium, the first included: light from a
 //!   source to a point is the single scattering (exact, from the compositor), light from a
 //!   walk's first collision to a point is double scattering, and so on. (Counting the light
@@ -31,6 +34,7 @@
 //! heavy-tailed estimator at 10^4 VPLs). White furnace box S / sigma_s 0.991 (clamp alone
 //! 0.695 at R = 2 cells).
 
+pub mod backend;
 pub mod compensate;
 pub mod gather;
 pub mod settings;
@@ -39,11 +43,10 @@ pub mod walks;
 
 use super::pop::mip::MediumMip;
 use super::pop::settings::PopSettings;
-use super::pop::upsample::upsample;
 use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
-use crate::compositor::single_scattering_grid_cancellable;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
+pub use backend::{CpuBackend, VplBackend};
 pub use gather::GatherStats;
 pub use settings::{NearField, VplSettings};
 
@@ -75,6 +78,11 @@ impl Vpl {
     /// Solves; `max_orders` keeps only the first VPLs of each walk (u32::MAX: all), so that 1
     /// gives single + double scattering.
     pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress, max_orders: u32) -> Result<(SolveOutput, VplReport)> {
+        self.solve_with(scene, progress, max_orders, &CpuBackend)
+    }
+
+    /// `solve_detailed` with the gather, upsampling and single scattering on `backend`.
+    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, max_orders: u32, backend: &dyn VplBackend) -> Result<(SolveOutput, VplReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -92,10 +100,10 @@ impl Vpl {
         if !progress.update("vpl gather", 0.0) {
             return Err(Error::Cancelled);
         }
-        let (merged, gstats) = timings.time("vpl gather", || gather::gather(scene, &mip, &walks, s, progress))?;
+        let (merged, gstats) = timings.time("vpl gather", || backend.gather(scene, &mip, &walks, s, progress))?;
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
-        let mut scattering = timings.time("vpl upsample", || upsample(medium, &mip, &merged, &pop_like))?;
-        let single = timings.time("vpl single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?;
+        let mut scattering = timings.time("vpl upsample", || backend.upsample(medium, &mip, &merged, &pop_like))?;
+        let single = timings.time("vpl single scattering", || backend.single_scattering(scene, s, progress))?;
         debug_assert_eq!(single.dims, scattering.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {
             *a += *b;

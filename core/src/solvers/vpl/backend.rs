@@ -1,0 +1,45 @@
+//! Where `vpl`'s heavy stages run. `Vpl::solve_with` traces the walks on the CPU (as the
+//! paper does) and hands the stages that touch every gather or output point to a
+//! `VplBackend`: the CPU code of this module's siblings (`CpuBackend`), or the GPU port in
+//! volscatter-gpu (shaders/src/vpl).
+
+use super::gather::{self, GatherStats};
+use super::settings::VplSettings;
+use super::walks::Walks;
+use crate::compositor::single_scattering_grid_cancellable;
+use crate::error::Result;
+use crate::medium::Medium;
+use crate::scene::Scene;
+use crate::solvers::pop::merge::Merged;
+use crate::solvers::pop::mip::MediumMip;
+use crate::solvers::pop::settings::PopSettings;
+use crate::solvers::pop::upsample;
+use crate::solvers::{Progress, ScatteringGrid};
+
+pub trait VplBackend: Sync {
+    /// gather.rs: J on the gather grid with its density guide, and the near field's report.
+    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)>;
+
+    /// pop's upsample.rs: the multiple scattering S on the output grid.
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid>;
+
+    /// The compositor's single-scattering grid on the output frame.
+    fn single_scattering(&self, scene: &Scene, s: &VplSettings, progress: &dyn Progress) -> Result<ScatteringGrid>;
+}
+
+/// The CPU pipeline.
+pub struct CpuBackend;
+
+impl VplBackend for CpuBackend {
+    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
+        gather::gather(scene, mip, walks, s, progress)
+    }
+
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
+        upsample::upsample(medium, mip, merged, settings)
+    }
+
+    fn single_scattering(&self, scene: &Scene, s: &VplSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
+        single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
+    }
+}
