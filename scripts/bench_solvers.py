@@ -59,8 +59,9 @@ DOCS = REPO_ROOT / "docs"
 QUALITIES = ("draft", "preview", "final")
 CYCLES_SPP = (16, 64, 256, 1024)
 #: Paths per pixel of each reference seed (two seeds): about a minute per seed and scene here
-#: (64 spp take 0.4-1.0 s on these 64x48 images), the whole step ~11 min.
-REF_SPP = {"thin_smoke": 4096, "dense_cloud": 16384, "smoke_point": 4096, "overcast": 4096, "fire_smoke": 4096}
+#: (64 spp take 0.4-1.0 s on these 64x48 images); the lamp inside the smoke gets twice that (the
+#: 1/r^2 next to its sphere is heavy-tailed).
+REF_SPP = {"thin_smoke": 4096, "dense_cloud": 16384, "smoke_point": 8192, "overcast": 4096, "fire_smoke": 4096}
 #: Reference settings beyond spp/seed. The dense cloud (albedo 0.99) without Russian roulette:
 #: the tracer's survival probability is capped at 0.95, so at albedo 0.99 a long path's weight
 #: grows 4% per bounce and the image is heavy-tailed (two seeds at 256 spp differ by 0.53 with
@@ -224,10 +225,21 @@ def full_settings(entry: dict, quality: str) -> dict:
     return s
 
 
-def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tuple[str, ...], work: Path):
+#: A solver's next (dearer) quality is skipped on a scene once one of its runs there took longer
+#: than this: the presets grow 4-16x in cost per step, and the whole benchmark has to fit in an
+#: hour of this shared machine. Skipped runs are listed in the section.
+SKIP_AFTER_SECONDS = 20.0
+
+
+def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tuple[str, ...], work: Path,
+                skipped: list[str]):
     runs, images = [], {}
     for e in entries:
         for q in qualities:
+            if runs and runs[-1]["solver"] == e["name"] and runs[-1]["seconds"] > SKIP_AFTER_SECONDS:
+                skipped.append(f"{e['name']} {q} on {name} (its {runs[-1]['quality']} took {runs[-1]['seconds']:.0f} s)")
+                log("skipped:", skipped[-1])
+                continue
             settings = full_settings(e, q)
             try:
                 img, rep = render(name, e["name"], settings, work, f"{name}_{e['name']}_{q}")
@@ -242,6 +254,36 @@ def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tupl
             images[(e["name"], q)] = img
             log(f"{e['name']:12s} {q:8s} {name}: {r['seconds']:.2f} s (solve {solve:.2f}), error {r['image_error']:.4f}")
     return runs, images
+
+
+def grid_pass(scenes: list[str], quality: str, grid_spp: int, work: Path) -> None:
+    """Fills `grid_error` of measurements.json for the runs at `quality`: `volscatter compare`
+    with each solver at that quality's settings (as measured) against the reference's scattering
+    grid (32 cells along the longest side, `grid_spp` paths per cell; its image at 1 spp is not
+    used). A separate pass because it solves everything again: it costs as much as the timing
+    runs, so it is done for one quality only."""
+    meas = json.loads(MEASUREMENTS.read_text())
+    for n in scenes:
+        runs = [r for r in meas["runs"] if r["scene"] == n and r["quality"] == quality]
+        if not runs:
+            continue
+        names = [f"{r['solver']}#{quality}" for r in runs] + ["reference"]
+        out = work / f"grid_{n}.json"
+        cmd = [str(volscatter_bin()), "compare", str(scene_json(n)), "--solvers", ",".join(names), "--device", "cpu",
+               "--grid-resolution", "32", "--grid-spp", str(grid_spp), "--json", str(out), "-q",
+               "--set", "reference.spp=1"]
+        for r in runs:
+            for k, v in r["settings"].items():
+                cmd += ["--set", f"{r['solver']}#{quality}.{k}={json.dumps(v)}"]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        rows = {row["solver"]: row for row in json.loads(out.read_text())["runs"]}
+        for r in runs:
+            e = rows[f"{r['solver']}#{quality}"]["grid_relative_rmse"]
+            r["grid_error"] = e
+            log(f"grid error {r['solver']} {quality} {n}: {e:.4f}")
+        MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+    write_section("solvers", markdown(meas, gpu_note()))
+    write_section("bench-solvers", readme_table(meas), path="README.md")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -276,7 +318,20 @@ def gpu_note() -> str:
         else "a GPU adapter exists but GPU runs are not measured by this script yet"
 
 
-def markdown(meas: dict, extrapolated: set, note_gpu: str) -> str:
+def skipped_runs(meas: dict) -> list[str]:
+    """The presets not measured because a cheaper one of the same solver took too long."""
+    out = []
+    for sc in meas["scenes"]:
+        for solver in dict.fromkeys(r["solver"] for r in meas["runs"]):
+            rs = {r["quality"]: r for r in meas["runs"] if r["scene"] == sc["name"] and r["solver"] == solver}
+            for prev, q in zip(QUALITIES, QUALITIES[1:]):
+                if prev in rs and q not in rs and rs[prev]["seconds"] > SKIP_AFTER_SECONDS:
+                    out.append(f"{solver} {q} on {sc['name']} (its {prev} took {rs[prev]['seconds']:.0f} s)")
+    return out
+
+
+def markdown(meas: dict, note_gpu: str) -> str:
+    skipped = skipped_runs(meas)
     lines = ["## Solvers against Cycles (issue 21)", "",
              "Written by `scripts/bench_solvers.py`; measurements in `core/src/solvers/auto/measurements.json`, "
              "plots `docs/bench_error_time.png` and `docs/bench_strip_<scene>.png`.", "",
@@ -290,7 +345,13 @@ def markdown(meas: dict, extrapolated: set, note_gpu: str) -> str:
              "is the whole render, its fixed scene-sync cost (a 1-spp render) given apart. Speed-up = Cycles' "
              "time to the same error (log-log interpolation of its error-time curve; `~` where extrapolated "
              "beyond the measured spp range, `-` where Cycles' error never falls that low or high enough to say) "
-             "/ the solver's time; above 1 the solver is faster.", ""]
+             "/ the solver's time; above 1 the solver is faster. Grid error: relative RMSE of the solver's "
+             "scattering grid against the reference's (`volscatter compare`, 32 cells along the longest side, "
+             "128 paths per cell: its own noise is in it), at the preview preset only (`--grid preview`, a second "
+             "solve of each run).", ""]
+    if skipped:
+        lines += [f"Not run (a cheaper quality of the same solver took over {SKIP_AFTER_SECONDS:.0f} s on that scene): "
+                  + "; ".join(skipped) + ".", ""]
     for sc in meas["scenes"]:
         n = sc["name"]
         cyc = [c for c in meas["cycles"] if c["scene"] == n]
@@ -301,8 +362,8 @@ def markdown(meas: dict, extrapolated: set, note_gpu: str) -> str:
                       + f" (time / error; sync {cyc[0]['sync_seconds']:.2f} s). Agreement of Cycles at "
                       f"{c1024['spp']} spp with our reference: {c1024['image_error']:.3f}.", ""]
         lines += ["| solver | quality | time (s) | solve (s) | composite (s) | image error | Cycles time at that error (s) | "
-                  "speed-up | speed-up, Cycles' sync left out |",
-                  "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+                  "speed-up | speed-up, Cycles' sync left out | grid error |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for r in meas["runs"]:
             if r["scene"] != n:
                 continue
@@ -312,8 +373,55 @@ def markdown(meas: dict, extrapolated: set, note_gpu: str) -> str:
             t2, ext2 = cycles_time_at(cyc, r["image_error"], minus_sync=True) if cyc else (None, False)
             sp2 = "-" if t2 is None else ("~" if ext2 else "") + f"{t2 / r['seconds']:.1f}x"
             lines.append(f"| {r['solver']} | {r['quality']} | {r['seconds']:.2f} | {r['solve_seconds']:.2f} | "
-                         f"{r['composite_seconds']:.2f} | {r['image_error']:.3f} | {ct} | {sp} | {sp2} |")
+                         f"{r['composite_seconds']:.2f} | {r['image_error']:.3f} | {ct} | {sp} | {sp2} | "
+                         + ("-" if r.get("grid_error") is None else f"{r['grid_error']:.3f}") + " |")
         lines.append("")
+    return "\n".join(lines)
+
+
+def images_from(work: Path, meas: dict) -> dict:
+    """The images of a full run, read back from its render folder (names as render() and
+    cycles_runs() write them)."""
+    images = {}
+    for r in meas["runs"]:
+        p = work / f"{r['scene']}_{r['solver']}_{r['quality']}.exr"
+        if p.is_file():
+            images.setdefault(r["scene"], {})[(r["solver"], r["quality"])] = read_exr_rgb(p)
+    for c in meas["cycles"]:
+        p = work / f"cycles_{c['scene']}_{c['spp']}.exr"
+        top = max(x["spp"] for x in meas["cycles"] if x["scene"] == c["scene"])
+        if c["spp"] == top and p.is_file():
+            import mitsuba_scenes as ms
+            images.setdefault(c["scene"], {})["cycles"] = (top, ms.read_exr_layers(p)["rgb"])
+    return images
+
+
+def readme_table(meas: dict) -> str:
+    """The README's "which solver for which scene" table: per solver and scene its preview run's
+    image error, time and speed-up over Cycles at that error (BENCHMARKS.md `solvers` has all)."""
+    scenes = [s["name"] for s in meas["scenes"]]
+    solvers = list(dict.fromkeys(r["solver"] for r in meas["runs"]))
+    lines = ["Which solver for which scene (`scripts/bench_solvers.py`, BENCHMARKS.md `solvers`, "
+             f"{meas['date']}): image relative RMSE against the converged reference at the `preview` preset, "
+             "its CPU time (solve + composite, 2 shared cores), and the speed-up over Cycles (CPU, 1024 volume "
+             "bounces) at the same error, its per-render sync cost included.", "",
+             "| solver | " + " | ".join(scenes) + " |", "|---|" + "---|" * len(scenes)]
+    for solver in solvers:
+        cells = []
+        for n in scenes:
+            r = next((r for r in meas["runs"] if r["scene"] == n and r["solver"] == solver and r["quality"] == "preview"), None)
+            if r is None:
+                cells.append("-")
+                continue
+            cyc = [c for c in meas["cycles"] if c["scene"] == n]
+            t, ext = cycles_time_at(cyc, r["image_error"]) if cyc else (None, False)
+            sp = "" if t is None else f", {'~' if ext else ''}{t / r['seconds']:.1f}x"
+            cells.append(f"{r['image_error']:.3f} in {r['seconds']:.1f} s{sp}")
+        lines.append(f"| `{solver}` | " + " | ".join(cells) + " |")
+    agree = [f"{c['scene']} {c['image_error']:.3f}" for c in meas["cycles"] if c["spp"] == max(CYCLES_SPP)]
+    if agree:
+        lines += ["", "Cycles at 1024 spp against the same reference (both renderers' noise and any disagreement): "
+                  + ", ".join(agree) + "."]
     return "\n".join(lines)
 
 
@@ -365,9 +473,9 @@ def plots(meas: dict, images: dict, refs: dict) -> list[Path]:
                     best[r["solver"]] = r
         cols = [("reference", ref, None)] + [(f"{s} {r['quality']}\n{r['image_error']:.3f}", images[n][(s, r["quality"])], s)
                                             for s, r in sorted(best.items())]
-        cyc_img = images.get(n, {}).get(("cycles", "1024"))
-        if cyc_img is not None:
-            cols.append(("Cycles 1024 spp", cyc_img, "cycles"))
+        if "cycles" in images.get(n, {}):
+            spp, cyc_img = images[n]["cycles"]
+            cols.append((f"Cycles {spp} spp", cyc_img, "cycles"))
         scale = np.percentile(ref.mean(-1), 99.5) or 1.0
         fig, axes = plt.subplots(2, len(cols), figsize=(1.9 * len(cols), 3.2), squeeze=False)
         for i, (title, img, _) in enumerate(cols):
@@ -395,14 +503,42 @@ def main() -> int:
     ap.add_argument("--references", action="store_true", help="compute the converged references, then stop")
     ap.add_argument("--quick", action="store_true", help="draft and preview only, Cycles at 16 and 64 spp (a smoke check)")
     ap.add_argument("--no-cycles", action="store_true")
+    ap.add_argument("--grid", metavar="QUALITY", help="only fill grid_error of measurements.json's runs at QUALITY "
+                    "(volscatter compare against the reference's scattering grid), then rewrite the section")
+    ap.add_argument("--grid-spp", type=int, default=128)
+    ap.add_argument("--work", help="folder for the renders (default: a new temporary one); --cycles-only and "
+                    "--replot read the solvers' images back from the folder of an earlier full run")
+    ap.add_argument("--cycles-only", action="store_true", help="render Cycles again for --scenes, replace its "
+                    "entries in measurements.json, rewrite the section, README table and plots")
+    ap.add_argument("--replot", action="store_true", help="only rewrite the section, README table and plots from "
+                    "measurements.json and the images in --work")
     ap.add_argument("--no-write", action="store_true", help="print only: leave BENCHMARKS.md, measurements and plots")
     args = ap.parse_args()
     scenes = args.scenes.split(",")
-    work = Path(tempfile.mkdtemp(prefix="bench-solvers-"))
+    work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="bench-solvers-"))
+    work.mkdir(parents=True, exist_ok=True)
+    log("renders in", work)
+    if args.cycles_only or args.replot:
+        meas = json.loads(MEASUREMENTS.read_text())
+        for n in scenes if args.cycles_only else []:
+            ref, _ = load_reference(n)
+            c, _ = cycles_runs(n, ref, CYCLES_SPP, work)
+            meas["cycles"] = [x for x in meas["cycles"] if x["scene"] != n] + c
+        MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+        write_section("solvers", markdown(meas, gpu_note()))
+        write_section("bench-solvers", readme_table(meas), path="README.md")
+        images, refs = images_from(work, meas), {s["name"]: load_reference(s["name"])[0] for s in meas["scenes"]}
+        for p in plots(meas, images, refs):
+            log("wrote", p.relative_to(REPO_ROOT))
+        return 0
     if args.references:
         make_references(scenes, work)
         return 0
-    entries = [e for e in registry() if e["name"] != "reference"]
+    if args.grid:
+        grid_pass(scenes, args.grid, args.grid_spp, work)
+        return 0
+    # `auto` picks among the others from this script's measurements: not measured itself
+    entries = [e for e in registry() if e["name"] not in ("reference", "auto")]
     if args.solvers:
         entries = [e for e in entries if e["name"] in args.solvers.split(",")]
     qualities = tuple(args.qualities.split(","))
@@ -411,7 +547,18 @@ def main() -> int:
         qualities, spps = tuple(q for q in qualities if q != "final"), (16, 64)
     meas = {"format": 1, "written_by": "scripts/bench_solvers.py", "machine": machine(), "date": today(),
             "error": "image relative RMSE against the converged reference", "scenes": [], "runs": [], "cycles": []}
-    images, refs = {}, {}
+    images, refs, skipped = {}, {}, []
+    note = gpu_note()
+
+    def write():
+        """After every scene: a run cut short still leaves what it measured."""
+        md = markdown(meas, note)
+        if not args.no_write:
+            MEASUREMENTS.parent.mkdir(parents=True, exist_ok=True)
+            MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+            write_section("solvers", md)
+        return md
+
     for n in scenes:
         ref, meta = load_reference(n)
         refs[n] = ref
@@ -421,18 +568,15 @@ def main() -> int:
         if not args.no_cycles:
             c, cimg = cycles_runs(n, ref, spps, work)
             meas["cycles"] += c
-            images[n][("cycles", "1024")] = cimg[max(cimg)]
-        r, rimg = solver_runs(n, ref, entries, qualities, work)
+            images[n]["cycles"] = (max(cimg), cimg[max(cimg)])
+        r, rimg = solver_runs(n, ref, entries, qualities, work, skipped)
         meas["runs"] += r
         images[n].update(rimg)
-    note = gpu_note()
-    md = markdown(meas, set(), note)
-    print(md)
+        write()
+    print(write())
     if args.no_write:
         return 0
-    MEASUREMENTS.parent.mkdir(parents=True, exist_ok=True)
-    MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
-    write_section("solvers", md)
+    write_section("bench-solvers", readme_table(meas), path="README.md")
     for p in plots(meas, images, refs):
         log("wrote", p.relative_to(REPO_ROOT))
     return 0
