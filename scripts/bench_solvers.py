@@ -178,16 +178,17 @@ def cycles_runs(name: str, ref: np.ndarray, spps: tuple[int, ...], work: Path) -
     return runs, images
 
 
-#: How far beyond Cycles' measured errors its curve is extrapolated (a factor in error); past it
-#: only a bound is given: where Cycles stops improving (its disagreement with our reference, or
-#: fireflies) a straight log-log line would promise absurd speed-ups.
+#: How far above Cycles' highest measured error (16 spp) its curve is extrapolated (a factor in
+#: error); past it, and anywhere below its lowest error, only a bound is given: where Cycles stops
+#: improving (its disagreement with our reference, or fireflies) a straight log-log line would
+#: promise absurd speed-ups.
 EXTRAPOLATE = 1.5
 
 
 def cycles_time_at(cycles: list[dict], error: float, minus_sync: bool = False) -> tuple[float | None, str]:
     """Cycles' time to reach `error`, interpolated log-log between its runs; (seconds, mark):
-    mark "" interpolated, "~" extrapolated (within EXTRAPOLATE of the measured errors), ">" the
-    error is below every Cycles run's by more than that (seconds = Cycles' slowest run: the
+    mark "" interpolated, "~" extrapolated (up to EXTRAPOLATE above the measured errors), ">" the
+    error is below every Cycles run's (seconds = Cycles' slowest run: the
     speed-up is at least seconds / the solver's), "<" above every run's (seconds = its fastest
     run: the speed-up is at most that). (None, "") when it cannot be said. With `minus_sync` the
     fixed cost (the 1-spp render) is taken off each time first: the sampling alone."""
@@ -205,11 +206,13 @@ def cycles_time_at(cycles: list[dict], error: float, minus_sync: bool = False) -
         if lo <= le_target <= hi and le[i] != le[i + 1]:
             f = (le_target - le[i]) / (le[i + 1] - le[i])
             return math.exp(lt[i] + f * (lt[i + 1] - lt[i])), ""
-    if le_target < min(le) - math.log(EXTRAPOLATE):
+    if le_target < min(le):
+        # below Cycles' best: its last segment is often flat (fireflies, disagreement with our
+        # reference), so a line through it promises anything; only the bound is sure
         return pts[-1][0], ">"
     if le_target > max(le) + math.log(EXTRAPOLATE):
         return pts[0][0], "<"
-    i = 0 if le_target > max(le) else len(pts) - 2
+    i = 0
     if le[i + 1] >= le[i]:
         return None, ""
     f = (le_target - le[i]) / (le[i + 1] - le[i])
@@ -352,7 +355,7 @@ def markdown(meas: dict, note_gpu: str) -> str:
              "Cycles: bpy, CPU, 2 threads, volume bounces 1024, clamping off, no denoiser, fixed spp; its time "
              "is the whole render, its fixed scene-sync cost (a 1-spp render) given apart. Speed-up = Cycles' "
              "time to the same error (log-log interpolation of its error-time curve; `~` where extrapolated "
-             f"up to {EXTRAPOLATE}x beyond its measured errors; `>` where the solver's error is lower still, so "
+             f"up to {EXTRAPOLATE}x above its highest (16 spp) error; `>` where the solver's error is below its lowest, so "
              "only a bound (Cycles at 1024 spp is that much slower and still worse); `<` where it is higher "
              "still (Cycles at 16 spp is already better); `-` where a time cannot be said) / the solver's time; "
              "above 1 the solver is faster. Where Cycles' error stops falling (dense_cloud: fireflies; "
