@@ -277,7 +277,7 @@ const REFERENCE: SolverEntry = SolverEntry {
 const POP: SolverEntry = SolverEntry {
     name: "pop",
     label: "Principal Ordinates",
-    help: "principal-ordinates propagation (paper 01), grids aligned with each light: 0.17-0.40 image error on smoke and cubes; dense clouds (optical depth 30+) 0.49 and 35% too dark, 0.25 with moment_anisotropy",
+    help: "principal-ordinates propagation (paper 01), grids aligned with each light: 0.17-0.40 image error on smoke and cubes; dense clouds (optical depth 30+) 0.49 and 35% too dark, 0.25 with moment_anisotropy. Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 1-16 s on 2 cores): thin smoke and overcast 0.09, fire-lit smoke 0.23, lamp inside smoke 0.50, dense cloud 0.71; final is slower and no better (0.13 on the smokes)",
     settings: &[
         SettingSpec::int("grid_resolution", "cells along the longest side of each light's propagation grid").range(2.0, 512.0),
         SettingSpec::int("max_iterations", "cap on propagation iterations per light").range(1.0, 100_000.0),
@@ -329,7 +329,7 @@ const POP: SolverEntry = SolverEntry {
 const VPL: SolverEntry = SolverEntry {
     name: "vpl",
     label: "Virtual Point Lights",
-    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering, clamped near field with bias compensation. Accurate on thin and medium media: image rel. RMSE at 4096 walks 0.09 (cube g 0), 0.14 (cube g 0.7), 0.31 (plume g 0.9), white furnace within 1%; at 8192 walks 0.11 (cube g 0.7), 0.19 (point light beside the plume); too dark on dense g 0.9 clouds (0.58, flux x0.59); compensation is heavy-tailed on the plume (one 8192-walk run 1.47, x1.62: use near_field ball there) (BENCHMARKS.md vpl)",
+    help: "instant multiple scattering with virtual point lights (paper 03): random walks, exact single scattering, clamped near field with bias compensation. Accurate on thin and medium media: image rel. RMSE at 4096 walks 0.09 (cube g 0), 0.14 (cube g 0.7), 0.31 (plume g 0.9), white furnace within 1%; at 8192 walks 0.11 (cube g 0.7), 0.19 (point light beside the plume); too dark on dense g 0.9 clouds (0.58, flux x0.59); compensation is heavy-tailed on the plume (one 8192-walk run 1.47, x1.62: use near_field ball there) (BENCHMARKS.md vpl). Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 30-110 s on 2 cores): overcast 0.05, thin smoke 0.07, fire-lit smoke 0.10, lamp inside smoke 0.43, dense cloud 0.52",
     settings: &[
         SettingSpec::int("walks", "random walks from the lights (noise falls as 1/sqrt)").range(1.0, (1u32 << 24) as f64),
         SettingSpec::int("max_vertices", "most VPLs one walk leaves before it is cut").range(1.0, (1u32 << 20) as f64),
@@ -367,7 +367,7 @@ const VPL: SolverEntry = SolverEntry {
 const PHOTON_GRID: SolverEntry = SolverEntry {
     name: "photon-grid",
     label: "Photon Grid",
-    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20); noise falls as photons^-0.47. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve). On a GPU the photon tracing and exact single scattering run on the device (other random numbers: equal in distribution, S within the noise of two seeds on lavapipe)",
+    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20); noise falls as photons^-0.47. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve). On a GPU the photon tracing and exact single scattering run on the device (other random numbers: equal in distribution, S within the noise of two seeds on lavapipe). Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 1.4-2.8 s on 2 cores): thin smoke and overcast 0.04, fire-lit smoke 0.05, dense cloud 0.25 (the best there; 0.22 at final), lamp inside smoke 0.42",
     settings: &[
         SettingSpec::int("photons", "photons traced per solve, equal flux each").range(1.0, (1u32 << 30) as f64),
         SettingSpec::int("seed", "random seed (deterministic for a seed, any thread count)"),
@@ -414,7 +414,7 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
 const NETWORK: SolverEntry = SolverEntry {
     name: "network",
     label: "Illumination Networks",
-    help: "illumination networks (paper 02): particles linked along D directions, view-independent multiple scattering. Image rel. RMSE at 2048 particles, 64 directions: cubes 0.09-0.12, plume 0.20; NOT for dense clouds: the optical-depth-30 cloud comes out 0.36x too dark (image error 0.69). In a session a camera move re-splats without iterating (exactly the full solve)",
+    help: "illumination networks (paper 02): particles linked along D directions, view-independent multiple scattering. Image rel. RMSE at 2048 particles, 64 directions: cubes 0.09-0.12, plume 0.20; NOT for dense clouds: the optical-depth-30 cloud comes out 0.36x too dark (image error 0.69). In a session a camera move re-splats without iterating (exactly the full solve). Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 0.5-2.5 s on 2 cores): thin smoke and overcast 0.09, fire-lit smoke 0.23, lamp inside smoke 0.46, dense cloud 0.63",
     settings: &[
         SettingSpec::int("particles", "particles N, sampled in proportion to sigma_t").range(16.0, 65536.0),
         SettingSpec::int("directions", "directions D of the network (Fibonacci lattice)").range(6.0, 1024.0),
@@ -448,7 +448,7 @@ const NETWORK: SolverEntry = SolverEntry {
 const LPM: SolverEntry = SolverEntry {
     name: "lpm",
     label: "Light Propagation Maps",
-    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget",
+    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget. Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 2-42 s on 2 cores): overcast 0.02, thin smoke 0.03, fire-lit smoke 0.05, lamp inside smoke 0.38, dense cloud 0.79; final (64^3, 49 directions) 0.01-0.02 on the smokes in 200 s",
     settings: &[
         SettingSpec::int("grid_resolution", "cells of the propagation grid along the longest side").range(2.0, 512.0),
         SettingSpec::int("directions", "propagation directions per cube face (a perfect square; the paper's 25)").range(1.0, 256.0),

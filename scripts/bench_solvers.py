@@ -1,0 +1,615 @@
+"""Every solver against Cycles on the benchmark scene set (issue 21). Writes the "solvers"
+section of BENCHMARKS.md, core/src/solvers/auto/measurements.json (what the `auto` solver is
+fitted to), docs/bench_error_time.png and docs/bench_strip_<scene>.png.
+
+    python3 scripts/bench_solvers.py --references [--scenes ...]   # converged references, once
+    python3 scripts/bench_solvers.py [--quick] [--scenes ...] [--solvers ...] [--no-cycles]
+
+Scenes: bench/scenes/<name>/scene.json (+ .vdb), exported from Blender by scripts/bench_scenes.py
+the way the add-on exports them; Cycles renders the same scenes rebuilt in Blender through bpy.
+
+- References (`--references`): `volscatter render --solver reference` (our path tracer, checked
+  against Mitsuba 3 in tests/mitsuba) at REF_SPP paths per pixel with two seeds; their mean is
+  bench/references/<name>.npy (float32, height x width x 3, premultiplied RGB of a transparent
+  film: only the volume counts) and the noise of that mean, |a - b| / 2 as a relative RMSE, goes
+  to bench/references/<name>.json. Never run in CI.
+- Solvers: each registered solver but `reference` at its registry presets draft / preview /
+  final, on the CPU (`--device cpu`, no AOVs): time = solve + composite from `--report`'s phases
+  (scene loading and EXR writing left out), image error = relative RMSE of the premultiplied RGB
+  against the reference (||img - ref|| / ||ref|| over all pixels).
+- Cycles (bpy, CPU, 2 threads, volume bounces 1024, no clamping, no denoiser, no adaptive
+  sampling, the same camera and image size) at 16, 64, 256, 1024 spp: time of the whole render,
+  and apart its fixed scene-sync cost, the time of a 1-spp render. Cycles at 1024 spp against our
+  reference is the renderers' agreement (it contains both renderers' noise).
+- Speed-up over Cycles at equal error: Cycles' (time, error) points interpolated log-log at each
+  solver run's error (extrapolated along the last segment, and marked so, outside the measured
+  range); speed-up = Cycles' time at that error / the run's time.
+
+Runs are interleaved per scene (Cycles, then the solvers) so that load from other work on the
+shared machine falls on both sides alike; run it under `nice -n 15`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT / "scripts"))
+sys.path.insert(0, str(REPO_ROOT / "tests" / "mitsuba"))
+from benchmarks_md import write_section  # noqa: E402
+
+import bench_scenes  # noqa: E402
+
+SCENE_DIR = REPO_ROOT / "bench" / "scenes"
+REF_DIR = REPO_ROOT / "bench" / "references"
+MEASUREMENTS = REPO_ROOT / "core" / "src" / "solvers" / "auto" / "measurements.json"
+DOCS = REPO_ROOT / "docs"
+QUALITIES = ("draft", "preview", "final")
+CYCLES_SPP = (16, 64, 256, 1024)
+#: Paths per pixel of each reference seed (two seeds): about a minute per seed and scene here
+#: (64 spp take 0.4-1.0 s on these 64x48 images); the lamp inside the smoke gets twice that (the
+#: 1/r^2 next to its sphere is heavy-tailed).
+REF_SPP = {"thin_smoke": 4096, "dense_cloud": 16384, "smoke_point": 8192, "overcast": 4096, "fire_smoke": 4096}
+#: Reference settings beyond spp/seed. The dense cloud (albedo 0.99) without Russian roulette:
+#: the tracer's survival probability is capped at 0.95, so at albedo 0.99 a long path's weight
+#: grows 4% per bounce and the image is heavy-tailed (two seeds at 256 spp differ by 0.53 with
+#: roulette after 8 bounces, 0.35 without; 20% more time). max_depth 1000 still ends the walk
+#: (0.99^1000 = 4e-5 of the light is left out).
+REF_SETTINGS = {"dense_cloud": {"rr_depth": 1000}}
+
+
+def log(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+def volscatter_bin() -> Path:
+    env = os.environ.get("VOLSCATTER_BIN")
+    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
+
+
+def read_exr_rgb(path: Path) -> np.ndarray:
+    """RGB of an EXR as float64 (height, width, 3), top row first (through mitsuba.Bitmap)."""
+    import mitsuba_scenes as ms
+    return ms.read_exr_rgb(path)
+
+
+def rel_rmse(img: np.ndarray, ref: np.ndarray) -> float:
+    """||img - ref|| / ||ref|| over the premultiplied RGB of all pixels."""
+    a = np.asarray(img, dtype=np.float64)[..., :3]
+    b = np.asarray(ref, dtype=np.float64)[..., :3]
+    return float(math.sqrt(np.mean((a - b) ** 2) / np.mean(b ** 2)))
+
+
+def scene_json(name: str) -> Path:
+    return SCENE_DIR / name / "scene.json"
+
+
+# ---------------------------------------------------------------------------------------------
+# our renders
+
+
+def render(name: str, solver: str, settings: dict, work: Path, tag: str, spp: int | None = None,
+           seed: int | None = None) -> tuple[np.ndarray, dict]:
+    """`volscatter render` of scene `name` (transparent film, CPU, no AOVs); (RGB, report)."""
+    out, rep = work / f"{tag}.exr", work / f"{tag}.json"
+    cmd = [str(volscatter_bin()), "render", str(scene_json(name)), "--solver", solver, "--out", str(out),
+           "--report", str(rep), "--transparent", "--device", "cpu", "--aov", "none", "-q"]
+    if spp is not None:
+        cmd += ["--spp", str(spp)]
+    if seed is not None:
+        cmd += ["--seed", str(seed)]
+    for k, v in settings.items():
+        cmd += ["--set", f"{k}={json.dumps(v)}"]
+    subprocess.run(cmd, check=True)
+    return read_exr_rgb(out), json.loads(rep.read_text())
+
+
+def split_phases(report: dict) -> tuple[float, float]:
+    """(solve, composite) seconds from a report's phases: the composite phase apart, scene
+    loading and writing left out, everything else is the solve."""
+    ph = report["phases_seconds"]
+    composite = ph.get("composite", 0.0)
+    solve = sum(v for k, v in ph.items() if k not in ("load scene", "write") and not k.startswith("composite"))
+    return solve, composite
+
+
+def make_references(scenes: list[str], work: Path, spp_div: int = 1) -> None:
+    REF_DIR.mkdir(parents=True, exist_ok=True)
+    for name in scenes:
+        spp = max(1, REF_SPP[name] // spp_div)
+        imgs, secs = [], 0.0
+        for seed in (1, 2):
+            t = time.perf_counter()
+            img, _ = render(name, "reference", REF_SETTINGS.get(name, {}), work, f"ref_{name}_{seed}", spp=spp, seed=seed)
+            secs += time.perf_counter() - t
+            imgs.append(img)
+        mean = (imgs[0] + imgs[1]) / 2
+        # the mean's error is half the two seeds' difference (independent, equal variance)
+        noise = math.sqrt(np.mean(((imgs[0] - imgs[1]) / 2) ** 2) / np.mean(mean ** 2))
+        np.save(REF_DIR / f"{name}.npy", mean.astype(np.float32))
+        meta = {"scene": f"bench/scenes/{name}/scene.json", "solver": "reference", "spp_per_seed": spp, "seeds": [1, 2],
+                "settings": REF_SETTINGS.get(name, {}), "width": int(mean.shape[1]), "height": int(mean.shape[0]),
+                "noise": noise, "seconds": secs, "machine": machine(), "date": today(),
+                "noise_definition": "relative RMSE of the stored mean: ||a - b|| / 2 / ||mean|| of the two seeds"}
+        (REF_DIR / f"{name}.json").write_text(json.dumps(meta, indent=1) + "\n")
+        log(f"reference {name}: {spp} spp x 2 seeds in {secs:.1f} s, noise {noise:.4f}")
+
+
+def load_reference(name: str) -> tuple[np.ndarray, dict]:
+    return np.load(REF_DIR / f"{name}.npy").astype(np.float64), json.loads((REF_DIR / f"{name}.json").read_text())
+
+
+# ---------------------------------------------------------------------------------------------
+# Cycles
+
+
+def cycles_runs(name: str, ref: np.ndarray, spps: tuple[int, ...], work: Path) -> tuple[list[dict], dict[int, np.ndarray]]:
+    """Cycles renders of scene `name` at each spp (and at 1 spp for the sync cost)."""
+    sys.path.insert(0, str(REPO_ROOT / "tests" / "python"))
+    import eevee_scenes as es
+    bench_scenes.build(name)
+    runs, images = [], {}
+
+    def one(spp):
+        t = time.perf_counter()
+        img = es.render_cycles(spp, bench_scenes.CYCLES_BOUNCES, seed=3, path=str(work / f"cycles_{name}_{spp}.exr"))
+        return img[..., :3].astype(np.float64), time.perf_counter() - t
+
+    # A 1-spp render is all fixed cost (scene sync, kernel and session set-up): 24 s here for
+    # any of these scenes and any bounce count, measured again per scene.
+    _, sync = one(1)
+    for spp in spps:
+        img, secs = one(spp)
+        images[spp] = img
+        runs.append({"scene": name, "spp": spp, "seconds": secs, "sync_seconds": sync, "image_error": rel_rmse(img, ref)})
+        log(f"cycles {name} {spp} spp: {secs:.2f} s (sync {sync:.2f} s), error {runs[-1]['image_error']:.4f}")
+    return runs, images
+
+
+#: How far above Cycles' highest measured error (16 spp) its curve is extrapolated (a factor in
+#: error); past it, and anywhere below its lowest error, only a bound is given: where Cycles stops
+#: improving (its disagreement with our reference, or fireflies) a straight log-log line would
+#: promise absurd speed-ups.
+EXTRAPOLATE = 1.5
+
+
+def cycles_time_at(cycles: list[dict], error: float, minus_sync: bool = False) -> tuple[float | None, str]:
+    """Cycles' time to reach `error`, interpolated log-log between its runs; (seconds, mark):
+    mark "" interpolated, "~" extrapolated (up to EXTRAPOLATE above the measured errors), ">" the
+    error is below every Cycles run's (seconds = Cycles' slowest run: the
+    speed-up is at least seconds / the solver's), "<" above every run's (seconds = its fastest
+    run: the speed-up is at most that). (None, "") when it cannot be said. With `minus_sync` the
+    fixed cost (the 1-spp render) is taken off each time first: the sampling alone."""
+    pts = sorted((c["seconds"] - (c["sync_seconds"] if minus_sync else 0.0), c["image_error"]) for c in cycles)
+    # under load a render can take less than the separately timed 1-spp one: no sampling time left
+    pts = [(t, e) for t, e in pts if t > 0]
+    if len(pts) < 2:
+        return None, ""
+    lt = [math.log(t) for t, _ in pts]
+    le = [math.log(e) for _, e in pts]
+    le_target = math.log(error)
+    # the first segment (in time) whose errors bracket the target
+    for i in range(len(pts) - 1):
+        lo, hi = sorted((le[i], le[i + 1]))
+        if lo <= le_target <= hi and le[i] != le[i + 1]:
+            f = (le_target - le[i]) / (le[i + 1] - le[i])
+            return math.exp(lt[i] + f * (lt[i + 1] - lt[i])), ""
+    if le_target < min(le):
+        # below Cycles' best: its last segment is often flat (fireflies, disagreement with our
+        # reference), so a line through it promises anything; only the bound is sure
+        return pts[-1][0], ">"
+    if le_target > max(le) + math.log(EXTRAPOLATE):
+        return pts[0][0], "<"
+    i = 0
+    if le[i + 1] >= le[i]:
+        return None, ""
+    f = (le_target - le[i]) / (le[i + 1] - le[i])
+    return math.exp(lt[i] + f * (lt[i + 1] - lt[i])), "~"
+
+
+# ---------------------------------------------------------------------------------------------
+# solvers
+
+
+def registry() -> list[dict]:
+    out = subprocess.run([str(volscatter_bin()), "solvers"], check=True, capture_output=True, text=True).stdout
+    doc = json.loads(out)
+    return doc["solvers"] if isinstance(doc, dict) else doc
+
+
+def full_settings(entry: dict, quality: str) -> dict:
+    """The registry's defaults with preset `quality` on top: the whole settings object."""
+    s = {}
+    for st in entry["settings"]:
+        if "default" in st:
+            s[st["name"]] = st["default"]
+    preset = next(p for p in entry["presets"] if p["name"] == quality)
+    s.update(preset["settings"])
+    return s
+
+
+#: A solver's next (dearer) quality is skipped on a scene once one of its runs there took longer
+#: than this: the presets grow 4-16x in cost per step, and the whole benchmark has to fit in an
+#: hour of this shared machine. Skipped runs are listed in the section.
+SKIP_AFTER_SECONDS = 20.0
+
+
+def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tuple[str, ...], work: Path,
+                skipped: list[str]):
+    runs, images = [], {}
+    for e in entries:
+        for q in qualities:
+            if runs and runs[-1]["solver"] == e["name"] and runs[-1]["seconds"] > SKIP_AFTER_SECONDS:
+                skipped.append(f"{e['name']} {q} on {name} (its {runs[-1]['quality']} took {runs[-1]['seconds']:.0f} s)")
+                log("skipped:", skipped[-1])
+                continue
+            settings = full_settings(e, q)
+            try:
+                img, rep = render(name, e["name"], settings, work, f"{name}_{e['name']}_{q}")
+            except subprocess.CalledProcessError as err:
+                log(f"{e['name']} {q} on {name} failed: {err}")
+                continue
+            solve, comp = split_phases(rep)
+            r = {"scene": name, "solver": e["name"], "quality": q, "settings": settings, "device": "cpu",
+                 "seconds": solve + comp, "solve_seconds": solve, "composite_seconds": comp,
+                 "image_error": rel_rmse(img, ref), "grid_error": None}
+            runs.append(r)
+            images[(e["name"], q)] = img
+            log(f"{e['name']:12s} {q:8s} {name}: {r['seconds']:.2f} s (solve {solve:.2f}), error {r['image_error']:.4f}")
+    return runs, images
+
+
+def grid_pass(scenes: list[str], quality: str, grid_spp: int, work: Path) -> None:
+    """Fills `grid_error` of measurements.json for the runs at `quality`: `volscatter compare`
+    with each solver at that quality's settings (as measured) against the reference's scattering
+    grid (32 cells along the longest side, `grid_spp` paths per cell; its image at 1 spp is not
+    used). A separate pass because it solves everything again: it costs as much as the timing
+    runs, so it is done for one quality only."""
+    meas = json.loads(MEASUREMENTS.read_text())
+    for n in scenes:
+        runs = [r for r in meas["runs"] if r["scene"] == n and r["quality"] == quality]
+        if not runs:
+            continue
+        names = [f"{r['solver']}#{quality}" for r in runs] + ["reference"]
+        out = work / f"grid_{n}.json"
+        cmd = [str(volscatter_bin()), "compare", str(scene_json(n)), "--solvers", ",".join(names), "--device", "cpu",
+               "--grid-resolution", "32", "--grid-spp", str(grid_spp), "--json", str(out), "-q",
+               "--set", "reference.spp=1"]
+        for r in runs:
+            for k, v in r["settings"].items():
+                cmd += ["--set", f"{r['solver']}#{quality}.{k}={json.dumps(v)}"]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        rows = {row["solver"]: row for row in json.loads(out.read_text())["runs"]}
+        for r in runs:
+            e = rows[f"{r['solver']}#{quality}"]["grid_relative_rmse"]
+            r["grid_error"] = e
+            log(f"grid error {r['solver']} {quality} {n}: {e:.4f}")
+        MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+    write_section("solvers", markdown(meas, gpu_note()))
+    write_section("bench-solvers", readme_table(meas), path="README.md")
+
+
+# ---------------------------------------------------------------------------------------------
+# outputs
+
+
+def machine() -> str:
+    info = Path("/proc/cpuinfo")
+    names = [ln.split(":", 1)[1].strip() for ln in (info.read_text().splitlines() if info.is_file() else [])
+             if ln.startswith("model name")]
+    cpu = names[0] if names else (platform.processor() or "unknown CPU")
+    return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
+
+
+def today() -> str:
+    return datetime.date.today().isoformat()
+
+
+def gpu_note() -> str:
+    """GPU columns appear only with a hardware adapter; `volscatter gpu-info` says which exists."""
+    try:
+        out = subprocess.run([str(volscatter_bin()), "gpu-info"], capture_output=True, text=True, timeout=60)
+        text = (out.stdout + out.stderr).strip()
+    except (OSError, subprocess.TimeoutExpired) as e:
+        text = str(e)
+    soft = any(w in text.lower() for w in ("llvmpipe", "lavapipe", "software", "no adapter", "cpu"))
+    return "no hardware GPU adapter on this machine (only a software one), so no GPU columns" if soft or not text \
+        else "a GPU adapter exists but GPU runs are not measured by this script yet"
+
+
+#: What a reader of a scene's table needs to know beyond its numbers.
+SCENE_NOTES = {
+    "smoke_point": "The camera sees the lamp's sphere in one pixel: our reference draws it, the solvers' "
+                   "composites do not, so that pixel is part of every solver's error. Every solver is darker than "
+                   "the reference here (docs/bench_strip_smoke_point.png), and so is Cycles (with Blender's soft "
+                   "falloff off, as the export assumes): how the reference treats a sphere lamp inside the medium is "
+                   "not yet checked against Mitsuba.",
+    "fire_smoke": "Cycles' error stops falling near 0.26: it and our reference disagree on this emission-lit scene "
+                  "(Cycles brighter), so the speed-ups here are bounds against Cycles' plateau.",
+}
+
+
+def skipped_runs(meas: dict) -> list[str]:
+    """The presets not measured because a cheaper one of the same solver took too long."""
+    out = []
+    for sc in meas["scenes"]:
+        for solver in dict.fromkeys(r["solver"] for r in meas["runs"]):
+            rs = {r["quality"]: r for r in meas["runs"] if r["scene"] == sc["name"] and r["solver"] == solver}
+            for prev, q in zip(QUALITIES, QUALITIES[1:]):
+                if prev in rs and q not in rs and rs[prev]["seconds"] > SKIP_AFTER_SECONDS:
+                    out.append(f"{solver} {q} on {sc['name']} (its {prev} took {rs[prev]['seconds']:.0f} s)")
+    return out
+
+
+def markdown(meas: dict, note_gpu: str) -> str:
+    skipped = skipped_runs(meas)
+    lines = ["## Solvers against Cycles (issue 21)", "",
+             "Written by `scripts/bench_solvers.py`; measurements in `core/src/solvers/auto/measurements.json`, "
+             "plots `docs/bench_error_time.png` and `docs/bench_strip_<scene>.png`.", "",
+             f"Machine: {meas['machine']}; date {meas['date']}; {note_gpu}. Times are wall clock on this shared "
+             "2-core machine (other work ran beside it: Cycles and the solvers were interleaved per scene so that "
+             "load falls on both alike; compare ratios within a scene, not absolute times across sections).", "",
+             "Error: relative RMSE of the premultiplied RGB (transparent film, only the volume counts) against "
+             "our converged reference path tracer (two seeds; its own noise is given per scene and is a floor "
+             "under every error below). Solver time = solve + composite on the CPU at the registry preset. "
+             "Cycles: bpy, CPU, 2 threads, volume bounces 1024, clamping off, no denoiser, fixed spp; its time "
+             "is the whole render, its fixed scene-sync cost (a 1-spp render) given apart. Speed-up = Cycles' "
+             "time to the same error (log-log interpolation of its error-time curve; `~` where extrapolated "
+             f"up to {EXTRAPOLATE}x above its highest (16 spp) error; `>` where the solver's error is below its lowest, so "
+             "only a bound (Cycles at 1024 spp is that much slower and still worse); `<` where it is higher "
+             "still (Cycles at 16 spp is already better); `-` where a time cannot be said) / the solver's time; "
+             "above 1 the solver is faster. Where Cycles' error stops falling (dense_cloud: fireflies; "
+             "fire_smoke and smoke_point: it disagrees with our reference, its flux is 1.11x and 0.89x ours) "
+             "the speed-ups measure against that plateau. Grid error: relative RMSE of the solver's "
+             "scattering grid against the reference's (`volscatter compare`, 32 cells along the longest side, "
+             "128 paths per cell: its own noise is in it), at the preview preset only (`--grid preview`, a second "
+             "solve of each run).", ""]
+    if skipped:
+        lines += [f"Not run (a cheaper quality of the same solver took over {SKIP_AFTER_SECONDS:.0f} s on that scene): "
+                  + "; ".join(skipped) + ".", ""]
+    for sc in meas["scenes"]:
+        n = sc["name"]
+        cyc = [c for c in meas["cycles"] if c["scene"] == n]
+        lines += [f"### {n}", "", f"{sc['description']}. Reference noise {sc['reference_noise']:.4f}.", ""]
+        if n in SCENE_NOTES:
+            lines += [SCENE_NOTES[n], ""]
+        if cyc:
+            c1024 = max(cyc, key=lambda c: c["spp"])
+            lines += ["Cycles: " + ", ".join(f"{c['spp']} spp {c['seconds']:.2f} s / {c['image_error']:.3f}" for c in cyc)
+                      + f" (time / error; sync {cyc[0]['sync_seconds']:.2f} s). Agreement of Cycles at "
+                      f"{c1024['spp']} spp with our reference: {c1024['image_error']:.3f}.", ""]
+        lines += ["| solver | quality | time (s) | solve (s) | composite (s) | image error | Cycles time at that error (s) | "
+                  "speed-up | speed-up, Cycles' sync left out | grid error |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in meas["runs"]:
+            if r["scene"] != n:
+                continue
+            t, mark = cycles_time_at(cyc, r["image_error"]) if cyc else (None, "")
+            ct = "-" if t is None else mark + f"{t:.2f}"
+            sp = "-" if t is None else mark + f"**{t / r['seconds']:.1f}x**"
+            t2, mark2 = cycles_time_at(cyc, r["image_error"], minus_sync=True) if cyc else (None, "")
+            sp2 = "-" if t2 is None else mark2 + f"{t2 / r['seconds']:.1f}x"
+            lines.append(f"| {r['solver']} | {r['quality']} | {r['seconds']:.2f} | {r['solve_seconds']:.2f} | "
+                         f"{r['composite_seconds']:.2f} | {r['image_error']:.3f} | {ct} | {sp} | {sp2} | "
+                         + ("-" if r.get("grid_error") is None else f"{r['grid_error']:.3f}") + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def images_from(work: Path, meas: dict) -> dict:
+    """The images of a full run, read back from its render folder (names as render() and
+    cycles_runs() write them)."""
+    images = {}
+    for r in meas["runs"]:
+        p = work / f"{r['scene']}_{r['solver']}_{r['quality']}.exr"
+        if p.is_file():
+            images.setdefault(r["scene"], {})[(r["solver"], r["quality"])] = read_exr_rgb(p)
+    for c in meas["cycles"]:
+        p = work / f"cycles_{c['scene']}_{c['spp']}.exr"
+        top = max(x["spp"] for x in meas["cycles"] if x["scene"] == c["scene"])
+        if c["spp"] == top and p.is_file():
+            import mitsuba_scenes as ms
+            images.setdefault(c["scene"], {})["cycles"] = (top, ms.read_exr_layers(p)["rgb"])
+    return images
+
+
+def readme_table(meas: dict) -> str:
+    """The README's "which solver for which scene" table: per solver and scene its preview run's
+    image error, time and speed-up over Cycles at that error (BENCHMARKS.md `solvers` has all)."""
+    scenes = [s["name"] for s in meas["scenes"]]
+    solvers = list(dict.fromkeys(r["solver"] for r in meas["runs"]))
+    lines = ["Which solver for which scene (`scripts/bench_solvers.py`, BENCHMARKS.md `solvers`, "
+             f"{meas['date']}): image relative RMSE against the converged reference at the `preview` preset, "
+             "its CPU time (solve + composite, 2 shared cores), and the speed-up over Cycles (CPU, 1024 volume "
+             "bounces) at the same error, its per-render sync cost included.", "",
+             "| solver | " + " | ".join(scenes) + " |", "|---|" + "---|" * len(scenes)]
+    for solver in solvers:
+        cells = []
+        for n in scenes:
+            r = next((r for r in meas["runs"] if r["scene"] == n and r["solver"] == solver and r["quality"] == "preview"), None)
+            if r is None:
+                cells.append("-")
+                continue
+            cyc = [c for c in meas["cycles"] if c["scene"] == n]
+            t, mark = cycles_time_at(cyc, r["image_error"]) if cyc else (None, "")
+            sp = "" if t is None else f", {mark}{t / r['seconds']:.1f}x"
+            cells.append(f"{r['image_error']:.3f} in {r['seconds']:.1f} s{sp}")
+        lines.append(f"| `{solver}` | " + " | ".join(cells) + " |")
+    agree = [f"{c['scene']} {c['image_error']:.3f}" for c in meas["cycles"] if c["spp"] == max(CYCLES_SPP)]
+    if agree:
+        lines += ["", "Cycles at 1024 spp against the same reference (both renderers' noise and any disagreement): "
+                  + ", ".join(agree) + "."]
+    return "\n".join(lines)
+
+
+def plots(meas: dict, images: dict, refs: dict) -> list[Path]:
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        log("matplotlib missing (tests/requirements.txt lists it): no plots written")
+        return []
+    written = []
+    scenes = [s["name"] for s in meas["scenes"]]
+    fig, axes = plt.subplots(1, len(scenes), figsize=(4.2 * len(scenes), 4), squeeze=False)
+    solvers = sorted({r["solver"] for r in meas["runs"]})
+    colours = dict(zip(solvers, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
+    for ax, n in zip(axes[0], scenes):
+        for s in solvers:
+            rs = [r for r in meas["runs"] if r["scene"] == n and r["solver"] == s]
+            if rs:
+                ax.plot([r["seconds"] for r in rs], [r["image_error"] for r in rs], "o-", color=colours[s], label=s)
+        cyc = [c for c in meas["cycles"] if c["scene"] == n]
+        if cyc:
+            ax.plot([c["seconds"] for c in cyc], [c["image_error"] for c in cyc], "s--", color="black", label="Cycles")
+            ax.plot([c["seconds"] - c["sync_seconds"] for c in cyc], [c["image_error"] for c in cyc], "s:", color="grey",
+                    mfc="none", label="Cycles, sync left out")
+            for c in cyc:
+                ax.annotate(str(c["spp"]), (c["seconds"], c["image_error"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        noise = next(s["reference_noise"] for s in meas["scenes"] if s["name"] == n)
+        ax.axhline(noise, color="grey", lw=0.8, ls=":", label="reference noise")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(n)
+        ax.set_xlabel("time (s, CPU)")
+        ax.grid(True, which="both", lw=0.3)
+    axes[0][0].set_ylabel("image relative RMSE")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    p = DOCS / "bench_error_time.png"
+    fig.savefig(p, dpi=90)
+    plt.close(fig)
+    written.append(p)
+    for n in scenes:
+        ref = refs[n]
+        best = {}
+        for r in meas["runs"]:
+            if r["scene"] == n and (r["solver"], r["quality"]) in images.get(n, {}):
+                if r["solver"] not in best or r["image_error"] < best[r["solver"]]["image_error"]:
+                    best[r["solver"]] = r
+        cols = [("reference", ref, None)] + [(f"{s} {r['quality']}\n{r['image_error']:.3f}", images[n][(s, r["quality"])], s)
+                                            for s, r in sorted(best.items())]
+        if "cycles" in images.get(n, {}):
+            spp, cyc_img = images[n]["cycles"]
+            cols.append((f"Cycles {spp} spp", cyc_img, "cycles"))
+        scale = np.percentile(ref.mean(-1), 99.5) or 1.0
+        fig, axes = plt.subplots(2, len(cols), figsize=(1.9 * len(cols), 3.2), squeeze=False)
+        for i, (title, img, _) in enumerate(cols):
+            axes[0][i].imshow(np.clip(img / scale, 0, 1) ** (1 / 2.2))
+            axes[0][i].set_title(title, fontsize=7)
+            d = (img - ref).mean(-1) / scale
+            axes[1][i].imshow(d, cmap="RdBu_r", vmin=-0.5, vmax=0.5)
+            for a in (axes[0][i], axes[1][i]):
+                a.set_xticks([])
+                a.set_yticks([])
+        axes[1][0].set_ylabel("difference\n(+-50% of peak)", fontsize=7)
+        fig.tight_layout()
+        p = DOCS / f"bench_strip_{n}.png"
+        fig.savefig(p, dpi=90)
+        plt.close(fig)
+        written.append(p)
+    return written
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", default=",".join(bench_scenes.SCENES))
+    ap.add_argument("--solvers", default="", help="comma-separated (default: every registered solver but reference)")
+    ap.add_argument("--qualities", default=",".join(QUALITIES))
+    ap.add_argument("--references", action="store_true", help="compute the converged references, then stop")
+    ap.add_argument("--quick", action="store_true", help="draft and preview only, Cycles at 16 and 64 spp (a smoke check)")
+    ap.add_argument("--no-cycles", action="store_true")
+    ap.add_argument("--grid", metavar="QUALITY", help="only fill grid_error of measurements.json's runs at QUALITY "
+                    "(volscatter compare against the reference's scattering grid), then rewrite the section")
+    ap.add_argument("--grid-spp", type=int, default=128)
+    ap.add_argument("--work", help="folder for the renders (default: a new temporary one); --cycles-only and "
+                    "--replot read the solvers' images back from the folder of an earlier full run")
+    ap.add_argument("--cycles-only", action="store_true", help="render Cycles again for --scenes, replace its "
+                    "entries in measurements.json, rewrite the section, README table and plots")
+    ap.add_argument("--replot", action="store_true", help="only rewrite the section, README table and plots from "
+                    "measurements.json and the images in --work")
+    ap.add_argument("--no-write", action="store_true", help="print only: leave BENCHMARKS.md, measurements and plots")
+    args = ap.parse_args()
+    scenes = args.scenes.split(",")
+    work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="bench-solvers-"))
+    work.mkdir(parents=True, exist_ok=True)
+    log("renders in", work)
+    if args.cycles_only or args.replot:
+        meas = json.loads(MEASUREMENTS.read_text())
+        for n in scenes if args.cycles_only else []:
+            ref, _ = load_reference(n)
+            c, _ = cycles_runs(n, ref, CYCLES_SPP, work)
+            meas["cycles"] = [x for x in meas["cycles"] if x["scene"] != n] + c
+        MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+        write_section("solvers", markdown(meas, gpu_note()))
+        write_section("bench-solvers", readme_table(meas), path="README.md")
+        images, refs = images_from(work, meas), {s["name"]: load_reference(s["name"])[0] for s in meas["scenes"]}
+        for p in plots(meas, images, refs):
+            log("wrote", p.relative_to(REPO_ROOT))
+        return 0
+    if args.references:
+        make_references(scenes, work)
+        return 0
+    if args.grid:
+        grid_pass(scenes, args.grid, args.grid_spp, work)
+        return 0
+    # `auto` picks among the others from this script's measurements: not measured itself
+    entries = [e for e in registry() if e["name"] not in ("reference", "auto")]
+    if args.solvers:
+        entries = [e for e in entries if e["name"] in args.solvers.split(",")]
+    qualities = tuple(args.qualities.split(","))
+    spps = CYCLES_SPP
+    if args.quick:
+        qualities, spps = tuple(q for q in qualities if q != "final"), (16, 64)
+    meas = {"format": 1, "written_by": "scripts/bench_solvers.py", "machine": machine(), "date": today(),
+            "error": "image relative RMSE against the converged reference", "scenes": [], "runs": [], "cycles": []}
+    images, refs, skipped = {}, {}, []
+    note = gpu_note()
+
+    def write():
+        """After every scene: a run cut short still leaves what it measured."""
+        md = markdown(meas, note)
+        if not args.no_write:
+            MEASUREMENTS.parent.mkdir(parents=True, exist_ok=True)
+            MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+            write_section("solvers", md)
+        return md
+
+    for n in scenes:
+        ref, meta = load_reference(n)
+        refs[n] = ref
+        meas["scenes"].append({"name": n, "scene": f"bench/scenes/{n}/scene.json", "reference_noise": meta["noise"],
+                               "description": bench_scenes.DESCRIPTIONS[n]})
+        images[n] = {}
+        if not args.no_cycles:
+            c, cimg = cycles_runs(n, ref, spps, work)
+            meas["cycles"] += c
+            images[n]["cycles"] = (max(cimg), cimg[max(cimg)])
+        r, rimg = solver_runs(n, ref, entries, qualities, work, skipped)
+        meas["runs"] += r
+        images[n].update(rimg)
+        write()
+    print(write())
+    if args.no_write:
+        return 0
+    write_section("bench-solvers", readme_table(meas), path="README.md")
+    for p in plots(meas, images, refs):
+        log("wrote", p.relative_to(REPO_ROOT))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
