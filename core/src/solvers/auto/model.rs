@@ -13,6 +13,9 @@
 //!   grids are set by their settings, not by the voxel count, so the solve is not rescaled),
 //!   plus the measured composite seconds scaled by pixels x voxels^(1/3) (the compositor marches
 //!   every pixel through the grid, in steps of a voxel).
+//! The candidates are the configurations measured on the measured scene nearest the query: one
+//! missing there was cancelled or skipped as too slow on it (measure.rs), and would otherwise
+//! be predicted from the scenes where it was fast.
 //! Only CPU runs are used: every host has a CPU; a GPU backend only makes the pick faster.
 
 use std::collections::BTreeMap;
@@ -224,6 +227,16 @@ impl Model {
         Model { scenes, configs }
     }
 
+    /// Index (into `scenes`) of the measured scene nearest to features `f`.
+    pub fn nearest_scene(&self, f: &Features) -> Option<usize> {
+        (0..self.scenes.len()).min_by(|&a, &b| distance(f, &self.scenes[a].1).total_cmp(&distance(f, &self.scenes[b].1)))
+    }
+
+    /// Whether configuration `i` was measured on scene `s`.
+    pub fn measured_on(&self, i: usize, s: usize) -> bool {
+        self.configs.get(i).is_some_and(|(_, obs)| obs.iter().any(|o| o.scene == s))
+    }
+
     /// Configuration `i`'s predicted error and seconds on a scene of features `f`.
     pub fn predict(&self, i: usize, f: &Features) -> Option<Prediction> {
         let obs = &self.configs.get(i)?.1;
@@ -233,6 +246,15 @@ impl Model {
         let total: f64 = w.iter().sum();
         if obs.is_empty() || !(total > 0.0) {
             return None;
+        }
+        let nearest = obs.iter().zip(&w).max_by(|a, b| a.1.total_cmp(b.1)).map(|(o, _)| o.scene).unwrap_or(0);
+        if exact {
+            // The query is a measured scene: its measurement, exactly (no ln/exp rounding, so
+            // that a target equal to a measured error is met by that run).
+            let o = obs.iter().zip(&d).find(|(_, &x)| x < 1e-9).map(|(o, _)| o)?;
+            let f_s = &self.scenes[o.scene].1;
+            let scale = (f.pixels / f_s.pixels.max(1.0)) * (f.voxels / f_s.voxels.max(1.0)).cbrt();
+            return Some(Prediction { error: o.error, seconds: o.seconds + o.composite_seconds * (scale - 1.0), nearest });
         }
         let mean_ln = |v: &dyn Fn(&Observation) -> f64| obs.iter().zip(&w).map(|(o, w)| w * v(o).max(1e-12).ln()).sum::<f64>() / total;
         let error = mean_ln(&|o| o.error).exp();
@@ -246,7 +268,6 @@ impl Model {
             })
             .sum::<f64>()
             / total;
-        let nearest = obs.iter().zip(&w).max_by(|a, b| a.1.total_cmp(b.1)).map(|(o, _)| o.scene).unwrap_or(0);
         Some(Prediction { error, seconds: solve + composite, nearest })
     }
 }

@@ -45,7 +45,12 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64) ->
         .map(|(n, _)| *n)
         .filter(|n| !model.scenes.iter().any(|(_, s)| s.lights.named().iter().any(|(m, p)| m == n && *p)))
         .collect();
-    let preds: Vec<(usize, Prediction)> = (0..model.configs.len()).filter_map(|i| Some((i, model.predict(i, f)?))).collect();
+    // Candidates: the configurations measured on the nearest measured scene (model.rs).
+    let nearest = model.nearest_scene(f);
+    let preds: Vec<(usize, Prediction)> = (0..model.configs.len())
+        .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s)))
+        .filter_map(|i| Some((i, model.predict(i, f)?)))
+        .collect();
     if preds.is_empty() || !missing.is_empty() {
         let reason = if preds.is_empty() {
             "no measurements to pick from".to_string()
