@@ -13,9 +13,11 @@
 //!   grids are set by their settings, not by the voxel count, so the solve is not rescaled),
 //!   plus the measured composite seconds scaled by pixels x voxels^(1/3) (the compositor marches
 //!   every pixel through the grid, in steps of a voxel).
+//!
 //! The candidates are the configurations measured on the measured scene nearest the query: one
 //! missing there was cancelled or skipped as too slow on it (measure.rs), and would otherwise
 //! be predicted from the scenes where it was fast.
+//!
 //! Only CPU runs are used: every host has a CPU; a GPU backend only makes the pick faster.
 
 use std::collections::BTreeMap;
@@ -244,7 +246,7 @@ impl Model {
         let exact = d.iter().any(|&x| x < 1e-9);
         let w: Vec<f64> = d.iter().map(|&x| if exact { if x < 1e-9 { 1.0 } else { 0.0 } } else { (-0.5 * x * x).exp().max(1e-300) }).collect();
         let total: f64 = w.iter().sum();
-        if obs.is_empty() || !(total > 0.0) {
+        if obs.is_empty() || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         let nearest = obs.iter().zip(&w).max_by(|a, b| a.1.total_cmp(b.1)).map(|(o, _)| o.scene).unwrap_or(0);

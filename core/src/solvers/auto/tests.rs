@@ -41,9 +41,12 @@ fn features_of(model: &Model, scene: &str) -> Features {
     model.scenes.iter().find(|(n, _)| n == scene).map(|(_, f)| f.clone()).unwrap()
 }
 
-/// For each target error: (target, the pick's measured error, its seconds, the cheapest
-/// measured seconds meeting the target) on `scene`, picked by `model`.
-fn target_rows(m: &Measurements, model: &Model, scene: &str, f: &Features) -> Vec<(f64, Option<(f64, f64)>, f64, String)> {
+/// (target, the pick's measured (error, seconds), the cheapest measured seconds meeting the
+/// target, "solver quality" of the pick).
+type TargetRow = (f64, Option<(f64, f64)>, f64, String);
+
+/// For each target error some run on `scene` reached: the pick of `model` there.
+fn target_rows(m: &Measurements, model: &Model, scene: &str, f: &Features) -> Vec<TargetRow> {
     let mut targets: Vec<f64> = cpu_runs(m, scene).map(|r| r.image_error).collect();
     targets.sort_by(f64::total_cmp);
     targets.dedup();
