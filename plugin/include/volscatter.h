@@ -544,6 +544,17 @@ VsStatus vs_result_dims(const VsResult *result, uint32_t *dims);
 VsStatus vs_result_device(const VsResult *result, uint32_t *out);
 
 /**
+ * What the `auto` solver picked for this result and why, as a JSON object: `solver`,
+ * `quality`, `settings`, `predicted_error` (image rel. RMSE), `predicted_seconds`,
+ * `target_error`, `time_budget`, `why` (a sentence), `fallback` (true when no measurement
+ * covered the scene and the default ran). Owned by the result: valid until it is destroyed.
+ * NULL for a result of another solver, and for a NULL or dead handle.
+ *
+ * Thread safety: any thread.
+ */
+const char *vs_result_choice(const VsResult *result);
+
+/**
  * Writes the number of floats `vs_result_copy_rgb` needs (nx * ny * nz * 3) to `*out`.
  *
  * Thread safety: any thread; calls on one result are serialised.

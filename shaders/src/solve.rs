@@ -16,7 +16,7 @@ use volscatter_core::solvers::photon_grid::PhotonGrid;
 use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
 use volscatter_core::solvers::session::{Session, SessionState};
-use volscatter_core::solvers::{self, registry, Progress, SolveOutput};
+use volscatter_core::solvers::{self, auto, registry, Progress, SolveOutput};
 use volscatter_core::{Error, Result, Scene};
 
 /// Residual checks of the GPU propagation happen every this many iterations (one readback).
@@ -136,11 +136,19 @@ fn solve_in_session(
     progress: &dyn Progress,
     state: &mut SessionState,
 ) -> Result<(SolveOutput, DeviceUsed)> {
-    let entry = registry::get(name)?;
     // Media tracking cannot step and lights beyond float32 are refused on every device, and
     // a non-finite result is an error, never status OK (solvers::guard).
     solvers::guard::check_scene(scene)?;
-    let (out, used) = solve_on_device(choice, scene, name, settings, progress, state, entry.gpu)?;
+    // `auto` is resolved here, before the device is picked, so that the solver it picks runs
+    // its GPU backend where it has one; the pick goes out with the result.
+    let picked = if name == auto::NAME { Some(auto::choose(scene, settings)?) } else { None };
+    let (name, settings) = match &picked {
+        Some(c) => (c.solver.as_str(), &c.settings),
+        None => (name, settings),
+    };
+    let entry = registry::get(name)?;
+    let (mut out, used) = solve_on_device(choice, scene, name, settings, progress, state, entry.gpu)?;
+    out.choice = picked;
     solvers::guard::check_finite(scene, "scattering grid", out.scattering.data.iter().copied())?;
     Ok((out, used))
 }

@@ -117,3 +117,18 @@ fn gpu_session_matches_one_off_gpu_solves() {
     }
     assert_eq!(session.frames(), 3);
 }
+
+/// `auto` is resolved before the device is picked: the chosen solver runs (with its GPU backend
+/// where it has one and the device allows) and the pick goes out with the result.
+#[test]
+fn auto_is_resolved_before_the_device_dispatch() {
+    let scene = Scene::default_scene();
+    let settings = serde_json::json!({"target_error": 0.3}).as_object().unwrap().clone();
+    let (out, used) = solve(DeviceChoice::Cpu, &scene, "auto", &settings, &NoProgress).unwrap();
+    let c = out.choice.expect("no choice from auto");
+    assert!(c.solver != "auto" && registry::get(&c.solver).is_ok(), "{c:?}");
+    assert_eq!(used, DeviceUsed::Cpu);
+    let bad = serde_json::json!({"target_error": -1.0}).as_object().unwrap().clone();
+    let Err(e) = solve(DeviceChoice::Auto, &scene, "auto", &bad, &NoProgress) else { panic!("a negative target accepted") };
+    assert!(matches!(e, Error::Scene { ref field, .. } if field == "solver.target_error"), "{e}");
+}

@@ -1015,7 +1015,8 @@ def test_menus_presets_and_custom_fields_come_from_the_library(fresh):
     solver_ids = [i.identifier for i in rna["solver"].enum_items_static] or \
         [i[0] for i in props._solver_items(s, bpy.context)]
     assert solver_ids == [e["name"] for e in reg["solvers"]]
-    assert s.solver == reg["solvers"][0]["name"] == "reference"  # the registry's first is the default
+    assert reg["solvers"][0]["name"] == "reference"
+    assert s.solver == "auto"  # the default (issue 21), by name, not by registry position
     quality_ids = [i[0] for i in props._quality_items(s, bpy.context)]
     assert quality_ids == [p["name"].upper() for p in reg["solvers"][0]["presets"]] + ["CUSTOM"]
     assert s.quality == "PREVIEW"
@@ -1517,3 +1518,29 @@ def test_device_gpu_says_where_a_solver_without_gpu_backend_runs(fresh, monkeypa
     for name in with_gpu:
         assert ops.device_note(name, 'GPU') is None
     assert ops.device_note(without[0], 'CPU') is None
+
+
+# ---------------------------------------------------------------------------------------------
+# `auto` is the default solver (issue 21)
+
+
+def test_auto_is_the_default_and_reports_its_pick(fresh):
+    """A new volume solves with `auto`; the operator keeps what it picked and why (from
+    vs_result_choice) for the panel, and a file that chose another solver keeps it."""
+    props = sys.modules[MODULE + ".properties"]
+    ob = bs.noise_volume(res=8)
+    bs.principled_material(ob, density=3.0)
+    bs.sun(strength=3.0)
+    bs.camera(width=12, height=9)
+    s = ob.volscatter
+    assert s.solver == "auto"
+    s.quality, s.output_dir = 'DRAFT', str(fresh)
+    assert s.solver_settings() == {"target_error": 0.3}
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    assert s.last_choice.startswith("auto picked "), s.last_choice
+    picked = s.last_choice.split(":")[0].split()[2]
+    assert picked in [e["name"] for e in _native().solvers()["solvers"]] and picked != "auto", s.last_choice
+    assert "optical depth" in s.last_choice, s.last_choice
+    # The other solvers keep the enum numbers they had before `auto` (a .blend stores numbers).
+    items = {i[0]: i[3] for i in props._solver_items(s, bpy.context)}
+    assert items["auto"] == props.AUTO_NUMBER and items["reference"] == 0 and items["pop"] == 1, items

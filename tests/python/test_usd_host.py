@@ -532,7 +532,8 @@ def test_ctrl_c_cancels_the_native_work(tmp_path):
     import time
     env = dict(os.environ, PYTHONPATH=str(ROOT / "usd"), VOLSCATTER_LIB=str(LIB))
     p = subprocess.Popen([sys.executable, "-m", "volscatter", "render", str(BLENDER_STAGE), "--width", "320",
-                          "--spp", "4096", "--out", str(tmp_path / "c.exr")], stderr=subprocess.PIPE, text=True,
+                          "--solver", "reference", "--spp", "4096", "--out", str(tmp_path / "c.exr")],
+                         stderr=subprocess.PIPE, text=True,
                          env=env)
     deadline = time.time() + 60
     seen = ""
@@ -612,3 +613,31 @@ def test_ctrl_c_leaves_a_worker_that_never_calls_back(tmp_path):
     took = time.time() - start
     assert p.returncode == 130 and "did not stop within 5 s" in err and "Traceback" not in err, err
     assert took < 15, took
+
+
+# ------------------------------------------------------------------------------------------------
+# the `auto` solver is the default (issue 21)
+
+def test_auto_is_the_default_and_says_what_it_picked(tmp_path):
+    """Without --solver the CLI runs `auto`, which logs the solver and quality it picked and
+    why; the Python API returns the same pick (Result.choice, vs_result_choice)."""
+    stage, path = make_stage(tmp_path)
+    r = cli("render", path, "--width", 16, "--height", 12, "--set", "target_error=0.3", "--out", tmp_path / "a.exr")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "a.exr").exists()
+    assert "auto picked " in r.stderr and "optical depth" in r.stderr and "with auto" in r.stderr, r.stderr
+    res = R.render(path, tmp_path / "b.exr", solver="auto", settings={"target_error": 0.3}, width=16, height=12)
+    c = res.choice
+    assert c and c["solver"] in _solver_names() and c["solver"] != "auto" and c["target_error"] == 0.3, c
+    assert c["quality"] in ("draft", "preview", "final") and isinstance(c["settings"], dict) and c["why"], c
+    # another solver's result carries no pick
+    res = R.render(path, tmp_path / "c.exr", solver="pop", settings=POP_FAST, width=16, height=12)
+    assert res.choice is None
+    # a bad target is refused with the setting named, nothing written
+    r = cli("render", path, "--width", 16, "--set", "target_error=-1", "--out", tmp_path / "d.exr", "-q")
+    assert r.returncode == 1 and "target_error" in r.stderr and not (tmp_path / "d.exr").exists(), r.stderr
+
+
+def _solver_names():
+    from volscatter import _native as N
+    return N.solver_names()

@@ -770,3 +770,37 @@ fn composite_aovs_makes_only_the_layers_asked_for() {
         assert_eq!((a.vs_scene_destroy)(s), OK);
     }
 }
+
+/// `vs_result_choice`: the `auto` solver's pick as JSON (solver, quality, settings, predictions,
+/// the sentence), owned by the result; NULL for another solver's result and for NULL or dead
+/// handles, never a crash.
+#[test]
+fn result_choice_says_what_auto_picked() {
+    let a = api();
+    unsafe {
+        let s = a.scene_from_json(&small_json(1));
+        assert_eq!((a.vs_scene_set_solver)(s, cstr("auto").as_ptr(), cstr(r#"{"target_error": 0.3}"#).as_ptr()), OK, "{}", a.scene_error(s));
+        let r = a.solve(s);
+        let p = (a.vs_result_choice)(r);
+        assert!(!p.is_null(), "auto's result has no choice");
+        let j: serde_json::Value = serde_json::from_str(&text(p)).unwrap();
+        let solver = j["solver"].as_str().unwrap_or_default();
+        assert!(volscatter_core::solvers::SOLVER_NAMES.contains(&solver) && solver != "auto", "{j}");
+        assert!(j["settings"].is_object() && j["quality"].is_string() && j["why"].as_str().is_some_and(|w| w.contains("optical depth")), "{j}");
+        assert_eq!(j["target_error"], serde_json::json!(0.3), "{j}");
+        // The pointer stays valid (and the same) until the result is destroyed.
+        assert_eq!((a.vs_result_choice)(r), p);
+        assert_eq!((a.vs_result_destroy)(r), OK);
+        assert!((a.vs_result_choice)(r).is_null(), "a dead handle gives NULL");
+        assert!((a.vs_result_choice)(null_mut()).is_null(), "NULL gives NULL");
+        // Another solver's result has no choice.
+        assert_eq!((a.vs_scene_set_solver)(s, cstr("pop").as_ptr(), cstr(r#"{"grid_resolution": 8}"#).as_ptr()), OK);
+        let r = a.solve(s);
+        assert!((a.vs_result_choice)(r).is_null(), "pop's result has a choice");
+        assert_eq!((a.vs_result_destroy)(r), OK);
+        // Bad settings are refused when set, with the setting named.
+        assert_ne!((a.vs_scene_set_solver)(s, cstr("auto").as_ptr(), cstr(r#"{"target_error": -1}"#).as_ptr()), OK);
+        assert!(a.scene_error(s).contains("target_error"), "{}", a.scene_error(s));
+        assert_eq!((a.vs_scene_destroy)(s), OK);
+    }
+}

@@ -134,6 +134,7 @@ _SIGNATURES = {
     "vs_result_last_error": (c_char_p, [_ResultPtr]),
     "vs_result_dims": (c_int32, [_ResultPtr, POINTER(c_uint32)]),
     "vs_result_device": (c_int32, [_ResultPtr, POINTER(c_uint32)]),
+    "vs_result_choice": (c_char_p, [_ResultPtr]),
     "vs_result_float_count": (c_int32, [_ResultPtr, POINTER(c_size_t)]),
     "vs_result_index_to_world": (c_int32, [_ResultPtr, _F]),
     "vs_result_copy_rgb": (c_int32, [_ResultPtr, _F, c_size_t]),
@@ -490,6 +491,12 @@ class Result(_Handle):
         d = c_uint32()
         self._check(lib().vs_result_device(self._p(), ctypes.byref(d)), "result device")
         return {v: k for k, v in DEVICES.items()}[d.value]
+
+    def choice(self) -> Optional[dict]:
+        """What the ``auto`` solver picked and why (solver, quality, settings, predicted_error,
+        predicted_seconds, why, ...; ``vs_result_choice``), None for the other solvers."""
+        raw = lib().vs_result_choice(self._p())
+        return json.loads(raw.decode()) if raw else None
 
     def index_to_world(self):
         """Row-major 4x4 (16 floats): grid point (i, j, k) sits at M (i, j, k, 1)."""

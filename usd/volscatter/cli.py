@@ -183,9 +183,10 @@ def _common(p: argparse.ArgumentParser, what: str):
     t.add_argument("--time", type=float, metavar="T",
                    help="time code to read (default: the stage's start time code, else the default time)")
     t.add_argument("--frames", metavar="A-B", help=f"{what} every frame A..B (inclusive; A-B:STEP for a step)")
-    p.add_argument("--solver", default="reference", type=_solver_arg,
-                   help="a solver of the library's registry (`volscatter solvers` lists them): "
-                        "reference (path-traced, default), pop, ...")
+    p.add_argument("--solver", default="auto", type=_solver_arg,
+                   help="a solver of the library's registry (`volscatter solvers` lists them): auto (default: "
+                        "picks a solver and quality for the scene from the benchmark's measurements and says "
+                        "which), reference (path-traced), pop, ...")
     p.add_argument("--width", type=int, default=320, help="image width in pixels (default 320)")
     p.add_argument("--height", type=int, help="image height (default: width / the camera's aperture ratio)")
     p.add_argument("--spp", type=int, help="samples per pixel (reference)")
@@ -288,6 +289,9 @@ def _render_frame(args, R, stage, settings, bar, warn, sessions, t, k: int, n: i
     finally:
         bar.finish()
     if not args.quiet:
+        if res.choice:
+            c = res.choice
+            sys.stderr.write(f"auto picked {c['solver']} {c['quality']}: {c['why']}\n")
         sys.stderr.write(f"{res.out}: {res.width}x{res.height} with {args.solver}"
                          f"{'' if math.isnan(res.time) else f' at time {res.time:g}'}, mean RGB "
                          f"({res.mean_rgb[0]:.4g}, {res.mean_rgb[1]:.4g}, {res.mean_rgb[2]:.4g}), "

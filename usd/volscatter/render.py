@@ -43,6 +43,8 @@ class FrameResult:
     mean_rgb: List[float]
     mean_alpha: float
     warnings: List[str] = field(default_factory=list)
+    #: What the ``auto`` solver picked and why (``Result.choice``); None for the other solvers.
+    choice: Optional[dict] = None
 
 
 def solver_warnings(scene: stage_mod.StageScene, solver: str) -> List[str]:
@@ -147,12 +149,14 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
             warn(w)
     if transparent and solver == "reference":
         settings = dict(settings or {}, transparent=True)
+    choice = None
     with native_scene(doc, solver, settings) as scene:
         if solver == "reference":
             image = scene.render_reference(progress)
         else:
             solved = sessions.solve(scene, progress, sc.volumes[vi].path) if sessions else scene.solve(progress)
             with solved as result:
+                choice = result.choice()
                 image = result.composite(transparent=transparent, aovs=aovs)
         with image:
             _ensure_parent(out)
@@ -164,7 +168,7 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
                 write_png(png, rgba, w, h, png_exposure, transparent)
     mean = _mean_rgba(rgba, w, h)
     return FrameResult(time=sc.time, out=str(out), width=w, height=h, mean_rgb=mean[:3], mean_alpha=mean[3],
-                       warnings=warnings)
+                       warnings=warnings, choice=choice)
 
 
 def pick_volume(sc: stage_mod.StageScene, volume: Optional[str], warnings: List[str]) -> int:

@@ -2,6 +2,7 @@
 //! `Scene` into a scattering grid S(x) = sigma_s(x) * integral p(w_view, w') L(x, w') dw' —
 //! in-scattered radiance per metre towards the camera, RGB, on a grid over the medium.
 
+pub mod auto;
 pub mod lpm;
 pub mod network;
 pub mod photon_grid;
@@ -128,13 +129,15 @@ impl Timings {
 pub struct SolveOutput {
     pub scattering: ScatteringGrid,
     pub timings: Timings,
+    /// What the `auto` solver picked and why (None from every other solver).
+    pub choice: Option<auto::Choice>,
 }
 
 impl SolveOutput {
     /// Build outputs with this, not a struct literal: fields added later (what a solver chose
     /// and why) then get their defaults without touching every solver.
     pub fn new(scattering: ScatteringGrid, timings: Timings) -> Self {
-        SolveOutput { scattering, timings }
+        SolveOutput { scattering, timings, choice: None }
     }
 }
 

@@ -12,7 +12,7 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use super::{lpm, network, photon_grid, pop, reference, vpl, Solver};
+use super::{auto, lpm, network, photon_grid, pop, reference, vpl, Solver};
 use crate::error::{Error, Result};
 
 /// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
@@ -480,8 +480,35 @@ const LPM: SolverEntry = SolverEntry {
     gpu: true,
 };
 
-/// Every solver, in menu order (the first is the hosts' default).
-pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID, NETWORK, LPM];
+const AUTO: SolverEntry = SolverEntry {
+    name: auto::NAME,
+    label: "Automatic",
+    help: AUTO_HELP,
+    settings: &[
+        SettingSpec::float("target_error", "image relative RMSE to reach: the cheapest measured solver and quality predicted to reach it runs")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }),
+        SettingSpec::float("time_budget", "seconds the solve may take (CPU, solve + composite); with a budget the lowest predicted error within it runs (0: no budget)")
+            .open_range(Range { min: Some(0.0), max: None, min_exclusive: false, max_exclusive: false }),
+    ],
+    defaults: || serde_json::to_value(auto::AutoSettings::default()).unwrap_or(Value::Null),
+    lights: &LightType::ALL,
+    presets: &[
+        Preset { name: "draft", help: "target image error 0.3", settings_json: r#"{"target_error": 0.3}"# },
+        Preset { name: "preview", help: "target image error 0.2 (the default)", settings_json: r#"{"target_error": 0.2}"# },
+        Preset { name: "final", help: "target image error 0.1", settings_json: r#"{"target_error": 0.1}"# },
+    ],
+    cpu: |m| Ok(Box::new(auto::Auto::from_settings(m)?)),
+    // Resolved to the chosen solver before the device dispatch (volscatter-gpu solve.rs), so
+    // the chosen solver's GPU backend runs where it has one.
+    gpu: false,
+};
+
+/// `auto`'s help, with the numbers of the committed measurements.
+const AUTO_HELP: &str = "picks the solver and its quality for the scene (optical depth, albedo, g, light types, size) and a target image error or a time budget, from a model fitted to measurements (core/src/solvers/auto/measurements.json, provisional: 9 fixture scenes, 110 runs), and says what it picked and why (--report `auto`, vs_result_choice). On every measured scene it reaches each measured error within 1.25x at under 2x the cheapest measured cost; for a scene left out of the fit, 97 of 110 picks were within 2x the target. A light type no measured scene has (emission) runs pop preview";
+
+/// Every solver, in menu order. The hosts default to `auto` (by name: it comes last so that the
+/// others keep the positions hosts and files already store).
+pub const SOLVERS: &[SolverEntry] = &[REFERENCE, POP, VPL, PHOTON_GRID, NETWORK, LPM, AUTO];
 
 /// The solvers' names, in `SOLVERS` order.
 pub const SOLVER_NAMES: &[&str] = &names::<{ SOLVERS.len() }>();

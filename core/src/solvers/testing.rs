@@ -65,10 +65,13 @@ pub(crate) fn load_fixture(name: &str) -> Fixture {
 
 /// An unsigned setting of a `regenerate_*` / `explore*` test from the environment.
 /// The scene of any shared fixture by name: the dense cloud, the local-light cases
-/// (`plume_*`, `fig10_*`, pop/radial/tests.rs) and the distant-light cases (pop/tests.rs).
+/// (`plume_*`, `fig10_*`, pop/radial/tests.rs), the dome cases (`dome_*`) and the distant-light
+/// cases (pop/tests.rs).
 pub(crate) fn fixture_scene(name: &str) -> Scene {
     if name == "cloud" {
         cloud::cloud_scene()
+    } else if name.starts_with("dome_") {
+        crate::solvers::pop::tests::dome_cases::dome_case(name)
     } else if name.starts_with("plume_") || name.starts_with("fig10") {
         crate::solvers::pop::radial::tests::case(name)
     } else {

@@ -62,6 +62,7 @@ _SIGNATURES = {
     "vs_result_last_error": (ctypes.c_char_p, [_vp]),
     "vs_result_dims": (_st, [_vp, _u32p]),
     "vs_result_device": (_st, [_vp, _u32p]),
+    "vs_result_choice": (ctypes.c_char_p, [_vp]),
     "vs_result_float_count": (_st, [_vp, _szp]),
     "vs_result_index_to_world": (_st, [_vp, _f32p]),
     "vs_result_copy_rgb": (_st, [_vp, _f32p, ctypes.c_size_t]),
@@ -345,6 +346,13 @@ class Result(_Handle):
         d = ctypes.c_uint32()
         self._call("vs_result_device", ctypes.byref(d))
         return {v: k for k, v in DEVICES.items()}[d.value]
+
+    def choice(self):
+        """What the `auto` solver picked and why (a dict: solver, quality, settings,
+        predicted_error, predicted_seconds, why, ...; `vs_result_choice`), None for the other
+        solvers."""
+        raw = lib().vs_result_choice(self.ptr)
+        return json.loads(raw.decode()) if raw else None
 
     def index_to_world(self):
         m = _floats(16)

@@ -166,6 +166,7 @@ class _JobOperator:
         self._index = 0
         self._values = []
         self._ran_on = set()  # "CPU" / "GPU": where the library says each frame's solve ran
+        self._choices = []  # what the `auto` solver picked for each frame (vs_result_choice)
         self._warned = set()
         self._out = _out_dir(self._settings)
         self._solver = {"name": self._settings.solver}
@@ -182,6 +183,18 @@ class _JobOperator:
         """Where the solves ran, for the report: "CPU", "GPU" or "CPU and GPU" (a GPU that failed
         mid-range leaves the rest of the frames on the CPU)."""
         return " and ".join(d for d in ("CPU", "GPU") if d in self._ran_on) or "nowhere"
+
+    def report_choice(self):
+        """Says what the `auto` solver picked and why (once per distinct pick of the job), and
+        keeps the last pick for the panel."""
+        seen = []
+        for c in getattr(self, "_choices", []):
+            line = "volscatter: auto picked %s %s: %s" % (c["solver"], c["quality"], c["why"])
+            if line not in seen:
+                seen.append(line)
+                self.report({'INFO'}, line)
+        if seen:
+            self._settings.last_choice = seen[-1][len("volscatter: "):]
 
     def _warn(self, msg):
         if msg not in self._warned:
@@ -237,6 +250,9 @@ class _JobOperator:
                 job = self if len(self._frames) > 1 else None  # a range: one session
                 with _solve_on(sc, self._settings.device, progress, state.notes, job) as result:
                     self._ran_on.add(result.device())  # read back from the library, not assumed
+                    choice = result.choice()
+                    if choice:
+                        self._choices.append(choice)
                     state.value = self.per_frame(result, frame)
         except BaseException as e:  # reported on the main thread
             state.error = e
@@ -279,6 +295,7 @@ class _JobOperator:
         self._close_session()
         self._restore_frame(context)
         try:
+            self.report_choice()
             self.finish(context, self._values)
         except Exception as e:
             return self._fail(context, e)

@@ -87,6 +87,9 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         note = cap_note(s)
         if note:
             col.label(text=note, icon='INFO')
+        if s.solver == "auto" and s.last_choice:
+            # The pick's first clause ("auto picked pop preview: ...") fits a panel line.
+            col.label(text=s.last_choice.split(":")[0], icon='INFO')
         col.prop(s, "hide_original")
         row = layout.row(align=True)
         row.operator("volscatter.compute_scattering", icon='OUTLINER_DATA_VOLUME')

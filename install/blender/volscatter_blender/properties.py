@@ -30,11 +30,20 @@ def _registry_items(key, build):
     return _ITEMS[key]
 
 
+#: The enum number of the `auto` solver (the default). A .blend file stores the number, so the
+#: other solvers keep the numbers they had before `auto` existed (their registry order without
+#: it) and a file saved then keeps the solver it chose.
+AUTO_NUMBER = 100
+
+
 def _solver_items(self, context):
-    # Numbered by registry order: the first solver (the reference) is the default.
-    return _registry_items("solvers", lambda solvers: [
-        (s["name"], s["label"], "%s (%s)" % (s["help"], scene_export.lights_note(s["lights"])), i)
-        for i, s in enumerate(solvers)])
+    # In the registry's order; numbered as AUTO_NUMBER says.
+    def build(solvers):
+        rest = [s["name"] for s in solvers if s["name"] != "auto"]
+        return [(s["name"], s["label"], "%s (%s)" % (s["help"], scene_export.lights_note(s["lights"])),
+                 AUTO_NUMBER if s["name"] == "auto" else rest.index(s["name"]))
+                for s in solvers]
+    return _registry_items("solvers", build)
 
 
 def _quality_items(self, context):
@@ -102,7 +111,7 @@ def solver_has(name, setting):
 
 
 class VolscatterSettings(bpy.types.PropertyGroup):
-    solver: EnumProperty(name="Solver", items=_solver_items, default=0, update=_show_preset)
+    solver: EnumProperty(name="Solver", items=_solver_items, default=AUTO_NUMBER, update=_show_preset)
     # default 1: the registry's second preset, "preview" (the Custom fields' defaults below are
     # the reference's and pop's preview values, so that they show what a new object runs)
     quality: EnumProperty(name="Quality", items=_quality_items, default=1, update=_show_preset)
@@ -137,6 +146,8 @@ class VolscatterSettings(bpy.types.PropertyGroup):
     # the one asked for (a solver caps its grid at the source's voxels: said, not silent).
     last_resolution: IntProperty(name="Result Resolution", default=0, options={'HIDDEN'})
     last_requested: IntProperty(name="Requested Resolution", default=0, options={'HIDDEN'})
+    last_choice: StringProperty(name="Last Pick", default="", options={'HIDDEN'},
+                                description="What the Automatic solver picked for the last result, and why")
 
     def solver_settings(self):
         """The JSON settings for the chosen solver: its registry preset, or under Custom the

@@ -332,11 +332,11 @@ def lights_note(types):
 
 def light_messages(solver, kinds):
     """(error, warning) for a solve by `solver` of lights of scene JSON types `kinds`; None for
-    none. The reference (the registry's first solver, the ground truth) renders a scene it has
+    none. The reference (the ground truth) renders a scene it has
     no light for as it is (black); the others refuse it."""
     handled = solver_light_types(solver)
     entry = native.solver(solver) or {"label": solver}
-    reference = native.solvers()["solvers"][0]
+    reference = native.solver("reference") or {"name": "reference", "label": "Reference"}
     note = lights_note(handled)
     if solver != reference["name"] and not any(k in handled for k in kinds):
         return ("the %s solver handles %s, and the scene has none; choose the %s solver"

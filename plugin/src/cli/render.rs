@@ -103,6 +103,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let progress = StderrProgress::new(args.quiet);
     let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
     let mut solve_device = volscatter_gpu::DeviceUsed::Cpu;
+    let mut choice = None;
     let image = if name == "reference" {
         let r = Reference::from_settings(&settings)?;
         let mut img = r.render_image(&scene, &progress, &mut timings)?;
@@ -115,6 +116,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
         let (out, solved_on) = volscatter_gpu::solve(args.device, &scene, &name, &settings, &progress)?;
         solve_device = solved_on;
         progress.finish();
+        if let (Some(c), false) = (&out.choice, args.quiet) {
+            eprintln!("auto picked {} {}: {}", c.solver, c.quality, c.why);
+        }
+        choice = out.choice;
         timings.0.extend(out.timings.0);
         let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
         // Timed apart from the march (phase "composite: single-scattering AOV", included in
@@ -176,7 +181,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             let total = phases.get(k).and_then(|x| x.as_f64()).unwrap_or(0.0) + v;
             phases.insert(k.clone(), json!(total));
         }
-        let doc = json!({
+        let mut doc = json!({
             "scene": args.scene.as_ref().map(|p| p.display().to_string()),
             "solver": name,
             "device": {"solve": solve_device.to_string(), "composite": device_used.to_string()},
@@ -188,6 +193,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "total_seconds": start.elapsed().as_secs_f64(),
             "image": stats,
         });
+        // What `auto` picked and why (solver, quality, settings, predictions, the sentence).
+        if let Some(c) = &choice {
+            doc["auto"] = serde_json::to_value(c).unwrap_or(serde_json::Value::Null);
+        }
         ensure_parent(report)?;
         volscatter_core::io::files::write_file(report, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
     }

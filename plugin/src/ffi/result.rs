@@ -1,7 +1,7 @@
 //! `VsResult`: the scattering grid a solve produced, with the scene snapshot it was solved for
 //! (so that compositing uses the same medium and camera).
 
-use std::ffi::c_char;
+use std::ffi::{c_char, CString};
 use std::sync::Arc;
 
 use volscatter_core::compositor::{self, Aovs, CompositeOptions};
@@ -68,6 +68,9 @@ pub(crate) struct ResultState {
     pub used: DeviceUsed,
     #[allow(dead_code)]
     pub timings: Timings,
+    /// What the `auto` solver picked and why, as JSON (`vs_result_choice`); None from the
+    /// other solvers.
+    pub choice: Option<CString>,
 }
 
 impl ResultState {
@@ -80,7 +83,10 @@ impl ResultState {
                 format!("solver returned a {:?} grid with {} values", g.dims, g.data.len()),
             ));
         }
-        Ok(ResultState { grid: output.scattering, scene, device, used, timings: output.timings })
+        // serde_json escapes control characters, so the JSON has no interior NUL; were it to,
+        // the choice is dropped rather than the result.
+        let choice = output.choice.as_ref().and_then(|c| serde_json::to_string(c).ok()).and_then(|j| CString::new(j).ok());
+        Ok(ResultState { grid: output.scattering, scene, device, used, timings: output.timings, choice })
     }
     fn float_count(&self) -> usize {
         self.grid.data.len() * 3
@@ -138,6 +144,21 @@ pub unsafe extern "C" fn vs_result_device(result: *const VsResult, out: *mut u32
             DeviceUsed::Gpu(_) => VS_DEVICE_GPU,
         };
         write_out(out, code, "out")
+    })
+}
+
+/// What the `auto` solver picked for this result and why, as a JSON object: `solver`,
+/// `quality`, `settings`, `predicted_error` (image rel. RMSE), `predicted_seconds`,
+/// `target_error`, `time_budget`, `why` (a sentence), `fallback` (true when no measurement
+/// covered the scene and the default ran). Owned by the result: valid until it is destroyed.
+/// NULL for a result of another solver, and for a NULL or dead handle.
+///
+/// Thread safety: any thread.
+#[no_mangle]
+pub unsafe extern "C" fn vs_result_choice(result: *const VsResult) -> *const c_char {
+    guard::value(std::ptr::null(), || match RESULTS.get(result) {
+        Ok(h) => lock(&h.state).choice.as_ref().map_or(std::ptr::null(), |c| c.as_ptr()),
+        Err(_) => std::ptr::null(),
     })
 }
 

@@ -400,7 +400,7 @@ fn dome_ordinates_carry_the_dome() {
     }
 }
 
-mod dome_cases;
+pub(crate) mod dome_cases;
 
 mod cloud_profile;
 mod cost;

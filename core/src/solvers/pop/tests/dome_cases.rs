@@ -40,7 +40,7 @@ fn dome_scene(medium: Medium, env: Environment) -> Scene {
 /// The dome cases: the heterogeneous plume (g 0.9, albedo 0.99) under a uniform bluish dome
 /// and under the sun sky, and a nearly white plume (albedo 0.999) under the sun sky, where
 /// light scatters hundreds of times (the isotropic residuum's case).
-pub(super) fn dome_case(name: &str) -> Scene {
+pub(crate) fn dome_case(name: &str) -> Scene {
     match name {
         "dome_uniform" => dome_scene(plume(32, 8.0, 0.99, 0.9), Environment { color: Vec3::new(0.5, 0.7, 1.0), map: None }),
         "dome_sun" => dome_scene(plume(32, 8.0, 0.99, 0.9), Environment { color: Vec3::ONE, map: Some(sun_sky(128, 64)) }),

@@ -1,0 +1,275 @@
+//! The model `auto` picks by, fitted to the benchmark's measurements (measurements.json, the
+//! schema of issue 21, written by scripts/bench_solvers.py; a provisional file from the solver
+//! fixtures until then) and to the features of each measured scene (scene_features.json,
+//! written from the measured scenes by the `scene_features_are_up_to_date` test with
+//! VOLSCATTER_BLESS=1). Both are embedded with include_str! and parsed once.
+//!
+//! The model, per configuration (solver, quality, settings: one measured configuration):
+//! - error: kernel regression in log space over the measured scenes that ran it,
+//!   ln e(q) = sum_s w_s ln e_s / sum_s w_s with w_s = exp(-d(q, s)^2 / 2), where d is the
+//!   distance of `distance` below; a measured scene at distance 0 (the query is that scene) is
+//!   used alone, so that on measured scenes the prediction is the measurement;
+//! - seconds: the same weighted geometric mean of the measured solve seconds (the solvers'
+//!   grids are set by their settings, not by the voxel count, so the solve is not rescaled),
+//!   plus the measured composite seconds scaled by pixels x voxels^(1/3) (the compositor marches
+//!   every pixel through the grid, in steps of a voxel).
+//!
+//! The candidates are the configurations measured on the measured scene nearest the query: one
+//! missing there was cancelled or skipped as too slow on it (measure.rs), and would otherwise
+//! be predicted from the scenes where it was fast.
+//!
+//! Only CPU runs are used: every host has a CPU; a GPU backend only makes the pick faster.
+
+use std::collections::BTreeMap;
+use std::sync::OnceLock;
+
+use serde::Deserialize;
+use serde_json::{Map, Value};
+
+use super::features::Features;
+use crate::error::{Error, Result};
+
+/// The measurements and the measured scenes' features, as committed.
+const MEASUREMENTS_JSON: &str = include_str!("measurements.json");
+const FEATURES_JSON: &str = include_str!("scene_features.json");
+
+/// One measured scene: its name, where it is (`scene`, relative to the repository root, or
+/// `fixture`, a solver fixture of core/src/solvers/fixtures in the provisional file), and the
+/// reference's own image noise.
+#[derive(Clone, Debug, Deserialize)]
+pub struct MeasuredScene {
+    pub name: String,
+    #[serde(default)]
+    pub scene: Option<String>,
+    #[serde(default)]
+    pub fixture: Option<String>,
+    #[serde(default)]
+    pub reference_noise: Option<f64>,
+}
+
+/// One solver run on one scene.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Run {
+    pub scene: String,
+    pub solver: String,
+    pub quality: String,
+    #[serde(default)]
+    pub settings: Map<String, Value>,
+    #[serde(default = "cpu")]
+    pub device: String,
+    pub seconds: f64,
+    #[serde(default)]
+    pub solve_seconds: Option<f64>,
+    #[serde(default)]
+    pub composite_seconds: Option<f64>,
+    pub image_error: f64,
+    #[serde(default)]
+    pub grid_error: Option<f64>,
+}
+
+fn cpu() -> String {
+    "cpu".into()
+}
+
+/// The measurements file (issue 21's schema; `cycles` rows are read but not used by the pick).
+#[derive(Clone, Debug, Deserialize)]
+pub struct Measurements {
+    pub format: u32,
+    #[serde(default)]
+    pub written_by: String,
+    #[serde(default)]
+    pub machine: String,
+    #[serde(default)]
+    pub date: String,
+    #[serde(default)]
+    pub error: String,
+    pub scenes: Vec<MeasuredScene>,
+    pub runs: Vec<Run>,
+    #[serde(default)]
+    pub cycles: Vec<Value>,
+}
+
+impl Measurements {
+    pub fn parse(text: &str) -> Result<Self> {
+        let m: Measurements = serde_json::from_str(text).map_err(|e| Error::InvalidArgument(format!("auto: measurements: {e}")))?;
+        if m.format != 1 {
+            return Err(Error::InvalidArgument(format!("auto: measurements format {} (this build reads 1)", m.format)));
+        }
+        Ok(m)
+    }
+}
+
+/// scene_features.json: the features of each measured scene, by name.
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize)]
+pub struct FeatureTable {
+    pub format: u32,
+    pub scenes: BTreeMap<String, Features>,
+}
+
+/// A configuration the pick can choose: a solver with the settings it was measured at.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    pub solver: String,
+    pub quality: String,
+    pub settings: Map<String, Value>,
+}
+
+/// One measurement of a configuration on a scene, in the model's terms.
+#[derive(Clone, Debug)]
+pub struct Observation {
+    pub scene: usize,
+    pub error: f64,
+    pub seconds: f64,
+    pub solve_seconds: f64,
+    pub composite_seconds: f64,
+}
+
+/// The fitted model: the measured scenes with their features, and per configuration its
+/// observations.
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub scenes: Vec<(String, Features)>,
+    pub configs: Vec<(Config, Vec<Observation>)>,
+}
+
+/// A prediction for one configuration on one scene.
+#[derive(Clone, Copy, Debug)]
+pub struct Prediction {
+    pub error: f64,
+    pub seconds: f64,
+    /// Index (into `Model::scenes`) of the measured scene with the largest weight.
+    pub nearest: usize,
+}
+
+/// Distance between two scenes' features, in units where 1 is "a different regime": a factor
+/// of 2 in 1 + optical depth (mean or max), a factor of e in 1 - albedo (0.99 -> 0.97), 0.3 in
+/// g, or one light class present in one scene and not the other. Image size and voxel count
+/// are left out: they change the cost (scaled in `predict`), not which solver is accurate.
+pub fn distance(a: &Features, b: &Features) -> f64 {
+    let ln2 = std::f64::consts::LN_2;
+    let tau = |x: f64| (1.0 + x.max(0.0)).ln() / ln2;
+    let absorb = |al: f64| (1.0 - al.clamp(0.0, 1.0) + 1e-3).ln();
+    let lights = a.lights.named().iter().zip(b.lights.named()).filter(|(x, y)| x.1 != y.1).count() as f64;
+    let d2 = (tau(a.tau_mean) - tau(b.tau_mean)).powi(2)
+        + (tau(a.tau_max) - tau(b.tau_max)).powi(2)
+        + (absorb(a.albedo) - absorb(b.albedo)).powi(2)
+        + ((a.g - b.g) / 0.3).powi(2)
+        + lights;
+    d2.sqrt()
+}
+
+impl Model {
+    /// The model of the committed files, parsed once (an error in them is a build defect that
+    /// the tests catch; it is reported, not panicked on).
+    pub fn embedded() -> Result<&'static Model> {
+        static MODEL: OnceLock<std::result::Result<Model, String>> = OnceLock::new();
+        MODEL
+            .get_or_init(|| Model::from_json(MEASUREMENTS_JSON, FEATURES_JSON).map_err(|e| e.to_string()))
+            .as_ref()
+            .map_err(|e| Error::InvalidArgument(e.clone()))
+    }
+
+    pub fn from_json(measurements: &str, features: &str) -> Result<Model> {
+        let m = Measurements::parse(measurements)?;
+        let table: FeatureTable =
+            serde_json::from_str(features).map_err(|e| Error::InvalidArgument(format!("auto: scene features: {e}")))?;
+        Model::fit(&m, &table)
+    }
+
+    /// The model of `m`'s CPU runs on the scenes that `table` has features of (a scene without
+    /// features is an error: the feature table is regenerated with the measurements).
+    pub fn fit(m: &Measurements, table: &FeatureTable) -> Result<Model> {
+        let mut scenes = Vec::new();
+        for s in &m.scenes {
+            let f = table.scenes.get(&s.name).ok_or_else(|| {
+                Error::InvalidArgument(format!("auto: measured scene `{}` has no features in scene_features.json (regenerate it)", s.name))
+            })?;
+            scenes.push((s.name.clone(), f.clone()));
+        }
+        let mut configs: Vec<(Config, Vec<Observation>)> = Vec::new();
+        for r in m.runs.iter().filter(|r| r.device == "cpu" && r.solver != super::NAME) {
+            let Some(scene) = scenes.iter().position(|(n, _)| *n == r.scene) else { continue };
+            if !(r.image_error.is_finite() && r.image_error > 0.0 && r.seconds.is_finite() && r.seconds > 0.0) {
+                continue;
+            }
+            let config = Config { solver: r.solver.clone(), quality: r.quality.clone(), settings: r.settings.clone() };
+            let composite = r.composite_seconds.unwrap_or(0.0).max(0.0);
+            let obs = Observation {
+                scene,
+                error: r.image_error,
+                seconds: r.seconds,
+                solve_seconds: r.solve_seconds.unwrap_or(r.seconds - composite).max(1e-6),
+                composite_seconds: composite,
+            };
+            match configs.iter_mut().find(|(c, _)| *c == config) {
+                Some((_, v)) => v.push(obs),
+                None => configs.push((config, vec![obs])),
+            }
+        }
+        Ok(Model { scenes, configs })
+    }
+
+    /// The same model without scene `name`'s runs (leave-one-scene-out).
+    pub fn without(&self, name: &str) -> Model {
+        let Some(gone) = self.scenes.iter().position(|(n, _)| n == name) else { return self.clone() };
+        let scenes = self.scenes.iter().filter(|(n, _)| n != name).cloned().collect();
+        let configs = self
+            .configs
+            .iter()
+            .map(|(c, obs)| {
+                let kept = obs
+                    .iter()
+                    .filter(|o| o.scene != gone)
+                    .map(|o| Observation { scene: if o.scene > gone { o.scene - 1 } else { o.scene }, ..o.clone() })
+                    .collect();
+                (c.clone(), kept)
+            })
+            .filter(|(_, obs): &(Config, Vec<Observation>)| !obs.is_empty())
+            .collect();
+        Model { scenes, configs }
+    }
+
+    /// Index (into `scenes`) of the measured scene nearest to features `f`.
+    pub fn nearest_scene(&self, f: &Features) -> Option<usize> {
+        (0..self.scenes.len()).min_by(|&a, &b| distance(f, &self.scenes[a].1).total_cmp(&distance(f, &self.scenes[b].1)))
+    }
+
+    /// Whether configuration `i` was measured on scene `s`.
+    pub fn measured_on(&self, i: usize, s: usize) -> bool {
+        self.configs.get(i).is_some_and(|(_, obs)| obs.iter().any(|o| o.scene == s))
+    }
+
+    /// Configuration `i`'s predicted error and seconds on a scene of features `f`.
+    pub fn predict(&self, i: usize, f: &Features) -> Option<Prediction> {
+        let obs = &self.configs.get(i)?.1;
+        let d: Vec<f64> = obs.iter().map(|o| distance(f, &self.scenes[o.scene].1)).collect();
+        let exact = d.iter().any(|&x| x < 1e-9);
+        let w: Vec<f64> = d.iter().map(|&x| if exact { if x < 1e-9 { 1.0 } else { 0.0 } } else { (-0.5 * x * x).exp().max(1e-300) }).collect();
+        let total: f64 = w.iter().sum();
+        if obs.is_empty() || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        let nearest = obs.iter().zip(&w).max_by(|a, b| a.1.total_cmp(b.1)).map(|(o, _)| o.scene).unwrap_or(0);
+        if exact {
+            // The query is a measured scene: its measurement, exactly (no ln/exp rounding, so
+            // that a target equal to a measured error is met by that run).
+            let o = obs.iter().zip(&d).find(|(_, &x)| x < 1e-9).map(|(o, _)| o)?;
+            let f_s = &self.scenes[o.scene].1;
+            let scale = (f.pixels / f_s.pixels.max(1.0)) * (f.voxels / f_s.voxels.max(1.0)).cbrt();
+            return Some(Prediction { error: o.error, seconds: o.seconds + o.composite_seconds * (scale - 1.0), nearest });
+        }
+        let mean_ln = |v: &dyn Fn(&Observation) -> f64| obs.iter().zip(&w).map(|(o, w)| w * v(o).max(1e-12).ln()).sum::<f64>() / total;
+        let error = mean_ln(&|o| o.error).exp();
+        let solve = mean_ln(&|o| o.solve_seconds).exp();
+        let composite = obs
+            .iter()
+            .zip(&w)
+            .map(|(o, w)| {
+                let s = &self.scenes[o.scene].1;
+                w * o.composite_seconds * (f.pixels / s.pixels.max(1.0)) * (f.voxels / s.voxels.max(1.0)).cbrt()
+            })
+            .sum::<f64>()
+            / total;
+        Some(Prediction { error, seconds: solve + composite, nearest })
+    }
+}

@@ -1,0 +1,120 @@
+//! The pick: which measured configuration to run on a scene, for a target error or a time
+//! budget, and the sentence that says why.
+
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use super::features::Features;
+use super::model::{Model, Prediction};
+use crate::solvers::registry;
+
+/// What `auto` ran, and why; carried by `SolveOutput::choice` to the CLI's `--report` (`auto`)
+/// and the C ABI (`vs_result_choice`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Choice {
+    pub solver: String,
+    pub quality: String,
+    pub settings: Map<String, Value>,
+    /// The model's predictions for this scene (image rel. RMSE, CPU seconds of solve +
+    /// composite); absent when the pick fell back to the default.
+    pub predicted_error: Option<f64>,
+    pub predicted_seconds: Option<f64>,
+    /// The request it answered.
+    pub target_error: f64,
+    pub time_budget: f64,
+    /// A sentence naming the features and the measured scenes the pick leaned on.
+    pub why: String,
+    /// True when no measurement covers the scene and the stated default ran.
+    pub fallback: bool,
+}
+
+/// The default where the measurements cannot speak for a scene (a light type no measured scene
+/// has, or no measurements): `pop` at its preview preset, the solver that handles every light
+/// type and has a GPU backend.
+pub const FALLBACK: (&str, &str) = ("pop", "preview");
+
+/// The configuration to run on a scene of features `f`: with `time_budget` > 0, the lowest
+/// predicted error among those predicted within the budget (the cheapest when none is); else
+/// the cheapest predicted to reach `target_error` (the most accurate when none is).
+pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64) -> Choice {
+    let missing: Vec<&str> = f
+        .lights
+        .named()
+        .iter()
+        .filter(|(_, present)| *present)
+        .map(|(n, _)| *n)
+        .filter(|n| !model.scenes.iter().any(|(_, s)| s.lights.named().iter().any(|(m, p)| m == n && *p)))
+        .collect();
+    // Candidates: the configurations measured on the nearest measured scene (model.rs).
+    let nearest = model.nearest_scene(f);
+    let preds: Vec<(usize, Prediction)> = (0..model.configs.len())
+        .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s)))
+        .filter_map(|i| Some((i, model.predict(i, f)?)))
+        .collect();
+    if preds.is_empty() || !missing.is_empty() {
+        let reason = if preds.is_empty() {
+            "no measurements to pick from".to_string()
+        } else {
+            format!("no measured scene has a {} light", missing.join(" or "))
+        };
+        return fallback(f, target_error, time_budget, &reason);
+    }
+    let by_seconds = |a: &&(usize, Prediction), b: &&(usize, Prediction)| a.1.seconds.total_cmp(&b.1.seconds);
+    let by_error = |a: &&(usize, Prediction), b: &&(usize, Prediction)| a.1.error.total_cmp(&b.1.error).then(a.1.seconds.total_cmp(&b.1.seconds));
+    let (best, rule) = if time_budget > 0.0 {
+        match preds.iter().filter(|(_, p)| p.seconds <= time_budget).min_by(by_error) {
+            Some(b) => (b, format!("the lowest predicted error within the {time_budget} s budget")),
+            None => (preds.iter().min_by(by_seconds).unwrap_or(&preds[0]), format!("nothing is predicted within the {time_budget} s budget: the fastest")),
+        }
+    } else {
+        match preds.iter().filter(|(_, p)| p.error <= target_error).min_by(by_seconds) {
+            Some(b) => (b, format!("the fastest predicted to reach image error {target_error}")),
+            None => (preds.iter().min_by(by_error).unwrap_or(&preds[0]), format!("nothing is predicted to reach image error {target_error}: the most accurate")),
+        }
+    };
+    let (i, p) = *best;
+    let config = &model.configs[i].0;
+    let leaned: Vec<String> = {
+        let mut near: Vec<(f64, &str)> = model.scenes.iter().map(|(n, s)| (super::model::distance(f, s), n.as_str())).collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        near.iter().take(2).map(|(d, n)| format!("{n} (distance {d:.2})")).collect()
+    };
+    let why = format!(
+        "{} {}: {rule}, predicted image error {:.3} in {:.2} s, for a scene of {}, {} voxels, {} pixels; leaning on the measured scenes {}",
+        config.solver,
+        config.quality,
+        p.error,
+        p.seconds,
+        f.describe(),
+        f.voxels,
+        f.pixels,
+        leaned.join(" and ")
+    );
+    Choice {
+        solver: config.solver.clone(),
+        quality: config.quality.clone(),
+        settings: config.settings.clone(),
+        predicted_error: Some(p.error),
+        predicted_seconds: Some(p.seconds),
+        target_error,
+        time_budget,
+        why,
+        fallback: false,
+    }
+}
+
+fn fallback(f: &Features, target_error: f64, time_budget: f64, reason: &str) -> Choice {
+    let (solver, quality) = FALLBACK;
+    let settings = registry::get(solver).ok().and_then(|e| e.preset(quality)).map(|p| p.settings()).unwrap_or_default();
+    Choice {
+        solver: solver.into(),
+        quality: quality.into(),
+        settings,
+        predicted_error: None,
+        predicted_seconds: None,
+        target_error,
+        time_budget,
+        why: format!("{solver} {quality} (the default): {reason}, so nothing measured predicts this scene of {}", f.describe()),
+        fallback: true,
+    }
+}
