@@ -494,7 +494,7 @@ const AUTO: SolverEntry = SolverEntry {
     lights: &LightType::ALL,
     presets: &[
         Preset { name: "draft", help: "target image error 0.3", settings_json: r#"{"target_error": 0.3}"# },
-        Preset { name: "preview", help: "target image error 0.2 (the default)", settings_json: r#"{"target_error": 0.2}"# },
+        Preset { name: "preview", help: "target image error 0.25 (the default)", settings_json: r#"{"target_error": 0.25}"# },
         Preset { name: "final", help: "target image error 0.1", settings_json: r#"{"target_error": 0.1}"# },
     ],
     cpu: |m| Ok(Box::new(auto::Auto::from_settings(m)?)),
@@ -504,7 +504,7 @@ const AUTO: SolverEntry = SolverEntry {
 };
 
 /// `auto`'s help, with the numbers of the committed measurements.
-const AUTO_HELP: &str = "picks the solver and its quality for the scene (optical depth, albedo, g, light types, size) and a target image error or a time budget, from a model fitted to measurements (core/src/solvers/auto/measurements.json, provisional: 9 fixture scenes, 110 runs), and says what it picked and why (--report `auto`, vs_result_choice). On every measured scene it reaches each measured error within 1.25x at under 2x the cheapest measured cost; for a scene left out of the fit, 97 of 110 picks were within 2x the target. A light type no measured scene has (emission) runs pop preview";
+const AUTO_HELP: &str = "picks the solver and its quality for the scene (optical depth, albedo, g, light types, size) and a target image error (default 0.25) or a time budget, from a model fitted to measurements (core/src/solvers/auto/measurements.json, written by scripts/bench_solvers.py: 5 Blender scenes, 69 runs), and says what it picked and why (--report `auto`, vs_result_choice). On every measured scene it reaches each measured error within 1.25x at under 2x the cheapest measured cost; for a scene left out of the fit, 38 of 69 picks were within 2x the target (five scenes are few). A light type no measured scene has (a local light outside the medium) runs pop preview";
 
 /// Every solver, in menu order. The hosts default to `auto` (by name: it comes last so that the
 /// others keep the positions hosts and files already store).
