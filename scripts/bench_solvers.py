@@ -358,7 +358,9 @@ def markdown(meas: dict, note_gpu: str) -> str:
     lines = ["## Solvers against Cycles (issue 21)", "",
              "Written by `scripts/bench_solvers.py`; measurements in `core/src/solvers/auto/measurements.json`, "
              "plots `docs/bench_error_time.png` and `docs/bench_strip_<scene>.png`.", "",
-             f"Machine: {meas['machine']}; date {meas['date']}; {note_gpu}. Times are wall clock on this shared "
+             f"Machine: {meas['machine']}; date {meas['date']}"
+             + (f" (then {meas['updated']}; the plots are from the full run)" if meas.get("updated") else "")
+             + f"; {note_gpu}. Times are wall clock on this shared "
              "2-core machine (other work ran beside it: Cycles and the solvers were interleaved per scene so that "
              "load falls on both alike; compare ratios within a scene, not absolute times across sections).", "",
              "Error: relative RMSE of the premultiplied RGB (transparent film, only the volume counts) against "
@@ -524,6 +526,39 @@ def plots(meas: dict, images: dict, refs: dict) -> list[Path]:
     return written
 
 
+def update_runs(scenes: list[str], args, work: Path) -> int:
+    """--update: the changed solvers' runs measured again on `scenes` and spliced into
+    measurements.json in place of their old rows; the other solvers' and Cycles' rows are kept
+    (they did not change, and Cycles is the slow part). Grid errors of the new rows are
+    empty until a --grid pass."""
+    if not args.solvers:
+        log("--update needs --solvers")
+        return 2
+    meas = json.loads(MEASUREMENTS.read_text())
+    names = args.solvers.split(",")
+    entries = [e for e in registry() if e["name"] in names]
+    skipped = []
+    for n in scenes:
+        ref, _ = load_reference(n)
+        r, _ = solver_runs(n, ref, entries, tuple(args.qualities.split(",")), work, skipped)
+        done = {(x["solver"], x["quality"]) for x in r}
+        old = [x for x in meas["runs"] if not (x["scene"] == n and (x["solver"], x["quality"]) in done)]
+        # keep the file's order: scene by scene, the solvers in registry order
+        meas["runs"] = old + r
+    order = {e["name"]: i for i, e in enumerate(registry())}
+    scene_order = {s["name"]: i for i, s in enumerate(meas["scenes"])}
+    quality_order = {q: i for i, q in enumerate(QUALITIES)}
+    meas["runs"].sort(key=lambda x: (scene_order[x["scene"]], order.get(x["solver"], 99), quality_order.get(x["quality"], 9)))
+    meas["updated"] = f"{today()}: {','.join(names)} measured again on {','.join(scenes)}"
+    if args.no_write:
+        print(markdown(meas, gpu_note()))
+        return 0
+    MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+    write_section("solvers", markdown(meas, gpu_note()))
+    write_section("bench-solvers", readme_table(meas), path="README.md")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", default=",".join(bench_scenes.SCENES))
@@ -542,6 +577,9 @@ def main() -> int:
     ap.add_argument("--replot", action="store_true", help="only rewrite the section, README table and plots from "
                     "measurements.json and the images in --work")
     ap.add_argument("--no-write", action="store_true", help="print only: leave BENCHMARKS.md, measurements and plots")
+    ap.add_argument("--update", action="store_true", help="measure only --solvers on --scenes again and replace their "
+                    "runs in measurements.json, keeping every other run and Cycles' (after a solver changed); "
+                    "rewrites the section and README table, not the plots (they need every image: rerun in full)")
     args = ap.parse_args()
     scenes = args.scenes.split(",")
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="bench-solvers-"))
@@ -563,6 +601,8 @@ def main() -> int:
     if args.references:
         make_references(scenes, work)
         return 0
+    if args.update:
+        return update_runs(scenes, args, work)
     if args.grid:
         grid_pass(scenes, args.grid, args.grid_spp, work)
         return 0
