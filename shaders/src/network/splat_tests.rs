@@ -11,11 +11,14 @@ use volscatter_core::Scene;
 
 #[test]
 fn network_splat_wgsl_validates_and_layouts_match() {
-    assert_eq!(naga_struct_size(WGSL, "Params") as usize, size_of::<SplatParams>());
+    for wgsl in [BIN_WGSL, RANGES_WGSL, WGSL] {
+        assert_eq!(naga_struct_size(wgsl, "Params") as usize, size_of::<SplatParams>());
+    }
     assert_eq!(naga_struct_size(WGSL, "Particle") as usize, size_of::<GpuParticle>());
 }
 
-struct Cancelled;
+/// A host that has cancelled (network's GPU tests).
+pub(crate) struct Cancelled;
 impl Progress for Cancelled {
     fn update(&self, _: &str, _: f32) -> bool {
         false
@@ -42,7 +45,8 @@ fn network_answer(n: usize, d: usize) -> (Vec<Vec3>, Vec<Vec3>) {
 
 /// The GPU splat against the CPU's on the fixture cube and the plume lit by a point light,
 /// at the default kernel and at a narrow one (where some points fall back to their nearest
-/// particle, on the CPU for both). Same sums in the same particle order; the GPU's exp
+/// particle, on the CPU for both), binned in tiles of 4 (the default), 8 and 32 points (one
+/// tile: every point visits every particle). Same sums in the same particle order; the GPU's exp
 /// differs from the CPU's in the last bits (within a few ulp on lavapipe and on Vulkan
 /// drivers generally), so each weight differs by ~1e-7 relative. Tolerance 1e-5 relative
 /// RMSE on S (measured on lavapipe: printed); a cancelled host gets `Cancelled`.
@@ -59,12 +63,14 @@ fn gpu_network_splat_matches_cpu() {
             let empty = ScatteringGrid::over_medium(&sc.medium, 24).unwrap();
             let mut cpu = empty.clone();
             CpuBackend.splat(&mut cpu, &input, &NoProgress).unwrap();
-            let mut gpu = empty.clone();
-            splat(&ctx, &mut gpu, &input, &NoProgress).unwrap();
-            let e = relative_rmse(&gpu.data, &cpu.data);
-            eprintln!("{name}, kernel radius {kernel_radius}: S rel. RMSE {e:e}");
             assert!(cpu.data.iter().any(|v| v.max_element() > 0.0), "{name}: nothing splatted");
-            assert!(e < 1e-5, "{name}, kernel radius {kernel_radius}: S relative RMSE {e}");
+            for tile in [FIRST_TILE, 8, 32] {
+                let mut gpu = empty.clone();
+                splat_tiled(&ctx, &mut gpu, &input, tile, &NoProgress).unwrap();
+                let e = relative_rmse(&gpu.data, &cpu.data);
+                eprintln!("{name}, kernel radius {kernel_radius}, tiles of {tile}: S rel. RMSE {e:e}");
+                assert!(e < 1e-5, "{name}, kernel radius {kernel_radius}, tiles of {tile}: S relative RMSE {e}");
+            }
             let mut cancelled = empty.clone();
             assert!(matches!(splat(&ctx, &mut cancelled, &input, &Cancelled), Err(Error::Cancelled)));
         }
