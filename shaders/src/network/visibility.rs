@@ -51,6 +51,11 @@ const _: () = assert!(size_of::<VisibilityParams>() == 192);
 const KEYS_PER_CHUNK: u64 = 1 << 17;
 
 pub fn visibility(ctx: &GpuContext, x: &VisibilityInput, progress: &dyn Progress) -> Result<Vec<DirectionLinks>, Error> {
+    visibility_chunked(ctx, x, KEYS_PER_CHUNK, progress)
+}
+
+/// `visibility` with chunks of at most `keys_per_chunk` sort keys (at least one direction).
+pub fn visibility_chunked(ctx: &GpuContext, x: &VisibilityInput, keys_per_chunk: u64, progress: &dyn Progress) -> Result<Vec<DirectionLinks>, Error> {
     let (medium, p) = (x.medium, x.particles);
     let n = p.len() as u64;
     if n == 0 || x.dirs.is_empty() {
@@ -61,7 +66,7 @@ pub fn visibility(ctx: &GpuContext, x: &VisibilityInput, progress: &dyn Progress
         return Err(Error::Device(format!("network window {} x {} exceeds the GPU's 32-bit pixel keys", x.window, x.window)));
     }
     let len = n.next_power_of_two();
-    let chunk = (KEYS_PER_CHUNK / len).clamp(1, x.dirs.len() as u64);
+    let chunk = (keys_per_chunk / len).clamp(1, x.dirs.len() as u64);
     for (what, bytes) in [
         ("density", bricked_density_bytes(medium)),
         ("network sort keys", chunk * len * 16),

@@ -38,7 +38,7 @@ fn spiral(d: usize) -> Vec<Vec3> {
 /// The GPU visibility network against core's `visibility::build`, on the fixture cube (g 0.7,
 /// a sun) and on the plume lit by a point light, with both opacity modes, at the solver's
 /// window (the paper's bound) and at a finer one, with N not a power of two (the sort's
-/// padding). The lists (order and upstream neighbours) must be identical: the keys are the
+/// padding), in one chunk of directions and in several. The lists (order and upstream neighbours) must be identical: the keys are the
 /// CPU's bit for bit. The opacities come from the same march (same steps, same order of
 /// summation); they differ by the GPU's exp and density lookup rounding (measured on lavapipe:
 /// 1.8e-7 in every case, 3 ulp of an opacity near 1). Bound 1e-6 absolute on 1 - exp(-tau):
@@ -57,6 +57,9 @@ fn gpu_network_visibility_matches_cpu() {
             let input = VisibilityInput { medium: &sc.medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window, opacity };
             let cpu = visibility::build(&sc.medium, &p, &dirs, sphere.center, sphere.radius, window, opacity, &NoProgress).unwrap();
             let gpu = visibility(&ctx, &input, &NoProgress).unwrap();
+            // In chunks of 3 directions (the last one of 2): the same lists.
+            let chunked = visibility_chunked(&ctx, &input, 3 * 1024, &NoProgress).unwrap();
+            assert!(chunked.iter().zip(&gpu).all(|(a, b)| a.order == b.order && a.up == b.up && a.alpha == b.alpha), "{name}: chunks changed the lists");
             assert_eq!(gpu.len(), cpu.len());
             let (mut worst, mut linked) = (0.0f32, 0usize);
             for (d, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
