@@ -94,3 +94,18 @@ fn gpu_bitonic_sort_matches_host_sort() {
     }
     assert_eq!(bytemuck::cast_slice::<u8, [u32; 4]>(&back), &keys[..]);
 }
+
+/// A window whose pixels overflow the GPU's 32-bit keys is refused with `Error::Device` (on
+/// which `auto` solves on the CPU), never binned wrongly.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
+fn gpu_network_visibility_refuses_oversized_windows() {
+    let ctx = gpu_or_skip();
+    let sc = cube_g07();
+    let p = particles::sample(&sc.medium, 64, 1);
+    let sphere = BoundingSphere::of(&sc.medium);
+    let dirs = spiral(4);
+    let input = VisibilityInput { medium: &sc.medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window: 1 << 16, opacity: Opacity::Boundary };
+    let e = visibility(&ctx, &input, &NoProgress).err();
+    assert!(matches!(e, Some(Error::Device(_))), "{e:?}");
+}
