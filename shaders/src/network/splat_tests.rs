@@ -2,6 +2,7 @@ use glam::Vec3;
 
 use super::*;
 use crate::network::iterate::tests::{cube_g07, plume_point_light};
+use crate::network::visibility::tests::spiral;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
@@ -31,14 +32,7 @@ impl Progress for Cancelled {
 /// A made-up network answer: D directions spread by a golden-angle spiral and radiance that
 /// varies with particle and direction (positive, RGB apart), so a misplaced weight shows.
 fn network_answer(n: usize, d: usize) -> (Vec<Vec3>, Vec<Vec3>) {
-    let dirs: Vec<Vec3> = (0..d)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f32 + 0.5) / d as f32;
-            let phi = 2.399_963 * i as f32;
-            let r = (1.0 - z * z).sqrt();
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect();
+    let dirs = spiral(d);
     let radiance = (0..n * d).map(|k| Vec3::new(1.0 + (k % 7) as f32, 0.5 + (k % 13) as f32 * 0.1, 2.0 + ((k / d) % 5) as f32)).collect();
     (dirs, radiance)
 }

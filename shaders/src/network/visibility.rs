@@ -152,4 +152,4 @@ pub fn visibility_chunked(ctx: &GpuContext, x: &VisibilityInput, keys_per_chunk:
 
 #[cfg(test)]
 #[path = "visibility_tests.rs"]
-mod tests;
+pub(crate) mod tests;

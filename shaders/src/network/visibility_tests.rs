@@ -20,19 +20,16 @@ fn network_visibility_wgsl_validates_and_layouts_match() {
 }
 
 /// `d` directions on a golden-angle spiral (the solver's Fibonacci lattice is private to core;
-/// any directions serve, the axis-aligned ones included: +-z is where `orthonormal_basis`
-/// switches branch).
-fn spiral(d: usize) -> Vec<Vec3> {
-    let mut dirs: Vec<Vec3> = (0..d)
+/// any directions serve).
+pub(crate) fn spiral(d: usize) -> Vec<Vec3> {
+    (0..d)
         .map(|i| {
             let z = 1.0 - 2.0 * (i as f32 + 0.5) / d as f32;
             let phi = 2.399_963 * i as f32;
             let r = (1.0 - z * z).sqrt();
             Vec3::new(r * phi.cos(), r * phi.sin(), z)
         })
-        .collect();
-    dirs.extend([Vec3::Z, -Vec3::Z, Vec3::X]);
-    dirs
+        .collect()
 }
 
 /// The GPU visibility network against core's `visibility::build`, on the fixture cube (g 0.7,
@@ -48,7 +45,8 @@ fn spiral(d: usize) -> Vec<Vec3> {
 fn gpu_network_visibility_matches_cpu() {
     let ctx = gpu_or_skip();
     let scenes: [(&str, Scene); 2] = [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())];
-    let dirs = spiral(29);
+    // With the axis-aligned ones: +-z is where `orthonormal_basis` switches branch.
+    let dirs: Vec<Vec3> = spiral(29).into_iter().chain([Vec3::Z, -Vec3::Z, Vec3::X]).collect();
     for (name, sc) in scenes {
         let p = particles::sample(&sc.medium, 1000, 3);
         let sphere = BoundingSphere::of(&sc.medium);
