@@ -56,19 +56,23 @@ def gpu_section(quick: bool) -> None:
         "",
         f"{datetime.date.today().isoformat()}, adapter: {g['device']}: {kind}; CPU {platform.machine()},"
         f" {os.cpu_count()} cores{' (quick sizes)' if g['quick'] else ''}. Wall-clock seconds of the same solve on the CPU"
-        " backend and on the GPU backend (iteration: source product, column sweep, residual; splat: the"
-        " points x particles accumulation); the network, direct light and single scattering are on the CPU in both.",
+        " backend and on the GPU backend (visibility: per-direction keys, bitonic sort, upstream neighbours,"
+        " marched opacities, read back; iteration: source product, column sweep, residual; splat: particles binned"
+        " into 4^3-point tiles by the same sort, then each point's gather over its tile); the particles, direct light"
+        " and single scattering are on the CPU in both. S rel. RMSE: the GPU solve's S against the CPU's.",
         "Scene: the paper's cloud (2 R tau = 20, albedo 0.9, g 0, two distant lights and a sky) on the 64^3 cumulus.",
         "",
-        "| N | D | output | iterations | CPU ms/iteration | GPU ms/iteration | CPU splat s | GPU splat s | CPU solve s | GPU solve s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| N | D | output | iterations | CPU visibility s | GPU visibility s | CPU ms/iteration | GPU ms/iteration"
+        " | CPU splat s | GPU splat s | CPU solve s | GPU solve s | S rel. RMSE |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in g["rows"]:
         c, q = r["cpu"], r["gpu"]
         its = f"{c['iterations']}" if c["iterations"] == q["iterations"] else f"{c['iterations']} / {q['iterations']}"
         lines.append(f"| {r['particles']} | {r['directions']} | {r['output_resolution']} | {its} |"
+                     f" {c['visibility_seconds']:.3f} | {q['visibility_seconds']:.3f} |"
                      f" {c['per_iteration_ms']:.2f} | {q['per_iteration_ms']:.2f} | {c['splat_seconds']:.3f} |"
-                     f" {q['splat_seconds']:.3f} | {c['solve_seconds']:.3f} | {q['solve_seconds']:.3f} |")
+                     f" {q['splat_seconds']:.3f} | {c['solve_seconds']:.3f} | {q['solve_seconds']:.3f} | {r['s_rel_rmse']:.1e} |")
     lines += [
         "",
         "The paper reports 45 and 26 frames per second at N 512 and 1024 (D 128) for its whole GPU frame.",

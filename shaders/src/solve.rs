@@ -67,9 +67,9 @@ fn photon_grid_on_gpu(
     Ok(out)
 }
 
-/// `network` with its iteration and its splat's accumulation on the GPU; the network and its
-/// radiance are kept in `state` on the host, as on the CPU (a camera move re-splats without
-/// iterating).
+/// `network` with its visibility network (binning, sorting, opacities), its iteration and its
+/// splat's accumulation on the GPU; the network and its radiance are kept in `state` on the
+/// host, as on the CPU (a camera move re-splats without iterating).
 fn network_on_gpu(
     ctx: &GpuContext,
     scene: &Scene,

@@ -11,6 +11,7 @@ use std::time::Instant;
 
 use crate::network::{GpuBackend, CHECK_EVERY};
 use crate::test_support::gpu_or_skip;
+use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{cumulus, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Environment, Light};
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
@@ -44,15 +45,17 @@ fn phase(out: &SolveOutput, name: &str) -> f64 {
     out.timings.0.iter().filter(|(k, _)| k == name).map(|(_, v)| *v).sum()
 }
 
-/// One solve on `backend`: wall seconds of the iteration, of the splat, of the whole solve, and the iterations.
-fn timed(sc: &Scene, s: &NetworkSettings, backend: &dyn NetworkBackend) -> serde_json::Value {
+/// One solve on `backend`: wall seconds of the visibility network, of the iteration, of the
+/// splat, of the whole solve, and the iterations; with the solve's output.
+fn timed(sc: &Scene, s: &NetworkSettings, backend: &dyn NetworkBackend) -> (serde_json::Value, SolveOutput) {
     let t = Instant::now();
     let (out, rep) = Network::new(s.clone()).unwrap().solve_on(sc, &NoProgress, backend, None).unwrap();
     let total = t.elapsed().as_secs_f64();
     let iterate = phase(&out, "network iterate");
     let iterations = rep.residuals.len();
-    json!({"iterations": iterations, "iterate_seconds": iterate, "per_iteration_ms": 1e3 * iterate / iterations.max(1) as f64,
-           "splat_seconds": phase(&out, "network splat"), "solve_seconds": total})
+    let row = json!({"iterations": iterations, "visibility_seconds": phase(&out, "network visibility"), "iterate_seconds": iterate,
+           "per_iteration_ms": 1e3 * iterate / iterations.max(1) as f64, "splat_seconds": phase(&out, "network splat"), "solve_seconds": total});
+    (row, out)
 }
 
 #[test]
@@ -72,7 +75,9 @@ fn bench_network_gpu() {
     let mut rows = Vec::new();
     for (n, d, res) in sizes {
         let s = NetworkSettings { particles: n, directions: d, output_resolution: res, ..Default::default() };
-        rows.push(json!({"particles": n, "directions": d, "output_resolution": res, "cpu": timed(&sc, &s, &CpuBackend), "gpu": timed(&sc, &s, &gpu)}));
+        let ((cpu, cpu_out), (gpu_row, gpu_out)) = (timed(&sc, &s, &CpuBackend), timed(&sc, &s, &gpu));
+        let error = relative_rmse(&gpu_out.scattering.data, &cpu_out.scattering.data);
+        rows.push(json!({"particles": n, "directions": d, "output_resolution": res, "cpu": cpu, "gpu": gpu_row, "s_rel_rmse": error}));
     }
     let data = json!({"device": ctx.describe(), "software": ctx.is_software(), "quick": quick, "rows": rows});
     println!("BENCH_JSON {}", json!({"bench": "gpu", "data": data}));

@@ -8,7 +8,8 @@ use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{DensityGrid, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Light};
-use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend, SplatInput};
+use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend, SplatInput, VisibilityInput};
+use volscatter_core::solvers::network::visibility::DirectionLinks;
 use volscatter_core::solvers::network::{Network, NetworkReport, NetworkSettings, Start};
 use volscatter_core::solvers::session::SessionState;
 use volscatter_core::solvers::{NoProgress, ScatteringGrid, SolveOutput};
@@ -29,6 +30,10 @@ struct Recording<B> {
 }
 
 impl<B: NetworkBackend> NetworkBackend for Recording<B> {
+    fn visibility(&self, input: &VisibilityInput, progress: &dyn Progress) -> volscatter_core::Result<Vec<DirectionLinks>> {
+        self.inner.visibility(input, progress)
+    }
+
     fn iterate(&self, input: &IterationInput, start: Option<Vec<Vec3>>, progress: &dyn Progress) -> volscatter_core::Result<Iterated> {
         let it = self.inner.iterate(input, start, progress)?;
         *self.last.borrow_mut() = Some(Iterated { radiance: it.radiance.clone(), residuals: it.residuals.clone() });
@@ -80,14 +85,16 @@ fn solve_on<B: NetworkBackend>(sc: &Scene, s: &NetworkSettings, backend: &Record
     (out, rep, it)
 }
 
-/// The GPU iteration and splat against the CPU's, same network and direct light, on the fixture cube
+/// The GPU solve (visibility network, iteration, splat) against the CPU's, same particles and direct light, on the fixture cube
 /// and on the plume lit by a point light, with the batch of 4 iterations between readbacks
 /// that the solver uses and with 1. Both run the same iterations in the same order within each
 /// column, and the GPU's convergence flag stops it at the CPU's iteration even mid-batch, so
 /// the iteration counts are equal and I differs only by float32 rounding: the matrix product
 /// sums in the same order (the driver may fuse multiply-adds), the residual is summed in
-/// float32 on the GPU and float64 on the CPU. Measured on lavapipe: I bit-identical (0 relative
-/// RMSE; it does not fuse), S 8.5e-8 and 2.6e-8 (the GPU splat's exp), residuals equal to 1e-4. Tolerances: I and S 1e-5
+/// float32 on the GPU and float64 on the CPU; the network's lists are the CPU's, its opacities
+/// within a few ulp (visibility_tests.rs). Measured on lavapipe: I 2.4e-7 and 1.7e-7 relative
+/// RMSE (the opacities' ulp; the iteration alone was bit-identical: lavapipe does not fuse),
+/// S 2.4e-7 and 6.1e-8, residuals equal to 1e-4. Tolerances: I and S 1e-5
 /// relative RMSE (a driver that fuses multiply-adds rounds each of the D terms differently,
 /// ~1e-7 each, compounded over ~20 iterations), each residual 1e-4 relative (float32 sums of
 /// ~50 000 terms).

@@ -1,19 +1,23 @@
-//! `network` (illumination networks, core solvers/network) with its iteration on the GPU.
-//! The network (particles, visibility lists and opacities, phase matrix) and the direct light
-//! are built on the CPU and kept there across a session's frames; this backend uploads what
+//! `network` (illumination networks, core solvers/network) on the GPU: the visibility
+//! network's binning, sorting and opacities (visibility.rs, with the bitonic sort of sort.rs),
+//! the iteration (iterate.rs) and the splat's accumulation (splat.rs). The particles, the phase
+//! matrix and the direct light are built on the CPU; the network's lists are read back and
+//! kept on the host across a session's frames, as the CPU's are, and this backend uploads what
 //! the iteration needs on every call (the GPU buffers are rebuilt per frame: a camera move,
-//! which keeps I, uploads nothing to the iteration). The splat's accumulation (points x
-//! particles) runs on the GPU too (splat.rs).
+//! which keeps I, uploads nothing to the iteration).
 
 pub mod iterate;
+pub mod sort;
 pub mod splat;
+pub mod visibility;
 #[cfg(test)]
 mod bench;
 
 use glam::Vec3;
 
 use crate::GpuContext;
-use volscatter_core::solvers::network::backend::{IterationInput, NetworkBackend, SplatInput};
+use volscatter_core::solvers::network::backend::{IterationInput, NetworkBackend, SplatInput, VisibilityInput};
+use volscatter_core::solvers::network::visibility::DirectionLinks;
 use volscatter_core::solvers::network::iterate::Iterated;
 use volscatter_core::solvers::{Progress, ScatteringGrid};
 use volscatter_core::Result;
@@ -35,6 +39,10 @@ impl<'c> GpuBackend<'c> {
 }
 
 impl NetworkBackend for GpuBackend<'_> {
+    fn visibility(&self, input: &VisibilityInput, progress: &dyn Progress) -> Result<Vec<DirectionLinks>> {
+        visibility::visibility(self.ctx, input, progress)
+    }
+
     fn iterate(&self, input: &IterationInput, start: Option<Vec<Vec3>>, progress: &dyn Progress) -> Result<Iterated> {
         Ok(iterate::iterate(self.ctx, input, start, self.check_every, progress)?)
     }

@@ -2,6 +2,7 @@ use glam::Vec3;
 
 use super::*;
 use crate::network::iterate::tests::{cube_g07, plume_point_light};
+use crate::network::visibility::tests::spiral;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
@@ -11,11 +12,14 @@ use volscatter_core::Scene;
 
 #[test]
 fn network_splat_wgsl_validates_and_layouts_match() {
-    assert_eq!(naga_struct_size(WGSL, "Params") as usize, size_of::<SplatParams>());
+    for wgsl in [BIN_WGSL, RANGES_WGSL, WGSL] {
+        assert_eq!(naga_struct_size(wgsl, "Params") as usize, size_of::<SplatParams>());
+    }
     assert_eq!(naga_struct_size(WGSL, "Particle") as usize, size_of::<GpuParticle>());
 }
 
-struct Cancelled;
+/// A host that has cancelled (network's GPU tests).
+pub(crate) struct Cancelled;
 impl Progress for Cancelled {
     fn update(&self, _: &str, _: f32) -> bool {
         false
@@ -28,21 +32,15 @@ impl Progress for Cancelled {
 /// A made-up network answer: D directions spread by a golden-angle spiral and radiance that
 /// varies with particle and direction (positive, RGB apart), so a misplaced weight shows.
 fn network_answer(n: usize, d: usize) -> (Vec<Vec3>, Vec<Vec3>) {
-    let dirs: Vec<Vec3> = (0..d)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f32 + 0.5) / d as f32;
-            let phi = 2.399_963 * i as f32;
-            let r = (1.0 - z * z).sqrt();
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect();
+    let dirs = spiral(d);
     let radiance = (0..n * d).map(|k| Vec3::new(1.0 + (k % 7) as f32, 0.5 + (k % 13) as f32 * 0.1, 2.0 + ((k / d) % 5) as f32)).collect();
     (dirs, radiance)
 }
 
 /// The GPU splat against the CPU's on the fixture cube and the plume lit by a point light,
 /// at the default kernel and at a narrow one (where some points fall back to their nearest
-/// particle, on the CPU for both). Same sums in the same particle order; the GPU's exp
+/// particle, on the CPU for both), binned in tiles of 4 (the default), 8 and 32 points (one
+/// tile: every point visits every particle). Same sums in the same particle order; the GPU's exp
 /// differs from the CPU's in the last bits (within a few ulp on lavapipe and on Vulkan
 /// drivers generally), so each weight differs by ~1e-7 relative. Tolerance 1e-5 relative
 /// RMSE on S (measured on lavapipe: printed); a cancelled host gets `Cancelled`.
@@ -59,12 +57,14 @@ fn gpu_network_splat_matches_cpu() {
             let empty = ScatteringGrid::over_medium(&sc.medium, 24).unwrap();
             let mut cpu = empty.clone();
             CpuBackend.splat(&mut cpu, &input, &NoProgress).unwrap();
-            let mut gpu = empty.clone();
-            splat(&ctx, &mut gpu, &input, &NoProgress).unwrap();
-            let e = relative_rmse(&gpu.data, &cpu.data);
-            eprintln!("{name}, kernel radius {kernel_radius}: S rel. RMSE {e:e}");
             assert!(cpu.data.iter().any(|v| v.max_element() > 0.0), "{name}: nothing splatted");
-            assert!(e < 1e-5, "{name}, kernel radius {kernel_radius}: S relative RMSE {e}");
+            for tile in [FIRST_TILE, 8, 32] {
+                let mut gpu = empty.clone();
+                splat_tiled(&ctx, &mut gpu, &input, tile, &NoProgress).unwrap();
+                let e = relative_rmse(&gpu.data, &cpu.data);
+                eprintln!("{name}, kernel radius {kernel_radius}, tiles of {tile}: S rel. RMSE {e:e}");
+                assert!(e < 1e-5, "{name}, kernel radius {kernel_radius}, tiles of {tile}: S relative RMSE {e}");
+            }
             let mut cancelled = empty.clone();
             assert!(matches!(splat(&ctx, &mut cancelled, &input, &Cancelled), Err(Error::Cancelled)));
         }

@@ -5,7 +5,8 @@
 //! POP's merge and upsampling read), `ray_box`, `optics` (optical depth by midpoint quadrature,
 //! the ball kernel), `hg` (phase function and the propagation's lobe helpers), `propagation`
 //! (what POP's two propagation kernels share), `network` (the parameters of network's
-//! iteration kernels) and `columns` (one
+//! iteration kernels), `network_visibility` and `network_splat` (what network's visibility
+//! and splat kernels share) and `columns` (one
 //! invocation per grid column). A prelude may read names the kernel declares (its `params`,
 //! buffers): WGSL resolves module-scope names in any order.
 

@@ -9,11 +9,26 @@ use glam::Vec3;
 
 use super::iterate::{self, Iterated};
 use super::particles::Particles;
+use super::settings::Opacity;
 use super::splat;
-use super::visibility::DirectionLinks;
-use crate::error::Result;
+use super::visibility::{self, DirectionLinks};
+use crate::error::{Error, Result};
 use crate::medium::Medium;
 use crate::solvers::{Progress, ScatteringGrid};
+
+/// What the visibility network is built from (visibility.rs `build`).
+pub struct VisibilityInput<'a> {
+    pub medium: &'a Medium,
+    pub particles: &'a Particles,
+    /// Directions light travels.
+    pub dirs: &'a [Vec3],
+    /// The bounding sphere the M x M windows cover.
+    pub centre: Vec3,
+    pub radius: f32,
+    /// Window side M.
+    pub window: u32,
+    pub opacity: Opacity,
+}
 
 /// What the iteration of Eq. 2 reads (iterate.rs).
 pub struct IterationInput<'a> {
@@ -40,6 +55,11 @@ pub struct SplatInput<'a> {
 }
 
 pub trait NetworkBackend {
+    /// Per direction the particles' column order, upstream neighbours and opacities, as
+    /// visibility.rs `build` defines them (same ties, same lists); `Error::Cancelled` once
+    /// `progress` is cancelled.
+    fn visibility(&self, input: &VisibilityInput, progress: &dyn Progress) -> Result<Vec<DirectionLinks>>;
+
     /// Iterates Eq. 2 from `start` (or zero) to the residual threshold; stops early, returning
     /// what it has, once `progress` is cancelled (the caller then discards it).
     fn iterate(&self, input: &IterationInput, start: Option<Vec<Vec3>>, progress: &dyn Progress) -> Result<Iterated>;
@@ -53,6 +73,10 @@ pub trait NetworkBackend {
 pub struct CpuBackend;
 
 impl NetworkBackend for CpuBackend {
+    fn visibility(&self, x: &VisibilityInput, progress: &dyn Progress) -> Result<Vec<DirectionLinks>> {
+        visibility::build(x.medium, x.particles, x.dirs, x.centre, x.radius, x.window, x.opacity, progress).ok_or(Error::Cancelled)
+    }
+
     fn iterate(&self, x: &IterationInput, start: Option<Vec<Vec3>>, progress: &dyn Progress) -> Result<Iterated> {
         Ok(iterate::iterate(x.links, x.phase, x.first, x.albedo, x.max_iterations, x.threshold, start, progress))
     }

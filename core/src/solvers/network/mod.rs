@@ -19,10 +19,10 @@
 //! one-off answer), a change of the lights iterates from it (warm start: the same fixed point to
 //! the residual threshold, not bit for bit).
 //!
-//! The stages over every (particle, direction) pair and every output cell (the iteration, the
-//! splat) run through a `NetworkBackend` (backend.rs): the CPU code here, or volscatter-gpu's
-//! port. The network itself (particles, visibility, phase matrix) and the direct light are
-//! built on the CPU.
+//! The stages over every (particle, direction) pair and every output cell (the visibility
+//! network's binning, sorting and opacities, the iteration, the splat) run through a
+//! `NetworkBackend` (backend.rs): the CPU code here, or volscatter-gpu's port. The particles,
+//! the phase matrix and the direct light are built on the CPU.
 
 pub mod backend;
 mod direct;
@@ -41,7 +41,7 @@ mod tests;
 
 pub use settings::NetworkSettings;
 
-use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput};
+use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput, VisibilityInput};
 
 use super::pop::reuse::MediumKey;
 use super::session::SessionState;
@@ -154,7 +154,8 @@ impl Network {
                 let dirs = directions::fibonacci(s.directions);
                 let sphere = BoundingSphere::of(medium);
                 let window = visibility::window_side(s.window, s.directions, sphere.radius, p.mean_sigma_t, p.len());
-                let links = timings.time("network visibility", || visibility::build(medium, &p, &dirs, sphere.center, sphere.radius, window, s.opacity, progress)).ok_or(Error::Cancelled)?;
+                let input = VisibilityInput { medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window, opacity: s.opacity };
+                let links = timings.time("network visibility", || backend.visibility(&input, progress))?;
                 let phase = directions::phase_matrix(&dirs, medium.g, self.normalise_phase);
                 Kept { medium: key, particles: p, dirs, links, phase, window, first: Vec::new(), radiance: Vec::new() }
             }

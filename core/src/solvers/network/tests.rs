@@ -162,8 +162,16 @@ fn network_unnormalised_rows_lose_energy() {
 /// M 7 (a gap rule of 2 optical depths per link) and the cubes to x1.17 at M 11. Averaging
 /// the direct light over each particle's ball (13 density-weighted points instead of the
 /// centre; tried, not kept) moved the cloud only from x0.368 to x0.358 and raised the
-/// white-furnace cloud from 1.05 to 1.12: the sunlit skin was not the cause. Not a ratchet
-/// until the column bias is fixed.
+/// white-furnace cloud from 1.05 to 1.12: the sunlit skin was not the cause. Links across
+/// columns (tried, issue 18's fourth step, not kept): each particle linked to the nearest
+/// particle upstream within the cone of solid angle 4 pi / D around the direction (brute
+/// force, order by depth, so every deep particle has a neighbour), opacity from the boundary
+/// depths' difference, the full segment's marched depth, or that per metre times the depth
+/// gap: x0.328 / x0.334 / x0.334 (image 0.72); a cone of a quarter of that solid angle x0.44,
+/// four times it x0.31. So a particle without an upstream neighbour is not the cause either:
+/// short links (a near neighbour, small opacity) carry light no further into the cloud than
+/// the columns' boundary links; only long chains along one line (small M, or a narrow cone)
+/// brighten it, with the column bias above. Not a ratchet until the column bias is fixed.
 #[test]
 #[ignore]
 fn network_cloud_vs_fixture() {

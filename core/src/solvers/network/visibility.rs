@@ -18,6 +18,36 @@ use crate::solvers::Progress;
 /// No upstream particle: the column starts at the medium's boundary.
 pub const NONE: u32 = u32::MAX;
 
+/// Most ray-march steps to the medium's boundary, and along a gap between two particles
+/// (`Opacity::Segment`). A GPU backend marches with the same steps.
+pub const BOUNDARY_STEPS: u32 = 512;
+pub const SEGMENT_STEPS: u32 = 256;
+
+/// The shortest ray-march step: half the smallest voxel side.
+pub fn march_step(medium: &Medium) -> f32 {
+    medium.voxel_size_world().min_element() * 0.5
+}
+
+/// The sort key of particle `index` at `x` for direction `w` (basis `u`, `v`) in an `m` x `m`
+/// window over the sphere (`centre`, `radius`): its pixel (u fastest), its depth x . w as a
+/// u32 that orders like `f32::total_cmp`, and its index. Lists are these keys in ascending
+/// order (ties in pixel and depth broken by index, so the order is deterministic).
+pub fn sort_key(x: Vec3, index: u32, (u, v, w): (Vec3, Vec3, Vec3), centre: Vec3, radius: f32, m: u32) -> (u64, u32, u32) {
+    let r = x - centre;
+    let cell = |a: f32| (((a + radius) / (2.0 * radius) * m as f32).floor() as i64).clamp(0, m as i64 - 1) as u64;
+    (cell(r.dot(u)) + m as u64 * cell(r.dot(v)), total_order_bits(x.dot(w)), index)
+}
+
+/// f32 bits as a u32 whose unsigned order is `f32::total_cmp`'s.
+pub fn total_order_bits(a: f32) -> u32 {
+    let b = a.to_bits();
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
+}
+
 /// One direction's lists.
 pub struct DirectionLinks {
     /// Particles by pixel, then by depth along the direction (upstream first): a sweep in this
@@ -46,25 +76,20 @@ pub fn window_side(requested: u32, directions: u32, radius: f32, mean_sigma_t: f
 /// cancels (a direction is a few ms, the whole build seconds at 8192 x 1024).
 #[allow(clippy::too_many_arguments)]
 pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius: f32, m: u32, opacity: Opacity, progress: &dyn Progress) -> Option<Vec<DirectionLinks>> {
-    let step = medium.voxel_size_world().min_element() * 0.5;
+    let step = march_step(medium);
     dirs.par_iter()
         .map(|&w| {
             if progress.cancelled() {
                 return None;
             }
             let (u, v) = orthonormal_basis(w);
-            let pixel = |x: Vec3| {
-                let r = x - centre;
-                let cell = |a: f32| (((a + radius) / (2.0 * radius) * m as f32).floor() as i64).clamp(0, m as i64 - 1) as u64;
-                cell(r.dot(u)) + m as u64 * cell(r.dot(v))
-            };
-            let mut keyed: Vec<(u64, f32, u32)> = p.position.iter().enumerate().map(|(i, &x)| (pixel(x), x.dot(w), i as u32)).collect();
-            // Ties broken by index: the order is deterministic.
-            keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+            let mut keyed: Vec<(u64, u32, u32)> = p.position.iter().enumerate().map(|(i, &x)| sort_key(x, i as u32, (u, v, w), centre, radius, m)).collect();
+            // Keys are unique (the index): any sort gives the same order.
+            keyed.sort_unstable();
             let n = p.len();
             let mut up = vec![NONE; n];
             let mut alpha = vec![Vec3::ZERO; n];
-            let boundary = |x: Vec3| optical_depth(medium, x, -w, f32::INFINITY, step, 512);
+            let boundary = |x: Vec3| optical_depth(medium, x, -w, f32::INFINITY, step, BOUNDARY_STEPS);
             let mut to_boundary = vec![Vec3::ZERO; n];
             if opacity == Opacity::Boundary {
                 for (i, t) in to_boundary.iter_mut().enumerate() {
@@ -90,7 +115,7 @@ pub fn build(medium: &Medium, p: &Particles, dirs: &[Vec3], centre: Vec3, radius
                                 let gap = x - p.position[a];
                                 let len = gap.length();
                                 if len > 0.0 {
-                                    optical_depth(medium, p.position[a], gap / len, len, step, 256) * (gap.dot(w).max(0.0) / len)
+                                    optical_depth(medium, p.position[a], gap / len, len, step, SEGMENT_STEPS) * (gap.dot(w).max(0.0) / len)
                                 } else {
                                     Vec3::ZERO
                                 }

@@ -1,0 +1,109 @@
+use glam::Vec3;
+
+use super::*;
+use crate::network::iterate::tests::{cube_g07, plume_point_light};
+use crate::network::sort::SortParams;
+use crate::network::splat::tests::Cancelled;
+use crate::test_support::{gpu_or_skip, naga_struct_size};
+use volscatter_core::solvers::network::particles;
+use volscatter_core::solvers::network::visibility::{self, window_side};
+use volscatter_core::solvers::NoProgress;
+use volscatter_core::translate::sampling::BoundingSphere;
+use volscatter_core::Scene;
+
+#[test]
+fn network_visibility_wgsl_validates_and_layouts_match() {
+    for wgsl in [KEYS_WGSL, LINKS_WGSL] {
+        assert_eq!(naga_struct_size(wgsl, "Params") as usize, size_of::<VisibilityParams>());
+    }
+    assert_eq!(naga_struct_size(sort::WGSL, "Params") as usize, size_of::<SortParams>());
+}
+
+/// `d` directions on a golden-angle spiral (the solver's Fibonacci lattice is private to core;
+/// any directions serve).
+pub(crate) fn spiral(d: usize) -> Vec<Vec3> {
+    (0..d)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / d as f32;
+            let phi = 2.399_963 * i as f32;
+            let r = (1.0 - z * z).sqrt();
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+/// The GPU visibility network against core's `visibility::build`, on the fixture cube (g 0.7,
+/// a sun) and on the plume lit by a point light, with both opacity modes, at the solver's
+/// window (the paper's bound) and at a finer one, with N not a power of two (the sort's
+/// padding), in one chunk of directions and in several. The lists (order and upstream neighbours) must be identical: the keys are the
+/// CPU's bit for bit. The opacities come from the same march (same steps, same order of
+/// summation); they differ by the GPU's exp and density lookup rounding (measured on lavapipe:
+/// 1.8e-7 in every case, 3 ulp of an opacity near 1). Bound 1e-6 absolute on 1 - exp(-tau):
+/// room for a driver that fuses the march's multiply-adds (a few ulp more per step).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
+fn gpu_network_visibility_matches_cpu() {
+    let ctx = gpu_or_skip();
+    let scenes: [(&str, Scene); 2] = [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())];
+    // With the axis-aligned ones: +-z is where `orthonormal_basis` switches branch.
+    let dirs: Vec<Vec3> = spiral(29).into_iter().chain([Vec3::Z, -Vec3::Z, Vec3::X]).collect();
+    for (name, sc) in scenes {
+        let p = particles::sample(&sc.medium, 1000, 3);
+        let sphere = BoundingSphere::of(&sc.medium);
+        let paper = window_side(0, 64, sphere.radius, p.mean_sigma_t, p.len());
+        for (window, opacity) in [(paper, Opacity::Boundary), (paper, Opacity::Segment), (24, Opacity::Boundary)] {
+            let input = VisibilityInput { medium: &sc.medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window, opacity };
+            let cpu = visibility::build(&sc.medium, &p, &dirs, sphere.center, sphere.radius, window, opacity, &NoProgress).unwrap();
+            let gpu = visibility(&ctx, &input, &NoProgress).unwrap();
+            // In chunks of 3 directions (the last one of 2): the same lists.
+            let chunked = visibility_chunked(&ctx, &input, 3 * 1024, &NoProgress).unwrap();
+            assert!(chunked.iter().zip(&gpu).all(|(a, b)| a.order == b.order && a.up == b.up && a.alpha == b.alpha), "{name}: chunks changed the lists");
+            assert_eq!(gpu.len(), cpu.len());
+            let (mut worst, mut linked) = (0.0f32, 0usize);
+            for (d, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+                assert_eq!(g.order, c.order, "{name}, M {window}, {opacity:?}: direction {d}: list order");
+                assert_eq!(g.up, c.up, "{name}, M {window}, {opacity:?}: direction {d}: upstream neighbours");
+                linked += c.up.iter().filter(|&&u| u != visibility::NONE).count();
+                for (a, b) in g.alpha.iter().zip(&c.alpha) {
+                    worst = worst.max((*a - *b).abs().max_element());
+                }
+            }
+            eprintln!("{name}, M {window}, {opacity:?}: {linked} links, largest opacity difference {worst:e}");
+            assert!(linked > dirs.len() * p.len() / 2, "{name}, M {window}: only {linked} links: the test would not see wrong neighbours");
+            assert!(worst <= 1e-6, "{name}, M {window}, {opacity:?}: opacity differs by {worst}");
+            assert!(matches!(visibility(&ctx, &input, &Cancelled), Err(Error::Cancelled)));
+        }
+    }
+}
+
+/// The sort alone on keys with many ties in the first words (the tie-break the lists rely on)
+/// against the host's sort, two lists at once.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
+fn gpu_bitonic_sort_matches_host_sort() {
+    let ctx = gpu_or_skip();
+    let len = 1u32 << 12;
+    let mut keys: Vec<[u32; 4]> = (0..2 * len).map(|i| [(i * 7919) % 13, (i * 104_729) % 5, i, 0]).collect();
+    let buf = ctx.storage_buffer("sort test keys", bytemuck::cast_slice(&keys)).unwrap();
+    sort::sort(&ctx, &buf, len, 2, &NoProgress).unwrap();
+    let back = ctx.read_buffer(&buf, 2 * len as u64 * 16).unwrap();
+    for list in keys.chunks_mut(len as usize) {
+        list.sort_unstable();
+    }
+    assert_eq!(bytemuck::cast_slice::<u8, [u32; 4]>(&back), &keys[..]);
+}
+
+/// A window whose pixels overflow the GPU's 32-bit keys is refused with `Error::Device` (on
+/// which `auto` solves on the CPU), never binned wrongly.
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
+fn gpu_network_visibility_refuses_oversized_windows() {
+    let ctx = gpu_or_skip();
+    let sc = cube_g07();
+    let p = particles::sample(&sc.medium, 64, 1);
+    let sphere = BoundingSphere::of(&sc.medium);
+    let dirs = spiral(4);
+    let input = VisibilityInput { medium: &sc.medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window: 1 << 16, opacity: Opacity::Boundary };
+    let e = visibility(&ctx, &input, &NoProgress).err();
+    assert!(matches!(e, Some(Error::Device(_))), "{e:?}");
+}
