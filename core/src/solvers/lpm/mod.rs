@@ -19,16 +19,19 @@
 //! lights (lights.rs); the phase table normalised (phase_table.rs).
 //!
 //! The sweeps run through a `stream::SweepBackend`: the CPU's here, the GPU's kernels in
-//! volscatter-gpu (its lpm module). Not yet here (issue 19): the VDB read per region and S
-//! written per slice (the per-cell arrays stay in memory, stream.rs).
+//! volscatter-gpu (its lpm module). With `out_of_core` the per-cell arrays live in scratch
+//! files too, read and written a slab at a time (out_of_core.rs): the whole solve is bounded by
+//! `memory_budget`, not only the sweeps.
 
 mod collect;
 pub mod directions;
 pub mod grid;
 pub mod lights;
+pub mod out_of_core;
 pub mod phase_table;
 pub mod propagate;
 pub mod settings;
+pub mod slab_store;
 pub mod stream;
 #[cfg(test)]
 mod tests;
@@ -51,6 +54,8 @@ use phase_table::PhaseTable;
 
 pub struct Lpm {
     settings: LpmSettings,
+    /// Where `out_of_core` puts its scratch files (None: the system temp dir).
+    scratch_dir: Option<std::path::PathBuf>,
 }
 
 /// What a solve did, for tests and benchmarks.
@@ -89,7 +94,13 @@ fn max_abs(v: &[Vec3]) -> f32 {
 impl Lpm {
     pub fn new(settings: LpmSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(Lpm { settings })
+        Ok(Lpm { settings, scratch_dir: None })
+    }
+
+    /// The directory of `out_of_core`'s scratch files (default: `std::env::temp_dir()`).
+    pub fn with_scratch_dir(mut self, dir: impl Into<std::path::PathBuf>) -> Self {
+        self.scratch_dir = Some(dir.into());
+        self
     }
 
     pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
@@ -107,6 +118,11 @@ impl Lpm {
     /// `solve_detailed` with the sweeps (propagate and collect, every order) on `backend`.
     pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
         let s = &self.settings;
+        if s.out_of_core {
+            // The CPU's: the GPU's sweeps keep their arrays on the device.
+            let dir = self.scratch_dir.clone().unwrap_or_else(std::env::temp_dir);
+            return out_of_core::solve(self, scene, progress, ov, &dir);
+        }
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = LpmReport::default();
