@@ -34,6 +34,8 @@ pub mod settings;
 pub mod slab_store;
 pub mod stream;
 #[cfg(test)]
+mod out_of_core_tests;
+#[cfg(test)]
 mod tests;
 
 pub use settings::{FirstOrder, LpmSettings};
