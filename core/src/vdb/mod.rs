@@ -16,7 +16,8 @@
 //! listed with statistics by [`inspect`] but refused as density; bool, mask and point grids
 //! are listed by name and type only.
 //!
-//! Write: float grids, full or half, uncompressed or Zip, file version 224 ([`writer`]).
+//! Write: float grids, full or half, uncompressed or Zip, file version 224 ([`writer`]); a
+//! dense RGB grid also z-planes at a time, for grids too large to hold ([`stream_writer`]).
 //!
 //! Modules: [`header`] (header, metadata, grid descriptors), [`transform`] (maps),
 //! `tree` (5-4-3 topology and buffers), [`values`] (compressed value blocks), [`blosc`]
@@ -26,6 +27,7 @@ pub mod blosc;
 mod bytes;
 pub mod header;
 mod stats;
+pub mod stream_writer;
 pub mod transform;
 mod tree;
 pub mod values;
@@ -46,6 +48,7 @@ use header::{FileHeader, GridDescriptor, MetaMap, MetaValue};
 use transform::GridTransform;
 use values::{Codec, ValueKind};
 
+pub use stream_writer::RgbVdbStream;
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 
 /// An OpenVDB file held in memory with its header and grid descriptors parsed.
