@@ -58,6 +58,9 @@ pub struct Lpm {
     settings: LpmSettings,
     /// Where `out_of_core` puts its scratch files (None: the system temp dir).
     scratch_dir: Option<std::path::PathBuf>,
+    /// Where S also goes as a VDB (`scattering_r/_g/_b`): out of core written plane by plane
+    /// as it is upsampled, in memory written whole.
+    s_vdb: Option<std::path::PathBuf>,
 }
 
 /// What a solve did, for tests and benchmarks.
@@ -96,12 +99,18 @@ fn max_abs(v: &[Vec3]) -> f32 {
 impl Lpm {
     pub fn new(settings: LpmSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(Lpm { settings, scratch_dir: None })
+        Ok(Lpm { settings, scratch_dir: None, s_vdb: None })
     }
 
     /// The directory of `out_of_core`'s scratch files (default: `std::env::temp_dir()`).
     pub fn with_scratch_dir(mut self, dir: impl Into<std::path::PathBuf>) -> Self {
         self.scratch_dir = Some(dir.into());
+        self
+    }
+
+    /// Also write S to the VDB file `path` (see the field).
+    pub fn with_s_vdb(mut self, path: impl Into<std::path::PathBuf>) -> Self {
+        self.s_vdb = Some(path.into());
         self
     }
 
@@ -216,6 +225,9 @@ impl Lpm {
             *a += *b;
         }
         report.j = Some(merged.j);
+        if let Some(path) = &self.s_vdb {
+            crate::vdb::write_rgb_grids(path, "scattering", scattering.dims, &scattering.data, scattering.index_to_world, &Default::default())?;
+        }
         progress.update("lpm upsample", 1.0);
         Ok((SolveOutput::new(scattering, timings), report))
     }

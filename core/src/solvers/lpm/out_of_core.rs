@@ -20,7 +20,8 @@
 //!   four boxes fit `memory_budget`: map x (p (layers + 1) + layers (2m + 2)) RGB values.
 //!   The output (S at `output_resolution`, the compositor's exact single scattering plus the
 //!   upsampled J) is a fixed size, independent of the grid; it is upsampled a window of J's
-//!   planes at a time (pop's `upsample_plane`, the same values as the whole).
+//!   planes at a time (pop's `upsample_plane`, the same values as the whole), and with
+//!   `Lpm::with_s_vdb` each 8 planes go to the VDB as they are done (vdb/stream_writer.rs).
 //! - Not streamed: the medium itself (the scene's sparse density grid and pop's density mip
 //!   stay in memory, as every solver reads them) and what needs random access to the whole
 //!   grid: the exact first order of distant lights (`first_order: exact`) and local lights,
@@ -46,6 +47,7 @@ use crate::solvers::pop::mip::MediumMip;
 use crate::solvers::pop::upsample::{upsample_plane, CoarseWindow};
 use crate::solvers::pop::PopSettings;
 use crate::solvers::{Progress, ScatteringGrid, SolveOutput, Timings};
+use crate::vdb::RgbVdbStream;
 
 const VEC3: u64 = std::mem::size_of::<Vec3>() as u64;
 
@@ -306,9 +308,13 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
         return Ok((SolveOutput::new(single, timings), report));
     }
     let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
-    let mut scattering = timings.time("lpm upsample (out of core)", || upsample_streamed(scene, &mip, &stores, geometry, &pop_like, progress))?;
-    for (a, b) in scattering.data.iter_mut().zip(&single.data) {
-        *a += *b;
+    let mut vdb = match lpm.s_vdb.as_deref() {
+        Some(p) => Some(RgbVdbStream::create(p, "scattering", out_probe.dims, out_probe.index_to_world, &Default::default())?),
+        None => None,
+    };
+    let scattering = timings.time("lpm upsample (out of core)", || upsample_streamed(scene, &mip, &stores, geometry, &pop_like, &single, vdb.as_mut(), progress))?;
+    if let Some(v) = vdb {
+        timings.time("lpm S to VDB", || v.finish())?;
     }
     progress.update("lpm upsample", 1.0);
     Ok((SolveOutput::new(scattering, timings), report))
@@ -319,7 +325,17 @@ const OUTPUT_PLANES: usize = 8;
 
 /// pop's upsampling of J (in `stores.j`) to the output grid, `OUTPUT_PLANES` output planes at a
 /// time, each reading only the coarse planes its points and the filter reach.
-fn upsample_streamed(scene: &Scene, mip: &MediumMip, stores: &Stores, geometry: ([usize; 3], Vec3, f32), settings: &PopSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
+#[allow(clippy::too_many_arguments)]
+fn upsample_streamed(
+    scene: &Scene,
+    mip: &MediumMip,
+    stores: &Stores,
+    geometry: ([usize; 3], Vec3, f32),
+    settings: &PopSettings,
+    single: &ScatteringGrid,
+    mut vdb: Option<&mut RgbVdbStream>,
+    progress: &dyn Progress,
+) -> Result<ScatteringGrid> {
     use rayon::prelude::*;
     let medium = &scene.medium;
     let (dims, lo_world, h) = geometry;
@@ -364,6 +380,13 @@ fn upsample_streamed(scene: &Scene, mip: &MediumMip, stores: &Stores, geometry: 
         let win = CoarseWindow { j: &window_grid, density: &dens, z0, to_coarse, max_density };
         chunk.par_chunks_mut(plane).enumerate().for_each(|(dk, slab)| upsample_plane(medium, mip, &win, settings, (odims, oframe, fp), k0 + dk, slab));
         j = window_grid.data;
+        // S = the upsampled multiple scattering + the exact single scattering, as in memory.
+        for (a, b) in chunk.iter_mut().zip(&single.data[k0 * plane..]) {
+            *a += *b;
+        }
+        if let Some(v) = vdb.as_deref_mut() {
+            v.push_planes(chunk)?;
+        }
     }
     Ok(out)
 }

@@ -64,11 +64,32 @@ fn lpm_out_of_core_equals_in_memory() {
         assert_eq!(files_in(&dir), 0, "scratch files left after a solve");
     }
     let (s_mem, _) = solve(&sc, s, Overrides::default(), None, &NoProgress).unwrap();
-    let (s_ooc, _) = solve(&sc, ooc, Overrides { layers: Some(5), ..Default::default() }, Some(&dir), &NoProgress).unwrap();
+    // S also streamed to a VDB, 8 planes at a time: it reads back as the returned grid.
+    let vdb_dir = scratch("equal-vdb");
+    let vdb = vdb_dir.join("S.vdb");
+    let lpm = Lpm::new(ooc).unwrap().with_scratch_dir(&dir).with_s_vdb(&vdb);
+    let s_ooc = lpm.solve_detailed(&sc, &NoProgress, Overrides { layers: Some(5), ..Default::default() }).unwrap().0.scattering;
     let worst = worst_relative(&s_ooc.data, &s_mem.data);
     eprintln!("out of core S vs in memory: worst relative {worst:e}");
     assert!(worst <= 1e-6, "S: {worst}");
     assert_eq!(files_in(&dir), 0);
+    let file = crate::vdb::VdbFile::open(&vdb, u64::MAX).unwrap();
+    let [nx, ny, nz] = s_ooc.dims.map(|d| d as i32);
+    for (c, ch) in ["r", "g", "b"].iter().enumerate() {
+        let i = file.find_density_grid(Some(&format!("scattering_{ch}"))).unwrap();
+        let (g, xf) = file.load_float_grid(i, Default::default()).unwrap();
+        assert!(xf.abs_diff_eq(s_ooc.index_to_world, 1e-6), "{xf:?}");
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let v = s_ooc.data[(x + nx * (y + ny * z)) as usize][c];
+                    assert_eq!(g.voxel(glam::IVec3::new(x, y, z)), v, "{ch} at {x} {y} {z}");
+                }
+            }
+        }
+    }
+    assert_eq!(files_in(&vdb_dir), 1, "the VDB alone, no scratch left beside it");
+    let _ = std::fs::remove_dir_all(&vdb_dir);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
