@@ -137,13 +137,8 @@ impl Lpm {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = LpmReport::default();
-        let out_probe = super::ScatteringGrid::over_medium(medium, s.output_resolution)?;
-        let single = if ov.j_only {
-            out_probe.clone()
-        } else {
-            timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
-        };
-        if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
+        let (out_probe, single) = output_start(s, scene, progress, ov, &mut timings)?;
+        if !scatters(scene) {
             return Ok((SolveOutput::new(single, timings), report));
         }
         // The mip serves both the cells' mean density and the upsampling.
@@ -231,6 +226,23 @@ impl Lpm {
         progress.update("lpm upsample", 1.0);
         Ok((SolveOutput::new(scattering, timings), report))
     }
+}
+
+/// The output grid (its frame) and S's exact single scattering on it (the empty grid when
+/// only J is asked for).
+fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Overrides, timings: &mut Timings) -> Result<(super::ScatteringGrid, super::ScatteringGrid)> {
+    let out_probe = super::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
+    let single = if ov.j_only {
+        out_probe.clone()
+    } else {
+        timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
+    };
+    Ok((out_probe, single))
+}
+
+/// Whether anything scatters more than once (else S is the single scattering alone).
+fn scatters(scene: &Scene) -> bool {
+    !scene.medium.grid.is_empty() && scene.medium.albedo.max_element() > 0.0
 }
 
 impl Solver for Lpm {

@@ -39,7 +39,6 @@ use super::propagate::FaceFrame;
 use super::slab_store::SlabStore;
 use super::stream::{propagate_slab, SweepStats};
 use super::{lights, FirstOrder, Lpm, LpmReport, Overrides};
-use crate::compositor::single_scattering_grid_cancellable;
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
 use crate::solvers::pop::merge::footprint;
@@ -244,13 +243,8 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
     let mut timings = Timings::default();
     let mut report = LpmReport::default();
     refuse_unstreamed_lights(scene, s.first_order)?;
-    let out_probe = ScatteringGrid::over_medium(medium, s.output_resolution)?;
-    let single = if ov.j_only {
-        out_probe.clone()
-    } else {
-        timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
-    };
-    if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
+    let (out_probe, single) = super::output_start(s, scene, progress, ov, &mut timings)?;
+    if !super::scatters(scene) {
         return Ok((SolveOutput::new(single, timings), report));
     }
     let geometry = LpmGrid::geometry(medium, s.grid_resolution);
