@@ -38,7 +38,8 @@ pub struct LpmSettings {
     /// Bytes the propagation's working buffers (the maps carried between slices and the
     /// slice's per-direction ray buffer) may use; the slice thickness is picked from it
     /// (Sec. 4.2). 0: one slice spanning the whole volume. Refused with the size needed when a
-    /// one-layer slice does not fit.
+    /// one-layer slice does not fit. With `out_of_core` it bounds everything a slice holds,
+    /// the slice's boxes of the per-cell arrays included (out_of_core.rs `slab_bytes`).
     pub memory_budget: u64,
     /// Keep the per-cell arrays (sigma_t, density, U of two orders, J) in scratch files in the
     /// system temp dir (`TMPDIR`), read and written a slab at a time, and bound the whole
