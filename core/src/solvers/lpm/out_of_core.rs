@@ -26,6 +26,9 @@
 //!   stay in memory, as every solver reads them) and what needs random access to the whole
 //!   grid: the exact first order of distant lights (`first_order: exact`) and local lights,
 //!   refused with a message (`boundary` streams: the sun enters as boundary radiance).
+//!   The VDB reader can read a slab's leaves alone (`VdbFile::load_float_grid_region`), but
+//!   the scene loads its medium whole and the cells are sampled from it; reading the medium
+//!   per slab here (with a per-slab mip) is the step left.
 
 use std::path::Path;
 
