@@ -460,7 +460,8 @@ const LPM: SolverEntry = SolverEntry {
             choices: &["exact", "boundary"],
             ..SettingSpec::new("first_order", SettingType::Choice, "first scattering of distant lights: exact transmittance to every cell, or the paper's boundary radiance in one bin")
         },
-        SettingSpec::int("memory_budget", "bytes for the propagation's slice buffers; the slice thickness is picked from it (0: one slice, the whole volume)"),
+        SettingSpec::int("memory_budget", "bytes for the propagation's slice buffers (with out_of_core: for everything a slice holds, the per-cell arrays included); the slice thickness is picked from it (0: one slice, the whole volume)"),
+        SettingSpec::bool("out_of_core", "keep the per-cell arrays in scratch files (TMPDIR) a slab at a time, so that memory_budget bounds the whole solve: grids larger than memory; CPU, first_order boundary, no local lights"),
         SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
         SettingSpec::bool("upsample", "joint bilateral upsampling guided by the density (off: trilinear)"),
         SettingSpec::float("range_sigma", "range sigma of the bilateral filter, a fraction of the largest density")

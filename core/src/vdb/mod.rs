@@ -16,7 +16,8 @@
 //! listed with statistics by [`inspect`] but refused as density; bool, mask and point grids
 //! are listed by name and type only.
 //!
-//! Write: float grids, full or half, uncompressed or Zip, file version 224 ([`writer`]).
+//! Write: float grids, full or half, uncompressed or Zip, file version 224 ([`writer`]); a
+//! dense RGB grid also z-planes at a time, for grids too large to hold ([`stream_writer`]).
 //!
 //! Modules: [`header`] (header, metadata, grid descriptors), [`transform`] (maps),
 //! `tree` (5-4-3 topology and buffers), [`values`] (compressed value blocks), [`blosc`]
@@ -26,11 +27,14 @@ pub mod blosc;
 mod bytes;
 pub mod header;
 mod stats;
+pub mod stream_writer;
 pub mod transform;
 mod tree;
 pub mod values;
 pub mod writer;
 
+#[cfg(test)]
+mod region_tests;
 #[cfg(test)]
 mod tests;
 
@@ -46,6 +50,7 @@ use header::{FileHeader, GridDescriptor, MetaMap, MetaValue};
 use transform::GridTransform;
 use values::{Codec, ValueKind};
 
+pub use stream_writer::RgbVdbStream;
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 
 /// An OpenVDB file held in memory with its header and grid descriptors parsed.
@@ -156,6 +161,12 @@ impl VdbFile {
 
     /// Reads grid `i`'s tree into a visitor.
     fn visit_tree(&self, i: usize, kind: ValueKind, visitor: &mut dyn tree::Visitor) -> Result<()> {
+        self.visit_tree_region(i, kind, visitor, None).map(|_| ())
+    }
+
+    /// `visit_tree` passing on only what meets `region` (see `tree::read_tree_region`);
+    /// returns the leaves skipped.
+    fn visit_tree_region(&self, i: usize, kind: ValueKind, visitor: &mut dyn tree::Visitor, region: Option<(IVec3, IVec3)>) -> Result<usize> {
         let owner = self.tree_owner(i)?;
         let head = self.grid_head(owner)?;
         let gd = &self.grids[owner];
@@ -165,7 +176,7 @@ impl VdbFile {
         let mut r = self.grid_reader(owner)?;
         r.seek(head.tree_pos as i64, "tree")?;
         let mut codec = Codec { kind, half: gd.half, compression: head.compression, background: vec![0.0; kind.comps] };
-        tree::read_tree(&mut r, &mut codec, visitor)
+        tree::read_tree_region(&mut r, &mut codec, visitor, region)
     }
 
     /// Index of the grid `name` (its name without uniqueness suffix, or its unique name), or
@@ -209,15 +220,22 @@ impl VdbFile {
 
     /// Loads float grid `i` into a sparse density grid, with its index-to-world map.
     pub fn load_float_grid(&self, i: usize, limits: GridLimits) -> Result<(DensityGrid, Affine3A)> {
+        self.load_float_grid_region(i, limits, None).map(|(g, xf, _)| (g, xf))
+    }
+
+    /// `load_float_grid` of only the leaves and tiles that meet the index box `region`
+    /// (`lo..hi`, e.g. a slab of z): the other leaves are stepped over without decoding
+    /// (compressed ones by their size prefix). Also returns how many leaves were skipped.
+    pub fn load_float_grid_region(&self, i: usize, limits: GridLimits, region: Option<(IVec3, IVec3)>) -> Result<(DensityGrid, Affine3A, usize)> {
         let head = self.grid_head(i)?;
         let mut v = DensityVisitor { builder: DensityGridBuilder::new(limits), path: self.path.clone() };
         let name = self.grids[i].name.clone();
-        let res = self.visit_tree(i, ValueKind::FLOAT, &mut v);
-        match res {
-            Ok(()) => {}
+        let res = self.visit_tree_region(i, ValueKind::FLOAT, &mut v, region);
+        let skipped = match res {
+            Ok(n) => n,
             Err(Error::InvalidArgument(m)) => return Err(Error::format(&self.path, format!("grid `{}`: {m}", excerpt(&name)))),
             Err(e) => return Err(e),
-        }
+        };
         let xf = head.transform.to_affine3a();
         let det = glam::Mat3::from(xf.matrix3).determinant();
         if !xf.is_finite() || !det.is_finite() || det == 0.0 {
@@ -227,7 +245,7 @@ impl VdbFile {
             ));
         }
         let grid = v.builder.build()?;
-        Ok((grid, xf))
+        Ok((grid, xf, skipped))
     }
 
     /// Everything `vdb-info` prints about grid `i`.

@@ -36,8 +36,41 @@ struct LeafTopo {
     mask: [u64; 8],
 }
 
-/// Reads topology and buffers of one tree at the reader's position.
-pub(crate) fn read_tree(r: &mut Reader, codec: &mut Codec, visitor: &mut dyn Visitor) -> Result<()> {
+/// Whether the box of `(1 << log2)^3` voxels at `origin` meets the index box `lo..hi`.
+fn meets(origin: IVec3, log2: u32, (lo, hi): (IVec3, IVec3)) -> bool {
+    (origin + IVec3::splat(1 << log2)).cmpgt(lo).all() && origin.cmplt(hi).all()
+}
+
+/// Passes on only the tiles that meet the region.
+struct InRegion<'a> {
+    inner: &'a mut dyn Visitor,
+    region: (IVec3, IVec3),
+}
+
+impl Visitor for InRegion<'_> {
+    fn background(&mut self, value: &[f64]) -> Result<()> {
+        self.inner.background(value)
+    }
+    fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], active: bool) -> Result<()> {
+        if meets(origin, log2, self.region) { self.inner.tile(origin, log2, value, active) } else { Ok(()) }
+    }
+    fn leaf(&mut self, origin: IVec3, mask: &[u64; 8], values: &[f64]) -> Result<()> {
+        self.inner.leaf(origin, mask, values)
+    }
+}
+
+/// Reads topology and buffers of one tree at the reader's position, passing on (with
+/// `region`) only the tiles and leaves that meet the index box `lo..hi`: the other leaves'
+/// buffers are stepped over without decoding. Returns how many leaves were skipped.
+pub(crate) fn read_tree_region(r: &mut Reader, codec: &mut Codec, visitor: &mut dyn Visitor, region: Option<(IVec3, IVec3)>) -> Result<usize> {
+    let mut filtered;
+    let visitor: &mut dyn Visitor = match region {
+        Some(region) => {
+            filtered = InRegion { inner: visitor, region };
+            &mut filtered
+        }
+        None => visitor,
+    };
     let buffers = r.i32("buffer count")?;
     if buffers != 1 {
         return Err(r.err(format!("tree has {buffers} buffers; only 1 is supported")));
@@ -91,12 +124,18 @@ pub(crate) fn read_tree(r: &mut Reader, codec: &mut Codec, visitor: &mut dyn Vis
     }
     // Leaf buffers, in topology order. The value mask is stored again; OpenVDB skips it when
     // reading from a file and keeps the topology's, and so does this reader.
+    let mut skipped = 0;
     for leaf in &leaves {
         r.skip(64, "leaf value mask")?;
+        if region.is_some_and(|b| !meets(leaf.origin, INTERNAL4_TILE_LOG2, b)) {
+            codec.skip_block(r, 512, &leaf.mask)?;
+            skipped += 1;
+            continue;
+        }
         codec.read_block(r, 512, &leaf.mask, &mut scratch)?;
         visitor.leaf(leaf.origin, &leaf.mask, &scratch)?;
     }
-    Ok(())
+    Ok(skipped)
 }
 
 /// An internal node of `1 << (3 * log2)` slots (log2 = 5 or 4) at `origin`.

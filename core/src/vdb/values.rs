@@ -108,6 +108,16 @@ impl Codec {
     /// Reads one compressed values block of `count` values into `out`
     /// (`count * comps` entries), restoring the inactive values left out by mask compression.
     pub fn read_block(&self, r: &mut Reader, count: usize, mask: &[u64], out: &mut Vec<f64>) -> Result<()> {
+        self.read_or_skip(r, count, mask, Some(out))
+    }
+
+    /// Moves the reader over one values block without decoding it (its sizes are checked as
+    /// `read_block` checks them; a compressed chunk is stepped over by its size prefix).
+    pub fn skip_block(&self, r: &mut Reader, count: usize, mask: &[u64]) -> Result<()> {
+        self.read_or_skip(r, count, mask, None)
+    }
+
+    fn read_or_skip(&self, r: &mut Reader, count: usize, mask: &[u64], out: Option<&mut Vec<f64>>) -> Result<()> {
         let comps = self.kind.comps;
         let start = r.pos();
         let metadata = r.i8("node metadata")?;
@@ -138,6 +148,8 @@ impl Codec {
                     return Err(to_error(r.path(), at, format!("uncompressed chunk of {m} bytes where the node needs {nbytes}")));
                 }
                 r.bytes(nbytes, "uncompressed values")?
+            } else if out.is_none() {
+                r.bytes(n as usize, "compressed values")?
             } else {
                 if n as u64 > r.remaining() as u64 {
                     return Err(to_error(
@@ -159,6 +171,7 @@ impl Codec {
         } else {
             r.bytes(nbytes, "values")?
         };
+        let Some(out) = out else { return Ok(()) };
         // Decode the stored values straight into `out` when nothing was left out, else into
         // a temporary that the mask then spreads.
         let decode = |dst: &mut Vec<f64>| {

@@ -57,7 +57,7 @@ fn key(v: IVec3) -> Key {
 /// A float tree being assembled: leaves (VDB order, z fastest) and active 8^3 tiles,
 /// grouped as the file wants them: Internal5 origin -> Internal4 slot -> leaf/tile slot.
 #[derive(Default)]
-struct FloatTree {
+pub(super) struct FloatTree {
     nodes: BTreeMap<Key, BTreeMap<usize, BTreeMap<usize, Slot>>>,
     voxels: u64,
     bbox_min: IVec3,
@@ -67,6 +67,9 @@ struct FloatTree {
 enum Slot {
     Leaf(Box<[f32; 512]>, [u64; 8]),
     Tile(f32),
+    /// A leaf already encoded (its mask and value block, as the buffers section holds it) in
+    /// a streaming writer's scratch file at `at`, `len` bytes (stream_writer.rs).
+    Stored { mask: [u64; 8], at: u64, len: u64 },
 }
 
 fn i4_offset(o: IVec3) -> usize {
@@ -79,7 +82,7 @@ fn i3_offset(o: IVec3) -> usize {
 }
 
 impl FloatTree {
-    fn new() -> Self {
+    pub(super) fn new() -> Self {
         FloatTree { bbox_min: IVec3::MAX, bbox_max: IVec3::MIN, ..Default::default() }
     }
 
@@ -89,6 +92,19 @@ impl FloatTree {
 
     /// A leaf at `origin` (multiple of 8), values z fastest. Non-zero voxels are active.
     fn add_leaf(&mut self, origin: IVec3, values: Box<[f32; 512]>) {
+        if let Some(mask) = self.leaf_mask(origin, &values) {
+            self.slot(origin).insert(i3_offset(origin), Slot::Leaf(values, mask));
+        }
+    }
+
+    /// A leaf already encoded elsewhere (see `Slot::Stored`).
+    pub(super) fn add_stored(&mut self, origin: IVec3, mask: [u64; 8], at: u64, len: u64) {
+        self.slot(origin).insert(i3_offset(origin), Slot::Stored { mask, at, len });
+    }
+
+    /// The active mask of a leaf's values (non-zero voxels), counted into the voxel count and
+    /// bounding box; None when none is active (the leaf is left out).
+    pub(super) fn leaf_mask(&mut self, origin: IVec3, values: &[f32; 512]) -> Option<[u64; 8]> {
         let mut mask = [0u64; 8];
         for (i, v) in values.iter().enumerate() {
             if *v != 0.0 {
@@ -99,10 +115,15 @@ impl FloatTree {
                 self.voxels += 1;
             }
         }
-        if mask.iter().all(|w| *w == 0) {
-            return;
-        }
-        self.slot(origin).insert(i3_offset(origin), Slot::Leaf(values, mask));
+        mask.iter().any(|w| *w != 0).then_some(mask)
+    }
+
+    /// The encoded leaves (`Slot::Stored`) in the order of the buffers section.
+    pub(super) fn stored(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
+        self.nodes.values().flat_map(|i4s| i4s.values()).flat_map(|slots| slots.values()).filter_map(|s| match s {
+            Slot::Stored { at, len, .. } => Some((*at, *len)),
+            _ => None,
+        })
     }
 
     fn add_tile8(&mut self, origin: IVec3, v: f32) {
@@ -156,12 +177,36 @@ impl FloatTree {
     }
 }
 
-fn compression_flags(o: &WriteOptions) -> u32 {
+pub(super) fn compression_flags(o: &WriteOptions) -> u32 {
     COMPRESS_ACTIVE_MASK | if o.compression == VdbCompression::Zip { COMPRESS_ZIP } else { 0 }
 }
 
 /// Writes one grid (descriptor and body) and patches its offsets.
 fn write_grid(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, xf: Affine3A, o: &WriteOptions) {
+    let comp = compression_flags(o);
+    let (offsets_at, grid_pos) = write_grid_head(w, unique_name, name, tree, xf, o);
+    // Buffers, same order.
+    let block_pos = w.pos();
+    for i4s in tree.nodes.values() {
+        for slots in i4s.values() {
+            for s in slots.values() {
+                if let Slot::Leaf(vals, mask) = s {
+                    w.mask(mask);
+                    write_float_block(w, &vals[..], mask, o.half, comp);
+                }
+            }
+        }
+    }
+    let end_pos = w.pos();
+    w.patch_i64(offsets_at, grid_pos as i64);
+    w.patch_i64(offsets_at + 8, block_pos as i64);
+    w.patch_i64(offsets_at + 16, end_pos as i64);
+}
+
+/// A grid's descriptor (offsets left 0), metadata, transform and topology: everything before
+/// its buffers. Returns where the three offsets are and where the grid starts (both
+/// positions in `w`).
+pub(super) fn write_grid_head(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, xf: Affine3A, o: &WriteOptions) -> (usize, usize) {
     let comp = compression_flags(o);
     w.string(unique_name);
     w.string(if o.half { "Tree_float_5_4_3_HalfFloat" } else { "Tree_float_5_4_3" });
@@ -209,7 +254,7 @@ fn write_grid(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, x
             let mut vals = zeros4096.clone();
             for (&n, s) in slots {
                 match s {
-                    Slot::Leaf(..) => child[n >> 6] |= 1 << (n & 63),
+                    Slot::Leaf(..) | Slot::Stored { .. } => child[n >> 6] |= 1 << (n & 63),
                     Slot::Tile(v) => {
                         active[n >> 6] |= 1 << (n & 63);
                         vals[n] = *v;
@@ -220,31 +265,25 @@ fn write_grid(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, x
             w.mask(&active);
             write_float_block(w, &vals, &active, o.half, comp);
             for s in slots.values() {
-                if let Slot::Leaf(_, mask) = s {
+                if let Slot::Leaf(_, mask) | Slot::Stored { mask, .. } = s {
                     w.mask(mask);
                 }
             }
         }
     }
-    // Buffers, same order.
-    let block_pos = w.pos();
-    for i4s in tree.nodes.values() {
-        for slots in i4s.values() {
-            for s in slots.values() {
-                if let Slot::Leaf(vals, mask) = s {
-                    w.mask(mask);
-                    write_float_block(w, &vals[..], mask, o.half, comp);
-                }
-            }
-        }
-    }
-    let end_pos = w.pos();
-    w.patch_i64(offsets_at, grid_pos as i64);
-    w.patch_i64(offsets_at + 8, block_pos as i64);
-    w.patch_i64(offsets_at + 16, end_pos as i64);
+    (offsets_at, grid_pos)
 }
 
 fn write_file(path: &Path, grids: &[(&str, FloatTree)], xf: Affine3A, o: &WriteOptions) -> Result<()> {
+    let mut w = file_head(path, grids.len(), xf, o)?;
+    for ((_, tree), (unique, name)) in grids.iter().zip(unique_names(grids.iter().map(|g| g.0))?) {
+        write_grid(&mut w, &unique, name, tree, xf, o);
+    }
+    crate::io::files::write_file(path, &w.buf)
+}
+
+/// Checks the map and options, and writes the file header up to the grid count.
+pub(super) fn file_head(path: &Path, grids: usize, xf: Affine3A, o: &WriteOptions) -> Result<Writer> {
     if !xf.is_finite() || glam::Mat3::from(xf.matrix3).determinant() == 0.0 {
         return Err(Error::InvalidArgument(format!("index-to-world map {xf:?} is not invertible")));
     }
@@ -259,18 +298,24 @@ fn write_file(path: &Path, grids: &[(&str, FloatTree)], xf: Affine3A, o: &WriteO
     w.u8(1); // grid offsets present
     w.bytes(uuid_text(path).as_bytes());
     header::write_meta_map(&mut w, &vec![("creator".into(), MetaValue::String(format!("volscatter {}", crate::VERSION)))]);
-    w.i32(grids.len() as i32);
+    w.i32(grids as i32);
+    Ok(w)
+}
+
+/// Each grid's unique name (the name, with a suffix from its second use on) and name; an
+/// empty name or one with the separator is refused.
+pub(super) fn unique_names<'a>(names: impl Iterator<Item = &'a str>) -> Result<Vec<(String, &'a str)>> {
     let mut used: Vec<&str> = Vec::new();
-    for (name, tree) in grids {
+    let mut out = Vec::new();
+    for name in names {
         if name.is_empty() || name.contains(header::NAME_SEP) {
             return Err(Error::InvalidArgument(format!("grid name `{name:?}` is empty or has a \\x1e")));
         }
-        let n = used.iter().filter(|u| *u == name).count();
-        let unique = if n == 0 { name.to_string() } else { format!("{name}{}{n}", header::NAME_SEP) };
+        let n = used.iter().filter(|u| **u == name).count();
+        out.push((if n == 0 { name.to_string() } else { format!("{name}{}{n}", header::NAME_SEP) }, name));
         used.push(name);
-        write_grid(&mut w, &unique, name, tree, xf, o);
     }
-    crate::io::files::write_file(path, &w.buf)
+    Ok(out)
 }
 
 /// 36 characters in UUID form; unique enough to tell files apart.

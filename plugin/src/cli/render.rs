@@ -22,6 +22,11 @@ pub struct RenderArgs {
     pub out: PathBuf,
     #[arg(long)]
     pub png: Option<PathBuf>,
+    /// Also write the solver's scattering grid S as OpenVDB (float grids `scattering_r/_g/_b`
+    /// on the grid the solver returns, `output_resolution`), what a host renders as emission.
+    /// Not with `reference`, which returns an image.
+    #[arg(long = "out-vdb")]
+    pub out_vdb: Option<PathBuf>,
     /// Samples per pixel (reference).
     #[arg(long)]
     pub spp: Option<u32>,
@@ -104,6 +109,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
     let mut solve_device = volscatter_gpu::DeviceUsed::Cpu;
     let mut choice = None;
+    if name == "reference" && args.out_vdb.is_some() {
+        return Err(Error::InvalidArgument("--out-vdb: `reference` renders an image, not a scattering grid; pick a scattering solver".into()));
+    }
     let image = if name == "reference" {
         let r = Reference::from_settings(&settings)?;
         let mut img = r.render_image(&scene, &progress, &mut timings)?;
@@ -121,6 +129,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
         choice = out.choice;
         timings.0.extend(out.timings.0);
+        if let Some(path) = &args.out_vdb {
+            ensure_parent(path)?;
+            let s = &out.scattering;
+            timings.time("write S (VDB)", || volscatter_core::vdb::write_rgb_grids(path, "scattering", s.dims, &s.data, s.index_to_world, &Default::default()))?;
+        }
         let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
         // Timed apart from the march (phase "composite: single-scattering AOV", included in
         // "composite", present only when an AOV needs it): the part an image without those

@@ -45,6 +45,8 @@ pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceF
     // The storage table by incoming direction: m contiguous weights per direction.
     let by_incoming: Vec<f32> = face_dirs.clone().flat_map(|i| (0..m).map(move |d| table.storage[d * n + i])).collect();
     let Targets { u_cur, j, camera, albedo } = targets;
+    // The targets hold the grid's planes from z0 on (a slab's box out of core, grid.rs).
+    let z0 = grid.offset[2];
     let work = |z: usize, u_plane: &mut [Vec3], mut j_plane: Option<&mut [Vec3]>| {
         if progress.cancelled() {
             return;
@@ -70,7 +72,7 @@ pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceF
                     jsum += tv * row[gi];
                 }
             }
-            let local = idx - z * plane;
+            let local = idx - (z - z0) * plane;
             for (d, a) in acc.iter().enumerate() {
                 u_plane[local * m + d] += sigma_s * *a;
             }
@@ -100,8 +102,9 @@ pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceF
             .par_chunks_mut(plane * m)
             .zip(j.par_chunks_mut(plane))
             .enumerate()
+            .map(|(k, x)| (k + z0, x))
             .filter(|(z, _)| zr.contains(z))
             .for_each(|(z, (up, jp))| work(z, up, Some(jp))),
-        None => u_cur.par_chunks_mut(plane * m).enumerate().filter(|(z, _)| zr.contains(z)).for_each(|(z, up)| work(z, up, None)),
+        None => u_cur.par_chunks_mut(plane * m).enumerate().map(|(k, x)| (k + z0, x)).filter(|(z, _)| zr.contains(z)).for_each(|(z, up)| work(z, up, None)),
     }
 }

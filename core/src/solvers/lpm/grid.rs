@@ -15,32 +15,49 @@ pub struct LpmGrid {
     /// World corner of cell (0, 0, 0) (its low face).
     pub lo: Vec3,
     pub h: f32,
+    /// Grid coordinates of this block's first cell: zero for a whole grid; a slab's box in the
+    /// out-of-core solve (out_of_core.rs), whose arrays hold only the box and whose `dims`
+    /// are the box's, while `lo` and `h` stay the whole grid's.
+    pub offset: [usize; 3],
     pub density: Vec<f32>,
     pub sigma_t: Vec<Vec3>,
 }
 
 impl LpmGrid {
     pub fn new(medium: &Medium, resolution: u32, mip: &MediumMip) -> Result<Self> {
+        let (dims, lo, h) = Self::geometry(medium, resolution);
+        let count = crate::budget::checked_product("lpm propagation grid", &dims.map(|d| d as u64))?;
+        // Density and sigma_t (16 bytes a cell) checked together.
+        crate::budget::check_elements::<[f32; 4]>("lpm propagation grid (density, sigma_t)", count)?;
+        Ok(Self::block(medium, mip, (dims, lo, h), [0; 3], dims))
+    }
+
+    /// Dims, world corner and cell side of the grid over `medium` at `resolution` (nothing
+    /// allocated: the out-of-core solve builds it block by block).
+    pub fn geometry(medium: &Medium, resolution: u32) -> ([usize; 3], Vec3, f32) {
         let (lo, hi) = medium.world_bounds();
         let extent = (hi - lo).max(Vec3::splat(1e-6));
         let h = extent.max_element() / resolution.max(1) as f32;
         let d = (extent / h).ceil().max(Vec3::ONE).as_uvec3();
-        let dims = [d.x as usize, d.y as usize, d.z as usize];
-        let count = crate::budget::checked_product("lpm propagation grid", &[d.x as u64, d.y as u64, d.z as u64])?;
-        // Density and sigma_t (16 bytes a cell) checked together.
-        crate::budget::check_elements::<[f32; 4]>("lpm propagation grid (density, sigma_t)", count)?;
+        ([d.x as usize, d.y as usize, d.z as usize], lo, h)
+    }
+
+    /// The cells `offset .. offset + dims` of the grid `geometry`, density and sigma_t sampled
+    /// as a whole grid samples them (the same values, cell for cell).
+    pub fn block(medium: &Medium, mip: &MediumMip, geometry: ([usize; 3], Vec3, f32), offset: [usize; 3], dims: [usize; 3]) -> Self {
+        let (_, lo, h) = geometry;
         let footprint = h / medium.voxel_size_world().max_element();
-        let mut density = Vec::with_capacity(count as usize);
-        for z in 0..dims[2] {
-            for y in 0..dims[1] {
-                for x in 0..dims[0] {
+        let mut density = Vec::with_capacity(dims.iter().product());
+        for z in offset[2]..offset[2] + dims[2] {
+            for y in offset[1]..offset[1] + dims[1] {
+                for x in offset[0]..offset[0] + dims[0] {
                     let c = lo + (Vec3::new(x as f32, y as f32, z as f32) + 0.5) * h;
                     density.push(mip.sample(medium, medium.world_to_index.transform_point3(c), footprint).max(0.0));
                 }
             }
         }
         let sigma_t = density.iter().map(|&r| medium.sigma_t(r)).collect();
-        Ok(LpmGrid { dims, lo, h, density, sigma_t })
+        LpmGrid { dims, lo, h, offset, density, sigma_t }
     }
 
     pub fn len(&self) -> usize {
@@ -53,7 +70,8 @@ impl LpmGrid {
 
     #[inline]
     pub fn index(&self, c: [usize; 3]) -> usize {
-        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+        let o = self.offset;
+        (c[0] - o[0]) + self.dims[0] * ((c[1] - o[1]) + self.dims[1] * (c[2] - o[2]))
     }
 
     #[inline]

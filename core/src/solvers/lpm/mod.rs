@@ -19,17 +19,22 @@
 //! lights (lights.rs); the phase table normalised (phase_table.rs).
 //!
 //! The sweeps run through a `stream::SweepBackend`: the CPU's here, the GPU's kernels in
-//! volscatter-gpu (its lpm module). Not yet here (issue 19): the VDB read per region and S
-//! written per slice (the per-cell arrays stay in memory, stream.rs).
+//! volscatter-gpu (its lpm module). With `out_of_core` the per-cell arrays live in scratch
+//! files too, read and written a slab at a time (out_of_core.rs): the whole solve is bounded by
+//! `memory_budget`, not only the sweeps.
 
 mod collect;
 pub mod directions;
 pub mod grid;
 pub mod lights;
+pub mod out_of_core;
 pub mod phase_table;
 pub mod propagate;
 pub mod settings;
+pub mod slab_store;
 pub mod stream;
+#[cfg(test)]
+mod out_of_core_tests;
 #[cfg(test)]
 mod tests;
 
@@ -51,6 +56,11 @@ use phase_table::PhaseTable;
 
 pub struct Lpm {
     settings: LpmSettings,
+    /// Where `out_of_core` puts its scratch files (None: the system temp dir).
+    scratch_dir: Option<std::path::PathBuf>,
+    /// Where S also goes as a VDB (`scattering_r/_g/_b`): out of core written plane by plane
+    /// as it is upsampled, in memory written whole.
+    s_vdb: Option<std::path::PathBuf>,
 }
 
 /// What a solve did, for tests and benchmarks.
@@ -89,7 +99,19 @@ fn max_abs(v: &[Vec3]) -> f32 {
 impl Lpm {
     pub fn new(settings: LpmSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(Lpm { settings })
+        Ok(Lpm { settings, scratch_dir: None, s_vdb: None })
+    }
+
+    /// The directory of `out_of_core`'s scratch files (default: `std::env::temp_dir()`).
+    pub fn with_scratch_dir(mut self, dir: impl Into<std::path::PathBuf>) -> Self {
+        self.scratch_dir = Some(dir.into());
+        self
+    }
+
+    /// Also write S to the VDB file `path` (see the field).
+    pub fn with_s_vdb(mut self, path: impl Into<std::path::PathBuf>) -> Self {
+        self.s_vdb = Some(path.into());
+        self
     }
 
     pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
@@ -107,16 +129,16 @@ impl Lpm {
     /// `solve_detailed` with the sweeps (propagate and collect, every order) on `backend`.
     pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
         let s = &self.settings;
+        if s.out_of_core {
+            // The CPU's: the GPU's sweeps keep their arrays on the device.
+            let dir = self.scratch_dir.clone().unwrap_or_else(std::env::temp_dir);
+            return out_of_core::solve(self, scene, progress, ov, &dir);
+        }
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = LpmReport::default();
-        let out_probe = super::ScatteringGrid::over_medium(medium, s.output_resolution)?;
-        let single = if ov.j_only {
-            out_probe.clone()
-        } else {
-            timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
-        };
-        if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
+        let (out_probe, single) = output_start(s, scene, progress, ov, &mut timings)?;
+        if !scatters(scene) {
             return Ok((SolveOutput::new(single, timings), report));
         }
         // The mip serves both the cells' mean density and the upsampling.
@@ -198,9 +220,29 @@ impl Lpm {
             *a += *b;
         }
         report.j = Some(merged.j);
+        if let Some(path) = &self.s_vdb {
+            crate::vdb::write_rgb_grids(path, "scattering", scattering.dims, &scattering.data, scattering.index_to_world, &Default::default())?;
+        }
         progress.update("lpm upsample", 1.0);
         Ok((SolveOutput::new(scattering, timings), report))
     }
+}
+
+/// The output grid (its frame) and S's exact single scattering on it (the empty grid when
+/// only J is asked for).
+fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Overrides, timings: &mut Timings) -> Result<(super::ScatteringGrid, super::ScatteringGrid)> {
+    let out_probe = super::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
+    let single = if ov.j_only {
+        out_probe.clone()
+    } else {
+        timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
+    };
+    Ok((out_probe, single))
+}
+
+/// Whether anything scatters more than once (else S is the single scattering alone).
+fn scatters(scene: &Scene) -> bool {
+    !scene.medium.grid.is_empty() && scene.medium.albedo.max_element() > 0.0
 }
 
 impl Solver for Lpm {

@@ -38,8 +38,15 @@ pub struct LpmSettings {
     /// Bytes the propagation's working buffers (the maps carried between slices and the
     /// slice's per-direction ray buffer) may use; the slice thickness is picked from it
     /// (Sec. 4.2). 0: one slice spanning the whole volume. Refused with the size needed when a
-    /// one-layer slice does not fit.
+    /// one-layer slice does not fit. With `out_of_core` it bounds everything a slice holds,
+    /// the slice's boxes of the per-cell arrays included (out_of_core.rs `slab_bytes`).
     pub memory_budget: u64,
+    /// Keep the per-cell arrays (sigma_t, density, U of two orders, J) in scratch files in the
+    /// system temp dir (`TMPDIR`), read and written a slab at a time, and bound the whole
+    /// solve, not only the sweeps, by `memory_budget` (out_of_core.rs): for grids whose arrays
+    /// do not fit in memory. CPU only; distant lights need `first_order: boundary`, local
+    /// lights are refused. Same J as in memory, to the bit.
+    pub out_of_core: bool,
     /// Largest side of the returned scattering grid.
     pub output_resolution: u32,
     /// Joint bilateral upsampling guided by the density (pop's upsample.rs); off: trilinear.
@@ -69,6 +76,7 @@ impl Default for LpmSettings {
             max_orders: 200,
             first_order: FirstOrder::Exact,
             memory_budget: 0,
+            out_of_core: false,
             output_resolution: 64,
             upsample: true,
             range_sigma: 0.25,

@@ -6,8 +6,9 @@
 //! one starts, in the same order as one whole-volume slab, so streamed and in-memory solves
 //! agree to the bit (tests.rs).
 //!
-//! Not streamed here (reported in issue 19): the per-cell arrays (density, sigma_t, U of two
-//! orders, J) stay whole in memory; only the propagation's buffers are bounded.
+//! Here the per-cell arrays (density, sigma_t, U of two orders, J) stay whole in memory and
+//! only the propagation's buffers are bounded; `out_of_core: true` (out_of_core.rs) keeps
+//! them in scratch files too, so that the whole solve is bounded by a slab.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -190,10 +191,7 @@ pub fn sweep(
         while w0 < ff.nw {
             let w1 = (w0 + s).min(ff.nw);
             let slab = (w1 - w0) * ff.map_len();
-            t[..p * slab].par_chunks_mut(slab).zip(maps.par_chunks_mut(ff.map_len())).enumerate().for_each(|(li, (tc, map))| {
-                let dir = &dirs.dirs[first + li];
-                propagate(grid, &ff, dir, m, u_prev, boundary[first + li], map, w0, w1, tc, progress);
-            });
+            propagate_slab(grid, &ff, dirs, m, u_prev, &boundary[first..first + p], maps, &mut t[..p * slab], (w0, w1), progress);
             let targets = Targets { u_cur: &mut *u_cur, j: j.as_deref_mut(), camera, albedo };
             collect(grid, dirs, table, &ff, &t[..p * slab], w0, w1, targets, progress);
             if progress.cancelled() {
@@ -204,4 +202,16 @@ pub fn sweep(
         }
     }
     Ok(())
+}
+
+/// Propagates layers `w0..w1` of face `ff` for each of its directions in parallel: direction
+/// i's map is `maps`' i-th map-sized chunk, its T the i-th slab-sized chunk of `t`, its
+/// boundary radiance `boundary[i]`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn propagate_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, m: usize, u_prev: &[Vec3], boundary: &[Vec3], maps: &mut [Vec3], t: &mut [Vec3], (w0, w1): (usize, usize), progress: &dyn Progress) {
+    let first = ff.face * dirs.per_face();
+    let slab = (w1 - w0) * ff.map_len();
+    t.par_chunks_mut(slab).zip(maps.par_chunks_mut(ff.map_len())).enumerate().for_each(|(li, (tc, map))| {
+        propagate(grid, ff, &dirs.dirs[first + li], m, u_prev, boundary[li], map, w0, w1, tc, progress);
+    });
 }

@@ -20,53 +20,73 @@ use crate::solvers::ScatteringGrid;
 
 pub fn upsample(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution)?;
-    let fp = footprint(medium, &out);
-    let [nx, ny, _] = out.dims;
-    let frame = out.index_to_world;
-    let coarse = &merged.j;
-    let to_coarse = coarse.index_to_world.inverse();
+    let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
+    let window = CoarseWindow { j: &merged.j, density: &merged.density, z0: 0, to_coarse: merged.j.index_to_world.inverse(), max_density };
+    let plane = (out.dims[0] * out.dims[1]) as usize;
+    let (dims, frame, fp) = (out.dims, out.index_to_world, footprint(medium, &out));
+    out.data.par_chunks_mut(plane).enumerate().for_each(|(k, slab)| upsample_plane(medium, mip, &window, settings, (dims, frame, fp), k, slab));
+    Ok(out)
+}
+
+/// The coarse J (and its density guide) that `upsample_plane` reads: the whole merged grid,
+/// or planes `z0..` of it (lpm's out-of-core output, which reads J a slab at a time).
+pub struct CoarseWindow<'a> {
+    /// Planes `z0..z0 + j.dims[2]` of the coarse grid (`j.index_to_world` unused).
+    pub j: &'a ScatteringGrid,
+    pub density: &'a [f32],
+    pub z0: usize,
+    /// World to the whole coarse grid's index space.
+    pub to_coarse: glam::Affine3A,
+    /// Largest density of the whole coarse grid (the range sigma's scale).
+    pub max_density: f32,
+}
+
+/// Output plane `k` of the grid (dims, index-to-world, footprint) into `slab`: the same
+/// values whatever window holds the coarse planes it reads (a shift by the integer z0 is
+/// exact in f32).
+pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, settings: &PopSettings, out: ([u32; 3], glam::Affine3A, f32), k: usize, slab: &mut [Vec3]) {
+    let ([nx, ny, _], frame, fp) = out;
+    let coarse = win.j;
+    let to_coarse = win.to_coarse;
     let cd = IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32);
     let w2i = medium.world_to_index;
-    let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
+    let max_density = win.max_density;
     let inv_range = 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2));
     let inv_spatial = 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma);
     let radius = (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32;
-    out.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
-        for j in 0..ny {
-            for i in 0..nx {
-                let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
-                let rho = mip.sample(medium, w2i.transform_point3(x), fp);
-                if rho <= 0.0 {
-                    continue;
-                }
-                let q = to_coarse.transform_point3(x);
-                let jv = if settings.upsample {
-                    let base = q.floor().as_ivec3();
-                    let mut sum = Vec3::ZERO;
-                    let mut wsum = 0.0f32;
-                    for dz in (1 - radius)..=radius {
-                        for dy in (1 - radius)..=radius {
-                            for dx in (1 - radius)..=radius {
-                                let c = base + IVec3::new(dx, dy, dz);
-                                if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
-                                    continue;
-                                }
-                                let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
-                                let ds = (q - c.as_vec3()).length_squared();
-                                let dr = rho - merged.density[ci];
-                                let w = (-ds * inv_spatial - dr * dr * inv_range).exp();
-                                sum += coarse.data[ci] * w;
-                                wsum += w;
+    for j in 0..ny {
+        for i in 0..nx {
+            let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
+            let rho = mip.sample(medium, w2i.transform_point3(x), fp);
+            if rho <= 0.0 {
+                continue;
+            }
+            let q = to_coarse.transform_point3(x) - Vec3::new(0.0, 0.0, win.z0 as f32);
+            let jv = if settings.upsample {
+                let base = q.floor().as_ivec3();
+                let mut sum = Vec3::ZERO;
+                let mut wsum = 0.0f32;
+                for dz in (1 - radius)..=radius {
+                    for dy in (1 - radius)..=radius {
+                        for dx in (1 - radius)..=radius {
+                            let c = base + IVec3::new(dx, dy, dz);
+                            if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
+                                continue;
                             }
+                            let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
+                            let ds = (q - c.as_vec3()).length_squared();
+                            let dr = rho - win.density[ci];
+                            let w = (-ds * inv_spatial - dr * dr * inv_range).exp();
+                            sum += coarse.data[ci] * w;
+                            wsum += w;
                         }
                     }
-                    if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
-                } else {
-                    coarse.sample_index(q)
-                };
-                slab[(i + nx * j) as usize] = medium.sigma_s(rho) * jv;
-            }
+                }
+                if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
+            } else {
+                coarse.sample_index(q)
+            };
+            slab[(i + nx * j) as usize] = medium.sigma_s(rho) * jv;
         }
-    });
-    Ok(out)
+    }
 }
