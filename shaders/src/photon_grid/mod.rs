@@ -89,11 +89,15 @@ const ORDER_SHIFT: i32 = 8;
 /// The GPU tracer.
 pub struct GpuPhotonBackend<'c> {
     ctx: &'c GpuContext,
+    /// Whether each workgroup pre-sums its photons' deposits in workgroup memory (trace.wgsl):
+    /// on by default; off gives the same sums bit for bit, all atomics in device memory (for
+    /// the test that shows it and for timing the two).
+    pub presum: bool,
 }
 
 impl<'c> GpuPhotonBackend<'c> {
     pub fn new(ctx: &'c GpuContext) -> Self {
-        GpuPhotonBackend { ctx }
+        GpuPhotonBackend { ctx, presum: true }
     }
 }
 
@@ -215,7 +219,7 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
                 if n == 0 {
                     continue;
                 }
-                let params = TraceParams { seeds: [base.seeds[0], base.seeds[1], g as u32, (g >> 32) as u32], first: [first, 0, 0, 0], flags: [base.flags[0], base.flags[1], base.flags[2], n], ..base };
+                let params = TraceParams { seeds: [base.seeds[0], base.seeds[1], g as u32, (g >> 32) as u32], first: [first, (!self.presum) as u32, 0, 0], flags: [base.flags[0], base.flags[1], base.flags[2], n], ..base };
                 first += n;
                 let params = ctx.uniform("photon trace params", bytemuck::bytes_of(&params));
                 let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;

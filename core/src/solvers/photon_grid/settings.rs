@@ -31,6 +31,17 @@ pub enum Similarity {
     Off,
 }
 
+/// How the coarse cache is brought to the output grid (reconstruct.rs, upsample.rs).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Upsampling {
+    /// Each tally trilinear between cell centres, the ratios taken after (mass-weighted).
+    Trilinear,
+    /// The paper's physically based upsampling (Sec. 4.3, upsample.rs): exponential distance
+    /// and linear density weights over 3^3 cells, g' extrapolated by g^delta.
+    Physical,
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct PhotonGridSettings {
@@ -72,6 +83,8 @@ pub struct PhotonGridSettings {
     /// frame, a larger m trades lag for less noise. 1: no ring, every frame of a session is the
     /// one-off solve (the sessions' contract, session.rs).
     pub generations: u32,
+    /// How the cache is upsampled to the output grid (see `Upsampling`). MEASURE
+    pub upsampling: Upsampling,
 }
 
 impl Default for PhotonGridSettings {
@@ -87,6 +100,7 @@ impl Default for PhotonGridSettings {
             similarity: Similarity::Linear,
             similarity_threshold: 0.05,
             generations: 1,
+            upsampling: Upsampling::Trilinear,
         }
     }
 }

@@ -214,3 +214,47 @@ fn dense_cloud_against_reference() {
     let (name, image, grid) = BOUNDS[3];
     check_case(name, image, grid);
 }
+
+/// Where the bias at g 0.9 comes from (issue 17): prints, per fixture (PG_CASE selects; the
+/// shared `fixture_scene`s, plume_point included), image / grid errors and the image mean ratio
+/// of variants that each change one thing: the upsampling (trilinear, the paper's Sec. 4.3),
+/// the lobe model (`oracle`: deposits weighted by the exact phase towards the camera, so only
+/// the spatial binning is left), the cache resolution and the similarity switch. PG_PHOTONS:
+/// photons (default 2^18); PG_VARIANTS: the variants whose name contains one of its
+/// comma-separated words (all when unset).
+#[test]
+#[ignore]
+fn bias_sources() {
+    use crate::solvers::testing::{fixture_scene, selected};
+    let photons = env_u32("PG_PHOTONS", 1 << 18);
+    let only = std::env::var("PG_VARIANTS").unwrap_or_default();
+    let base = PhotonGridSettings { photons, ..Default::default() };
+    let physical = PhotonGridSettings { upsampling: Upsampling::Physical, ..base.clone() };
+    let variants: Vec<(&str, PhotonGridSettings, bool)> = vec![
+        ("trilinear", base.clone(), false),
+        ("physical", physical.clone(), false),
+        ("oracle trilinear", base.clone(), true),
+        ("oracle physical", physical.clone(), true),
+        ("switch-off trilinear", PhotonGridSettings { similarity: Similarity::Off, ..base.clone() }, false),
+        ("switch-sqrt trilinear", PhotonGridSettings { similarity: Similarity::Sqrt, ..base.clone() }, false),
+        ("cache12 trilinear", PhotonGridSettings { cache_resolution: 12, ..base.clone() }, false),
+        ("cache48 trilinear", PhotonGridSettings { cache_resolution: 48, ..base.clone() }, false),
+        ("cache12 physical", PhotonGridSettings { cache_resolution: 12, ..physical.clone() }, false),
+        ("cache48 physical", PhotonGridSettings { cache_resolution: 48, ..physical.clone() }, false),
+        ("cache48 oracle trilinear", PhotonGridSettings { cache_resolution: 48, ..base.clone() }, true),
+    ];
+    for name in selected(&["cube_g0", "cube_g07", "cube_g09", "plume", "plume_point", "cloud"], "PG_CASE") {
+        let sc = fixture_scene(name);
+        for (what, s, oracle) in &variants {
+            if !only.is_empty() && !only.split(',').any(|w| what.contains(w)) {
+                continue;
+            }
+            let mut pg = PhotonGrid::new(s.clone()).unwrap();
+            pg.view_oracle = *oracle;
+            let t = std::time::Instant::now();
+            let (out, rep) = pg.solve_detailed(&sc, &NoProgress).unwrap();
+            let secs = t.elapsed().as_secs_f64();
+            print(name, what, &errors_against_fixture(name, &sc, &out.scattering), &rep, secs);
+        }
+    }
+}
