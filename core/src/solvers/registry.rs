@@ -394,6 +394,14 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
         },
         SettingSpec::float("similarity_threshold", "switch once g^bounces falls below this (the paper's t)")
             .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
+        SettingSpec {
+            name: "upsampling",
+            kind: SettingType::Choice,
+            range: None,
+            zero: None,
+            choices: &["trilinear", "physical"],
+            help: "cache to output grid: mass-weighted trilinear (default: the better image on 5 of 6 fixtures), or the paper's physically based upsampling (exponential/linear weights, g^delta; better grid on the cubes)",
+        },
         SettingSpec::int(
             "generations",
             "temporal ring m: in a session each frame traces photons/m new photons and drops the oldest m-th (1/m the cost, up to m-1 frames of lag); 1: every frame solved afresh",

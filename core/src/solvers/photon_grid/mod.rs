@@ -13,7 +13,9 @@
 //! Tracing goes through a `PhotonBackend` (backend.rs): the CPU's trace.rs, or the GPU's
 //! kernel in volscatter-gpu; the modules it needs (cache, fixed, ring, trace) are public for it.
 //!
-//! Not yet (issue 17): the paper's physically based upsampling.
+//! Upsampling (reconstruct.rs): mass-weighted trilinear by default, the paper's physically
+//! based filter (Sec. 4.3, upsample.rs) by the `upsampling` setting; settings.rs has the
+//! measurements behind the default.
 
 pub mod backend;
 pub mod cache;

@@ -5,13 +5,13 @@
 //! (App. C), so no integral is needed. The isotropic part of the light is inside the lobe:
 //! a shorter mean cosine (cache.rs).
 //!
-//! Upsampling (first landing): each tally is interpolated trilinearly between cell centres
-//! and the ratios are taken after (phi = flux / mass, g' = |moment| / weight): a mass-weighted
-//! interpolation, so empty cells (mass 0) neither darken nor brighten their neighbours, and
-//! sigma_s(rho(x)) restores the density's full resolution where the medium is. The paper's
-//! physically based upsampling (Sec. 4.3: exponential / linear distance weights and the g^delta
-//! weighting of anisotropy by penetration depth) is not here yet; neither is pop's joint
-//! bilateral filter, which is written against pop's merged grid and mip types.
+//! Upsampling (`Upsampling`): by default each tally is interpolated trilinearly between cell
+//! centres and the ratios are taken after (phi = flux / mass, g' = |moment| / weight): a
+//! mass-weighted interpolation, so empty cells (mass 0) neither darken nor brighten their
+//! neighbours, and sigma_s(rho(x)) restores the density's full resolution where the medium
+//! is. The paper's physically based upsampling (Sec. 4.3: exponential / linear distance
+//! weights and the g^delta weighting of anisotropy by penetration depth) is upsample.rs;
+//! settings.rs says why it is not the default.
 
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
