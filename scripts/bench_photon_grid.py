@@ -3,7 +3,7 @@ paper Fig. 12's three (cells, photons) settings on a 48 x 62 x 90 cumulus, and f
 flicker on a moving sun with and without the temporal ring. Writes the "photon-grid" section of
 BENCHMARKS.md.
 
-    python3 scripts/bench_photon_grid.py
+    python3 scripts/bench_photon_grid.py [--json PATH] [--from-json PATH]
     python3 scripts/bench_photon_grid.py --gpu [--quick]
 
 Runs the ignored tests of core/src/solvers/photon_grid/bench.rs (they time, never assert; they
@@ -81,7 +81,14 @@ def main() -> None:
     if "--gpu" in sys.argv[1:]:
         gpu_main("--quick" in sys.argv[1:])
         return
-    b = run_benches("solvers::photon_grid")
+    args = sys.argv[1:]
+    if "--from-json" in args:
+        # Re-render from a saved run (--json PATH of an earlier run), without running.
+        b = json.loads(Path(args[args.index("--from-json") + 1]).read_text())
+    else:
+        b = run_benches("solvers::photon_grid")
+    if "--json" in args:
+        Path(args[args.index("--json") + 1]).write_text(json.dumps(b))
     lines = [
         "## photon-grid (photon beams into HG-lobe caches, paper 04; `scripts/bench_photon_grid.py`)",
         "",
@@ -182,11 +189,19 @@ def aim_lines(aim: dict) -> list[str]:
             lines.append(f"- {method}: 5% reached in {t:.2f} s, {ref_time(0.05) / t:.1f}x below the reference's time.")
         else:
             best = min(mine, key=lambda r: r["image"])
+            fast = max(mine, key=lambda r: ref_time(r["image"]) / r["seconds"])
             lines.append(
                 f"- {method}: 5% **not reached**; best {best['image']:.3f} ({best['photons']} photons, {best['seconds']:.2f} s),"
                 f" where the reference needs {ref_time(best['image']):.1f} s: {ref_time(best['image']) / best['seconds']:.1f}x at"
-                " that error. The error stops falling with photons (a bias, issue 17: the lobe model and the cells,"
-                " core/src/solvers/photon_grid/tests.rs `bias_sources`).")
+                f" that error; the largest speed-up over its rows {ref_time(fast['image']) / fast['seconds']:.1f}x (error"
+                f" {fast['image']:.3f}, {fast['photons']} photons).")
+    lines += [
+        "",
+        "The error stops falling with photons near 0.14-0.15: a bias, not noise. `bias_sources`"
+        " (core/src/solvers/photon_grid/tests.rs) splits it: neither the upsampling, the similarity switch, the cache"
+        " resolution nor the lobe model (photons weighted by the exact phase towards the camera) moves the cloud's image"
+        " floor by more than 0.01, so the 5% aim is not met and no setting here reaches it.",
+    ]
     return lines
 
 

@@ -1,6 +1,7 @@
 //! `photon-grid`'s tracing on the GPU (`trace.wgsl`): a `PhotonBackend` whose generations are
 //! traced one invocation per photon, their deposits summed in 64-bit fixed point by integer
-//! atomics and read back as the CPU's `FixedTallies`, so that the ring (ring.rs) and the
+//! atomics (pre-summed per workgroup in a hash table in workgroup memory, then added to the
+//! cache once per slot: trace.wgsl) and read back as the CPU's `FixedTallies`, so that the ring (ring.rs) and the
 //! cache's reconstruction run unchanged on the CPU; exact single scattering runs the
 //! compositor's GPU kernel.
 //!

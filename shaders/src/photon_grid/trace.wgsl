@@ -120,16 +120,18 @@ fn to_fixed(x: f32) -> vec2<u32> {
     return vec2<u32>(lo, hi);
 }
 
+// What to add to the high word after adding v.x to a low word that held `old`: v.y, plus
+// one where the low word wrapped.
+fn high_part(old: u32, v: vec2<u32>) -> u32 {
+    return v.y + select(0u, 1u, old + v.x < old);
+}
 // Adds the 64-bit integer v = (low, high) to the sum at words i, i + 1 of the cache.
 fn add_pair(i: u32, v: vec2<u32>) {
-    if (v.x == 0u && v.y == 0u) {
-        return;
-    }
-    let old = atomicAdd(&sums[i], v.x);
-    // The low words wrapped: carry one into the high word.
-    let carry = select(0u, 1u, old + v.x < old);
-    if (v.y + carry != 0u) {
-        atomicAdd(&sums[i + 1u], v.y + carry);
+    if (any(v != vec2<u32>(0u))) {
+        let h = high_part(atomicAdd(&sums[i], v.x), v);
+        if (h != 0u) {
+            atomicAdd(&sums[i + 1u], h);
+        }
     }
 }
 // ---- the workgroup's pre-sum (module doc) ----
@@ -140,15 +142,14 @@ const WG_ENERGY_WORDS: u32 = 22u;
 var<workgroup> wg_keys: array<atomic<u32>, WG_SLOTS>;
 // Per slot CELL_WORDS words as the cache's, then the energy sums (as the cache's, from word 0).
 var<workgroup> wg_sums: array<atomic<u32>, 2902>; // WG_SLOTS * CELL_WORDS + WG_ENERGY_WORDS
-// add_pair into workgroup memory.
+// add_pair into workgroup memory (its twin: a WGSL function's atomics live in one address
+// space).
 fn wg_add_pair(i: u32, v: vec2<u32>) {
-    if (v.x == 0u && v.y == 0u) {
-        return;
-    }
-    let old = atomicAdd(&wg_sums[i], v.x);
-    let carry = select(0u, 1u, old + v.x < old);
-    if (v.y + carry != 0u) {
-        atomicAdd(&wg_sums[i + 1u], v.y + carry);
+    if (any(v != vec2<u32>(0u))) {
+        let h = high_part(atomicAdd(&wg_sums[i], v.x), v);
+        if (h != 0u) {
+            atomicAdd(&wg_sums[i + 1u], h);
+        }
     }
 }
 fn presum() -> bool {

@@ -57,7 +57,8 @@ use crate::medium::Medium;
 /// f_exp(d | lambda, r) (Sec. 4.3): the exponential distribution of rate `lambda` truncated to
 /// [0, r], shifted to reach zero at r and renormalised to a unit integral over [0, r].
 pub fn f_exp(d: f32, lambda: f32, r: f32) -> f32 {
-    if !(d < r) || r <= 0.0 {
+    // Also NaN d or r: no weight.
+    if d.is_nan() || d >= r || r.is_nan() || r <= 0.0 {
         return 0.0;
     }
     let (d, lambda, r) = (d.max(0.0) as f64, lambda.max(0.0) as f64, r as f64);
