@@ -280,3 +280,30 @@ fn bias_sources() {
         }
     }
 }
+
+/// Where on the image the error is (PG_CASE, default cloud; PG_PHOTONS, default 2^20): the
+/// pixels split by the fixture's brightness into quarters, each quarter's share of the squared
+/// error and its mean ratio, for the whole image and its multiple-scattering part.
+#[test]
+#[ignore]
+fn error_by_brightness() {
+    use crate::solvers::testing::{fixture_scene, load_fixture, SolverOutput};
+    let name = std::env::var("PG_CASE").unwrap_or_else(|_| "cloud".into());
+    let sc = fixture_scene(&name);
+    let fx = load_fixture(&name);
+    let pg = PhotonGrid::new(PhotonGridSettings { photons: env_u32("PG_PHOTONS", 1 << 20), ..Default::default() }).unwrap();
+    let out = SolverOutput::of(&sc, &pg.solve(&sc, &NoProgress).unwrap().scattering);
+    for (what, mine, reference) in [("image", out.image.clone(), fx.image()), ("multiple", out.multiple.clone(), fx.multiple().unwrap_or_default())] {
+        if reference.is_empty() {
+            continue;
+        }
+        let mut order: Vec<usize> = (0..reference.len()).collect();
+        order.sort_by(|&a, &b| reference[a].element_sum().total_cmp(&reference[b].element_sum()));
+        let total: f64 = mine.iter().zip(&reference).map(|(a, b)| (*a - *b).as_dvec3().length_squared()).sum();
+        for (q, part) in order.chunks(order.len().div_ceil(4)).enumerate() {
+            let err: f64 = part.iter().map(|&i| (mine[i] - reference[i]).as_dvec3().length_squared()).sum();
+            let (m, r): (f64, f64) = part.iter().fold((0.0, 0.0), |(m, r), &i| (m + mine[i].element_sum() as f64, r + reference[i].element_sum() as f64));
+            eprintln!("{name} {what} quarter {q} (dim to bright): share of squared error {:.3}, mean ratio x{:.3}", err / total, m / r.max(1e-30));
+        }
+    }
+}
