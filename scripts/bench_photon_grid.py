@@ -3,7 +3,7 @@ paper Fig. 12's three (cells, photons) settings on a 48 x 62 x 90 cumulus, and f
 flicker on a moving sun with and without the temporal ring. Writes the "photon-grid" section of
 BENCHMARKS.md.
 
-    python3 scripts/bench_photon_grid.py
+    python3 scripts/bench_photon_grid.py [--json PATH] [--from-json PATH]
     python3 scripts/bench_photon_grid.py --gpu [--quick]
 
 Runs the ignored tests of core/src/solvers/photon_grid/bench.rs (they time, never assert; they
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
 import platform
 import subprocess
@@ -80,7 +81,14 @@ def main() -> None:
     if "--gpu" in sys.argv[1:]:
         gpu_main("--quick" in sys.argv[1:])
         return
-    b = run_benches("solvers::photon_grid")
+    args = sys.argv[1:]
+    if "--from-json" in args:
+        # Re-render from a saved run (--json PATH of an earlier run), without running.
+        b = json.loads(Path(args[args.index("--from-json") + 1]).read_text())
+    else:
+        b = run_benches("solvers::photon_grid")
+    if "--json" in args:
+        Path(args[args.index("--json") + 1]).write_text(json.dumps(b))
     lines = [
         "## photon-grid (photon beams into HG-lobe caches, paper 04; `scripts/bench_photon_grid.py`)",
         "",
@@ -131,8 +139,70 @@ def main() -> None:
         " static flicker is 1 / sqrt(m) of the independent one's (`static_scene_flicker_is_the_rings_predicted_noise`:"
         " measured 0.510 at m 4, predicted 0.500), at 1 / m of the tracing per frame and up to m - 1 frames of lag.",
     ]
+    lines += aim_lines(b["cloud_aim"])
     path = write_section("photon-grid", "\n".join(lines) + "\n")
     print(f"wrote {path}", file=sys.stderr)
+
+
+def aim_lines(aim: dict) -> list[str]:
+    """The issue's aim on the dense cloud: photon-grid's time to 5% image error (or its best)
+    against the reference path tracer's, which is extrapolated from its measured rows: with the
+    fixture's own noise n removed in quadrature (a measured error e is sqrt(e_true^2 + n^2)),
+    e_true falls as c / sqrt(time), c the geometric mean over the rows."""
+    noise = aim["fixture_noise"]
+    rows = aim["rows"]
+    true = lambda e: math.sqrt(max(e * e - noise * noise, 1e-12))  # noqa: E731
+    ref = [r for r in rows if r["method"] == "reference"]
+    c = math.exp(sum(math.log(true(r["image"]) * math.sqrt(r["seconds"])) for r in ref) / len(ref))
+    ref_time = lambda e: (c / true(e)) ** 2  # noqa: E731
+    lines = [
+        "",
+        "### The aim on the dense cloud: 5% image error at 30x below the reference's time (2 shared cores)",
+        "",
+        f"Image rel. RMSE against the cloud fixture (its own noise {noise:.3f} is inside every number). Reference: our path"
+        " tracer, transparent film, all cores; photon-grid: the whole solve (tracing, cells' mass, reconstruction, exact single"
+        " scattering). Wall-clock on the shared machine.",
+        "",
+        "| method | photons / spp | s | image rel. RMSE | image mean ratio | grid rel. RMSE |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        n = r.get("photons", r.get("spp"))
+        grid = f"{r['grid']:.3f}" if "grid" in r else "-"
+        lines.append(f"| {r['method']} | {n} | {r['seconds']:.2f} | {r['image']:.3f} | x{r['image_ratio']:.3f} | {grid} |")
+    lines += [
+        "",
+        f"Reference, fitted (fixture noise removed in quadrature, slope -1/2): time to 5% image error **{ref_time(0.05):.0f} s**"
+        f" (extrapolated from its rows; the aim asks photon-grid for {ref_time(0.05) / 30:.1f} s or less).",
+        "",
+    ]
+    for method in sorted({r["method"] for r in rows if r["method"] != "reference"}):
+        mine = sorted((r for r in rows if r["method"] == method), key=lambda r: r["photons"])
+        reached = [i for i, r in enumerate(mine) if r["image"] <= 0.05]
+        if reached:
+            i = reached[0]
+            t = mine[i]["seconds"]
+            if i > 0:
+                a, b = mine[i - 1], mine[i]
+                f = math.log(0.05 / a["image"]) / math.log(b["image"] / a["image"])
+                t = math.exp(math.log(a["seconds"]) + f * (math.log(b["seconds"]) - math.log(a["seconds"])))
+            lines.append(f"- {method}: 5% reached in {t:.2f} s, {ref_time(0.05) / t:.1f}x below the reference's time.")
+        else:
+            best = min(mine, key=lambda r: r["image"])
+            fast = max(mine, key=lambda r: ref_time(r["image"]) / r["seconds"])
+            lines.append(
+                f"- {method}: 5% **not reached**; best {best['image']:.3f} ({best['photons']} photons, {best['seconds']:.2f} s),"
+                f" where the reference needs {ref_time(best['image']):.1f} s: {ref_time(best['image']) / best['seconds']:.1f}x at"
+                f" that error; the largest speed-up over its rows {ref_time(fast['image']) / fast['seconds']:.1f}x (error"
+                f" {fast['image']:.3f}, {fast['photons']} photons).")
+    lines += [
+        "",
+        "The error stops falling with photons near 0.14-0.15: a bias, not noise. `bias_sources`"
+        " (core/src/solvers/photon_grid/tests.rs) splits it: neither the upsampling, the similarity switch, the cache"
+        " resolution nor the lobe model (photons weighted by the exact phase towards the camera) moves the cloud's image"
+        " floor by more than 0.01, so the 5% aim is not met and no setting here reaches it.",
+    ]
+    return lines
 
 
 if __name__ == "__main__":

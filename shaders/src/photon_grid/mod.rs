@@ -1,6 +1,7 @@
 //! `photon-grid`'s tracing on the GPU (`trace.wgsl`): a `PhotonBackend` whose generations are
 //! traced one invocation per photon, their deposits summed in 64-bit fixed point by integer
-//! atomics and read back as the CPU's `FixedTallies`, so that the ring (ring.rs) and the
+//! atomics (pre-summed per workgroup in a hash table in workgroup memory, then added to the
+//! cache once per slot: trace.wgsl) and read back as the CPU's `FixedTallies`, so that the ring (ring.rs) and the
 //! cache's reconstruction run unchanged on the CPU; exact single scattering runs the
 //! compositor's GPU kernel.
 //!
@@ -89,11 +90,15 @@ const ORDER_SHIFT: i32 = 8;
 /// The GPU tracer.
 pub struct GpuPhotonBackend<'c> {
     ctx: &'c GpuContext,
+    /// Whether each workgroup pre-sums its photons' deposits in workgroup memory (trace.wgsl):
+    /// on by default; off gives the same sums bit for bit, all atomics in device memory (for
+    /// the test that shows it and for timing the two).
+    pub presum: bool,
 }
 
 impl<'c> GpuPhotonBackend<'c> {
     pub fn new(ctx: &'c GpuContext) -> Self {
-        GpuPhotonBackend { ctx }
+        GpuPhotonBackend { ctx, presum: true }
     }
 }
 
@@ -215,7 +220,7 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
                 if n == 0 {
                     continue;
                 }
-                let params = TraceParams { seeds: [base.seeds[0], base.seeds[1], g as u32, (g >> 32) as u32], first: [first, 0, 0, 0], flags: [base.flags[0], base.flags[1], base.flags[2], n], ..base };
+                let params = TraceParams { seeds: [base.seeds[0], base.seeds[1], g as u32, (g >> 32) as u32], first: [first, (!self.presum) as u32, 0, 0], flags: [base.flags[0], base.flags[1], base.flags[2], n], ..base };
                 first += n;
                 let params = ctx.uniform("photon trace params", bytemuck::bytes_of(&params));
                 let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;

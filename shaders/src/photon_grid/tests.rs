@@ -160,3 +160,24 @@ fn device_gpu_runs_the_gpu_backend() {
     eprintln!("--device gpu: S relative RMSE against the CPU {e:.4}, CPU seed to seed {noise:.4}");
     assert!(noise > 0.0 && e < 1.5 * noise, "gpu vs cpu {e}, noise {noise}");
 }
+
+/// The workgroup pre-sum (trace.wgsl) changes only where the integer additions happen: with
+/// it on and off the same photons give the same 64-bit sums, so S and the energy report are
+/// equal bit for bit. Cache 12 (3456 keys against the table's 160 slots: many deposits miss
+/// the table and go to device memory directly) and cache 3 (every cell has a slot).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
+fn workgroup_presum_is_bit_exact() {
+    let ctx = gpu_or_skip();
+    let scene = Scene::default_scene();
+    for cache_resolution in [12, 3] {
+        let s = PhotonGridSettings { cache_resolution, ..settings(1 << 14, 3) };
+        let (a, ra) = solve(&scene, s.clone(), &GpuPhotonBackend::new(&ctx));
+        let (b, rb) = solve(&scene, s, &GpuPhotonBackend { presum: false, ..GpuPhotonBackend::new(&ctx) });
+        let bits = |v: &[Vec3]| v.iter().flat_map(|x| x.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+        assert!(a.scattering.data.iter().any(|v| v.x > 0.0));
+        assert_eq!(bits(&a.scattering.data), bits(&b.scattering.data), "cache {cache_resolution}");
+        let (ea, eb) = (ra.energy, rb.energy);
+        assert_eq!((ea.escaped, ea.absorbed, ea.cut, ea.scatterings, ea.switched), (eb.escaped, eb.absorbed, eb.cut, eb.scatterings, eb.switched), "cache {cache_resolution}");
+    }
+}

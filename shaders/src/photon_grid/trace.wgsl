@@ -12,9 +12,17 @@
 // - deposits are summed as 64-bit fixed-point integers with 32-bit atomics (low word, then the
 //   carry into the high word): integer sums do not depend on the order in which invocations
 //   add, so a generation's tallies are the same on every run (f32 atomics would not be).
-//   The cache (cells x 2 lobes x 9 sums of 8 bytes) does not fit workgroup memory (wgpu's
-//   16 KiB: Fig. 12's smallest cache, 315 cells, takes 45 KiB; the default ~1 MiB), so the
-//   atomics go to device memory directly, with no second reduction pass.
+// - a workgroup pre-sums its 64 photons' deposits in workgroup memory (the issue's "atomics
+//   into workgroup memory, then a reduction") before adding them to the cache in device
+//   memory. The cache (cells x 2 lobes x 9 sums of 8 bytes) does not fit workgroup memory
+//   (WebGPU's guaranteed 16 KiB: Fig. 12's smallest cache, 315 cells, takes 45 KiB; the
+//   default ~1 MiB), so the workgroup keeps a hash table of WG_SLOTS (lobe, cell) entries:
+//   a deposit whose cell has a slot (claimed by compare-exchange on first use, WG_PROBES
+//   linear probes) adds there, any other goes to device memory directly; after a barrier the
+//   workgroup adds each slot's sums to the cache once. The energy sums (the same 22 words for
+//   every photon, the hottest contention) are pre-summed the same way. Sums of 64-bit
+//   integers modulo 2^64 do not depend on grouping, so the cache is bit for bit the one
+//   without the pre-sum (`params.first.y` != 0 turns it off; tests.rs compares the two).
 // affine, density_at, ray_box come from the preludes (shaders/src/wgsl).
 
 struct Phase {
@@ -35,7 +43,7 @@ struct Params {
     units: vec4<f32>,       // 1 / unit of: deposits (flux, moment, weight), order sums, energy
     flags: vec4<u32>,       // order of the similarity switch (0: none), split order, deposit unscattered, photons in this dispatch
     seeds: vec4<u32>,       // seed (lo, hi), generation (lo, hi)
-    first: vec4<u32>,       // index of this dispatch's first photon in its generation
+    first: vec4<u32>,       // index of this dispatch's first photon in its generation; y: 1 = no workgroup pre-sum
     maj_origin: vec4<f32>,  // majorant grid's minimum corner (index space), w: cell edge (voxels)
     maj_dims: vec4<i32>,    // its cells per axis, w: where the reduced medium's values start
 };
@@ -112,27 +120,66 @@ fn to_fixed(x: f32) -> vec2<u32> {
     return vec2<u32>(lo, hi);
 }
 
-// Adds x (in units) to the 64-bit sum at words i, i + 1.
-fn add_fixed(i: u32, x: f32) {
-    let v = to_fixed(x);
-    if (v.x == 0u && v.y == 0u) {
-        return;
-    }
-    let old = atomicAdd(&sums[i], v.x);
-    // The low words wrapped: carry one into the high word.
-    let carry = select(0u, 1u, old + v.x < old);
-    if (v.y + carry != 0u) {
-        atomicAdd(&sums[i + 1u], v.y + carry);
+// What to add to the high word after adding v.x to a low word that held `old`: v.y, plus
+// one where the low word wrapped.
+fn high_part(old: u32, v: vec2<u32>) -> u32 {
+    return v.y + select(0u, 1u, old + v.x < old);
+}
+// Adds the 64-bit integer v = (low, high) to the sum at words i, i + 1 of the cache.
+fn add_pair(i: u32, v: vec2<u32>) {
+    if (any(v != vec2<u32>(0u))) {
+        let h = high_part(atomicAdd(&sums[i], v.x), v);
+        if (h != 0u) {
+            atomicAdd(&sums[i + 1u], h);
+        }
     }
 }
-
-fn add_count(i: u32) {
-    let old = atomicAdd(&sums[i], 1u);
-    if (old == 0xffffffffu) {
-        atomicAdd(&sums[i + 1u], 1u);
+// ---- the workgroup's pre-sum (module doc) ----
+const WG_SLOTS: u32 = 160u;
+const WG_PROBES: u32 = 4u;
+const WG_ENERGY_WORDS: u32 = 22u;
+// Slot keys: 0 free, else 1 + lobe x cells + cell.
+var<workgroup> wg_keys: array<atomic<u32>, WG_SLOTS>;
+// Per slot CELL_WORDS words as the cache's, then the energy sums (as the cache's, from word 0).
+var<workgroup> wg_sums: array<atomic<u32>, 2902>; // WG_SLOTS * CELL_WORDS + WG_ENERGY_WORDS
+// add_pair into workgroup memory (its twin: a WGSL function's atomics live in one address
+// space).
+fn wg_add_pair(i: u32, v: vec2<u32>) {
+    if (any(v != vec2<u32>(0u))) {
+        let h = high_part(atomicAdd(&wg_sums[i], v.x), v);
+        if (h != 0u) {
+            atomicAdd(&wg_sums[i + 1u], h);
+        }
     }
 }
-
+fn presum() -> bool {
+    return params.first.y == 0u;
+}
+// The slot holding `key` (claimed if free), or -1: the table is off, or the probed slots are
+// taken by other cells (or a weak exchange failed spuriously: the deposit then goes to device
+// memory, which is exact as well).
+fn wg_slot(key: u32) -> i32 {
+    if (!presum()) {
+        return -1;
+    }
+    let h = fmix32(key) % WG_SLOTS;
+    for (var k = 0u; k < WG_PROBES; k++) {
+        let s = (h + k) % WG_SLOTS;
+        let r = atomicCompareExchangeWeak(&wg_keys[s], 0u, key);
+        if (r.exchanged || r.old_value == key) {
+            return i32(s);
+        }
+    }
+    return -1;
+}
+// Adds v to energy sum word w (energy_word's numbering), through the workgroup when on.
+fn energy_pair(w: u32, v: vec2<u32>) {
+    if (presum()) {
+        wg_add_pair(WG_SLOTS * CELL_WORDS + w, v);
+    } else {
+        add_pair(energy_word(w), v);
+    }
+}
 // The energy sums' first word: after both lobes' cells.
 fn energy_word(w: u32) -> u32 {
     return 2u * params.cell_dims.w * CELL_WORDS + w;
@@ -140,9 +187,9 @@ fn energy_word(w: u32) -> u32 {
 
 fn energy_add3(q: u32, v: vec3<f32>) {
     let s = v * params.units.z;
-    add_fixed(energy_word(6u * q), s.x);
-    add_fixed(energy_word(6u * q + 2u), s.y);
-    add_fixed(energy_word(6u * q + 4u), s.z);
+    energy_pair(6u * q, to_fixed(s.x));
+    energy_pair(6u * q + 2u, to_fixed(s.y));
+    energy_pair(6u * q + 4u, to_fixed(s.z));
 }
 
 // cache.rs `Cache::cell_of`: the cell whose centre is nearest, or none.
@@ -162,20 +209,32 @@ fn deposit(x: vec3<f32>, f: vec3<f32>, dir: vec3<f32>, order: u32, lobe: u32) {
     if (cell < 0) {
         return;
     }
-    let base = (lobe * params.cell_dims.w + u32(cell)) * CELL_WORDS;
+    let key = lobe * params.cell_dims.w + u32(cell);
     let w = (f.x + f.y + f.z) / 3.0;
     let k = params.units.x;
-    add_fixed(base, f.x * k);
-    add_fixed(base + 2u, f.y * k);
-    add_fixed(base + 4u, f.z * k);
-    add_fixed(base + 6u, dir.x * w * k);
-    add_fixed(base + 8u, dir.y * w * k);
-    add_fixed(base + 10u, dir.z * w * k);
-    add_fixed(base + 12u, w * k);
-    add_fixed(base + 14u, w * f32(order) * params.units.y);
-    add_count(base + 16u);
+    var v: array<vec2<u32>, 9>;
+    v[0] = to_fixed(f.x * k);
+    v[1] = to_fixed(f.y * k);
+    v[2] = to_fixed(f.z * k);
+    v[3] = to_fixed(dir.x * w * k);
+    v[4] = to_fixed(dir.y * w * k);
+    v[5] = to_fixed(dir.z * w * k);
+    v[6] = to_fixed(w * k);
+    v[7] = to_fixed(w * f32(order) * params.units.y);
+    v[8] = vec2<u32>(1u, 0u);
+    let slot = wg_slot(key + 1u);
+    if (slot >= 0) {
+        let base = u32(slot) * CELL_WORDS;
+        for (var i = 0u; i < 9u; i++) {
+            wg_add_pair(base + 2u * i, v[i]);
+        }
+    } else {
+        let base = key * CELL_WORDS;
+        for (var i = 0u; i < 9u; i++) {
+            add_pair(base + 2u * i, v[i]);
+        }
+    }
 }
-
 // ---- directions (sampling.rs, phase.rs) ----
 
 fn uniform_sphere(u0: f32, u1: f32) -> vec3<f32> {
@@ -276,11 +335,38 @@ fn dda_segment() -> vec3<f32> {
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let id = gid.x + gid.y * groups.x * 64u;
-    if (id >= params.flags.w) {
-        return;
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(num_workgroups) groups: vec3<u32>) {
+    // Clear the workgroup's table (explicitly: not every backend zeroes workgroup memory).
+    for (var i = lid; i < WG_SLOTS; i += 64u) {
+        atomicStore(&wg_keys[i], 0u);
     }
+    for (var i = lid; i < WG_SLOTS * CELL_WORDS + WG_ENERGY_WORDS; i += 64u) {
+        atomicStore(&wg_sums[i], 0u);
+    }
+    workgroupBarrier();
+    let id = gid.x + gid.y * groups.x * 64u;
+    if (id < params.flags.w) {
+        trace_photon(id);
+    }
+    workgroupBarrier();
+    // The reduction: each slot's sums (and the energy sums) into the cache, once.
+    for (var s = lid; s < WG_SLOTS; s += 64u) {
+        let key = atomicLoad(&wg_keys[s]);
+        if (key != 0u) {
+            for (var i = 0u; i < CELL_WORDS; i += 2u) {
+                let w = s * CELL_WORDS + i;
+                add_pair((key - 1u) * CELL_WORDS + i, vec2<u32>(atomicLoad(&wg_sums[w]), atomicLoad(&wg_sums[w + 1u])));
+            }
+        }
+    }
+    for (var i = 2u * lid; i < WG_ENERGY_WORDS; i += 128u) {
+        let w = WG_SLOTS * CELL_WORDS + i;
+        add_pair(energy_word(i), vec2<u32>(atomicLoad(&wg_sums[w]), atomicLoad(&wg_sums[w + 1u])));
+    }
+}
+
+// One photon from its ray (`id` in this dispatch) to its end.
+fn trace_photon(id: u32) {
     rng_seed(params.first.x + id);
     var x = rays[3u * id].xyz;
     var d = rays[3u * id + 1u].xyz;
@@ -367,14 +453,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         energy_add3(1u, power * beta * (vec3<f32>(1.0) - albedo));
         beta *= albedo;
         order += 1u;
-        add_count(energy_word(18u));
+        energy_pair(18u, vec2<u32>(1u, 0u));
         if (max3(beta) < cutoff || max3(beta) <= 0.0) {
             energy_add3(2u, power * beta);
             return;
         }
         if (switch_at > 0u && order == switch_at && !reduced) {
             reduced = true;
-            add_count(energy_word(20u));
+            energy_pair(20u, vec2<u32>(1u, 0u));
         }
         let g = select(params.full.albedo.w, params.reduced.albedo.w, reduced);
         let u0 = rng_f32();

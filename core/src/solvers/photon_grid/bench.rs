@@ -133,3 +133,41 @@ fn bench_photon_grid_flicker() {
     }
     emit("flicker", json!(rows));
 }
+
+/// The aim on the dense cloud: time against image error for photon-grid (the
+/// defaults, the default with the paper's upsampling, and cache 48) at 2^16 to 2^22 photons,
+/// and for the reference path tracer at 256 to 4096 paths per pixel, both against the cloud
+/// fixture (own noise 2.2%). PG_BENCH_MAX_PHOTONS caps the photon count (log2, default 22).
+#[test]
+#[ignore]
+fn bench_photon_grid_cloud_aim() {
+    use crate::solvers::reference::{Reference, ReferenceSettings};
+    use crate::solvers::testing::{env_u32, load_fixture, rgb, Errors};
+    let sc = case("cloud");
+    let fx = load_fixture("cloud");
+    let mut rows = Vec::new();
+    for spp in [256u32, 1024, 4096] {
+        let t = Instant::now();
+        let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
+        let img = r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap();
+        let secs = t.elapsed().as_secs_f64();
+        let e = Errors::between(&rgb(&img), &[], &[], &fx.image(), &[], None);
+        rows.push(json!({"method": "reference", "spp": spp, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio}));
+    }
+    let max = env_u32("PG_BENCH_MAX_PHOTONS", 22);
+    for (label, s) in [
+        ("defaults", PhotonGridSettings::default()),
+        ("physical upsampling", PhotonGridSettings { upsampling: Upsampling::Physical, ..Default::default() }),
+        ("cache 48", PhotonGridSettings { cache_resolution: 48, ..Default::default() }),
+    ] {
+        for p in (16..=max).step_by(2) {
+            let pg = PhotonGrid::new(PhotonGridSettings { photons: 1 << p, ..s.clone() }).unwrap();
+            let t = Instant::now();
+            let out = pg.solve(&sc, &NoProgress).unwrap();
+            let secs = t.elapsed().as_secs_f64();
+            let e = errors_against_fixture("cloud", &sc, &out.scattering);
+            rows.push(json!({"method": format!("photon-grid {label}"), "photons": 1u64 << p, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio, "grid": e.grid}));
+        }
+    }
+    emit("cloud_aim", json!({"rows": rows, "fixture_noise": fx.noise_image}));
+}

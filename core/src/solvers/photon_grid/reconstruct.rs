@@ -5,18 +5,20 @@
 //! (App. C), so no integral is needed. The isotropic part of the light is inside the lobe:
 //! a shorter mean cosine (cache.rs).
 //!
-//! Upsampling (first landing): each tally is interpolated trilinearly between cell centres
-//! and the ratios are taken after (phi = flux / mass, g' = |moment| / weight): a mass-weighted
-//! interpolation, so empty cells (mass 0) neither darken nor brighten their neighbours, and
-//! sigma_s(rho(x)) restores the density's full resolution where the medium is. The paper's
-//! physically based upsampling (Sec. 4.3: exponential / linear distance weights and the g^delta
-//! weighting of anisotropy by penetration depth) is not here yet; neither is pop's joint
-//! bilateral filter, which is written against pop's merged grid and mip types.
+//! Upsampling (`Upsampling`): by default each tally is interpolated trilinearly between cell
+//! centres and the ratios are taken after (phi = flux / mass, g' = |moment| / weight): a
+//! mass-weighted interpolation, so empty cells (mass 0) neither darken nor brighten their
+//! neighbours, and sigma_s(rho(x)) restores the density's full resolution where the medium
+//! is. The paper's physically based upsampling (Sec. 4.3: exponential / linear distance
+//! weights and the g^delta weighting of anisotropy by penetration depth) is upsample.rs;
+//! settings.rs says why it is not the default.
 
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
 use super::cache::Tallies;
+use super::settings::Upsampling;
+use super::upsample::Upsampler;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::phase::hg;
@@ -74,12 +76,24 @@ impl Tallies {
     }
 }
 
+/// The lobe of `tallies` at world point `x` by `upsampling` (the view-independent form).
+pub fn lobe_at(medium: &Medium, tallies: &Tallies, x: Vec3, upsampling: Upsampling) -> Lobe {
+    match upsampling {
+        Upsampling::Trilinear => tallies.lobe(x),
+        Upsampling::Physical => Upsampler::new(medium, tallies).lobe(x, medium.density_world(x)),
+    }
+}
+
 /// S towards `camera` on `ScatteringGrid::over_medium(medium, resolution)`, the lobes of all
-/// `tallies` added.
-pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, resolution: u32) -> Result<ScatteringGrid> {
+/// `tallies` added, each upsampled by `upsampling`.
+pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, resolution: u32, upsampling: Upsampling) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, resolution)?;
     let [nx, ny, _] = out.dims;
     let frame = out.index_to_world;
+    let physical: Vec<Upsampler> = match upsampling {
+        Upsampling::Physical => tallies.iter().map(|t| Upsampler::new(medium, t)).collect(),
+        Upsampling::Trilinear => Vec::new(),
+    };
     out.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {
@@ -90,8 +104,11 @@ pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, re
                 }
                 let to_camera = (camera - x).normalize_or_zero();
                 let mut s = Vec3::ZERO;
-                for t in tallies {
-                    let lobe = t.lobe(x);
+                for (n, t) in tallies.iter().enumerate() {
+                    let lobe = match physical.get(n) {
+                        Some(u) => u.lobe(x, rho),
+                        None => t.lobe(x),
+                    };
                     s += lobe.fluence * hg(lobe.direction.dot(to_camera), medium.g * lobe.g);
                 }
                 slab[(i + nx * j) as usize] = medium.sigma_s(rho) * s;

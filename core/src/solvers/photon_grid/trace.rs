@@ -93,6 +93,11 @@ pub struct Tracer<'a> {
     /// Read every `CANCEL_STRIDE` photons: once cancelled the batches stop early and the
     /// caller discards their tallies.
     pub progress: &'a dyn crate::solvers::Progress,
+    /// Diagnosis only (tests.rs `bias_sources`): deposits weighted by the exact phase function
+    /// towards this camera, with no direction, so the cache holds S itself per cell (no lobe
+    /// model, only the spatial binning).
+    #[cfg(test)]
+    pub view_from: Option<Vec3>,
 }
 
 /// Photons between two reads of the cancel flag: a photon is microseconds (longer in dense
@@ -133,6 +138,18 @@ impl Tracer<'_> {
         ([lobe(0), lobe(1)], report)
     }
 
+    /// A deposit's flux and direction as stored: as traced, or under `view_from` (tests) the
+    /// flux times 4 pi p_HG towards the camera and no direction.
+    #[inline]
+    fn view_weighted(&self, _p: Vec3, d: Vec3, f: Vec3) -> (Vec3, Vec3) {
+        #[cfg(test)]
+        if let Some(camera) = self.view_from {
+            let k = 4.0 * std::f32::consts::PI * crate::phase::hg((camera - _p).normalize_or_zero().dot(d), self.medium.g);
+            return (f * k, Vec3::ZERO);
+        }
+        (f, d)
+    }
+
     /// One photon of power `power` from `x` along `d` to its end.
     fn photon(&self, mut x: Vec3, mut d: Vec3, power: Vec3, rng: &mut Rng, caches: &mut [Cache; 2], report: &mut EnergyReport) {
         report.photons += 1;
@@ -155,7 +172,8 @@ impl Tracer<'_> {
             let (hit, w) = track(phase, x, d, beta, rng, |p, w, rho_over_m| {
                 if deposit {
                     let f = power * w * rho_over_m;
-                    cache.deposit(p, f, f.element_sum() / 3.0, d, order);
+                    let (flux, dir) = self.view_weighted(p, d, f);
+                    cache.deposit(p, flux, f.element_sum() / 3.0, dir, order);
                 }
             });
             match hit {
