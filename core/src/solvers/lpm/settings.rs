@@ -35,6 +35,11 @@ pub struct LpmSettings {
     /// POP's exact sweep) or `boundary` (the paper: the sun is radiance E / solid angle in its
     /// direction bin at the boundary). Measured in tests.rs: exact is closer, see there.
     pub first_order: FirstOrder,
+    /// The delta-M split of the phase function's forward peak (delta_m.rs): the propagated
+    /// orders carry the peak (f = g^2) as unscattered light through sigma_t (1 - albedo f) and
+    /// scatter with the residual lobe g / (1 + g), which the direction lattice can represent;
+    /// the single scattering and the first order keep the true medium and phase. MEASURED.
+    pub delta_m: bool,
     /// Bytes the propagation's working buffers (the maps carried between slices and the
     /// slice's per-direction ray buffer) may use; the slice thickness is picked from it
     /// (Sec. 4.2). 0: one slice spanning the whole volume. Refused with the size needed when a
@@ -68,6 +73,7 @@ impl Default for LpmSettings {
             epsilon: 1e-3,
             max_orders: 200,
             first_order: FirstOrder::Exact,
+            delta_m: true,
             memory_budget: 0,
             output_resolution: 64,
             upsample: true,

@@ -85,6 +85,7 @@ fn lpm_explore() {
         output_resolution: env_u32("LPM_OUT", 24),
         max_orders: env_u32("LPM_ORDERS", 200),
         first_order: if std::env::var("LPM_BOUNDARY").is_ok() { FirstOrder::Boundary } else { FirstOrder::Exact },
+        delta_m: std::env::var("LPM_NO_DM").is_err(),
         ..Default::default()
     };
     if name == "furnace" {
