@@ -179,13 +179,16 @@ impl Lpm {
         })?;
         // The later orders' sweeper: through sigma_t' with the residual lobe under delta-M
         // (the true medium's sweeper given back first), else the first propagation's.
-        let mut sweeper = if kept.is_none() {
+        // (Not `if let`/`match` on `kept`: the borrow checker would keep its borrow of the grid
+        // alive in the branch that scales the grid; dropping it there ends the borrow.)
+        let reuse = kept.is_some();
+        let mut sweeper = if reuse {
+            kept.expect("checked above")
+        } else {
             drop(kept);
             delta.scale_extinction(&mut grid.sigma_t);
             let table = scaled_table.as_ref().unwrap_or(&table);
             backend.start(stream::SweepSetup { grid: &grid, dirs: &dirs, table, layers: &layers, camera, albedo: delta.albedo }, progress)?
-        } else {
-            kept.expect("kept is some")
         };
         if let Some(jt) = j_true {
             timings.time("lpm first order", || sweeper.sweep(&u_prev, &boundary, &mut u_cur, Some(&mut j), &mut report.sweep, progress))?;
