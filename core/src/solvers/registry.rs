@@ -448,7 +448,7 @@ const NETWORK: SolverEntry = SolverEntry {
 const LPM: SolverEntry = SolverEntry {
     name: "lpm",
     label: "Light Propagation Maps",
-    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget. Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 2-42 s on 2 cores): overcast 0.02, thin smoke 0.03, fire-lit smoke 0.05, lamp inside smoke 0.38, dense cloud 0.79; final (64^3, 49 directions) 0.01-0.02 on the smokes in 200 s. Those runs predate the delta-M split (delta_m, now on): on the g 0.9 test fixtures it took the dense cloud from 0.99 to 0.61, a g 0.9 cube from 0.40 to 0.15, plumes from 0.16-0.25 to 0.08-0.17",
+    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget. Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 2-42 s on 2 cores): overcast 0.02, thin smoke 0.03, fire-lit smoke 0.05, lamp inside smoke 0.38, dense cloud 0.79; final (64^3, 49 directions) 0.01-0.02 on the smokes in 200 s. Those runs predate the delta-M split (delta_m, now on; BENCHMARKS.md lpm-accuracy): at preview it takes the dense cloud from 0.79 to 0.29 in 5 s instead of 25 and leaves the other scenes within 0.003; on the g 0.9 test fixtures a cube from 0.40 to 0.15, plumes from 0.16-0.25 to 0.08-0.17",
     settings: &[
         SettingSpec::int("grid_resolution", "cells of the propagation grid along the longest side").range(2.0, 512.0),
         SettingSpec::int("directions", "propagation directions per cube face (a perfect square; the paper's 25)").range(1.0, 256.0),
