@@ -15,7 +15,8 @@
 //!
 //! The light scattered once is not collected into J: S's single scattering is the
 //! compositor's exact grid (mod.rs), the same for every solver. Under the delta-M split
-//! (delta_m.rs) the beams' peak-scattered light is, towards the viewer, with the true phase.
+//! (delta_m.rs) J gets the light the phase function's peak scattered on along a beam, as the
+//! true phase scatters it towards the viewer.
 
 use glam::Vec3;
 use rayon::prelude::*;

@@ -16,7 +16,10 @@
 //!
 //! Departures from the paper, each where it is made: T is the exact segment mean
 //! (propagate.rs); J from the fine bins (collect.rs); exact first order for distant and local
-//! lights (lights.rs); the phase table normalised (phase_table.rs).
+//! lights (lights.rs); the phase table normalised (phase_table.rs); the delta-M split of the
+//! phase function's forward peak (delta_m.rs, setting `delta_m`, on): the propagated light
+//! runs through sigma_t (1 - albedo g^2) and scatters into U by the residual lobe g / (1 + g);
+//! S's single scattering and the phase towards the viewer stay true.
 //!
 //! The sweeps run through a `stream::SweepBackend`: the CPU's here, the GPU's kernels in
 //! volscatter-gpu (its lpm module). Not yet here (issue 19): the VDB read per region and S
