@@ -24,6 +24,11 @@ and a streamed solve under a memory budget; writes the "lpm" section of BENCHMAR
 `--before BIN`: the paper's cases also on the CPU with another build of the CLI (the code
 before a CPU speed-up), in a "before" column, and its image against this build's.
 
+`--accuracy`: only the accuracy rows (section "lpm-accuracy"): lpm's preview on the five
+benchmark scenes (bench/scenes, scripts/bench_solvers.py's converged references) with the
+delta-M split on (the default) and off, image relative RMSE against the reference and the
+solve time; the optical-depth-30, g 0.9 dense cloud is the case the split is for.
+
 Uses the `volscatter` CLI ($VOLSCATTER_BIN, default target/release/volscatter) and numpy +
 Mitsuba's EXR reader for the comparison (skipped, and said so, without them).
 """
@@ -133,6 +138,47 @@ def kept_paper_rows() -> list[str] | None:
     return body[:cut]
 
 
+#: lpm's preview preset (registry.rs), the quality bench_solvers.py measures every solver at.
+PREVIEW = {"grid_resolution": 32, "directions": 25, "output_resolution": 64}
+
+
+def accuracy() -> None:
+    """lpm preview with delta_m on and off on the benchmark scenes: the "lpm-accuracy" section."""
+    import bench_solvers as bs  # numpy and Mitsuba's EXR reader, as that script
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for name in ("thin_smoke", "dense_cloud", "smoke_point", "overcast", "fire_smoke"):
+            ref, meta = bs.load_reference(name)
+            cells = [name, f"{meta['noise']:.3f}"]
+            for delta_m in (True, False):
+                img, rep = bs.render(name, "lpm", {**PREVIEW, "delta_m": delta_m}, work, f"acc_{name}_{delta_m}")
+                solve, _ = bs.split_phases(rep)
+                err = bs.rel_rmse(img, ref)
+                ratio = float(img[..., :3].mean() / max(ref[..., :3].mean(), 1e-30))
+                cells.append(f"{err:.3f} (x{ratio:.2f}), {solve:.1f} s")
+                log(f"{name} delta_m {delta_m}: error {err:.4f} x{ratio:.3f}, solve {solve:.1f} s")
+            rows.append(cells)
+    cpu = platform.processor() or platform.machine()
+    lines = [
+        "## lpm accuracy: the delta-M split (issue 19)",
+        "",
+        f"Written by `scripts/bench_lpm.py --accuracy` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared, CPU).",
+        f"lpm at its preview preset (`{json.dumps(PREVIEW)}`) on the benchmark scenes against their converged references (bench/references, their own noise in the second column): image relative RMSE (mean brightness against the reference), and the solve time (the report's phases without the composite).",
+        "",
+        "| scene | reference noise | delta_m on (default) | delta_m off (the paper) |",
+        "|---|---|---|---|",
+    ]
+    lines += [f"| {' | '.join(r)} |" for r in rows]
+    lines += [
+        "",
+        "The split (core/src/solvers/lpm/delta_m.rs) carries the phase function's forward peak (f = g^2) as unscattered light and leaves the 16-degree direction bins the residual lobe g / (1 + g); the test fixtures' numbers are in core/src/solvers/lpm/tests.rs.",
+    ]
+    write_section("lpm-accuracy", "\n".join(lines))
+    log("\n".join(lines))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="64^3 only, small large case")
@@ -141,7 +187,11 @@ def main() -> None:
     ap.add_argument("--only-ooc", action="store_true", help="skip the paper's cases (keeps nothing of them: for a quick out-of-core row)")
     ap.add_argument("--before", type=Path, help="another volscatter CLI: the paper's cases on the CPU before a change")
     ap.add_argument("--before-note", default="", help="what the --before build lacks, for the table's note")
+    ap.add_argument("--accuracy", action="store_true", help="only the accuracy rows: delta_m on and off on the benchmark scenes")
     args = ap.parse_args()
+    if args.accuracy:
+        accuracy()
+        return
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)

@@ -456,11 +456,11 @@ const NETWORK: SolverEntry = SolverEntry {
 const LPM: SolverEntry = SolverEntry {
     name: "lpm",
     label: "Light Propagation Maps",
-    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget. Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 2-42 s on 2 cores): overcast 0.02, thin smoke 0.03, fire-lit smoke 0.05, lamp inside smoke 0.38, dense cloud 0.79; final (64^3, 49 directions) 0.01-0.02 on the smokes in 200 s",
+    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget. Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 2-42 s on 2 cores): overcast 0.02, thin smoke 0.03, fire-lit smoke 0.05, lamp inside smoke 0.38, dense cloud 0.79; final (64^3, 49 directions) 0.01-0.02 on the smokes in 200 s. Those runs predate the delta-M split (delta_m, now on; BENCHMARKS.md lpm-accuracy): at preview it takes the dense cloud from 0.79 to 0.29 in 5 s instead of 25 and leaves the other scenes within 0.003; on the g 0.9 test fixtures a cube from 0.40 to 0.15, plumes from 0.16-0.25 to 0.08-0.17",
     settings: &[
         SettingSpec::int("grid_resolution", "cells of the propagation grid along the longest side").range(2.0, 512.0),
         SettingSpec::int("directions", "propagation directions per cube face (a perfect square; the paper's 25)").range(1.0, 256.0),
-        SettingSpec::int("storage_per_face", "storage directions m = 6 x this^2 (1: the paper's 6; anisotropic media need 2 or more)").range(1.0, 32.0),
+        SettingSpec::int("storage_per_face", "storage directions m = 6 x this^2 (1: the paper's 6, enough for g > 0.5 with delta_m on; more costs 4-25x the collect)").range(1.0, 32.0),
         SettingSpec::float("epsilon", "stop when an order's largest U falls below this fraction of the first order's")
             .open_range(Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: true }),
         SettingSpec::int("max_orders", "cap on propagated orders").range(1.0, 100_000.0),
@@ -468,6 +468,7 @@ const LPM: SolverEntry = SolverEntry {
             choices: &["exact", "boundary"],
             ..SettingSpec::new("first_order", SettingType::Choice, "first scattering of distant lights: exact transmittance to every cell, or the paper's boundary radiance in one bin")
         },
+        SettingSpec::bool("delta_m", "delta-M split of the phase function's forward peak (f = g^2): the peak's light goes on unscattered, the direction bins carry the broad rest; much closer at g 0.9 (cube 0.15 against 0.40 image error), the same at g 0"),
         SettingSpec::int("memory_budget", "bytes for the propagation's slice buffers (with out_of_core: for everything a slice holds, the per-cell arrays included); the slice thickness is picked from it (0: one slice, the whole volume)"),
         SettingSpec::bool("out_of_core", "keep the per-cell arrays in scratch files (TMPDIR) a slab at a time, so that memory_budget bounds the whole solve: grids larger than memory; CPU, first_order boundary, no local lights"),
         SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),

@@ -9,7 +9,7 @@
 @group(0) @binding(2) var<storage, read> t_in: array<vec4<f32>>;
 // The storage table by incoming direction: weight of direction i into bin d at i * m + d.
 @group(0) @binding(3) var<storage, read> by_incoming: array<f32>;
-// The fine table, n x n, row = outgoing bin.
+// The view table (the fine table, or the true phase's under delta-M), n x n, row = outgoing bin.
 @group(0) @binding(4) var<storage, read> fine: array<f32>;
 // Each cell's bin towards the camera (lpm/directions.rs `bin_of`, on the host).
 @group(0) @binding(5) var<storage, read> view_bin: array<u32>;

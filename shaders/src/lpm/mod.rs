@@ -152,7 +152,7 @@ impl<'a> GpuSweeper<'a> {
             dirs: ctx.zeroed_storage("lpm directions", n as u64 * size_of::<GpuDir>() as u64)?,
             offsets: ctx.storage_buffer("lpm ray offsets", bytemuck::cast_slice(&offsets))?,
             by_incoming: ctx.storage_buffer("lpm storage table", bytemuck::cast_slice(&by_incoming))?,
-            fine: ctx.storage_buffer("lpm phase table", bytemuck::cast_slice(&table.fine))?,
+            fine: ctx.storage_buffer("lpm phase table", bytemuck::cast_slice(table.view_table()))?,
             sigma: ctx.zeroed_storage("lpm slab sigma_t", slab_cells * v4)?,
             u_in: ctx.zeroed_storage("lpm slab U in", slab_cells * m as u64 * v4)?,
             view_slab: ctx.zeroed_storage("lpm slab view bins", slab_cells * 4)?,

@@ -6,7 +6,9 @@
 //!
 //! Departure from the paper: J towards the viewer is read from the fine propagation bins
 //! (J += sum_i F[view bin][i] T_i), not from the m storage bins' I: the fine table keeps an
-//! anisotropic lobe that m = 6 flattens, and costs one table row per cell.
+//! anisotropic lobe that m = 6 flattens, and costs one table row per cell. The rows are the
+//! table's `view` ones: the true phase's under the delta-M split (delta_m.rs), whose U uses the
+//! residual lobe.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -60,7 +62,7 @@ pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceF
             let w = if ff.forward { wg } else { ff.nw - 1 - wg } - w0;
             let pos = w * ff.map_len() + v * ff.nu + u;
             acc.iter_mut().for_each(|a| *a = Vec3::ZERO);
-            let view_row = j_plane.as_ref().map(|_| table.fine_row(dirs.bin_of((camera - grid.centre(c)).normalize_or(Vec3::Z))));
+            let view_row = j_plane.as_ref().map(|_| table.view_row(dirs.bin_of((camera - grid.centre(c)).normalize_or(Vec3::Z))));
             let mut jsum = Vec3::ZERO;
             for (li, gi) in face_dirs.clone().enumerate() {
                 let tv = t[li * slab_len + pos];

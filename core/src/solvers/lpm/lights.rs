@@ -14,15 +14,19 @@
 //! - Emission: the initial U, e(x) in every bin, propagated as an order of its own.
 //!
 //! The light scattered once is not collected into J: S's single scattering is the
-//! compositor's exact grid (mod.rs), the same for every solver.
+//! compositor's exact grid (mod.rs), the same for every solver. Under the delta-M split
+//! (delta_m.rs) J gets the light the phase function's peak scattered on along a beam, as the
+//! true phase scatters it towards the viewer.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::delta_m::DeltaM;
 use super::directions::Directions;
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::settings::FirstOrder;
+use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::Progress;
 
@@ -69,13 +73,16 @@ pub fn emission_source(scene: &Scene, grid: &LpmGrid, m: usize, u: &mut [Vec3]) 
 }
 
 /// Adds the exact first scattering of the distant lights (in `exact` mode) and of the local
-/// lights to U (m values a cell). Each cell traces a shadow ray per light (a second or more
-/// at 128^3), so planes not started when the host cancels are skipped: the caller checks
+/// lights to U (m values a cell), split by `delta` (delta_m.rs: U gets the residual lobe's
+/// share of the beam attenuated by sigma_t', J the peak-scattered light towards the viewer;
+/// the identity split adds the true first scattering to U and nothing to J). `table` is the
+/// propagated orders' (p'). Each cell traces a shadow ray per light (a second or more at
+/// 128^3), so planes not started when the host cancels are skipped: the caller checks
 /// `progress.cancelled()` and discards U.
-pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, mode: FirstOrder, u: &mut [Vec3], progress: &dyn Progress) {
+#[allow(clippy::too_many_arguments)]
+pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, delta: &DeltaM, mode: FirstOrder, u: &mut [Vec3], j: &mut [Vec3], progress: &dyn Progress) {
     let medium = &scene.medium;
     let m = table.m;
-    let g = medium.g;
     // Distant lights: travel direction, irradiance and the bins' mean phase towards it.
     let suns: Vec<(Vec3, Vec3, Vec<f32>)> = if mode == FirstOrder::Exact {
         scene
@@ -84,7 +91,7 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
             .filter_map(|l| match l {
                 Light::Distant { direction, irradiance, .. } => {
                     let w = direction.normalize();
-                    Some((w, *irradiance, (0..m).map(|d| PhaseTable::storage_mean_towards(dirs, d, w, g)).collect()))
+                    Some((w, *irradiance, (0..m).map(|d| PhaseTable::storage_mean_towards(dirs, d, w, delta.g_scaled)).collect()))
                 }
                 _ => None,
             })
@@ -97,8 +104,22 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
         return;
     }
     let near = crate::medium::near_field_radius(&grid.frame());
+    let camera = scene.camera.position;
     let [nx, ny, _] = grid.dims;
-    u.par_chunks_mut(nx * ny * m).enumerate().for_each(|(z, plane)| {
+    // Light arriving along `w` with (true) transmittance `t` at p: its share of U (the residual
+    // lobe, sigma_t' attenuation) and of J (the peak-scattered part towards the viewer).
+    let add = |cell: &mut [Vec3], jv: &mut Vec3, p: Vec3, sigma_s: Vec3, w: Vec3, arriving: Vec3, t: Vec3, pbar: &dyn Fn(usize) -> f32| {
+        let tp = delta.scaled_transmittance(t);
+        let lit = sigma_s * (1.0 - delta.f) * arriving * tp;
+        for (d, v) in cell.iter_mut().enumerate() {
+            *v += lit * pbar(d);
+        }
+        if delta.active() {
+            let to_cam = (camera - p).normalize_or(Vec3::Z);
+            *jv += hg(w.dot(to_cam), delta.g) * arriving * (tp - t);
+        }
+    };
+    u.par_chunks_mut(nx * ny * m).zip(j.par_chunks_mut(nx * ny)).enumerate().for_each(|(z, (plane, j_plane))| {
         if progress.cancelled() {
             return;
         }
@@ -112,11 +133,9 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                 }
                 let p = grid.centre(c);
                 let cell = &mut plane[(x + nx * y) * m..(x + nx * y + 1) * m];
+                let jv = &mut j_plane[x + nx * y];
                 for (w, e, pbar) in &suns {
-                    let lit = sigma_s * *e * grid.transmittance(p, -*w, f32::INFINITY);
-                    for (v, &f) in cell.iter_mut().zip(pbar) {
-                        *v += lit * f;
-                    }
+                    add(cell, jv, p, sigma_s, *w, *e, grid.transmittance(p, -*w, f32::INFINITY), &|d| pbar[d]);
                 }
                 for em in &emitters {
                     let to = em.position - p;
@@ -130,11 +149,9 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                         continue;
                     }
                     let r = (em.radius * em.radius + near * near).sqrt();
-                    let lit = sigma_s * intensity * crate::medium::ball_mean_inverse_square(dist, r) * grid.transmittance(p, towards, dist);
+                    let arriving = intensity * crate::medium::ball_mean_inverse_square(dist, r);
                     let bin = dirs.bin_of(-towards);
-                    for (d, v) in cell.iter_mut().enumerate() {
-                        *v += lit * table.storage_mean_from_bin(dirs, d, bin);
-                    }
+                    add(cell, jv, p, sigma_s, -towards, arriving, grid.transmittance(p, towards, dist), &|d| table.storage_mean_from_bin(dirs, d, bin));
                 }
             }
         }

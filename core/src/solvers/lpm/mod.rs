@@ -16,7 +16,10 @@
 //!
 //! Departures from the paper, each where it is made: T is the exact segment mean
 //! (propagate.rs); J from the fine bins (collect.rs); exact first order for distant and local
-//! lights (lights.rs); the phase table normalised (phase_table.rs).
+//! lights (lights.rs); the phase table normalised (phase_table.rs); the delta-M split of the
+//! phase function's forward peak (delta_m.rs, setting `delta_m`, on): the propagated light
+//! runs through sigma_t (1 - albedo g^2) and scatters into U by the residual lobe g / (1 + g);
+//! S's single scattering and the phase towards the viewer stay true.
 //!
 //! The sweeps run through a `stream::SweepBackend`: the CPU's here, the GPU's kernels in
 //! volscatter-gpu (its lpm module). With `out_of_core` the per-cell arrays live in scratch
@@ -24,6 +27,7 @@
 //! `memory_budget`, not only the sweeps.
 
 mod collect;
+pub mod delta_m;
 pub mod directions;
 pub mod grid;
 pub mod lights;
@@ -146,10 +150,12 @@ impl Lpm {
         let h = (hi - lo).max_element() / s.grid_resolution as f32;
         let cell_fp = h / medium.voxel_size_world().max_element();
         let mip = timings.time("lpm mip", || MediumMip::new(medium, cell_fp.min(footprint(medium, &out_probe))));
-        let grid = timings.time("lpm grid", || LpmGrid::new(medium, s.grid_resolution, &mip))?;
+        let mut grid = timings.time("lpm grid", || LpmGrid::new(medium, s.grid_resolution, &mip))?;
         report.grid_dims = grid.dims;
         let dirs = Directions::new(s.lattice_side() as usize, s.storage_per_face as usize);
         let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
+        let delta = delta_m::DeltaM::new(s.delta_m, medium.g, medium.albedo);
+        let scaled_table = if delta.active() { Some(timings.time("lpm phase table", || delta.table(&dirs, &table))?) } else { None };
         let m = table.m;
         let cells = grid.len() as u64;
         let mut u_prev = stream::filled("lpm U (cells x storage directions)", cells * m as u64, progress)?;
@@ -162,24 +168,60 @@ impl Lpm {
             None => stream::plan(grid.dims, &dirs, s.memory_budget)?,
         };
         let layers = report.layers;
-        let setup = stream::SweepSetup { grid: &grid, dirs: &dirs, table: &table, layers: &layers, camera: scene.camera.position, albedo: medium.albedo };
-        let mut sweeper = backend.start(setup, progress)?;
+        let camera = scene.camera.position;
         let zero_boundary = vec![Vec3::ZERO; dirs.len()];
 
-        // First order: the first propagation (dome, emission, sun as boundary) and the exact
-        // first scattering of the other lights.
+        // First order, split by delta-M (delta_m.rs): the first propagation (dome, emission,
+        // sun as boundary) and the exact first scattering of the other lights. Under the split
+        // the unscattered light goes through sigma_t' (on the sweeper of the later orders,
+        // below), and J gets what it scatters towards the viewer less what the same sweep
+        // through the true medium gives (the compositor's single scattering): the light the
+        // peak scattered on.
         let boundary = lights::boundary(scene, &dirs, s.first_order);
+        let first_propagation = lights::first_propagation_needed(&boundary, scene);
+        let mut kept = None;
+        let mut j_true = None;
         timings.time("lpm first order", || -> Result<()> {
-            if lights::first_propagation_needed(&boundary, scene) {
+            if first_propagation {
+                let setup = stream::SweepSetup { grid: &grid, dirs: &dirs, table: &table, layers: &layers, camera, albedo: medium.albedo };
+                let mut sweeper = backend.start(setup, progress)?;
                 lights::emission_source(scene, &grid, m, &mut u_prev);
-                sweeper.sweep(&u_prev, &boundary, &mut u_cur, None, &mut report.sweep, progress)?;
+                if delta.active() {
+                    let mut jt = stream::filled("lpm J", cells, progress)?;
+                    sweeper.sweep(&u_prev, &boundary, &mut u_cur, Some(&mut jt), &mut report.sweep, progress)?;
+                    u_cur.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                    j_true = Some(jt);
+                } else {
+                    sweeper.sweep(&u_prev, &boundary, &mut u_cur, None, &mut report.sweep, progress)?;
+                    kept = Some(sweeper);
+                }
             }
-            lights::add_first_order(scene, &grid, &dirs, &table, s.first_order, &mut u_cur, progress);
+            lights::add_first_order(scene, &grid, &dirs, scaled_table.as_ref().unwrap_or(&table), &delta, s.first_order, &mut u_cur, &mut j, progress);
             if progress.cancelled() {
                 return Err(Error::Cancelled);
             }
             Ok(())
         })?;
+        // The later orders' sweeper: through sigma_t' with the residual lobe under delta-M
+        // (the true medium's sweeper given back first), else the first propagation's.
+        // (Not `if let`/`match` on `kept`: the borrow checker would keep its borrow of the grid
+        // alive in the branch that scales the grid; dropping it there ends the borrow.)
+        let reuse = kept.is_some();
+        let mut sweeper = if reuse {
+            kept.expect("checked above")
+        } else {
+            drop(kept);
+            delta.scale_extinction(&mut grid.sigma_t);
+            let table = scaled_table.as_ref().unwrap_or(&table);
+            backend.start(stream::SweepSetup { grid: &grid, dirs: &dirs, table, layers: &layers, camera, albedo: delta.albedo }, progress)?
+        };
+        if let Some(jt) = j_true {
+            timings.time("lpm first order", || sweeper.sweep(&u_prev, &boundary, &mut u_cur, Some(&mut j), &mut report.sweep, progress))?;
+            // Non-negative up to rounding (sigma_t' <= sigma_t along every ray).
+            for (a, b) in j.iter_mut().zip(&jt) {
+                *a = (*a - *b).max(Vec3::ZERO);
+            }
+        }
         std::mem::swap(&mut u_prev, &mut u_cur);
         let first_max = max_abs(&u_prev);
         report.max_u.push(first_max);

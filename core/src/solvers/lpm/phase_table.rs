@@ -7,6 +7,10 @@
 //! error (measured in tests.rs).
 //!
 //! `storage[d][i]`: the same mean over a storage bin d (what collect.rs adds to U_d).
+//!
+//! `view`: the rows J towards the camera is read from (collect.rs): `fine` itself, or, under
+//! the delta-M split (delta_m.rs), the true phase's table while `fine` and `storage` hold the
+//! residual lobe's.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -25,6 +29,8 @@ pub struct PhaseTable {
     /// Row sums of `fine` times |Omega_j| before normalisation (the paper's F rows), for the
     /// tests.
     pub raw_row_solid_angle: Vec<f32>,
+    /// n x n rows towards the viewer when they differ from `fine` (delta-M).
+    pub view: Option<Vec<f32>>,
 }
 
 impl PhaseTable {
@@ -60,7 +66,7 @@ impl PhaseTable {
                 storage[dj.storage * n + i] += w * fine[j * n + i];
             }
         }
-        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw })
+        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw, view: None })
     }
 
     /// Mean over storage bin `d` of p(w_out . w) for light travelling along unit `w` (a
@@ -80,6 +86,22 @@ impl PhaseTable {
     #[inline]
     pub fn storage_mean_from_bin(&self, dirs: &Directions, d: usize, i: usize) -> f32 {
         self.storage[d * self.n + i] / dirs.dirs[i].solid_angle
+    }
+
+    /// The same table with `view` (n x n) as the rows towards the viewer.
+    pub fn with_view(self, view: Vec<f32>) -> Self {
+        debug_assert_eq!(view.len(), self.n * self.n);
+        PhaseTable { view: Some(view), ..self }
+    }
+
+    /// The n x n table J towards the viewer is read from, row = outgoing (view) bin.
+    pub fn view_table(&self) -> &[f32] {
+        self.view.as_deref().unwrap_or(&self.fine)
+    }
+
+    #[inline]
+    pub fn view_row(&self, j: usize) -> &[f32] {
+        &self.view_table()[j * self.n..(j + 1) * self.n]
     }
 
     #[inline]

@@ -18,11 +18,17 @@ pub struct LpmSettings {
     pub directions: u32,
     /// Storage directions per face side: m = 6 x `storage_per_face`^2 bins of U. The paper's
     /// 6 (1 per face) flattens an anisotropic phase function to one value per face. Measured
-    /// against the fixtures (grid 24, 25 directions), image rel. RMSE for s = 1 / 2 / 5: cube
-    /// g 0 0.023 / 0.023; cube g 0.7 0.115 (x1.01) / 0.104 (x1.09); cube g 0.9 0.40 / 0.41 /
-    /// 0.34 (all about x1.35 too bright: the 16-degree propagation bins blur a g 0.9 lobe
-    /// whatever m is); plume 0.250 / 0.248. So g > 0.5 gains little from more storage bins at
-    /// 4x (m 24) the collect's cost, and the default stays the paper's 6. Above
+    /// against the fixtures (grid 24, 25 directions), image rel. RMSE for s = 1 / 2 / 5.
+    /// Without delta-M: cube g 0 0.023 / 0.023; cube g 0.7 0.115 / 0.104; cube g 0.9 0.40 /
+    /// 0.41 / 0.34 (all about x1.35 too bright: the 16-degree propagation bins blur a g 0.9
+    /// lobe whatever m is); plume 0.250 / 0.248. With delta-M (the default, which leaves U the
+    /// residual lobe, g' = g / (1 + g)): cube g 0.7 0.098 / 0.087 / 0.096; cube g 0.9 0.147 /
+    /// 0.157 / 0.150; plume 0.168 / 0.158 / 0.192; plume beside a point light (g 0.6) 0.085 /
+    /// 0.067 / 0.061; dense cloud 0.610 / 0.634 / 0.487; domes uniform 0.095 / 0.095 /
+    /// 0.095, sun 0.164 / 0.162 / 0.173, milk cube 0.124 / 0.167 / 0.111. So g > 0.5 needs no
+    /// more than the paper's 6 once delta-M is in: 24 bins (4x the collect's cost, about 2x
+    /// the solve's time) and 150 (6-15x the solve's time) move the errors both ways by up to
+    /// 0.12 (only the dense cloud gains clearly, 0.61 to 0.49 at 150), and the default stays 6. Above
     /// sqrt(directions) it acts as sqrt(directions) (one storage bin per propagation bin).
     pub storage_per_face: u32,
     /// Stop when the largest U of an order falls below this fraction of the first order's
@@ -35,6 +41,15 @@ pub struct LpmSettings {
     /// POP's exact sweep) or `boundary` (the paper: the sun is radiance E / solid angle in its
     /// direction bin at the boundary). Measured in tests.rs: exact is closer, see there.
     pub first_order: FirstOrder,
+    /// The delta-M split of the phase function's forward peak (delta_m.rs): the light the
+    /// peak (f = g^2) scatters goes on unscattered through sigma_t (1 - albedo f), and U
+    /// scatters with the residual lobe g / (1 + g), which the 16-degree direction bins can
+    /// represent; S's single scattering keeps the true medium, J towards the viewer the true
+    /// phase. Measured (tests.rs, image rel. RMSE, on / off): cube g 0.9 0.147 / 0.403, plume
+    /// 0.168 / 0.250, dense cloud 0.610 / 0.993, point light (g 0.6) 0.085 / 0.164, milk dome
+    /// 0.124 / 0.277, cube g 0.7 0.098 / 0.115 (its grid 0.086 / 0.078), isotropic the same;
+    /// and 3-4x fewer orders to epsilon. Off: the paper's phase table as it is.
+    pub delta_m: bool,
     /// Bytes the propagation's working buffers (the maps carried between slices and the
     /// slice's per-direction ray buffer) may use; the slice thickness is picked from it
     /// (Sec. 4.2). 0: one slice spanning the whole volume. Refused with the size needed when a
@@ -75,6 +90,7 @@ impl Default for LpmSettings {
             epsilon: 1e-3,
             max_orders: 200,
             first_order: FirstOrder::Exact,
+            delta_m: true,
             memory_budget: 0,
             out_of_core: false,
             output_resolution: 64,
