@@ -35,6 +35,7 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::collect::{collect, Targets};
+use super::delta_m::DeltaM;
 use super::directions::{Directions, FACES};
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
@@ -204,6 +205,40 @@ impl Sweeps<'_> {
     }
 }
 
+/// sigma_t' = sigma_t (1 - albedo f) in the store, a z-plane at a time (as
+/// `DeltaM::scale_extinction` does to a whole grid in memory).
+fn scale_extinction(sigma_t: &SlabStore, dims: [usize; 3], delta: &DeltaM, progress: &dyn Progress) -> Result<()> {
+    let mut v = Vec::new();
+    for z in 0..dims[2] {
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
+        sigma_t.read_box([0, 0, z], [dims[0], dims[1], z + 1], &mut v)?;
+        delta.scale_extinction(&mut v);
+        sigma_t.write_box([0, 0, z], [dims[0], dims[1], z + 1], &v)?;
+    }
+    Ok(())
+}
+
+/// j = max(j - j_true, 0) a z-plane at a time: the light the forward peak scattered on (the
+/// true medium's share is the compositor's exact single scattering). Non-negative up to
+/// rounding, as in memory.
+fn subtract_clamped(j: &SlabStore, j_true: &SlabStore, dims: [usize; 3], progress: &dyn Progress) -> Result<()> {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for z in 0..dims[2] {
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
+        j.read_box([0, 0, z], [dims[0], dims[1], z + 1], &mut a)?;
+        j_true.read_box([0, 0, z], [dims[0], dims[1], z + 1], &mut b)?;
+        for (x, y) in a.iter_mut().zip(&b) {
+            *x = (*x - *y).max(Vec3::ZERO);
+        }
+        j.write_box([0, 0, z], [dims[0], dims[1], z + 1], &a)?;
+    }
+    Ok(())
+}
+
 /// Builds the stores z-slab by z-slab: sigma_t and density, and the emission into U of the
 /// first propagation (every storage bin, as `lights::emission_source`).
 fn build(scene: &Scene, mip: &MediumMip, geometry: ([usize; 3], Vec3, f32), thickness: usize, m: usize, stores: &Stores, progress: &dyn Progress) -> Result<()> {
@@ -266,11 +301,32 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
     report.cell_bytes = stores.disk_bytes();
     let thickness = report.layers.iter().copied().min().unwrap_or(1).max(1);
     timings.time("lpm grid (out of core)", || build(scene, &mip, geometry, thickness, m, &stores, progress))?;
-    let sweeps = Sweeps { geometry, dirs: &dirs, table: &table, layers: report.layers, camera: scene.camera.position, albedo: medium.albedo };
+    // The delta-M split as in memory (mod.rs): the first propagation runs through the true
+    // medium and then through sigma_t' with the residual lobe, J keeping their difference;
+    // the later orders run through sigma_t' alone.
+    let delta = DeltaM::new(s.delta_m, medium.g, medium.albedo);
+    let scaled_table = if delta.active() { Some(timings.time("lpm phase table", || delta.table(&dirs, &table))?) } else { None };
+    let truth = Sweeps { geometry, dirs: &dirs, table: &table, layers: report.layers, camera: scene.camera.position, albedo: medium.albedo };
+    let sweeps = Sweeps { table: scaled_table.as_ref().unwrap_or(&table), albedo: delta.albedo, ..truth };
     let boundary = lights::boundary(scene, &dirs, s.first_order);
     let zero_boundary = vec![Vec3::ZERO; dirs.len()];
     let first_max = if lights::first_propagation_needed(&boundary, scene) {
-        let max = timings.time("lpm first order", || sweeps.sweep(&stores, &boundary, false, &mut report.sweep, progress))?;
+        let max = timings.time("lpm first order", || -> Result<f32> {
+            if !delta.active() {
+                return truth.sweep(&stores, &boundary, false, &mut report.sweep, progress);
+            }
+            // J of the true medium's first propagation, in a scratch store of its own (the
+            // stores' J swapped out for the pass), then subtracted from the scaled one's.
+            let mut j_true = SlabStore::create(scratch, "j_true", dims, 1)?;
+            std::mem::swap(&mut stores.j, &mut j_true);
+            let swept = truth.sweep(&stores, &boundary, true, &mut report.sweep, progress);
+            std::mem::swap(&mut stores.j, &mut j_true);
+            swept?;
+            scale_extinction(&stores.sigma_t, dims, &delta, progress)?;
+            let max = sweeps.sweep(&stores, &boundary, true, &mut report.sweep, progress)?;
+            subtract_clamped(&stores.j, &j_true, dims, progress)?;
+            Ok(max)
+        })?;
         std::mem::swap(&mut stores.u_prev, &mut stores.u_cur);
         max
     } else {
