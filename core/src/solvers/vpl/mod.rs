@@ -40,6 +40,7 @@
 pub mod backend;
 pub mod compensate;
 pub mod gather;
+pub mod march;
 pub mod settings;
 pub mod upsample;
 pub mod walks;

@@ -146,6 +146,7 @@ fn vpl_explore() {
     let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
     let e = errors_against_fixture(&name, &sc, &out.scattering);
     eprintln!("{name} {:?} walks {} gather {}: {e}; {:?}; {} vpls, {} cut, {:.2} s", s.near_field, s.walks, s.gather_resolution, rep.gather, rep.vpls, rep.walks_cut, t.elapsed().as_secs_f64());
+    eprintln!("timings {:?}", out.timings.0);
 }
 
 /// Energy of the walks: around a point light inside a thick homogeneous box (optical radius
@@ -356,8 +357,8 @@ fn vpl_bench() {
 /// seeds 1-8: measured image mean x1.013, the seeds' standard deviation 0.041, so the 8-seed
 /// mean's standard error is 1.4% (the fixture's own noise ~0.5%): the test tells the mean
 /// fit's x1.079 (over 4 standard errors past the bound) from the bound, not a 1% bias. At 2048
-/// walks: x0.985, standard error 1.2%, for twice the time (35 s on a loaded core; 1024 walks
-/// take 12-17 s), so more walks do not buy a much tighter test.
+/// walks: x0.985, standard error 1.2%, for twice the time (1024 walks: 6 s on a loaded core
+/// with the dense march, march.rs), so more walks do not buy a much tighter test.
 /// Not met elsewhere (vpl_explore_seeds, ball, 8 seeds): cube_g07 (1024 walks) linear x1.034,
 /// mean x1.086 (standard error 2.2%); the point light beside the plume (plume_point, g 0.9,
 /// 4096 walks) x0.873 mean, x0.886 linear, x0.890 trilinear, x0.927 at a 24-cell gather,
