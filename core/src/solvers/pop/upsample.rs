@@ -8,7 +8,7 @@
 //! cells half outside hold the bright unshadowed light, and a fine voxel inside the cloud should
 //! take its light from coarse cells of similar density.
 
-use glam::{IVec3, Vec3};
+use glam::{Affine3A, IVec3, Vec3};
 use rayon::prelude::*;
 
 use super::merge::{footprint, Merged};
@@ -18,19 +18,64 @@ use crate::error::Result;
 use crate::medium::Medium;
 use crate::solvers::ScatteringGrid;
 
+/// The joint bilateral filter's neighbourhood of an output point: the coarse points around it
+/// and their weights (spatial Gaussian in coarse cells, range Gaussian on the density guide).
+/// Shared with vpl's weighted linear fit (vpl/upsample.rs), which takes the same weights.
+pub struct Bilateral<'m> {
+    merged: &'m Merged,
+    /// World to the coarse grid's index space.
+    pub to_coarse: Affine3A,
+    dims: IVec3,
+    inv_range: f32,
+    inv_spatial: f32,
+    radius: i32,
+}
+
+impl<'m> Bilateral<'m> {
+    pub fn new(merged: &'m Merged, settings: &PopSettings) -> Self {
+        let coarse = &merged.j;
+        let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
+        Bilateral {
+            merged,
+            to_coarse: coarse.index_to_world.inverse(),
+            dims: IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32),
+            inv_range: 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2)),
+            inv_spatial: 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma),
+            radius: (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32,
+        }
+    }
+
+    /// `f(coarse point's index, q - its position, weight)` for each coarse point around `q`
+    /// (coarse index coordinates) of an output point of density `rho`, in a fixed order.
+    #[inline(always)]
+    pub fn visit(&self, q: Vec3, rho: f32, mut f: impl FnMut(usize, Vec3, f32)) {
+        let (cd, radius) = (self.dims, self.radius);
+        let base = q.floor().as_ivec3();
+        for dz in (1 - radius)..=radius {
+            for dy in (1 - radius)..=radius {
+                for dx in (1 - radius)..=radius {
+                    let c = base + IVec3::new(dx, dy, dz);
+                    if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
+                        continue;
+                    }
+                    let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
+                    let d = q - c.as_vec3();
+                    let dr = rho - self.merged.density[ci];
+                    f(ci, d, (-d.length_squared() * self.inv_spatial - dr * dr * self.inv_range).exp());
+                }
+            }
+        }
+    }
+}
+
 pub fn upsample(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution)?;
     let fp = footprint(medium, &out);
     let [nx, ny, _] = out.dims;
     let frame = out.index_to_world;
     let coarse = &merged.j;
-    let to_coarse = coarse.index_to_world.inverse();
-    let cd = IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32);
     let w2i = medium.world_to_index;
-    let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
-    let inv_range = 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2));
-    let inv_spatial = 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma);
-    let radius = (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32;
+    let filter = Bilateral::new(merged, settings);
     out.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         for j in 0..ny {
             for i in 0..nx {
@@ -39,27 +84,14 @@ pub fn upsample(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &Po
                 if rho <= 0.0 {
                     continue;
                 }
-                let q = to_coarse.transform_point3(x);
+                let q = filter.to_coarse.transform_point3(x);
                 let jv = if settings.upsample {
-                    let base = q.floor().as_ivec3();
                     let mut sum = Vec3::ZERO;
                     let mut wsum = 0.0f32;
-                    for dz in (1 - radius)..=radius {
-                        for dy in (1 - radius)..=radius {
-                            for dx in (1 - radius)..=radius {
-                                let c = base + IVec3::new(dx, dy, dz);
-                                if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
-                                    continue;
-                                }
-                                let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
-                                let ds = (q - c.as_vec3()).length_squared();
-                                let dr = rho - merged.density[ci];
-                                let w = (-ds * inv_spatial - dr * dr * inv_range).exp();
-                                sum += coarse.data[ci] * w;
-                                wsum += w;
-                            }
-                        }
-                    }
+                    filter.visit(q, rho, |ci, _, w| {
+                        sum += coarse.data[ci] * w;
+                        wsum += w;
+                    });
                     if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
                 } else {
                     coarse.sample_index(q)

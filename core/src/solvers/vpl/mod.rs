@@ -17,7 +17,9 @@
 //! - The gather runs on a coarse grid and is upsampled, not per pixel (the project's
 //!   scattering-grid interface).
 //! - Transmittance to VPLs is ray marched (deterministic) at the gather grid's spacing but at
-//!   most half a mean free path of the densest voxel (gather::march_step).
+//!   most half a mean free path of the densest voxel (gather::march_step), on a dense copy of
+//!   the density (march.rs: the march is ~90% of a solve; 2.8x faster than the sparse lookups,
+//!   same values to float rounding).
 //! - `upsample_fit: linear` replaces the bilateral filter's weighted mean by a weighted local
 //!   linear fit (upsample.rs): the mean is J at the weights' centroid, which a medium's
 //!   surface pulls inwards (cube g 0 8 seeds x1.079 bright; the fit x1.013).

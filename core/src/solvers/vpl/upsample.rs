@@ -20,7 +20,7 @@
 //! Runs on the CPU on both backends (the GPU backend hands this variant to it: one pass over
 //! the output grid, a small share of a solve), so the two stay equal.
 
-use glam::{IVec3, Mat3, Vec3};
+use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
@@ -28,6 +28,7 @@ use crate::medium::Medium;
 use crate::solvers::pop::merge::{footprint, Merged};
 use crate::solvers::pop::mip::MediumMip;
 use crate::solvers::pop::settings::PopSettings;
+use crate::solvers::pop::upsample::Bilateral;
 use crate::solvers::{Progress, ScatteringGrid};
 
 /// Ridge added to the weighted covariance of the offsets (coarse cells squared). Measured on
@@ -43,39 +44,23 @@ pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settin
     let [nx, ny, _] = out.dims;
     let frame = out.index_to_world;
     let coarse = &merged.j;
-    let to_coarse = coarse.index_to_world.inverse();
-    let cd = IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32);
     let w2i = medium.world_to_index;
-    let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
-    let inv_range = 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2));
-    let inv_spatial = 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma);
-    let radius = (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32;
+    let filter = Bilateral::new(merged, settings);
     let fit = |q: Vec3, rho: f32| -> Vec3 {
-        let base = q.floor().as_ivec3();
         let (mut w0, mut sd, mut sj) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
-        // Weighted second moments of the offsets, and of offset x J (column c: channel c).
+        // Weighted second moments of the offsets d (coarse point - q), and of d x J (column
+        // c: channel c).
         let (mut sdd, mut sdj) = (Mat3::ZERO, Mat3::ZERO);
-        for dz in (1 - radius)..=radius {
-            for dy in (1 - radius)..=radius {
-                for dx in (1 - radius)..=radius {
-                    let c = base + IVec3::new(dx, dy, dz);
-                    if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
-                        continue;
-                    }
-                    let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
-                    let d = c.as_vec3() - q;
-                    let dr = rho - merged.density[ci];
-                    let w = (-d.length_squared() * inv_spatial - dr * dr * inv_range).exp();
-                    let j = coarse.data[ci];
-                    let wd = w * d;
-                    w0 += w;
-                    sd += wd;
-                    sj += w * j;
-                    sdd += Mat3::from_cols(wd * d.x, wd * d.y, wd * d.z);
-                    sdj += Mat3::from_cols(wd * j.x, wd * j.y, wd * j.z);
-                }
-            }
-        }
+        filter.visit(q, rho, |ci, back, w| {
+            let d = -back;
+            let j = coarse.data[ci];
+            let wd = w * d;
+            w0 += w;
+            sd += wd;
+            sj += w * j;
+            sdd += Mat3::from_cols(wd * d.x, wd * d.y, wd * d.z);
+            sdj += Mat3::from_cols(wd * j.x, wd * j.y, wd * j.z);
+        });
         if w0 <= 1e-20 {
             return coarse.sample_index(q);
         }
@@ -97,7 +82,7 @@ pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settin
                 if rho <= 0.0 {
                     continue;
                 }
-                slab[(i + nx * j) as usize] = medium.sigma_s(rho) * fit(to_coarse.transform_point3(x), rho);
+                slab[(i + nx * j) as usize] = medium.sigma_s(rho) * fit(filter.to_coarse.transform_point3(x), rho);
             }
         }
     });
