@@ -152,7 +152,9 @@ def time_to(points: list[tuple[float, float]], target: float, fixed_slope: float
     if pts[0][1] <= target:
         return pts[0][0], "measured (first run)"
     k = fixed_slope if fixed_slope is not None else (slope(pts) if len(pts) >= 2 else float("nan"))
-    if not (k < -0.1):
+    # Flatter than -0.3 (noise alone falls at -0.5): a bias or a heavy tail rules the error,
+    # and extrapolating along it would be a guess.
+    if not (k <= -0.3):
         return None, f"not reached (error against time slope {k:+.2f}: a plateau)"
     t_last, e_last = pts[-1]
     return t_last * (target / e_last) ** (1.0 / k), f"extrapolated (slope {k:+.2f})"
@@ -163,8 +165,9 @@ def target_table(rows: list[dict]) -> list[str]:
     lines = [f"### Time to {TARGET:.0%} image rel. RMSE (issue 16's aim: vpl at 30x or more below the reference)", "",
              "Times of the runs above (2 CPU cores, shared); each time to the target is interpolated log-log between the",
              "runs that bracket it, else extrapolated from the largest run: the path tracer along error ~ time^-0.5, vpl",
-             "along its own fitted slope of error against time (none where that slope is flat: a bias or the fixture's noise).",
-             "Ratio = reference's time / vpl's; the aim is 30x or more.", "",
+             "along its own fitted slope of error against time (none where that slope is flatter than -0.3: a bias or a heavy",
+             "tail rules the error there, not the noise). Ratio = reference's time / vpl's fastest; the aim is 30x or more.",
+             "The fixture images are 256-576 pixels, which favours the path tracer (see above).", "",
              "| scene | reference (s) | vpl clamp (s) | vpl ball (s) | vpl compensate (s) | best ratio |", "|---|---|---|---|---|---|"]
     for case in dict.fromkeys(r["case"] for r in rows):
         rs = [r for r in rows if r["case"] == case]
@@ -176,7 +179,7 @@ def target_table(rows: list[dict]) -> list[str]:
             if t is not None and ref is not None:
                 best = max(best or 0.0, ref / t)
         ref_cell = f"{ref:.3g} ({how})" if ref is not None else how
-        ratio = f"{best:.3g}x" if best is not None else "-"
+        ratio = (f"{best:.2g}x" + (f" ({1 / best:.0f}x slower)" if best < 1 else "")) if best is not None else "not reached"
         lines.append(f"| `{case}` | {ref_cell} | " + " | ".join(cells) + f" | {ratio} |")
     return lines + [""]
 
