@@ -8,7 +8,7 @@
 //! cells half outside hold the bright unshadowed light, and a fine voxel inside the cloud should
 //! take its light from coarse cells of similar density.
 
-use glam::{IVec3, Vec3};
+use glam::{Affine3A, IVec3, Vec3};
 use rayon::prelude::*;
 
 use super::merge::{footprint, Merged};
@@ -17,6 +17,63 @@ use super::settings::PopSettings;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::solvers::ScatteringGrid;
+
+/// The joint bilateral filter's neighbourhood of an output point: the coarse points around it
+/// and their weights (spatial Gaussian in coarse cells, range Gaussian on the density guide).
+/// Shared with vpl's weighted linear fit (vpl/upsample.rs), which takes the same weights, and
+/// read through a `CoarseWindow` by lpm's out-of-core output (a few coarse planes at a time).
+pub struct Bilateral<'m> {
+    /// The guide of the coarse points the filter reads (the window's planes).
+    density: &'m [f32],
+    /// World to the whole coarse grid's index space.
+    pub to_coarse: Affine3A,
+    /// The window's dims (the whole grid's but for z).
+    dims: IVec3,
+    inv_range: f32,
+    inv_spatial: f32,
+    radius: i32,
+}
+
+impl<'m> Bilateral<'m> {
+    pub fn new(merged: &'m Merged, settings: &PopSettings) -> Self {
+        let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
+        Self::over(&merged.j, &merged.density, merged.j.index_to_world.inverse(), max_density, settings)
+    }
+
+    fn over(coarse: &ScatteringGrid, density: &'m [f32], to_coarse: Affine3A, max_density: f32, settings: &PopSettings) -> Self {
+        Bilateral {
+            density,
+            to_coarse,
+            dims: IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32),
+            inv_range: 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2)),
+            inv_spatial: 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma),
+            radius: (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32,
+        }
+    }
+
+    /// `f(coarse point's index, q - its position, weight)` for each coarse point around `q`
+    /// (coarse index coordinates, relative to the window) of an output point of density
+    /// `rho`, in a fixed order.
+    #[inline(always)]
+    pub fn visit(&self, q: Vec3, rho: f32, mut f: impl FnMut(usize, Vec3, f32)) {
+        let (cd, radius) = (self.dims, self.radius);
+        let base = q.floor().as_ivec3();
+        for dz in (1 - radius)..=radius {
+            for dy in (1 - radius)..=radius {
+                for dx in (1 - radius)..=radius {
+                    let c = base + IVec3::new(dx, dy, dz);
+                    if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
+                        continue;
+                    }
+                    let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
+                    let d = q - c.as_vec3();
+                    let dr = rho - self.density[ci];
+                    f(ci, d, (-d.length_squared() * self.inv_spatial - dr * dr * self.inv_range).exp());
+                }
+            }
+        }
+    }
+}
 
 pub fn upsample(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution)?;
@@ -47,13 +104,8 @@ pub struct CoarseWindow<'a> {
 pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, settings: &PopSettings, out: ([u32; 3], glam::Affine3A, f32), k: usize, slab: &mut [Vec3]) {
     let ([nx, ny, _], frame, fp) = out;
     let coarse = win.j;
-    let to_coarse = win.to_coarse;
-    let cd = IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32);
+    let filter = Bilateral::over(coarse, win.density, win.to_coarse, win.max_density, settings);
     let w2i = medium.world_to_index;
-    let max_density = win.max_density;
-    let inv_range = 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2));
-    let inv_spatial = 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma);
-    let radius = (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32;
     for j in 0..ny {
         for i in 0..nx {
             let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
@@ -61,27 +113,14 @@ pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, sett
             if rho <= 0.0 {
                 continue;
             }
-            let q = to_coarse.transform_point3(x) - Vec3::new(0.0, 0.0, win.z0 as f32);
+            let q = filter.to_coarse.transform_point3(x) - Vec3::new(0.0, 0.0, win.z0 as f32);
             let jv = if settings.upsample {
-                let base = q.floor().as_ivec3();
                 let mut sum = Vec3::ZERO;
                 let mut wsum = 0.0f32;
-                for dz in (1 - radius)..=radius {
-                    for dy in (1 - radius)..=radius {
-                        for dx in (1 - radius)..=radius {
-                            let c = base + IVec3::new(dx, dy, dz);
-                            if c.cmplt(IVec3::ZERO).any() || c.cmpge(cd).any() {
-                                continue;
-                            }
-                            let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
-                            let ds = (q - c.as_vec3()).length_squared();
-                            let dr = rho - win.density[ci];
-                            let w = (-ds * inv_spatial - dr * dr * inv_range).exp();
-                            sum += coarse.data[ci] * w;
-                            wsum += w;
-                        }
-                    }
-                }
+                filter.visit(q, rho, |ci, _, w| {
+                    sum += coarse.data[ci] * w;
+                    wsum += w;
+                });
                 if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
             } else {
                 coarse.sample_index(q)

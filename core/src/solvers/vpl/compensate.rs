@@ -33,8 +33,10 @@
 //! the paper's local-visibility approximation is not needed.
 
 use glam::Vec3;
+use std::sync::Arc;
 
 use super::gather::{connect, subset_lists, GatherStats, Kernel};
+use super::march::Marcher;
 use super::settings::VplSettings;
 use super::walks::{Vpl, Walks};
 use crate::compositor::DirectLight;
@@ -63,10 +65,13 @@ pub struct Compensation<'a> {
     phase: HenyeyGreenstein,
     vertices: u32,
     depth: u32,
+    /// The connections' transmittance march (shared with the gather plan).
+    march: Arc<Marcher<'a>>,
 }
 
 impl<'a> Compensation<'a> {
-    pub fn new(scene: &'a Scene, mip: &'a MediumMip, footprint: f32, walks: &Walks, s: &VplSettings, radius: f32, step: f32) -> Self {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(scene: &'a Scene, mip: &'a MediumMip, footprint: f32, walks: &Walks, s: &VplSettings, radius: f32, step: f32, march: Arc<Marcher<'a>>) -> Self {
         let medium = &scene.medium;
         let subsets = (walks.count() as u32 / s.compensation_walks.max(1)).clamp(1, walks.count().max(1) as u32);
         let short_step = 0.5 * medium.voxel_size_world().min_element();
@@ -82,6 +87,7 @@ impl<'a> Compensation<'a> {
             phase: HenyeyGreenstein::new(medium.g),
             vertices: s.compensation_vertices,
             depth: s.compensation_depth,
+            march,
         }
     }
 
@@ -93,7 +99,7 @@ impl<'a> Compensation<'a> {
             .iter()
             .map(|v| {
                 let (kernel, ball) = self.kernel(v);
-                connect(self.medium, &self.lists[v.list as usize], v.position, v.view, kernel, ball, self.step, stats).0
+                connect(&self.march, &self.lists[v.list as usize], v.position, v.view, kernel, ball, self.step, stats).0
             })
             .collect();
         self.combine(&nodes, &light)

@@ -15,13 +15,15 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 use super::compensate::Compensation;
 use super::settings::{NearField, VplSettings};
 use super::walks::{Vpl, Walks};
 use crate::rng::Rng;
 use crate::scene::Scene;
-use crate::medium::{ball_mean_inverse_square, near_field_radius, optical_depth, Medium};
+use super::march::Marcher;
+use crate::medium::{ball_mean_inverse_square, near_field_radius, Medium};
 use crate::phase::hg;
 use crate::solvers::pop::merge::{footprint, Merged};
 use crate::solvers::pop::mip::MediumMip;
@@ -74,8 +76,8 @@ pub enum Kernel {
 /// lost there against the ball kernel of radius `ball` (zero for `Kernel::Ball`).
 /// Transmittance to each VPL by a deterministic march of `step`.
 #[allow(clippy::too_many_arguments)]
-pub fn connect(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3) {
-    let g = medium.g;
+pub fn connect(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3) {
+    let g = march.medium().g;
     let (mut sum, mut lost) = (Vec3::ZERO, Vec3::ZERO);
     let radius = match kernel {
         Kernel::Clamp(r) | Kernel::Ball(r) => r,
@@ -90,7 +92,7 @@ pub fn connect(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kerne
         let w = to / d.max(1e-12);
         // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
         let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
-        let tr = if d > 1e-6 { (-optical_depth(medium, v.position, w, d, step, 1024)).exp() } else { Vec3::ONE };
+        let tr = if d > 1e-6 { (-march.optical_depth(v.position, w, d, step, 1024)).exp() } else { Vec3::ONE };
         let light = v.power * (p_vpl * p_view) * tr;
         match kernel {
             Kernel::Ball(r) => sum += light * ball_mean_inverse_square(d, r),
@@ -158,6 +160,8 @@ pub struct GatherPlan<'a> {
     seed: u64,
     compensation: Option<Compensation<'a>>,
     cell_volume: f64,
+    /// The connections' transmittance march (march.rs), shared with the compensation.
+    march: Arc<Marcher<'a>>,
 }
 
 /// One gather point's connection: where, seen from where, with which kernel, to which subset.
@@ -188,7 +192,8 @@ impl<'a> GatherPlan<'a> {
         let subsets = s.subsets();
         let r = s.clamp_radius * near_field_radius(&grid.index_to_world);
         let step = march_step(medium, &grid.index_to_world);
-        let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step));
+        let march = Arc::new(Marcher::new(medium));
+        let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step, march.clone()));
         let cell_volume = glam::Mat3::from(grid.index_to_world.matrix3).determinant().abs() as f64;
         Ok(GatherPlan {
             medium,
@@ -205,6 +210,7 @@ impl<'a> GatherPlan<'a> {
             seed: s.seed,
             compensation,
             cell_volume,
+            march,
         })
     }
 
@@ -238,6 +244,11 @@ impl<'a> GatherPlan<'a> {
         self.medium
     }
 
+    /// The connections' transmittance march.
+    pub fn march(&self) -> &Marcher<'a> {
+        &self.march
+    }
+
     /// The compensation of `near_field: compensate`, if on.
     pub fn compensation(&self) -> Option<&Compensation<'a>> {
         self.compensation.as_ref()
@@ -267,7 +278,6 @@ impl<'a> GatherPlan<'a> {
 /// Ends with `Error::Cancelled` within a row of gather points once `progress` is cancelled.
 pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
     let plan = GatherPlan::new(scene, mip, walks, s)?;
-    let medium = &scene.medium;
     let [nx, ny, nz] = plan.grid.dims;
     let rows: Vec<(Vec<Vec3>, Vec<f32>, GatherStats)> = (0..nz)
         .into_par_iter()
@@ -285,7 +295,7 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
                     let (rho, point) = plan.point(i, jj, k);
                     dens[idx] = rho;
                     let Some(p) = point else { continue };
-                    let (sum, lost) = connect(medium, &plan.lists[p.subset as usize], p.position, p.view, p.kernel, p.ball, plan.step, &mut stats);
+                    let (sum, lost) = connect(plan.march(), &plan.lists[p.subset as usize], p.position, p.view, p.kernel, p.ball, plan.step, &mut stats);
                     jv[idx] = plan.finish(&p, sum, lost, &mut stats);
                 }
             }

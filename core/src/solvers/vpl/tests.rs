@@ -146,6 +146,7 @@ fn vpl_explore() {
     let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
     let e = errors_against_fixture(&name, &sc, &out.scattering);
     eprintln!("{name} {:?} walks {} gather {}: {e}; {:?}; {} vpls, {} cut, {:.2} s", s.near_field, s.walks, s.gather_resolution, rep.gather, rep.vpls, rep.walks_cut, t.elapsed().as_secs_f64());
+    eprintln!("timings {:?}", out.timings.0);
 }
 
 /// Energy of the walks: around a point light inside a thick homogeneous box (optical radius
@@ -350,9 +351,40 @@ fn vpl_bench() {
     }
 }
 
+/// Issue 16: the mean of 8 seeds within 2% of the reference's flux, on cube_g0 (sun + dome,
+/// g 0), with `upsample_fit: linear` (the default weighted mean is x1.079 bright there, a bias
+/// of its centroid at the surface: upsample.rs). 1024 walks, 12-cell gather, 24-cell output,
+/// seeds 1-8: measured image mean x1.013, the seeds' standard deviation 0.041, so the 8-seed
+/// mean's standard error is 1.4% (the fixture's own noise ~0.5%): the test tells the mean
+/// fit's x1.079 (over 4 standard errors past the bound) from the bound, not a 1% bias. At 2048
+/// walks: x0.985, standard error 1.2%, for twice the time (1024 walks: 6 s on a loaded core
+/// with the dense march, march.rs), so more walks do not buy a much tighter test.
+/// Not met elsewhere (vpl_explore_seeds, ball, 8 seeds): cube_g07 (1024 walks) linear x1.034,
+/// mean x1.086 (standard error 2.2%); the point light beside the plume (plume_point, g 0.9,
+/// 4096 walks) x0.873 mean, x0.886 linear, x0.890 trilinear, x0.927 at a 24-cell gather,
+/// x0.846 at 48 cells and 2048 walks: no upsampling fixes it, a heavy-tailed g 0.9 estimator
+/// whose 8-seed mean sits below its expectation; the point light inside a g 0 sphere
+/// (fig10_g0, 1024 walks) mean x1.132, linear x0.917 (the light's peak is narrower than a
+/// gather cell: neither estimate of J there is right).
+#[test]
+fn vpl_eight_seeds_flux_within_two_percent() {
+    let name = "cube_g0";
+    let sc = case(name);
+    let ratios: Vec<f64> = (1..=8u64)
+        .map(|seed| {
+            let s = VplSettings { walks: 1024, seed, near_field: NearField::Ball, upsample_fit: super::UpsampleFit::Linear, ..test_settings() };
+            let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
+            errors_against_fixture(name, &sc, &out.scattering).image_ratio
+        })
+        .collect();
+    let mean = ratios.iter().sum::<f64>() / 8.0;
+    eprintln!("{name}: image mean ratio over 8 seeds x{mean:.4} ({ratios:.3?})");
+    assert!((mean - 1.0).abs() < 0.02, "{name}: 8-seed image mean x{mean:.4}");
+}
+
 /// Exploration (not in CI): the image flux of several seeds against a fixture (VPL_CASE,
 /// VPL_WALKS, VPL_SEEDS, VPL_GATHER, VPL_OUT, VPL_UPSAMPLE=0 for trilinear, VPL_NEAR=clamp|ball,
-/// default compensate).
+/// default compensate, VPL_FIT=linear for `upsample_fit: linear`).
 /// Measured on cube_g0 (image mean ratio, mean over seeds 1-8 unless said): 1024 walks,
 /// 12-cell gather: compensate x1.111 (x1.054-x1.171), ball x1.079 (x1.026-x1.136): every seed
 /// bright, a bias, so issue 16's "8 seeds within 2%" is not met at the tests' settings. The
@@ -369,6 +401,17 @@ fn vpl_bench() {
 /// at the point with the output grid's footprint: image x1.025 (every seed's image error
 /// lower: 0.136/0.139/0.102/0.091 -> 0.121/0.124/0.094/0.087), but the dense cloud's image
 /// error rose over its ratchet (0.867 against 0.816; its flux x0.691 -> x0.743).
+/// Measured next (same walks, seeds 1-8, image ratio): bilateral mean x1.079; fine guide read
+/// with the gather's footprint on both sides x1.049; trilinear x0.999 (seeds 1-4 x0.970: the
+/// earlier x0.971 was those seeds' noise), but trilinear breaks the plume's ratchet (image
+/// 0.78) and the cloud's (1.42); the bilateral renormalised per coarse cell to trilinear's
+/// mass x1.002, also over the plume's and cloud's ratchets (0.56, 1.34); the weighted local
+/// linear fit (`upsample_fit: linear`) x1.013 with every seed's image error lower
+/// (0.112/0.116/0.087/0.097/0.089/0.142/0.111/0.099 against 0.136/0.139/0.102/0.091/0.103/
+/// 0.196/0.142/0.141), every ratchet kept but the cloud's (ball 0.866 / 0.919 against 0.816 /
+/// 0.888, compensate 0.758 against 0.694) and plume compensated's (0.383 against 0.352), so it
+/// is a setting, not the default. Its ridge trades the two: 0.1 gives cube x1.028 and cloud
+/// 0.824, 0.3 gives x1.046 and 0.787 (within the ratchet): no value reaches both.
 #[test]
 #[ignore]
 fn vpl_explore_seeds() {
@@ -385,11 +428,15 @@ fn vpl_explore_seeds() {
             _ => NearField::Compensate,
         };
         let upsample = env_u32("VPL_UPSAMPLE", 1) != 0;
-        let s = VplSettings { walks, seed, near_field, upsample, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), ..Default::default() };
+        let upsample_fit = if std::env::var("VPL_FIT").as_deref() == Ok("linear") { super::UpsampleFit::Linear } else { super::UpsampleFit::Mean };
+        let s = VplSettings { walks, seed, near_field, upsample, upsample_fit, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), ..Default::default() };
         let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
         let e = errors_against_fixture(&name, &sc, &out.scattering);
         eprintln!("{name} seed {seed}: {e} ({:.2} s)", t.elapsed().as_secs_f64());
         ratios.push(e.image_ratio);
     }
-    eprintln!("mean image ratio {:.4}", ratios.iter().sum::<f64>() / ratios.len() as f64);
+    let n = ratios.len() as f64;
+    let m = ratios.iter().sum::<f64>() / n;
+    let sd = (ratios.iter().map(|r| (r - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+    eprintln!("mean image ratio {m:.4}, seeds' standard deviation {sd:.4}, standard error {:.4}", sd / n.sqrt());
 }
