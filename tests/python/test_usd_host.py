@@ -526,6 +526,15 @@ def test_point_light_position_lights_the_right_side(tmp_path):
     assert right[:, :, h:].sum() > 1.5 * right[:, :, :h].sum()
 
 
+def _sigint_default():
+    """In the child before exec: SIGINT back to its default. A runner started in the background
+    by a shell without job control (`( cmd & )`, as a CI script may be) hands SIG_IGN down, and
+    Python installs its KeyboardInterrupt handler only where SIGINT is not ignored: the Ctrl-C
+    tests would then test how the runner was started, not the host (seen once: both failed)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_cancels_the_native_work(tmp_path):
     """SIGINT during a solve: the progress callback stops the library, exit code 130, no crash."""
     import signal
@@ -534,7 +543,7 @@ def test_ctrl_c_cancels_the_native_work(tmp_path):
     p = subprocess.Popen([sys.executable, "-m", "volscatter", "render", str(BLENDER_STAGE), "--width", "320",
                           "--solver", "reference", "--spp", "4096", "--out", str(tmp_path / "c.exr")],
                          stderr=subprocess.PIPE, text=True,
-                         env=env)
+                         env=env, preexec_fn=_sigint_default)
     deadline = time.time() + 60
     seen = ""
     while time.time() < deadline and "%" not in seen:
@@ -604,7 +613,8 @@ def test_ctrl_c_leaves_a_worker_that_never_calls_back(tmp_path):
             "    cli.run_cancellable(stuck, cli.ProgressBar(False))\n"
             "except KeyboardInterrupt:\n"
             "    sys.stderr.write('interrupted\\n'); sys.exit(130)\n")
-    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                         preexec_fn=_sigint_default)
     assert p.stdout.readline().strip() == "working"
     time.sleep(0.5)  # the main thread is then in its wait, not still starting the worker
     start = time.time()
