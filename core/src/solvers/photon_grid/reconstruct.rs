@@ -19,10 +19,10 @@ use rayon::prelude::*;
 use super::cache::Tallies;
 use super::settings::Upsampling;
 use super::upsample::Upsampler;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::medium::Medium;
 use crate::phase::hg;
-use crate::solvers::ScatteringGrid;
+use crate::solvers::{Progress, ScatteringGrid};
 
 /// The view-independent form at a point: fluence (W/m^2, RGB), lobe anisotropy g' and
 /// dominant direction of travel (zero when the light there has no preferred direction).
@@ -85,8 +85,16 @@ pub fn lobe_at(medium: &Medium, tallies: &Tallies, x: Vec3, upsampling: Upsampli
 }
 
 /// S towards `camera` on `ScatteringGrid::over_medium(medium, resolution)`, the lobes of all
-/// `tallies` added, each upsampled by `upsampling`.
-pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, resolution: u32, upsampling: Upsampling) -> Result<ScatteringGrid> {
+/// `tallies` added, each upsampled by `upsampling`. Reads the cancel flag per plane: the
+/// physical upsampling visits 27 cells a point, seconds at a large output resolution.
+pub fn scattering_towards(
+    medium: &Medium,
+    tallies: &[Tallies],
+    camera: Vec3,
+    resolution: u32,
+    upsampling: Upsampling,
+    progress: &dyn Progress,
+) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, resolution)?;
     let [nx, ny, _] = out.dims;
     let frame = out.index_to_world;
@@ -95,6 +103,9 @@ pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, re
         Upsampling::Trilinear => Vec::new(),
     };
     out.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
+        if progress.cancelled() {
+            return;
+        }
         for j in 0..ny {
             for i in 0..nx {
                 let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
@@ -115,5 +126,8 @@ pub fn scattering_towards(medium: &Medium, tallies: &[Tallies], camera: Vec3, re
             }
         }
     });
+    if progress.cancelled() {
+        return Err(Error::Cancelled);
+    }
     Ok(out)
 }
