@@ -102,9 +102,31 @@ pub struct CoarseWindow<'a> {
 /// values whatever window holds the coarse planes it reads (a shift by the integer z0 is
 /// exact in f32).
 pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, settings: &PopSettings, out: ([u32; 3], glam::Affine3A, f32), k: usize, slab: &mut [Vec3]) {
-    let ([nx, ny, _], frame, fp) = out;
     let coarse = win.j;
     let filter = Bilateral::over(coarse, win.density, win.to_coarse, win.max_density, settings);
+    let shift = Vec3::new(0.0, 0.0, win.z0 as f32);
+    fill_plane(medium, mip, out, k, slab, |x, rho| {
+        let q = filter.to_coarse.transform_point3(x) - shift;
+        if !settings.upsample {
+            return coarse.sample_index(q);
+        }
+        let mut sum = Vec3::ZERO;
+        let mut wsum = 0.0f32;
+        filter.visit(q, rho, |ci, _, w| {
+            sum += coarse.data[ci] * w;
+            wsum += w;
+        });
+        if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
+    });
+}
+
+/// Output plane `k` (grid dims, index-to-world, footprint) into `slab`: at each point x where
+/// the medium's density (the mip at the output's footprint) rho is positive,
+/// S = sigma_s(rho) J(x, rho), J from `estimate`; elsewhere `slab` is left as it is. The one
+/// loop behind pop's upsampling and vpl's linear fit (vpl/upsample.rs): only J's estimate
+/// differs between them.
+pub fn fill_plane(medium: &Medium, mip: &MediumMip, out: ([u32; 3], glam::Affine3A, f32), k: usize, slab: &mut [Vec3], estimate: impl Fn(Vec3, f32) -> Vec3) {
+    let ([nx, ny, _], frame, fp) = out;
     let w2i = medium.world_to_index;
     for j in 0..ny {
         for i in 0..nx {
@@ -113,19 +135,7 @@ pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, sett
             if rho <= 0.0 {
                 continue;
             }
-            let q = filter.to_coarse.transform_point3(x) - Vec3::new(0.0, 0.0, win.z0 as f32);
-            let jv = if settings.upsample {
-                let mut sum = Vec3::ZERO;
-                let mut wsum = 0.0f32;
-                filter.visit(q, rho, |ci, _, w| {
-                    sum += coarse.data[ci] * w;
-                    wsum += w;
-                });
-                if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
-            } else {
-                coarse.sample_index(q)
-            };
-            slab[(i + nx * j) as usize] = medium.sigma_s(rho) * jv;
+            slab[(i + nx * j) as usize] = medium.sigma_s(rho) * estimate(x, rho);
         }
     }
 }

@@ -28,7 +28,7 @@ use crate::medium::Medium;
 use crate::solvers::pop::merge::{footprint, Merged};
 use crate::solvers::pop::mip::MediumMip;
 use crate::solvers::pop::settings::PopSettings;
-use crate::solvers::pop::upsample::Bilateral;
+use crate::solvers::pop::upsample::{fill_plane, Bilateral};
 use crate::solvers::{Progress, ScatteringGrid};
 
 /// Ridge added to the weighted covariance of the offsets (coarse cells squared). Measured on
@@ -40,11 +40,8 @@ const RIDGE: f32 = 0.02;
 /// `Error::Cancelled` within a slab of output points once `progress` is cancelled.
 pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution)?;
-    let fp = footprint(medium, &out);
     let [nx, ny, _] = out.dims;
-    let frame = out.index_to_world;
     let coarse = &merged.j;
-    let w2i = medium.world_to_index;
     let filter = Bilateral::new(merged, settings);
     let fit = |q: Vec3, rho: f32| -> Vec3 {
         let (mut w0, mut sd, mut sj) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
@@ -71,20 +68,12 @@ pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settin
         let grad = cov.inverse() * cross;
         (mean - Vec3::new(grad.x_axis.dot(m), grad.y_axis.dot(m), grad.z_axis.dot(m))).max(Vec3::ZERO)
     };
+    let grid = (out.dims, out.index_to_world, footprint(medium, &out));
     out.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
         if progress.cancelled() {
             return;
         }
-        for j in 0..ny {
-            for i in 0..nx {
-                let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
-                let rho = mip.sample(medium, w2i.transform_point3(x), fp);
-                if rho <= 0.0 {
-                    continue;
-                }
-                slab[(i + nx * j) as usize] = medium.sigma_s(rho) * fit(filter.to_coarse.transform_point3(x), rho);
-            }
-        }
+        fill_plane(medium, mip, grid, k, slab, |x, rho| fit(filter.to_coarse.transform_point3(x), rho));
     });
     if progress.cancelled() {
         return Err(Error::Cancelled);
