@@ -134,7 +134,7 @@ impl PhotonGrid {
         let medium = &scene.medium;
         let tallies = timings.time("cache", || ring.total().each_ref().map(|t| cache::Tallies::from_fixed(medium, ring.cache(), t)));
         let res = self.settings.output_resolution;
-        let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(medium, &tallies, scene.camera.position, res, self.settings.upsampling, progress))?;
+        let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &self.settings, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
             let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;
