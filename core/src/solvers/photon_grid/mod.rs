@@ -10,8 +10,9 @@
 //! The temporal ring of partial caches (ring.rs) keeps m generations of photons in a session,
 //! summed in fixed point (fixed.rs); a one-off solve traces all m.
 //!
-//! Tracing goes through a `PhotonBackend` (backend.rs): the CPU's trace.rs, or the GPU's
-//! kernel in volscatter-gpu; the modules it needs (cache, fixed, ring, trace) are public for it.
+//! Tracing, the reconstruction and exact single scattering go through a `PhotonBackend`
+//! (backend.rs): the CPU's code, or the GPU's kernels in volscatter-gpu; the modules they need
+//! (cache, fixed, ring, trace, upsample) are public for it.
 //!
 //! Upsampling (reconstruct.rs): mass-weighted trilinear by default, the paper's physically
 //! based filter (Sec. 4.3, upsample.rs) by the `upsampling` setting; settings.rs has the
