@@ -10,9 +10,10 @@ Runs the ignored tests of core/src/solvers/photon_grid/bench.rs (they time, neve
 need the crate's fixtures and internals) and reads their `BENCH_JSON` lines. Wall-clock on
 whatever cores the machine lends (shared: pessimistic).
 
-`--gpu` instead runs shaders/src/photon_grid/bench.rs (the tracing stage on the CPU and the GPU
-backend, paper Fig. 12's settings) and writes the "photon-grid-gpu" section with the adapter's
-name and absolute times: on a machine with a GPU, rerun it as is. `--quick`: the first setting only.
+`--gpu` instead runs shaders/src/photon_grid/bench.rs (the tracing and reconstruction stages on
+the CPU and the GPU backend, paper Fig. 12's settings, then the reconstruction alone with each
+upsampling) and writes the "photon-grid-gpu" section with the adapter's name and absolute times:
+on a machine with a GPU, rerun it as is. `--quick`: the first setting only.
 """
 
 from __future__ import annotations
@@ -54,23 +55,36 @@ def gpu_main(quick: bool) -> None:
     device = b["device"]
     label = "lavapipe (software, for correctness only)" if b["software"] else "GPU"
     lines = [
-        "## photon-grid on the GPU (tracing kernel, issue 17; `scripts/bench_photon_grid.py --gpu`)",
+        "## photon-grid on the GPU (tracing and reconstruction kernels, issue 17; `scripts/bench_photon_grid.py --gpu`)",
         "",
         f"{datetime.date.today().isoformat()}, {platform.machine()}, {os.cpu_count()} CPU cores shared with other jobs;"
         f" adapter: {device}. GPU column: {label}." + (" Quick run (first setting only)." if quick else ""),
         "",
         "Paper Fig. 12's settings on the 48 x 62 x 90 cumulus (sigma_t 25, albedo 0.99, g 0.9). `trace`: the photon"
         " tracing stage alone (on the GPU: drawing rays on the CPU, uploading them, the kernel, reading the cache back);"
-        " `solve`: the whole one-off solve (on the GPU the exact single scattering too, by the compositor's kernel; the"
-        " majorant grid, the cells' mass and the reconstruction stay on the CPU in both columns). A session frame traces photons / m (m = 100): its row is a"
+        " `reconstruct`: S at the output resolution (64) from the cache, trilinear (on the GPU: uploading the tallies and"
+        " the density, the kernel, reading S back); `solve`: the whole one-off solve (on the GPU the exact single"
+        " scattering too, by the compositor's kernel; the majorant grid, the ring and the cells' mass stay on the CPU in"
+        " both columns). A session frame traces photons / m (m = 100): its row is a"
         " one-off solve of that many photons. The paper's GPU frame times: 4.8 / 9.1 / 33.4 ms.",
         "",
-        f"| cache res | photons | run | CPU trace s | CPU solve s | {label} trace s | {label} solve s |",
-        "|---|---|---|---|---|---|---|",
+        f"| cache res | photons | run | CPU trace s | CPU reconstruct s | CPU solve s | {label} trace s | {label} reconstruct s | {label} solve s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in b["rows"]:
-        lines.append(f"| {r['cache_resolution']} | {r['photons']} | {r['run']} | {r['cpu_trace']:.3f} | {r['cpu_total']:.3f} |"
-                     f" {r['gpu_trace']:.3f} | {r['gpu_total']:.3f} |")
+        lines.append(f"| {r['cache_resolution']} | {r['photons']} | {r['run']} | {r['cpu_trace']:.3f} | {r['cpu_reconstruct']:.4f} |"
+                     f" {r['cpu_total']:.3f} | {r['gpu_trace']:.3f} | {r['gpu_reconstruct']:.4f} | {r['gpu_total']:.3f} |")
+    lines += [
+        "",
+        "The reconstruction alone at the cumulus's own resolution (output 90: 48 x 62 x 90 points), cache 18, each"
+        " upsampling (trilinear: 8 cells a point and lobe; physical, the paper's Sec. 4.3: 27); the fastest of 3 solves.",
+        "",
+        f"| upsampling | cache res | output res | CPU reconstruct s | {label} reconstruct s |",
+        "|---|---|---|---|---|",
+    ]
+    for r in b.get("reconstruct", []):
+        lines.append(f"| {r['upsampling']} | {r['cache_resolution']} | {r['output_resolution']} | {r['cpu_reconstruct']:.4f} |"
+                     f" {r['gpu_reconstruct']:.4f} |")
     if b["software"]:
         lines += ["", "lavapipe runs the kernel on the same shared CPU cores: these times say nothing of a GPU's speed."]
     path = write_section("photon-grid-gpu", "\n".join(lines) + "\n")

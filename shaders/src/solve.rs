@@ -52,9 +52,9 @@ fn pop_on_gpu(
     Ok(out)
 }
 
-/// `photon-grid` with its photon tracing and exact single scattering on the GPU (the ring and
-/// the reconstruction on the CPU: photon_grid/mod.rs says why); a session's ring lives in
-/// `state`.
+/// `photon-grid` with its photon tracing, reconstruction and exact single scattering on the
+/// GPU (the rays' drawing, the ring and the cells' mass on the CPU: photon_grid/mod.rs says
+/// why); a session's ring lives in `state`.
 fn photon_grid_on_gpu(
     ctx: &GpuContext,
     scene: &Scene,

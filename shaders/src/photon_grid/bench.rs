@@ -1,8 +1,9 @@
 //! Measurements for `scripts/bench_photon_grid.py --gpu` (an ignored test: it times, never
 //! asserts). Prints one line `BENCH_JSON {...}`: paper Fig. 12's three (cells, photons)
-//! settings on the 48 x 62 x 90 cumulus, the tracing stage on the CPU backend and on the GPU
-//! backend, for a one-off solve (all photons) and for a session frame's share (photons / m,
-//! m = 100), with the adapter's name. `VOLSCATTER_BENCH_QUICK=1`: the first setting only.
+//! settings on the 48 x 62 x 90 cumulus, the tracing and reconstruction stages on the CPU
+//! backend and on the GPU backend, for a one-off solve (all photons) and for a session frame's
+//! share (photons / m, m = 100), then the reconstruction alone at the cumulus's resolution with
+//! each upsampling, with the adapter's name. `VOLSCATTER_BENCH_QUICK=1`: the first setting only.
 
 use glam::{IVec3, Vec3};
 use serde_json::json;
@@ -13,7 +14,7 @@ use crate::test_support::gpu_or_skip;
 use volscatter_core::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::photon_grid::backend::{CpuBackend, PhotonBackend};
-use volscatter_core::solvers::photon_grid::{PhotonGrid, PhotonGridSettings};
+use volscatter_core::solvers::photon_grid::{PhotonGrid, PhotonGridSettings, Upsampling};
 use volscatter_core::solvers::NoProgress;
 use volscatter_core::Scene;
 
@@ -31,12 +32,13 @@ fn paper_cumulus() -> Scene {
     }
 }
 
-/// (trace seconds, whole solve seconds) of a one-off solve.
-fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &dyn PhotonBackend) -> (f64, f64) {
+/// (trace seconds, reconstruction seconds, whole solve seconds) of a one-off solve.
+fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &dyn PhotonBackend) -> (f64, f64, f64) {
     let t = Instant::now();
     let (out, _) = PhotonGrid::new(s.clone()).unwrap().solve_generations_with(scene, 0, &NoProgress, backend).unwrap();
     let total = t.elapsed().as_secs_f64();
-    (out.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum(), total)
+    let stage = |name: &str| out.timings.0.iter().filter(|(k, _)| k == name).map(|(_, v)| *v).sum();
+    (stage("trace"), stage("reconstruct"), total)
 }
 
 #[test]
@@ -53,12 +55,23 @@ fn bench_photon_grid_gpu() {
     for &(res, photons) in settings {
         for (what, n) in [("one-off", photons), ("frame (photons / 100)", photons / 100)] {
             let s = PhotonGridSettings { photons: n, cache_resolution: res, ..Default::default() };
-            let (cpu_trace, cpu_total) = timed(&scene, &s, &CpuBackend);
-            let (gpu_trace, gpu_total) = timed(&scene, &s, &gpu);
+            let (cpu_trace, cpu_reconstruct, cpu_total) = timed(&scene, &s, &CpuBackend);
+            let (gpu_trace, gpu_reconstruct, gpu_total) = timed(&scene, &s, &gpu);
             rows.push(json!({"cache_resolution": res, "photons": n, "run": what, "cpu_trace": cpu_trace, "cpu_total": cpu_total,
-                "gpu_trace": gpu_trace, "gpu_total": gpu_total}));
+                "gpu_trace": gpu_trace, "gpu_total": gpu_total, "cpu_reconstruct": cpu_reconstruct, "gpu_reconstruct": gpu_reconstruct}));
         }
     }
-    let doc = json!({"bench": "gpu", "data": {"device": ctx.describe(), "software": ctx.is_software(), "rows": rows}});
+    // The reconstruction alone at the cumulus's own resolution (90 planes: output 90), both
+    // upsamplings: its cost depends on the output and the cache, not on the photons. The
+    // fastest of 3 solves (a shared machine's other jobs only ever add time).
+    let mut reconstruct = Vec::new();
+    for upsampling in [Upsampling::Trilinear, Upsampling::Physical] {
+        let s = PhotonGridSettings { photons: 102_400, cache_resolution: 18, output_resolution: 90, upsampling, ..Default::default() };
+        let best = |backend: &dyn PhotonBackend| (0..3).map(|_| timed(&scene, &s, backend).1).fold(f64::INFINITY, f64::min);
+        let (cpu, gpu_s) = (best(&CpuBackend), best(&gpu));
+        reconstruct.push(json!({"upsampling": format!("{upsampling:?}").to_lowercase(), "cache_resolution": 18, "output_resolution": 90,
+            "cpu_reconstruct": cpu, "gpu_reconstruct": gpu_s}));
+    }
+    let doc = json!({"bench": "gpu", "data": {"device": ctx.describe(), "software": ctx.is_software(), "rows": rows, "reconstruct": reconstruct}});
     println!("BENCH_JSON {doc}");
 }

@@ -1,9 +1,13 @@
 //! `photon-grid`'s tracing on the GPU (`trace.wgsl`): a `PhotonBackend` whose generations are
 //! traced one invocation per photon, their deposits summed in 64-bit fixed point by integer
 //! atomics (pre-summed per workgroup in a hash table in workgroup memory, then added to the
-//! cache once per slot: trace.wgsl) and read back as the CPU's `FixedTallies`, so that the ring (ring.rs) and the
-//! cache's reconstruction run unchanged on the CPU; exact single scattering runs the
-//! compositor's GPU kernel.
+//! cache once per slot: trace.wgsl) and read back as the CPU's `FixedTallies`, so that the
+//! ring (ring.rs) runs unchanged on the CPU, in integers, and GPU solves agree with themselves
+//! exactly. The reconstruction (S at the output resolution, both upsamplings) runs on the GPU
+//! too (reconstruct.rs), from the ring's sum uploaded once per frame; exact single scattering
+//! runs the compositor's GPU kernel. What stays on the CPU: drawing the photons' rays (below),
+//! the majorant grids, the ring, and each cell's mass (cache.rs `Tallies::from_fixed`: linear
+//! in cells, a few milliseconds at the default cache).
 //!
 //! Photons' rays (origin, direction, power) are drawn on the CPU by the shared `LightSampler`
 //! (in parallel) and uploaded a chunk at a time: every light type (sun, dome with its importance map, point,
@@ -17,8 +21,10 @@
 //! 1 / scale), so that a deposit of at most 2^32 units takes the low word and a cell overflows
 //! only after 2^31 such deposits; the smallest deposits keep 2^-32 of the largest's resolution.
 
+pub mod reconstruct;
+
 use bytemuck::{Pod, Zeroable};
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::mem::size_of;
 
@@ -27,6 +33,8 @@ use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
 use volscatter_core::medium::Medium;
 use volscatter_core::rng::Rng;
 use volscatter_core::solvers::photon_grid::backend::{PhotonBackend, TraceJob};
+use volscatter_core::solvers::photon_grid::cache::Tallies;
+use volscatter_core::solvers::photon_grid::PhotonGridSettings;
 use volscatter_core::solvers::photon_grid::fixed::{fix_units, FixedCell, FixedTallies};
 use volscatter_core::solvers::photon_grid::ring::Generation;
 use volscatter_core::solvers::photon_grid::trace::EnergyReport;
@@ -265,6 +273,12 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
         }
         Ok(crate::composite::single::single_scattering_grid(self.ctx, scene, resolution, dome_directions)?)
     }
+
+    /// reconstruct.wgsl: both upsamplings, equal to the CPU's within f32 rounding
+    /// (reconstruct_tests.rs).
+    fn reconstruct(&self, medium: &Medium, tallies: &[Tallies], camera: Vec3, settings: &PhotonGridSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
+        reconstruct::scattering_towards(self.ctx, medium, tallies, camera, settings, progress)
+    }
 }
 
 #[cfg(test)]
@@ -272,3 +286,6 @@ mod bench;
 #[cfg(test)]
 #[path = "tests.rs"]
 mod tests;
+#[cfg(test)]
+#[path = "reconstruct_tests.rs"]
+mod reconstruct_tests;

@@ -1,16 +1,23 @@
 //! Where `photon-grid` runs its heavy stages: the tracing (every photon's Woodcock tracking
 //! with a deposit at each tentative collision) and exact single scattering go through a
 //! `PhotonBackend`, the CPU code (`CpuBackend`: trace.rs, the compositor) or the GPU port in
-//! volscatter-gpu. The rest (the ring of generations in integers, the cache's mass, the
-//! reconstruction) stays with the solver: it is linear in cells, not photons.
+//! volscatter-gpu, and so does the reconstruction (S at the output resolution from the
+//! cache's tallies, reconstruct.rs), which visits 8 or 27 cells per output voxel and lobe. The
+//! rest (the ring of generations in integers, the cache's mass) stays with the solver: it is
+//! linear in cells.
 
 use rayon::prelude::*;
 
-use super::cache::Cache;
+use glam::Vec3;
+
+use super::cache::{Cache, Tallies};
+use super::reconstruct::scattering_towards;
 use super::ring::{self, Generation};
+use super::settings::PhotonGridSettings;
 use super::trace::Tracer;
 use crate::compositor::single_scattering_grid_cancellable;
 use crate::error::Result;
+use crate::medium::Medium;
 use crate::scene::Scene;
 use crate::solvers::{Progress, ScatteringGrid};
 use crate::translate::LightSampler;
@@ -40,6 +47,14 @@ pub trait PhotonBackend: Sync {
     /// `resolution` with `dome_directions`, on the CPU unless the backend has its own.
     fn single_scattering(&self, scene: &Scene, resolution: u32, dome_directions: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
         single_scattering_grid_cancellable(scene, resolution, dome_directions, progress)
+    }
+
+    /// S towards `camera` from the cache's `tallies` (one per lobe, the ring's sum) on
+    /// `ScatteringGrid::over_medium(medium, settings.output_resolution)`, upsampled by
+    /// `settings.upsampling` (reconstruct.rs `scattering_towards`), on the CPU unless the
+    /// backend has its own. Returns `Cancelled` when `progress` is cancelled.
+    fn reconstruct(&self, medium: &Medium, tallies: &[Tallies], camera: Vec3, settings: &PhotonGridSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
+        scattering_towards(medium, tallies, camera, settings.output_resolution, settings.upsampling, progress)
     }
 }
 

@@ -10,8 +10,9 @@
 //! The temporal ring of partial caches (ring.rs) keeps m generations of photons in a session,
 //! summed in fixed point (fixed.rs); a one-off solve traces all m.
 //!
-//! Tracing goes through a `PhotonBackend` (backend.rs): the CPU's trace.rs, or the GPU's
-//! kernel in volscatter-gpu; the modules it needs (cache, fixed, ring, trace) are public for it.
+//! Tracing, the reconstruction and exact single scattering go through a `PhotonBackend`
+//! (backend.rs): the CPU's code, or the GPU's kernels in volscatter-gpu; the modules they need
+//! (cache, fixed, ring, trace, upsample) are public for it.
 //!
 //! Upsampling (reconstruct.rs): mass-weighted trilinear by default, the paper's physically
 //! based filter (Sec. 4.3, upsample.rs) by the `upsampling` setting; settings.rs has the
@@ -134,7 +135,7 @@ impl PhotonGrid {
         let medium = &scene.medium;
         let tallies = timings.time("cache", || ring.total().each_ref().map(|t| cache::Tallies::from_fixed(medium, ring.cache(), t)));
         let res = self.settings.output_resolution;
-        let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(medium, &tallies, scene.camera.position, res, self.settings.upsampling, progress))?;
+        let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &self.settings, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
             let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;

@@ -88,16 +88,18 @@ pub fn g_delta(g: f32, delta: f32) -> f32 {
 /// The neighbourhood data of one lobe's tallies, measured once per solve.
 pub struct Upsampler<'a> {
     tallies: &'a Tallies,
+    // Public for the GPU's port of `lobe` (volscatter-gpu photon_grid/reconstruct.rs), which
+    // uploads these rather than measuring them again.
     /// Each cell's mean density (mass / volume), over the grid's maximum.
-    cell_density: Vec<f32>,
+    pub cell_density: Vec<f32>,
     /// 1 / the grid's maximum density.
-    density_norm: f32,
+    pub density_norm: f32,
     /// sigma_s per unit density (the channels' mean).
-    sigma_s: f32,
+    pub sigma_s: f32,
     /// The medium's HG g.
-    g: f32,
+    pub g: f32,
     /// r: 1.5 of the shortest cell edge (world units).
-    r: f32,
+    pub r: f32,
 }
 
 impl<'a> Upsampler<'a> {
