@@ -36,7 +36,7 @@ mod temporal_tests;
 mod tests;
 
 pub use reconstruct::Lobe;
-pub use settings::{PhotonGridSettings, Similarity, SingleScattering, Upsampling};
+pub use settings::{Angular, PhotonGridSettings, Similarity, SingleScattering, Upsampling};
 pub use trace::EnergyReport;
 
 use crate::compositor::{dome_directions_for, CompositeOptions};
@@ -88,6 +88,16 @@ impl PhotonGrid {
         PhotonGrid::new(parse_settings(map)?)
     }
 
+    /// Whether deposits are weighted towards the camera (`Angular::Camera`, or the tests'
+    /// oracle, which is the same thing).
+    fn camera_deposits(&self) -> bool {
+        #[cfg(test)]
+        if self.view_oracle {
+            return true;
+        }
+        self.settings.angular == Angular::Camera
+    }
+
     /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns, on
     /// `backend`.
     fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(cache::Cache, Vec<Generation>)> {
@@ -106,8 +116,7 @@ impl PhotonGrid {
             deposit_unscattered: s.single_scattering == SingleScattering::Photons,
             split_order: SPLIT_ORDER,
             progress,
-            #[cfg(test)]
-            view_from: self.view_oracle.then_some(scene.camera.position),
+            view_from: self.camera_deposits().then_some(scene.camera.position),
         };
         let job = TraceJob { tracer: &tracer, sampler: &sampler, empty: &empty };
         let generations = timings.time("trace", || backend.trace_generations(&job, generations))?;
@@ -133,7 +142,7 @@ impl PhotonGrid {
         }
         let medium = &scene.medium;
         let tallies = timings.time("cache", || ring.total().each_ref().map(|t| cache::Tallies::from_fixed(medium, ring.cache(), t)));
-        let res = self.settings.output_resolution;
+        let res = self.settings.output_dim(medium);
         let mut s = timings.time("reconstruct", || reconstruct::scattering_towards(medium, &tallies, scene.camera.position, res, self.settings.upsampling, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
@@ -207,6 +216,9 @@ impl PhotonGrid {
     /// scattered less than `SPLIT_ORDER` times; in `exact` mode without the unscattered light):
     /// the cache as a host could keep it to re-light from any view.
     pub fn lobes(&self, scene: &Scene, points: &[glam::Vec3]) -> Result<Vec<Lobe>> {
+        if self.settings.angular == Angular::Camera {
+            return Err(Error::InvalidArgument("photon-grid: angular = camera keeps S towards the camera, not the view-independent lobes".into()));
+        }
         let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::solvers::NoProgress, &CpuBackend)?;
         let first = cache::Tallies::from_fixed(&scene.medium, ring.cache(), &ring.total()[0]);
         Ok(points.iter().map(|&p| reconstruct::lobe_at(&scene.medium, &first, p, self.settings.upsampling)).collect())

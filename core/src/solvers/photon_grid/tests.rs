@@ -166,10 +166,14 @@ fn lobe_of_direct_sun_points_along_the_beam() {
 
 #[test]
 fn settings_parse_and_reject() {
-    let ok: serde_json::Value = serde_json::json!({"name": "photon-grid", "photons": 1000, "similarity": "sqrt", "single_scattering": "photons"});
+    let ok: serde_json::Value = serde_json::json!({"name": "photon-grid", "photons": 1000, "similarity": "sqrt", "single_scattering": "photons", "angular": "camera"});
     let pg = PhotonGrid::from_settings(ok.as_object().unwrap()).unwrap();
     assert_eq!(pg.settings.similarity, Similarity::Sqrt);
-    for bad in [serde_json::json!({"photon": 10}), serde_json::json!({"similarity": "cubic"}), serde_json::json!({"cutoff": 1.0})] {
+    assert_eq!(pg.settings.angular, Angular::Camera);
+    // Camera deposits are CPU only and keep no view-independent lobes: both said, not ignored.
+    assert!(pg.settings.needs_cpu().is_some() && PhotonGridSettings::default().needs_cpu().is_none());
+    assert!(pg.lobes(&case("cube_g0"), &[Vec3::ZERO]).is_err());
+    for bad in [serde_json::json!({"photon": 10}), serde_json::json!({"similarity": "cubic"}), serde_json::json!({"cutoff": 1.0}), serde_json::json!({"angular": "sphere"})] {
         assert!(PhotonGrid::from_settings(bad.as_object().unwrap()).is_err(), "{bad} accepted");
     }
 }
@@ -213,6 +217,43 @@ fn plume_against_reference() {
 fn dense_cloud_against_reference() {
     let (name, image, grid) = BOUNDS[3];
     check_case(name, image, grid);
+}
+
+/// `angular: camera` (each deposit weighted by the exact phase towards the camera, no lobe
+/// model; with the similarity switch off, as settings.rs advises) at 2^19 photons: the lobes'
+/// darkening at g 0.9 goes (cube g 0.9 image mean x0.916 with the lobes at 2^18; with the
+/// camera measured x1.013, bound 3%: the cube's image noise at this count is 0.14), and both
+/// scenes' errors are ratcheted as the lobes' are (measured + 10% + 0.01): cube g 0.9 0.145 /
+/// 0.314 (image / grid), dense cloud 0.155 / 0.174 (x0.990). Noisier than the lobes at
+/// few photons (the phase at g 0.9 spans 0.02..190 x its mean), better on the cloud from 2^22.
+#[test]
+fn camera_deposits_remove_the_lobe_bias() {
+    for (name, max_image, max_grid) in [("cube_g09", 0.170, 0.355), ("cloud", 0.180, 0.202)] {
+        let (e, rep, secs) = against(name, PhotonGridSettings { photons: 1 << 19, angular: Angular::Camera, similarity: Similarity::Off, ..Default::default() });
+        print(name, "camera", &e, &rep, secs);
+        assert!(e.image <= max_image && e.grid <= max_grid, "{name}: {e}");
+        if name == "cube_g09" {
+            assert!((e.image_ratio - 1.0).abs() < 0.03, "cube g 0.9 image mean x{:.3}", e.image_ratio);
+        }
+    }
+}
+
+/// A medium of at most `output_resolution` voxels a side is returned on its own voxels:
+/// the dense cloud's 64 voxels at the default 64 give 66 points a side (its one-voxel ramp on
+/// each side included), every point on a voxel centre; a coarser output keeps its resolution.
+#[test]
+fn output_grid_sits_on_the_voxels() {
+    let sc = case("cloud");
+    let dim = PhotonGridSettings::default().output_dim(&sc.medium);
+    assert_eq!(dim, 66);
+    let grid = crate::solvers::ScatteringGrid::over_medium(&sc.medium, dim).unwrap();
+    let to_voxel = sc.medium.index_to_world.inverse() * grid.index_to_world;
+    let [nx, ny, nz] = grid.dims;
+    for (i, j, k) in [(0, 0, 0), (nx - 1, ny - 1, nz - 1), (nx / 2, ny / 3, nz / 5)] {
+        let q = to_voxel.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
+        assert!((q - q.round()).abs().max_element() < 1e-3, "point ({i}, {j}, {k}) at voxel index {q}");
+    }
+    assert_eq!(PhotonGridSettings { output_resolution: 48, ..Default::default() }.output_dim(&sc.medium), 48);
 }
 
 /// Where the bias at g 0.9 comes from (issue 17): prints, per fixture (PG_CASE selects; the
@@ -322,5 +363,101 @@ fn error_by_brightness() {
             let (m, r): (f64, f64) = part.iter().fold((0.0, 0.0), |(m, r), &i| (m + mine[i].element_sum() as f64, r + reference[i].element_sum() as f64));
             eprintln!("{name} {what} quarter {q} (dim to bright): share of squared error {:.3}, mean ratio x{:.3}", err / total, m / r.max(1e-30));
         }
+    }
+}
+
+/// Anatomy of the dense cloud's error floor (issue 17; PG_PHOTONS default 2^20, PG_CACHE 24):
+/// the image error split into its single-scattering part (the compositor's AOV against the
+/// fixture's image minus its multiple AOV) and its multiple part, each over the whole image's
+/// norm (so their squares add up to the image's); the silhouette pixels' share (composited
+/// alpha < 0.95); the compositor's own sampling (2 x 2 rays a pixel against 6 x 6 at a quarter
+/// voxel step, same S); a map of each pixel's error; and the grid split by optical depth
+/// towards the sun.
+#[test]
+#[ignore]
+fn floor_anatomy() {
+    use crate::compositor::composite;
+    use crate::solvers::testing::{fixture_scene, load_fixture, rgb, FIXTURE_GRID};
+    let sc = fixture_scene("cloud");
+    let fx = load_fixture("cloud");
+    let mut s = PhotonGridSettings { photons: env_u32("PG_PHOTONS", 1 << 20), cache_resolution: env_u32("PG_CACHE", 24), output_resolution: env_u32("PG_OUTPUT", 64), ..Default::default() };
+    // PG_SWITCH=0: no similarity switch; PG_CUTOFF=0: no cutoff; PG_ORACLE=1 (bias_sources).
+    if env_u32("PG_SWITCH", 1) == 0 {
+        s.similarity = Similarity::Off;
+    }
+    if env_u32("PG_CUTOFF", 1) == 0 {
+        s.cutoff = 0.0;
+    }
+    let mut pg = PhotonGrid::new(s).unwrap();
+    pg.view_oracle = env_u32("PG_ORACLE", 0) == 1;
+    let t = std::time::Instant::now();
+    let (out, rep) = pg.solve_detailed(&sc, &NoProgress).unwrap();
+    print("cloud", "floor", &errors_against_fixture("cloud", &sc, &out.scattering), &rep, t.elapsed().as_secs_f64());
+    let out = out.scattering;
+    let opts = CompositeOptions { transparent: true, ..Default::default() };
+    let img = composite(&sc, &out, &opts).unwrap();
+    let fine = composite(&sc, &out, &CompositeOptions { subpixels: 6, step_voxels: 0.25, single_resolution: 64, ..opts.clone() }).unwrap();
+    let (mine, fine_rgb) = (rgb(&img), rgb(&fine));
+    let mine_single = img.aov("single").unwrap().to_vec();
+    let (ref_img, ref_multi) = (fx.image(), fx.multiple().unwrap());
+    let ref_single: Vec<Vec3> = ref_img.iter().zip(&ref_multi).map(|(a, b)| *a - *b).collect();
+    let mine_multi: Vec<Vec3> = mine.iter().zip(&mine_single).map(|(a, b)| *a - *b).collect();
+    let norm: f64 = ref_img.iter().map(|p| p.as_dvec3().length_squared()).sum();
+    let part = |a: &[Vec3], b: &[Vec3], keep: &dyn Fn(usize) -> bool| -> f64 {
+        (a.iter().zip(b).enumerate().filter(|(i, _)| keep(*i)).map(|(_, (x, y))| (*x - *y).as_dvec3().length_squared()).sum::<f64>() / norm).sqrt()
+    };
+    let all = |_: usize| true;
+    let m = |v: &[Vec3]| crate::solvers::testing::mean(v);
+    eprintln!(
+        "image {:.4} (x{:.3}); single part {:.4} (mine {:.4} / ref {:.4} of the image mean), multiple part {:.4} (x{:.3})",
+        part(&mine, &ref_img, &all),
+        m(&mine) / m(&ref_img),
+        part(&mine_single, &ref_single, &all),
+        m(&mine_single) / m(&ref_img),
+        m(&ref_single) / m(&ref_img),
+        part(&mine_multi, &ref_multi, &all),
+        m(&mine_multi) / m(&ref_multi)
+    );
+    for r in [48u32, 64, 66, 131] {
+        let single = composite(&sc, &out, &CompositeOptions { single_resolution: r, ..opts.clone() }).unwrap();
+        let a = single.aov("single").unwrap();
+        eprintln!("compositor single AOV at single_resolution {r}: {:.4} of the image, mean x{:.4} of the reference's", part(a, &ref_single, &all), m(a) / m(&ref_single));
+    }
+    let alpha: Vec<f32> = fine.rgba.iter().map(|p| p.w).collect();
+    let rim = |i: usize| alpha[i] < 0.95 && alpha[i] > 0.0;
+    eprintln!(
+        "silhouette ({} pixels, alpha < 0.95): {:.4} of the image error; compositor 6x6 rays / 1/4 voxel steps against its default: {:.4}; fine against the fixture {:.4}",
+        (0..alpha.len()).filter(|&i| rim(i)).count(),
+        part(&mine, &ref_img, &rim),
+        crate::image::relative_rmse(&mine, &fine_rgb),
+        part(&fine_rgb, &ref_img, &all)
+    );
+    // Per pixel: (mine - ref) / the image's rms, in percent (blank: background).
+    let rms = (norm / ref_img.len() as f64).sqrt();
+    let n = sc.camera.width as usize;
+    for (row, (a, b)) in mine.chunks(n).zip(ref_img.chunks(n)).enumerate() {
+        let cells: String = a.iter().zip(b).map(|(x, y)| if y.max_element() <= 0.0 { "    ".to_string() } else { format!("{:4.0}", 100.0 * (x.x - y.x) as f64 / rms) }).collect();
+        eprintln!("{row:2} {cells}");
+    }
+    // The grid against the fixture's by optical depth towards the sun.
+    let frame = crate::solvers::ScatteringGrid::over_medium(&sc.medium, FIXTURE_GRID).unwrap();
+    let grid = crate::solvers::testing::resample(&out, &frame);
+    let fg = fx.grid();
+    let to_sun = crate::solvers::testing::cloud::to_sun();
+    let gnorm: f64 = fg.iter().map(|p| p.as_dvec3().length_squared()).sum();
+    let mut bins = [(0.0f64, 0.0f64, 0.0f64, 0usize); 5];
+    let edges = [1.0f32, 3.0, 10.0, 30.0];
+    for (i, (a, b)) in grid.iter().zip(&fg).enumerate() {
+        let [nx, ny, _] = frame.dims;
+        let p = frame.position(i as u32 % nx, (i as u32 / nx) % ny, i as u32 / (nx * ny));
+        let tau = crate::solvers::testing::cloud::optical_depth(&sc.medium, p, p + 3.0 * to_sun);
+        let k = edges.iter().position(|e| tau < *e).unwrap_or(4);
+        bins[k].0 += (*a - *b).as_dvec3().length_squared() / gnorm;
+        bins[k].1 += a.element_sum() as f64;
+        bins[k].2 += b.element_sum() as f64;
+        bins[k].3 += 1;
+    }
+    for (k, (e, a, b, c)) in bins.iter().enumerate() {
+        eprintln!("grid, optical depth to the sun bin {k} (edges 1, 3, 10, 30): {c} points, share of squared error {e:.3}, mean ratio x{:.3}", a / b.max(1e-30));
     }
 }
