@@ -129,7 +129,10 @@ pub struct PhotonGridSettings {
     ///   2^22 (less noise, but the cube g 0.9, whose light rarely scatters 8 times, keeps the
     ///   lobes' x0.92); camera weights truncated to their first three Legendre terms
     ///   (1 + 3 g mu + 5 g^2 P2(mu)) for the diffuse orders, 0.097-0.105 at 2^22 (x0.64 when
-    ///   applied from order 2: the orders below ~8 are far from diffuse at g 0.9).
+    ///   applied from order 2: the orders below ~8 are far from diffuse at g 0.9); with the
+    ///   lobes, the twice-or-more scattered lobe drawn as an Eddington lobe (1 + 3 g g' mu,
+    ///   clamped at 0) instead of HG(g g'): the foot 20-35% too bright (image x1.28), where the
+    ///   HG lobe is 20-30% too dark: the true shape lies between, and one moment cannot say where.
     pub angular: Angular,
 }
 
