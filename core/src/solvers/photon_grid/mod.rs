@@ -119,6 +119,9 @@ impl PhotonGrid {
             view_from: self.camera_deposits().then_some(scene.camera.position),
         };
         let job = TraceJob { tracer: &tracer, sampler: &sampler, empty: &empty };
+        // Camera weights exist in trace.rs only (settings.rs `needs_cpu`): such a solve traces
+        // on the CPU whatever backend it was given, rather than get the lobes from a GPU.
+        let backend: &dyn PhotonBackend = if self.settings.needs_cpu().is_some() { &CpuBackend } else { backend };
         let generations = timings.time("trace", || backend.trace_generations(&job, generations))?;
         // Cut-short generations must not reach a session's ring.
         if progress.cancelled() {
@@ -147,8 +150,11 @@ impl PhotonGrid {
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
             let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;
-            // Same medium, same max_dim: the same frame (ScatteringGrid::over_medium).
-            debug_assert_eq!(single.dims, s.dims);
+            // Same medium, same max_dim (`output_dim`): the same frame. Checked, not assumed: a
+            // backend that sized its grid from `output_resolution` alone would pair the wrong points.
+            if single.dims != s.dims {
+                return Err(Error::InvalidArgument(format!("photon-grid: single scattering on {:?} points, the reconstruction on {:?}", single.dims, s.dims)));
+            }
             for (a, b) in s.data.iter_mut().zip(&single.data) {
                 *a += *b;
             }

@@ -53,7 +53,7 @@ pub enum Angular {
     /// (4 pi p_HG(g, d . to camera)), so a cell holds S towards the camera itself and no lobe
     /// shape is assumed: no angular bias, more noise (p_HG at g 0.9 spans 0.02..190 x its
     /// mean), the cache tied to one camera position (a session's ring lags a moving camera as
-    /// it lags a moving light). CPU only: `needs_cpu` says so to the GPU path.
+    /// it lags a moving light). Traced on the CPU only (`needs_cpu`).
     Camera,
 }
 
@@ -192,8 +192,9 @@ impl PhotonGridSettings {
         Some((self.similarity_threshold.ln() / g.ln()).ceil().max(1.0) as u32)
     }
 
-    /// Why these settings cannot run on a GPU backend (its trace kernel keeps the lobes only),
-    /// or None: for the GPU path to refuse (or fall back to the CPU) before tracing.
+    /// Why these settings cannot be traced by a GPU backend (its kernel keeps the lobes only),
+    /// or None. The solver then traces on the CPU whatever backend it is given (mod.rs
+    /// `trace`); a host can read this to say so.
     pub fn needs_cpu(&self) -> Option<&'static str> {
         (self.angular == Angular::Camera).then_some("solver.angular = camera weights each deposit by the phase towards the camera, which only the CPU tracer does")
     }

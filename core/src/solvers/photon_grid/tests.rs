@@ -238,6 +238,29 @@ fn camera_deposits_remove_the_lobe_bias() {
     }
 }
 
+/// A backend that traces nothing (a stand-in for the GPU's, whose kernel keeps lobes only).
+struct NoTracing;
+
+impl super::backend::PhotonBackend for NoTracing {
+    fn trace_generations(&self, _: &super::backend::TraceJob, _: &[u64]) -> crate::error::Result<Vec<super::ring::Generation>> {
+        Err(crate::error::Error::InvalidArgument("this backend traces nothing".into()))
+    }
+}
+
+/// Camera weights are traced on the CPU whatever backend the solve is given (the same S as
+/// the CPU backend's, bit for bit), while the lobes go to the backend (here: its error).
+#[test]
+fn camera_weights_trace_on_the_cpu_whatever_the_backend() {
+    let sc = case("cube_g07");
+    let s = PhotonGridSettings { photons: 1 << 12, angular: Angular::Camera, ..Default::default() };
+    let pg = PhotonGrid::new(s.clone()).unwrap();
+    let a = pg.solve_generations_with(&sc, 0, &NoProgress, &NoTracing).unwrap().0.scattering.data;
+    let b = pg.solve_generations_with(&sc, 0, &NoProgress, &super::backend::CpuBackend).unwrap().0.scattering.data;
+    assert_eq!(a, b);
+    let lobes = PhotonGrid::new(PhotonGridSettings { angular: Angular::Lobes, ..s }).unwrap();
+    assert!(lobes.solve_generations_with(&sc, 0, &NoProgress, &NoTracing).is_err());
+}
+
 /// A medium of at most `output_resolution` voxels a side is returned on its own voxels:
 /// the dense cloud's 64 voxels at the default 64 give 66 points a side (its one-voxel ramp on
 /// each side included), every point on a voxel centre; a coarser output keeps its resolution.
