@@ -125,6 +125,11 @@ pub struct PhotonGridSettings {
     ///   fixture's noise (0.022) and 2^24 photons show; the error is noise, falling as
     ///   photons^-0.27 to -0.3 over these counts (cells still filling). With the switch on:
     ///   0.147, 0.103, 0.062 (x1.03-1.04: reduced, isotropic walks weighted by the real phase).
+    /// - the other fixtures at 2^19 photons (tests.rs `bias_sources`, switch on; lobes against
+    ///   camera): cube g 0 0.017 both (g 0: the same weights), cube g 0.7 0.071 against 0.045,
+    ///   cube g 0.9 0.129 (x0.920) against 0.145 (x1.013), plume 0.176 (x0.957) against 0.137
+    ///   (x1.042), plume_point 0.067 against 0.065, cloud 0.159 (x0.931) against 0.200 (x1.007;
+    ///   the camera's noise: it wins on the cloud from 2^21).
     /// - tried, not kept: lobes for orders 1-7 and camera weights from order 8 on, 0.078 at
     ///   2^22 (less noise, but the cube g 0.9, whose light rarely scatters 8 times, keeps the
     ///   lobes' x0.92); camera weights truncated to their first three Legendre terms
