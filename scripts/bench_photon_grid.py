@@ -211,10 +211,13 @@ def aim_lines(aim: dict) -> list[str]:
                 f" {fast['image']:.3f}, {fast['photons']} photons).")
     lines += [
         "",
-        "The error stops falling with photons near 0.14-0.15: a bias, not noise. `bias_sources`"
-        " (core/src/solvers/photon_grid/tests.rs) splits it: neither the upsampling, the similarity switch, the cache"
-        " resolution nor the lobe model (photons weighted by the exact phase towards the camera) moves the cloud's image"
-        " floor by more than 0.01, so the 5% aim is not met and no setting here reaches it.",
+        "The defaults stop falling near 0.14: a bias, the HG lobe of the light scattered twice or more (`floor_anatomy`,"
+        " core/src/solvers/photon_grid/tests.rs: the cloud's shadowed foot is 20-30% too dark; one HG lobe, or any mixture"
+        " of coaxial HG lobes, cannot hold the half-range radiance leaving a surface). `angular: camera` weights each"
+        " photon's deposits by the exact phase towards the camera instead (CPU only, S for that camera): no bias shows"
+        " above the noise, which then sets the error. Both rows use the output grid on the medium's own voxels"
+        " (`output_dim`: 66 points for the 64-voxel cloud, not 64 points between the voxel centres, which made the"
+        " camera rows x1.07 too bright).",
     ]
     return lines
 

@@ -368,7 +368,7 @@ const VPL: SolverEntry = SolverEntry {
 const PHOTON_GRID: SolverEntry = SolverEntry {
     name: "photon-grid",
     label: "Photon Grid",
-    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20, 0.149 at 2^22 in 10 s: a bias floor, which the reference path tracer reaches 1.5-2.2x slower over two runs; 5% is not reached); noise falls as photons^-0.47. At g 0.9 its one HG lobe per cell is the bias (cube g 0.9 image x0.92; x1.01 with the exact phase per photon). The paper's upsampling (upsampling: physical) gives the better grid on the cubes, the worse image on 5 of 6 scenes. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve). On a GPU the photon tracing, the reconstruction (both upsamplings) and exact single scattering run on the device (tracing: other random numbers, equal in distribution, S within the noise of two seeds on lavapipe; reconstruction: equal to the CPU's within 6.4e-7 of the largest S on lavapipe). Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 1.4-2.8 s on 2 cores): thin smoke and overcast 0.04, fire-lit smoke 0.05, dense cloud 0.25 (the best there; 0.22 at final), lamp inside smoke 0.42",
+    help: "photon beams into a grid of HG lobes (paper 04): every scattering order, for thick bright clouds. Image rel. RMSE against the reference at 2^17 photons: cube g 0 0.03, cube g 0.9 0.16, plume 0.20, dense cloud (optical depth 30+) 0.21 (0.15 at 2^20, 0.14 at 2^22: a bias floor; 5% is not reached); noise falls as photons^-0.47. At g 0.9 its HG lobe per cell is the bias (cube g 0.9 image x0.92; the cloud's shadowed foot 20-30% too dark): angular: camera weights each photon by the exact phase towards the camera instead (CPU only), cube g 0.9 x1.01, dense cloud 0.087 at 2^22 and 0.060 at 2^24 photons (23 s), no bias left above the noise. The paper's upsampling (upsampling: physical) gives the better grid on the cubes, the worse image on 5 of 6 scenes. In a session with generations m > 1 a frame costs 1/m of a solve and lags up to m-1 frames (moving sun 0.5 deg/frame: within 1.5% plus noise of a fresh solve). On a GPU the photon tracing, the reconstruction (both upsamplings) and exact single scattering run on the device (tracing: other random numbers, equal in distribution, S within the noise of two seeds on lavapipe; reconstruction: equal to the CPU's within 6.4e-7 of the largest S on lavapipe; angular: camera traces on the CPU). Benchmark scenes (BENCHMARKS.md solvers, image rel. RMSE at preview, 1.4-2.8 s on 2 cores): thin smoke and overcast 0.04, fire-lit smoke 0.05, dense cloud 0.25 (the best there; 0.22 at final), lamp inside smoke 0.42",
     settings: &[
         SettingSpec::int("photons", "photons traced per solve, equal flux each").range(1.0, (1u32 << 30) as f64),
         SettingSpec::int("seed", "random seed (deterministic for a seed, any thread count)"),
@@ -402,6 +402,14 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
             zero: None,
             choices: &["trilinear", "physical"],
             help: "cache to output grid: mass-weighted trilinear (default: the better image on 5 of 6 fixtures), or the paper's physically based upsampling (exponential/linear weights, g^delta; better grid on the cubes)",
+        },
+        SettingSpec {
+            name: "angular",
+            kind: SettingType::Choice,
+            range: None,
+            zero: None,
+            choices: &["lobes", "camera"],
+            help: "what a cache cell keeps of the light's directions: two HG lobes (default, any view, GPU) or S towards this camera, each photon weighted by the exact phase (no lobe bias, noisier; CPU only; best with similarity off). Image error, lobes against camera: dense cloud 0.14 floor against 0.12 at 2^20, 0.087 at 2^22, 0.060 at 2^24 photons; at 2^19 cube g 0.7 0.071 against 0.045, plume 0.176 against 0.137, cube g 0.9 0.129 (x0.92) against 0.145 (x1.01)",
         },
         SettingSpec::int(
             "generations",

@@ -135,9 +135,10 @@ fn bench_photon_grid_flicker() {
 }
 
 /// The aim on the dense cloud: time against image error for photon-grid (the
-/// defaults, the default with the paper's upsampling, and cache 48) at 2^16 to 2^22 photons,
-/// and for the reference path tracer at 256 to 4096 paths per pixel, both against the cloud
-/// fixture (own noise 2.2%). PG_BENCH_MAX_PHOTONS caps the photon count (log2, default 22).
+/// defaults at 2^16 to 2^22 photons, and `angular: camera` with the similarity switch off and
+/// cache 32 at 2^18 to 2^24), and for the reference path tracer at 256 to 4096 paths per
+/// pixel, both against the cloud fixture (own noise 2.2%). PG_BENCH_MAX_PHOTONS caps the
+/// defaults' photon count (log2, default 22; the camera rows go 2 further).
 #[test]
 #[ignore]
 fn bench_photon_grid_cloud_aim() {
@@ -155,12 +156,9 @@ fn bench_photon_grid_cloud_aim() {
         rows.push(json!({"method": "reference", "spp": spp, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio}));
     }
     let max = env_u32("PG_BENCH_MAX_PHOTONS", 22);
-    for (label, s) in [
-        ("defaults", PhotonGridSettings::default()),
-        ("physical upsampling", PhotonGridSettings { upsampling: Upsampling::Physical, ..Default::default() }),
-        ("cache 48", PhotonGridSettings { cache_resolution: 48, ..Default::default() }),
-    ] {
-        for p in (16..=max).step_by(2) {
+    let camera = PhotonGridSettings { angular: Angular::Camera, similarity: Similarity::Off, cache_resolution: 32, ..Default::default() };
+    for (label, s, from, to) in [("defaults", PhotonGridSettings::default(), 16, max), ("camera, similarity off, cache 32", camera, 18, max + 2)] {
+        for p in (from..=to).step_by(2) {
             let pg = PhotonGrid::new(PhotonGridSettings { photons: 1 << p, ..s.clone() }).unwrap();
             let t = Instant::now();
             let out = pg.solve(&sc, &NoProgress).unwrap();

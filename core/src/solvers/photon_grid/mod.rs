@@ -37,7 +37,7 @@ mod temporal_tests;
 mod tests;
 
 pub use reconstruct::Lobe;
-pub use settings::{PhotonGridSettings, Similarity, SingleScattering, Upsampling};
+pub use settings::{Angular, PhotonGridSettings, Similarity, SingleScattering, Upsampling};
 pub use trace::EnergyReport;
 
 use crate::compositor::{dome_directions_for, CompositeOptions};
@@ -89,6 +89,16 @@ impl PhotonGrid {
         PhotonGrid::new(parse_settings(map)?)
     }
 
+    /// Whether deposits are weighted towards the camera (`Angular::Camera`, or the tests'
+    /// oracle, which is the same thing).
+    fn camera_deposits(&self) -> bool {
+        #[cfg(test)]
+        if self.view_oracle {
+            return true;
+        }
+        self.settings.angular == Angular::Camera
+    }
+
     /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns, on
     /// `backend`.
     fn trace(&self, scene: &Scene, generations: &[u64], timings: &mut Timings, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(cache::Cache, Vec<Generation>)> {
@@ -107,10 +117,12 @@ impl PhotonGrid {
             deposit_unscattered: s.single_scattering == SingleScattering::Photons,
             split_order: SPLIT_ORDER,
             progress,
-            #[cfg(test)]
-            view_from: self.view_oracle.then_some(scene.camera.position),
+            view_from: self.camera_deposits().then_some(scene.camera.position),
         };
         let job = TraceJob { tracer: &tracer, sampler: &sampler, empty: &empty };
+        // Camera weights exist in trace.rs only (settings.rs `needs_cpu`): such a solve traces
+        // on the CPU whatever backend it was given, rather than get the lobes from a GPU.
+        let backend: &dyn PhotonBackend = if self.settings.needs_cpu().is_some() { &CpuBackend } else { backend };
         let generations = timings.time("trace", || backend.trace_generations(&job, generations))?;
         // Cut-short generations must not reach a session's ring.
         if progress.cancelled() {
@@ -134,13 +146,18 @@ impl PhotonGrid {
         }
         let medium = &scene.medium;
         let tallies = timings.time("cache", || ring.total().each_ref().map(|t| cache::Tallies::from_fixed(medium, ring.cache(), t)));
-        let res = self.settings.output_resolution;
-        let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &self.settings, progress))?;
+        let res = self.settings.output_dim(medium);
+        // The backend sizes its grid from `output_resolution`: give it the voxel-aligned one.
+        let out = PhotonGridSettings { output_resolution: res, ..self.settings.clone() };
+        let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &out, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
             let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;
-            // Same medium, same max_dim: the same frame (ScatteringGrid::over_medium).
-            debug_assert_eq!(single.dims, s.dims);
+            // Same medium, same max_dim (`output_dim`): the same frame. Checked, not assumed: a
+            // backend that sized its grid from `output_resolution` alone would pair the wrong points.
+            if single.dims != s.dims {
+                return Err(Error::InvalidArgument(format!("photon-grid: single scattering on {:?} points, the reconstruction on {:?}", single.dims, s.dims)));
+            }
             for (a, b) in s.data.iter_mut().zip(&single.data) {
                 *a += *b;
             }
@@ -208,6 +225,9 @@ impl PhotonGrid {
     /// scattered less than `SPLIT_ORDER` times; in `exact` mode without the unscattered light):
     /// the cache as a host could keep it to re-light from any view.
     pub fn lobes(&self, scene: &Scene, points: &[glam::Vec3]) -> Result<Vec<Lobe>> {
+        if self.settings.angular == Angular::Camera {
+            return Err(Error::InvalidArgument("photon-grid: angular = camera keeps S towards the camera, not the view-independent lobes".into()));
+        }
         let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::solvers::NoProgress, &CpuBackend)?;
         let first = cache::Tallies::from_fixed(&scene.medium, ring.cache(), &ring.total()[0]);
         Ok(points.iter().map(|&p| reconstruct::lobe_at(&scene.medium, &first, p, self.settings.upsampling)).collect())

@@ -42,6 +42,21 @@ pub enum Upsampling {
     Physical,
 }
 
+/// What a cache cell keeps of the light's directions (reconstruct.rs).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Angular {
+    /// Two HG lobes per cell (mod.rs `SPLIT_ORDER`), each fitted to the deposits' mean
+    /// direction: view-independent, any camera can be served from the same cache.
+    Lobes,
+    /// Each deposit weighted by the medium's exact phase function towards the scene's camera
+    /// (4 pi p_HG(g, d . to camera)), so a cell holds S towards the camera itself and no lobe
+    /// shape is assumed: no angular bias, more noise (p_HG at g 0.9 spans 0.02..190 x its
+    /// mean), the cache tied to one camera position (a session's ring lags a moving camera as
+    /// it lags a moving light). Traced on the CPU only (`needs_cpu`).
+    Camera,
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct PhotonGridSettings {
@@ -94,6 +109,36 @@ pub struct PhotonGridSettings {
     /// varies within a cell (plumes, the cloud's rim) its 3^3 neighbourhood blends cells the
     /// trilinear weights would not reach, and the image is what a host shows.
     pub upsampling: Upsampling,
+    /// What a cell keeps of the light's directions (see `Angular`). Lobes by default: they are
+    /// what the GPU traces, they serve any view and they are the less noisy below ~2^21
+    /// photons. Measured on the dense cloud (tests.rs `floor_anatomy`; image rel. RMSE (mean
+    /// ratio), voxel-aligned output, cache 24 at 2^20 photons, 32 above; 2 shared cores):
+    /// - lobes: 0.152 (x0.933) at 2^20, 0.140 (x0.943) at 2^22, a floor: the shadowed foot of
+    ///   the cloud is 20-30% too dark. The lobe of the light scattered twice or more is the
+    ///   cause (camera weights for that lobe alone give the all-camera result; for the
+    ///   once-scattered lobe alone, the lobes' one): one HG lobe per cell, fitted to the mean
+    ///   cosine, cannot hold the flat, half-range radiance that leaves a surface, and no
+    ///   mixture of coaxial HG lobes can (each has Legendre moments h^l, so k2 >= k1^2, while a
+    ///   half-range radiance has k2 < k1^2): the two-moment fit of the issue would not either.
+    /// - camera, similarity off: 0.121 (x0.993) at 2^20 in 1.9 s, 0.087 (x1.023) at 2^22 in
+    ///   5.5 s, 0.060 (x1.017) at 2^24 in 23 s (grid 0.066, x1.006): no bias left that the
+    ///   fixture's noise (0.022) and 2^24 photons show; the error is noise, falling as
+    ///   photons^-0.27 to -0.3 over these counts (cells still filling). With the switch on:
+    ///   0.147, 0.103, 0.062 (x1.03-1.04: reduced, isotropic walks weighted by the real phase).
+    /// - the other fixtures at 2^19 photons (tests.rs `bias_sources`, switch on; lobes against
+    ///   camera): cube g 0 0.017 both (g 0: the same weights), cube g 0.7 0.071 against 0.045,
+    ///   cube g 0.9 0.129 (x0.920) against 0.145 (x1.013), plume 0.176 (x0.957) against 0.137
+    ///   (x1.042), plume_point 0.067 against 0.065, cloud 0.159 (x0.931) against 0.200 (x1.007;
+    ///   the camera's noise: it wins on the cloud from 2^21).
+    /// - tried, not kept: lobes for orders 1-7 and camera weights from order 8 on, 0.078 at
+    ///   2^22 (less noise, but the cube g 0.9, whose light rarely scatters 8 times, keeps the
+    ///   lobes' x0.92); camera weights truncated to their first three Legendre terms
+    ///   (1 + 3 g mu + 5 g^2 P2(mu)) for the diffuse orders, 0.097-0.105 at 2^22 (x0.64 when
+    ///   applied from order 2: the orders below ~8 are far from diffuse at g 0.9); with the
+    ///   lobes, the twice-or-more scattered lobe drawn as an Eddington lobe (1 + 3 g g' mu,
+    ///   clamped at 0) instead of HG(g g'): the foot 20-35% too bright (image x1.28), where the
+    ///   HG lobe is 20-30% too dark: the true shape lies between, and one moment cannot say where.
+    pub angular: Angular,
 }
 
 impl Default for PhotonGridSettings {
@@ -110,6 +155,7 @@ impl Default for PhotonGridSettings {
             similarity_threshold: 0.05,
             generations: 1,
             upsampling: Upsampling::Trilinear,
+            angular: Angular::Lobes,
         }
     }
 }
@@ -149,6 +195,31 @@ impl PhotonGridSettings {
         }
         let g = g.min(0.999);
         Some((self.similarity_threshold.ln() / g.ln()).ceil().max(1.0) as u32)
+    }
+
+    /// Why these settings cannot be traced by a GPU backend (its kernel keeps the lobes only),
+    /// or None. The solver then traces on the CPU whatever backend it is given (mod.rs
+    /// `trace`); a host can read this to say so.
+    pub fn needs_cpu(&self) -> Option<&'static str> {
+        (self.angular == Angular::Camera).then_some("solver.angular = camera weights each deposit by the phase towards the camera, which only the CPU tracer does")
+    }
+
+    /// The side of the returned scattering grid for `medium`: `output_resolution`, except that
+    /// a medium of at most that many voxels a side gets exactly its own voxels.
+    /// `ScatteringGrid::over_medium` also covers the one-voxel trilinear ramp on each side, so
+    /// a 64-voxel medium at 64 would get 64 points over 66 voxel spacings: points between the
+    /// voxel centres, S sampled where the density is interpolated and interpolated again by
+    /// the compositor. Measured on the dense cloud (64 voxels; exact phase per deposit, so no
+    /// lobe bias, 2^22 photons): image 0.113 (x1.072) at 64 against 0.087 (x1.023) on the
+    /// voxels (66 points).
+    pub fn output_dim(&self, medium: &crate::medium::Medium) -> u32 {
+        let (lo, hi) = medium.grid.bbox();
+        let voxels = (hi - lo + glam::IVec3::ONE).max_element().max(1) as u32;
+        if voxels <= self.output_resolution {
+            voxels + 2
+        } else {
+            self.output_resolution
+        }
     }
 
     /// The factor sigma_s' / sigma_s after the switch.

@@ -93,10 +93,9 @@ pub struct Tracer<'a> {
     /// Read every `CANCEL_STRIDE` photons: once cancelled the batches stop early and the
     /// caller discards their tallies.
     pub progress: &'a dyn crate::solvers::Progress,
-    /// Diagnosis only (tests.rs `bias_sources`): deposits weighted by the exact phase function
-    /// towards this camera, with no direction, so the cache holds S itself per cell (no lobe
-    /// model, only the spatial binning).
-    #[cfg(test)]
+    /// `Angular::Camera` (settings.rs): deposits weighted by the exact phase function towards
+    /// this camera position, with no direction, so the cache holds S itself per cell (no lobe
+    /// model, only the spatial binning). None: the lobes.
     pub view_from: Option<Vec3>,
 }
 
@@ -138,13 +137,13 @@ impl Tracer<'_> {
         ([lobe(0), lobe(1)], report)
     }
 
-    /// A deposit's flux and direction as stored: as traced, or under `view_from` (tests) the
-    /// flux times 4 pi p_HG towards the camera and no direction.
+    /// A deposit's flux and direction as stored: as traced, or under `view_from` the flux
+    /// times 4 pi p_HG towards the camera and no direction (the reconstruction's lobe is then
+    /// isotropic, 1 / 4 pi, and gives back sigma_s times the cell's mean of p_HG L).
     #[inline]
-    fn view_weighted(&self, _p: Vec3, d: Vec3, f: Vec3) -> (Vec3, Vec3) {
-        #[cfg(test)]
+    fn view_weighted(&self, p: Vec3, d: Vec3, f: Vec3) -> (Vec3, Vec3) {
         if let Some(camera) = self.view_from {
-            let k = 4.0 * std::f32::consts::PI * crate::phase::hg((camera - _p).normalize_or_zero().dot(d), self.medium.g);
+            let k = 4.0 * std::f32::consts::PI * crate::phase::hg((camera - p).normalize_or_zero().dot(d), self.medium.g);
             return (f * k, Vec3::ZERO);
         }
         (f, d)
