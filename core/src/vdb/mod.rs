@@ -54,7 +54,7 @@ use transform::GridTransform;
 use values::{Codec, ValueKind};
 
 pub use filter::{load_density_filtered, FilterReport};
-pub use stream_writer::RgbVdbStream;
+pub use stream_writer::{FloatVdbStream, RgbVdbStream};
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 
 /// An OpenVDB file with its header and grid descriptors parsed. Opened from disk, its bytes
