@@ -171,13 +171,14 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// A positioned read (no shared file offset, so readers of one file do not disturb each other).
 #[cfg(unix)]
-fn read_exact_at(f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
+pub(crate) fn read_exact_at(f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
     std::os::unix::fs::FileExt::read_exact_at(f, buf, at)
 }
 
 #[cfg(not(unix))]
-fn read_exact_at(mut f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
+pub(crate) fn read_exact_at(mut f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
     use std::io::{Read, Seek, SeekFrom};
     f.seek(SeekFrom::Start(at))?;
     f.read_exact(buf)

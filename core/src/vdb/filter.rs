@@ -72,8 +72,9 @@ impl tree::Visitor for Extent<'_> {
         super::density_background(self.path, value)
     }
     fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], _active: bool) -> Result<()> {
-        // Not `> 0`: a NaN tile is kept so that pass 2 reports it.
-        if !(value[0] as f32 <= 0.0) {
+        // A NaN tile is kept too, so that pass 2 reports it.
+        let v = value[0] as f32;
+        if v > 0.0 || v.is_nan() {
             self.add(origin, origin + IVec3::splat(1 << log2));
         }
         Ok(())

@@ -86,15 +86,6 @@ fn check_file(path: &Path, max_resolution: u32) -> Option<FilterReport> {
     Some(report)
 }
 
-fn fixture_files() -> Vec<PathBuf> {
-    let f = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(f.join("vdb")).map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|e| e == "vdb")).collect()).unwrap_or_default();
-    v.push(f.join("blender_noise_cube/volumes/Volume.vdb"));
-    v.retain(|p| p.is_file());
-    v.sort();
-    v
-}
-
 #[test]
 fn filtered_load_equals_the_whole_load_box_filtered_and_reads_one_window() {
     let dir = temp_dir("ours");
@@ -125,7 +116,7 @@ fn filtered_load_equals_the_whole_load_box_filtered_and_reads_one_window() {
             }
         }
     }
-    let fixtures = fixture_files();
+    let fixtures = super::region_tests::files();
     if fixtures.is_empty() {
         eprintln!("SKIPPED the fixture files: shared/fixtures not found beside the repository");
     }

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, IVec3, Vec3};
 
-use super::bytes::Writer;
+use super::bytes::{read_exact_at, Writer};
 use super::values::write_float_block;
 use super::writer::{compression_flags, file_head, unique_names, write_grid_head, FloatTree, WriteOptions};
 use crate::error::{Error, Result};
@@ -227,18 +227,6 @@ impl Drop for PlaneStream {
             let _ = std::fs::remove_file(part(&self.path, ".part"));
         }
     }
-}
-
-#[cfg(unix)]
-fn read_exact_at(f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
-    std::os::unix::fs::FileExt::read_exact_at(f, buf, at)
-}
-
-#[cfg(not(unix))]
-fn read_exact_at(mut f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
-    use std::io::{Read, Seek, SeekFrom};
-    f.seek(SeekFrom::Start(at))?;
-    f.read_exact(buf)
 }
 
 #[cfg(test)]
