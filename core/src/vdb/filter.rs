@@ -25,7 +25,7 @@
 
 use std::path::Path;
 
-use glam::{Affine3A, IVec3, Vec3};
+use glam::{Affine3A, I64Vec3, IVec3, Vec3};
 
 use super::tree::{self, LeafTopo};
 use super::values::ValueKind;
@@ -39,7 +39,7 @@ pub struct FilterReport {
     /// Fine voxels per coarse cell side.
     pub factor: i32,
     /// Leaf-aligned index box `lo..hi` (exclusive) of the leaves and non-zero tiles.
-    pub fine_box: (IVec3, IVec3),
+    pub fine_box: (I64Vec3, I64Vec3),
     pub coarse_dims: IVec3,
     pub leaves: usize,
     /// Bytes of the coarse accumulator (f64 a cell).
@@ -52,18 +52,20 @@ pub struct FilterReport {
     pub clamped_negative: u64,
 }
 
-/// Pass 1: the box of the leaves and of the tiles that hold density.
+/// Pass 1: the box of the leaves and of the tiles that hold density (64-bit: a tile at the
+/// edge of the index range ends past i32).
 struct Extent<'a> {
-    lo: IVec3,
-    hi: IVec3,
+    lo: I64Vec3,
+    hi: I64Vec3,
     leaves: usize,
     path: &'a Path,
 }
 
 impl Extent<'_> {
-    fn add(&mut self, lo: IVec3, hi: IVec3) {
+    fn add(&mut self, origin: IVec3, size: i64) {
+        let lo = origin.as_i64vec3();
         self.lo = self.lo.min(lo);
-        self.hi = self.hi.max(hi);
+        self.hi = self.hi.max(lo + I64Vec3::splat(size));
     }
 }
 
@@ -75,7 +77,7 @@ impl tree::Visitor for Extent<'_> {
         // A NaN tile is kept too, so that pass 2 reports it.
         let v = value[0] as f32;
         if v > 0.0 || v.is_nan() {
-            self.add(origin, origin + IVec3::splat(1 << log2));
+            self.add(origin, 1 << log2);
         }
         Ok(())
     }
@@ -83,7 +85,7 @@ impl tree::Visitor for Extent<'_> {
         Ok(())
     }
     fn wants_leaf(&mut self, origin: IVec3) -> bool {
-        self.add(origin, origin + IVec3::splat(8));
+        self.add(origin, 8);
         self.leaves += 1;
         false
     }
@@ -94,10 +96,10 @@ impl tree::Visitor for Extent<'_> {
 
 /// Pass 2: sums of the fine voxels in each coarse cell.
 struct Accumulate<'a> {
-    f: i32,
+    f: i64,
     /// Coarse index of the array's first cell.
-    c0: IVec3,
-    dims: IVec3,
+    c0: I64Vec3,
+    dims: I64Vec3,
     sums: Vec<f64>,
     clamped_negative: u64,
     path: &'a Path,
@@ -105,7 +107,7 @@ struct Accumulate<'a> {
 
 impl Accumulate<'_> {
     #[inline]
-    fn index(&self, c: IVec3) -> usize {
+    fn index(&self, c: I64Vec3) -> usize {
         let d = c - self.c0;
         d.x as usize + self.dims.x as usize * (d.y as usize + self.dims.y as usize * d.z as usize)
     }
@@ -134,15 +136,16 @@ impl tree::Visitor for Accumulate<'_> {
         if v == 0.0 {
             return Ok(());
         }
-        let (lo, hi) = (origin, origin + IVec3::splat(1 << log2));
+        let lo = origin.as_i64vec3();
+        let hi = lo + I64Vec3::splat(1 << log2);
         let f = self.f;
-        let (a, b) = (lo.div_euclid(IVec3::splat(f)), (hi - IVec3::ONE).div_euclid(IVec3::splat(f)));
+        let (a, b) = (lo.div_euclid(I64Vec3::splat(f)), (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f)));
         for z in a.z..=b.z {
             for y in a.y..=b.y {
                 for x in a.x..=b.x {
-                    let c = IVec3::new(x, y, z);
+                    let c = I64Vec3::new(x, y, z);
                     // Fine voxels the tile shares with cell c.
-                    let n = (hi.min((c + IVec3::ONE) * f) - lo.max(c * f)).max(IVec3::ZERO).as_dvec3();
+                    let n = (hi.min((c + I64Vec3::ONE) * f) - lo.max(c * f)).max(I64Vec3::ZERO).as_dvec3();
                     let i = self.index(c);
                     self.sums[i] += v as f64 * n.x * n.y * n.z;
                 }
@@ -153,11 +156,11 @@ impl tree::Visitor for Accumulate<'_> {
 
     fn leaf(&mut self, origin: IVec3, _mask: &[u64; 8], values: &[f64]) -> Result<()> {
         for (i, &raw) in values.iter().enumerate() {
-            // VDB order: x << 6 | y << 3 | z.
+            // VDB order: x << 6 | y << 3 | z. A leaf's origin is a multiple of 8: no overflow.
             let p = origin + IVec3::new((i >> 6) as i32, ((i >> 3) & 7) as i32, (i & 7) as i32);
             let v = self.value(raw, p)?;
             if v > 0.0 {
-                let c = p.div_euclid(IVec3::splat(self.f));
+                let c = p.as_i64vec3().div_euclid(I64Vec3::splat(self.f));
                 let k = self.index(c);
                 self.sums[k] += v as f64;
             }
@@ -166,13 +169,16 @@ impl tree::Visitor for Accumulate<'_> {
     }
 }
 
-/// The factor and coarse lattice for `max_resolution` cells along the box's longest side.
-fn lattice(lo: IVec3, hi: IVec3, max_resolution: u32) -> (i32, IVec3, IVec3) {
-    let extent = (hi - lo).max_element().max(1) as i64;
-    let f = ((extent + max_resolution as i64 - 1) / max_resolution.max(1) as i64).clamp(1, i32::MAX as i64) as i32;
-    let c0 = lo.div_euclid(IVec3::splat(f));
-    let c1 = (hi - IVec3::ONE).div_euclid(IVec3::splat(f));
-    (f, c0, c1 - c0 + IVec3::ONE)
+/// The factor and coarse lattice (first cell, cells) for `max_resolution` cells along the
+/// box's longest side. Every value fits i32: the box spans at most 2^32 voxels, so `f` is
+/// below 2^31 for `max_resolution` >= 2 and the coarse indices are the fine ones over `f`.
+fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: u32) -> (i64, I64Vec3, I64Vec3) {
+    let extent = (hi - lo).max_element().max(1);
+    let m = max_resolution.max(1) as i64;
+    let f = (extent + m - 1) / m;
+    let c0 = lo.div_euclid(I64Vec3::splat(f));
+    let c1 = (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f));
+    (f, c0, c1 - c0 + I64Vec3::ONE)
 }
 
 impl VdbFile {
@@ -185,7 +191,7 @@ impl VdbFile {
             e => e,
         };
         let head = self.grid_head(i)?;
-        let mut extent = Extent { lo: IVec3::MAX, hi: IVec3::MIN, leaves: 0, path: &self.path };
+        let mut extent = Extent { lo: I64Vec3::MAX, hi: I64Vec3::MIN, leaves: 0, path: &self.path };
         let (_, window1) = self.visit_tree_windowed(i, ValueKind::FLOAT, &mut extent, None).map_err(in_grid)?;
         let fine_xf = head.transform.to_affine3a();
         let mut report = FilterReport { leaves: extent.leaves, topology_bytes: (extent.leaves * std::mem::size_of::<LeafTopo>()) as u64, ..Default::default() };
@@ -193,13 +199,14 @@ impl VdbFile {
             report.peak_window_bytes = window1;
             return Ok((DensityGrid::empty(), fine_xf, report));
         }
-        let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution);
+        let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution.max(2));
         let cells = crate::budget::checked_product("filtered density grid", &[dims.x as u64, dims.y as u64, dims.z as u64])?;
         crate::budget::check_elements::<f64>("filtered density grid (coarse sums)", cells)?;
         let mut acc = Accumulate { f, c0, dims, sums: vec![0.0; cells as usize], clamped_negative: 0, path: &self.path };
         let (_, window2) = self.visit_tree_windowed(i, ValueKind::FLOAT, &mut acc, None).map_err(in_grid)?;
         let volume = (f as f64).powi(3);
         let means: Vec<f32> = acc.sums.iter().map(|s| (s / volume) as f32).collect();
+        let (f, c0, dims) = (f as i32, c0.as_ivec3(), dims.as_ivec3());
         report.factor = f;
         report.fine_box = (extent.lo, extent.hi);
         report.coarse_dims = dims;

@@ -19,7 +19,7 @@ fn temp_dir(name: &str) -> PathBuf {
 /// largest voxel (the scale of the tolerance).
 fn whole_box_filtered(whole: &DensityGrid, report: &FilterReport) -> (Vec<f32>, f32) {
     let f = report.factor;
-    let c0 = report.fine_box.0.div_euclid(IVec3::splat(f));
+    let c0 = report.fine_box.0.as_ivec3().div_euclid(IVec3::splat(f));
     let d = report.coarse_dims;
     let mut out = Vec::new();
     for z in 0..d.z {
@@ -42,7 +42,7 @@ fn whole_box_filtered(whole: &DensityGrid, report: &FilterReport) -> (Vec<f32>, 
 }
 
 fn coarse_values(g: &DensityGrid, report: &FilterReport) -> Vec<f32> {
-    let c0 = report.fine_box.0.div_euclid(IVec3::splat(report.factor));
+    let c0 = report.fine_box.0.as_ivec3().div_euclid(IVec3::splat(report.factor));
     let d = report.coarse_dims;
     let mut out = Vec::new();
     for z in 0..d.z {
@@ -74,7 +74,7 @@ fn check_file(path: &Path, max_resolution: u32) -> Option<FilterReport> {
     assert!(worst <= 1e-6 * scale, "{}: worst {worst} of {scale}", path.display());
     // A coarse cell's centre is the centre of its fine voxels.
     let f = report.factor as f32;
-    let c = report.fine_box.0.div_euclid(IVec3::splat(report.factor)).as_vec3();
+    let c = report.fine_box.0.as_ivec3().div_euclid(IVec3::splat(report.factor)).as_vec3();
     let fine_centre = c * f + glam::Vec3::splat(0.5 * (f - 1.0));
     assert!((cxf.transform_point3(c) - xf.transform_point3(fine_centre)).length() < 1e-4 * xf.transform_vector3(glam::Vec3::ONE).length() * f);
     // In memory, the same filter gives the same grid to the bit.
@@ -123,6 +123,13 @@ fn filtered_load_equals_the_whole_load_box_filtered_and_reads_one_window() {
     for p in fixtures {
         let r = check_file(&p, 12);
         eprintln!("{}: {r:?}", p.display());
+        if r.is_none() && p.file_name().is_some_and(|n| n == "roottile_blosc_full.vdb") {
+            // Root tiles of 4096^3 voxels (12288 x 4096 x 4096 here), which the whole load refuses (over the grid
+            // limits): filtered, it is 12^3 cells of its value at most.
+            let (g, _, r) = load_density_filtered(&p, None, 12, GridLimits::default()).unwrap();
+            eprintln!("{}: filtered {r:?}, max {}", p.display(), g.max_value());
+            assert!(r.coarse_dims.max_element() <= 12 && r.factor >= 4096 / 12, "{r:?}");
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
