@@ -21,6 +21,16 @@ and a streamed solve under a memory budget; writes the "lpm" section of BENCHMAR
    Larger grids are extrapolated from these two sizes (the table says so): this machine has 2
    shared cores, and 25 directions x 3 orders at 128^3 already take minutes.
 
+3. `--region N`: a medium larger than memory (section "lpm-region"). A procedural cumulus of
+   N^3 voxels (default 1024: 4 GiB dense) written as a VDB z-slab by z-slab (the example
+   `cumulus_vdb`, through `vdb::FloatVdbStream`, beside $VOLSCATTER_BIN in `examples/`), then
+   solved with the medium read box-filtered as it is read (`medium.max_resolution`, twice the
+   propagation grid; vdb/filter.rs) and `out_of_core: true` under a `memory_budget` far below
+   the dense size; against the same cloud at N/2 loaded whole and solved in memory. Peak RSS
+   (/usr/bin/time -v), times (the render report's phases: "load scene" is the filtered read),
+   file and scratch sizes. The VDB files go to $VOLSCATTER_BENCH_DIR (default: the system temp
+   dir) and are deleted afterwards. Measure a small N first (256) and extrapolate.
+
 `--before BIN`: the paper's cases also on the CPU with another build of the CLI (the code
 before a CPU speed-up), in a "before" column, and its image against this build's.
 
@@ -179,6 +189,79 @@ def accuracy() -> None:
     log("\n".join(lines))
 
 
+def write_cumulus(n: int, path: Path) -> dict:
+    """The cumulus at n^3 voxels as a VDB, streamed (the `cumulus_vdb` example)."""
+    example = volscatter_bin().parent / "examples" / "cumulus_vdb"
+    if not example.exists():
+        raise SystemExit(f"{example} not found: cargo build --release -p volscatter-core --example cumulus_vdb")
+    rss, wall, p = peak_rss_kib_of(["nice", "-n", "15", str(example), str(n), str(path)])
+    if p.returncode != 0:
+        raise SystemExit(f"cumulus_vdb {n}: {p.stderr[-2000:]}")
+    log(f"cumulus {n}^3: {path.stat().st_size / 2**20:.1f} MiB in {wall:.1f} s, peak RSS {rss / 1024:.0f} MiB")
+    return {"wall_s": wall, "rss_mib": rss / 1024, "mib": path.stat().st_size / 2**20}
+
+
+def region(n: int, grid: int, full_in_memory: bool) -> None:
+    """Issue 19's medium larger than memory: the "lpm-region" section (see the docstring)."""
+    work = Path(tempfile.mkdtemp(prefix="volscatter-lpm-region-", dir=os.environ.get("VOLSCATTER_BENCH_DIR")))
+    rows = []
+    try:
+        big, half_vdb = work / f"cumulus{n}.vdb", work / f"cumulus{n // 2}.vdb"
+        wb = write_cumulus(n, big)
+        wh = write_cumulus(n // 2, half_vdb)
+        max_res = 2 * grid
+        base = {"grid_resolution": grid, "directions": 25, "max_orders": 3, "output_resolution": grid, "first_order": "boundary"}
+        # A slab of 8 layers of the grid (out_of_core.rs slab_bytes: 12 B x map x (25 (layers + 1)
+        # + layers (2 x 6 + 2))), rounded up to MiB: far below the dense medium.
+        budget = -(-12 * grid * grid * (25 * 9 + 8 * 14) // 2**20) * 2**20
+
+        def with_medium(vdb: Path, max_resolution: int | None) -> dict:
+            sc = scene("cumulus", n, 0.6, 0.95)
+            sc["medium"] = {"vdb": str(vdb), "density_scale": 12.0, "albedo": [0.95] * 3, "g": 0.6}
+            if max_resolution:
+                sc["medium"]["max_resolution"] = max_resolution
+            return sc
+
+        streamed = solve(work, "region_streamed", with_medium(big, max_res), {**base, "out_of_core": True, "memory_budget": budget})
+        half = solve(work, "region_half", with_medium(half_vdb, None), base)
+        full = solve(work, "region_full", with_medium(big, None), base) if full_in_memory else None
+        streamed["vs_half"] = rel_rmse(streamed["exr"], half["exr"])
+        if full:
+            streamed["vs_full"] = rel_rmse(streamed["exr"], full["exr"])
+            half["vs_full"] = rel_rmse(half["exr"], full["exr"])
+        rows = [("streamed: filtered read + out of core", f"{n}^3 read to {max_res}^3 cells", budget, streamed)]
+        rows.append(("in memory, half resolution", f"{n // 2}^3 loaded whole", 0, half))
+        if full:
+            rows.append(("in memory, full resolution", f"{n}^3 loaded whole", 0, full))
+    finally:
+        for f in work.glob("*"):
+            f.unlink()
+        work.rmdir()
+    cpu = platform.processor() or platform.machine()
+    scratch = grid**3 * (12 * 3 + 2 * 6 * 12)
+    lines = [
+        "## lpm: a medium larger than memory (issue 19)",
+        "",
+        f"Written by `scripts/bench_lpm.py --region {n} --grid {grid}` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared, CPU, nice 15).",
+        f"The procedural cumulus at {n}^3 voxels ({n**3 * 4 / 2**30:.2f} GiB dense) written as a Zip VDB 8 z-planes at a time (`cumulus_vdb`, `vdb::FloatVdbStream`): {wb['mib']:.1f} MiB in {wb['wall_s']:.1f} s, peak RSS {wb['rss_mib']:.0f} MiB ({n // 2}^3: {wh['mib']:.1f} MiB in {wh['wall_s']:.1f} s).",
+        f"lpm on a {grid}^3 propagation grid, 25 x 6 directions, 3 orders, `first_order: boundary`, output {grid}^3; sun and sky, 64x64 image. Streamed: `medium.max_resolution: {max_res}` (the VDB box-filtered as it is read, through a 64 KiB window, vdb/filter.rs) and `out_of_core: true` (scratch files at most {scratch / 2**20:.0f} MiB).",
+        "",
+        "| run | medium | memory_budget | read (s) | lpm (s) | wall (s) | peak RSS (MiB) | image vs half resolution (rel. RMSE) |" + (" image vs full resolution in memory |" if full_in_memory else ""),
+        "|---|---|---|---|---|---|---|---|" + ("---|" if full_in_memory else ""),
+    ]
+    for name, medium, b, r in rows:
+        cells = [name, medium, f"{b / 2**20:.0f} MiB" if b else "0", f"{r['phases'].get('load scene', float('nan')):.2f}", f"{r['solver_s']:.2f}", f"{r['wall_s']:.1f}", f"{r['rss_mib']:.0f}", r.get("vs_half", "-")]
+        if full_in_memory:
+            cells.append(r.get("vs_full", "-"))
+        lines.append(f"| {' | '.join(cells)} |")
+    lines += [
+        "",
+        "The streamed run never holds the file or the full-resolution voxels: its peak RSS is the coarse medium, the per-leaf topology (76 B a leaf), the slab and the output grid (the test `filtered_vdb_load_peaks_at_the_coarse_grid_not_the_file` counts the filter's allocations). The image difference against the half-resolution solve is what the box filter and the resolution change together; the out-of-core solve itself equals the in-memory one to the bit on the same medium (`lpm_out_of_core_equals_in_memory`).",
+    ]
+    write_section("lpm-region", "\n".join(lines))
+    log("\n".join(lines))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="64^3 only, small large case")
@@ -188,7 +271,12 @@ def main() -> None:
     ap.add_argument("--before", type=Path, help="another volscatter CLI: the paper's cases on the CPU before a change")
     ap.add_argument("--before-note", default="", help="what the --before build lacks, for the table's note")
     ap.add_argument("--accuracy", action="store_true", help="only the accuracy rows: delta_m on and off on the benchmark scenes")
+    ap.add_argument("--region", type=int, help="only the medium-larger-than-memory rows: a cumulus of this many voxels a side (1024 in the issue)")
+    ap.add_argument("--region-full", action="store_true", help="with --region: also solve the full-resolution VDB loaded whole, in memory")
     args = ap.parse_args()
+    if args.region:
+        region(args.region, 64 if args.grid == 128 else args.grid, args.region_full)
+        return
     if args.accuracy:
         accuracy()
         return

@@ -79,6 +79,11 @@ pub struct MediumJson {
     pub vdb: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grid: Option<String>,
+    /// For `vdb`: read the grid through a bounded window and box-filter it, as it is read, to
+    /// at most this many voxels along its longest side (an integer factor; vdb/filter.rs), so
+    /// that a grid larger than memory is never held at full resolution. Absent: loaded whole.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_resolution: Option<u32>,
     /// Built-in procedural medium: "plume" or "cumulus".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub procedural: Option<String>,

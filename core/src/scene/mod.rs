@@ -302,6 +302,9 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
     if sources != 1 {
         return Err(Error::scene("medium", "needs exactly one of `vdb`, `procedural`, `raw`"));
     }
+    if m.max_resolution.is_some() && m.vdb.is_none() {
+        return Err(Error::scene("medium.max_resolution", "is for a `vdb` medium (a procedural or raw medium takes its resolution from `dims`)"));
+    }
     let (grid, index_to_object) = if let Some(name) = &m.procedural {
         let build = match name.as_str() {
             "plume" => procedural::plume,
@@ -327,8 +330,11 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
         let grid = raw::read_raw_f32(&scene_file("medium.raw", file, base_dir)?, dims, limits)?;
         (grid, Affine3A::from_translation(origin) * Affine3A::from_scale(Vec3::splat(voxel)))
     } else {
-        let file = m.vdb.as_ref().unwrap();
-        crate::vdb::load_density(&scene_file("medium.vdb", file, base_dir)?, m.grid.as_deref(), limits)?
+        let file = scene_file("medium.vdb", m.vdb.as_ref().unwrap(), base_dir)?;
+        match m.max_resolution {
+            None => crate::vdb::load_density(&file, m.grid.as_deref(), limits)?,
+            Some(n) => filtered_vdb(&file, m, n, limits)?,
+        }
     };
     let mut medium = Medium::new(grid, object_to_world * index_to_object, density_scale, albedo, m.g);
     if let Some(e) = &m.emission {
@@ -337,6 +343,22 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
         medium.emission = Some(emission::build_emission(e, &src, limits)?);
     }
     Ok(medium)
+}
+
+/// The `vdb` medium box-filtered to `max_resolution` as it is read (`medium.max_resolution`,
+/// vdb/filter.rs). Emission is refused: its grids would be read whole, at full resolution.
+fn filtered_vdb(file: &Path, m: &json::MediumJson, max_resolution: u32, limits: GridLimits) -> Result<(crate::medium::DensityGrid, Affine3A)> {
+    if !(2..=4096).contains(&max_resolution) {
+        return Err(Error::scene("medium.max_resolution", format!("must be in 2..=4096, got {max_resolution}")));
+    }
+    if m.emission.is_some() {
+        return Err(Error::scene(
+            "medium.max_resolution",
+            "emission is not read box-filtered yet (its grids would be loaded whole at full resolution); leave out max_resolution or the emission",
+        ));
+    }
+    let (grid, xf, _) = crate::vdb::load_density_filtered(file, m.grid.as_deref(), max_resolution, limits)?;
+    Ok((grid, xf))
 }
 
 #[cfg(test)]
@@ -410,6 +432,21 @@ mod tests {
         assert!(e.contains("kamera"), "{e}");
         let e = err_of(&base.replace(r#""irradiance": [5.0, 4.6, 4.0]"#, r#""irradiance": "bright""#));
         assert!(e.contains("lights[0]"), "{e}");
+    }
+
+    /// `medium.max_resolution` (the box-filtered VDB read) is for `vdb` media, in 2..=4096,
+    /// and refuses emission (whose grids would be read whole) before reading anything.
+    #[test]
+    fn max_resolution_is_for_vdb_media_without_emission() {
+        let e = err_of(&DEFAULT_SCENE_JSON.replace(r#""dims": [64]"#, r#""dims": [64], "max_resolution": 32"#));
+        assert!(e.contains("medium.max_resolution") && e.contains("vdb"), "{e}");
+        let vdb = |extra: &str| DEFAULT_SCENE_JSON.replace(r#""procedural": "plume", "dims": [64]"#, &format!(r#""vdb": "missing.vdb"{extra}"#));
+        let e = err_of(&vdb(r#", "max_resolution": 1"#));
+        assert!(e.contains("medium.max_resolution") && e.contains("2..=4096"), "{e}");
+        let e = err_of(&vdb(r#", "max_resolution": 32, "emission": {"grid": "density"}"#));
+        assert!(e.contains("medium.max_resolution") && e.contains("emission"), "{e}");
+        let e = err_of(&vdb(r#", "max_resolution": 32"#));
+        assert!(e.contains("missing.vdb"), "{e}");
     }
 
     /// Issue 22: text after the object was ignored; now it is an error naming what follows.

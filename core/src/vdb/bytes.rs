@@ -1,19 +1,50 @@
-//! Bounds-checked little-endian reading of an in-memory file. Every read checks the bytes
-//! left first; an error names the file, the offset and what was being read.
+//! Bounds-checked little-endian reading of a file, held in memory or read from disk through
+//! a bounded window. Every read checks the bytes left first; an error names the file, the
+//! offset and what was being read.
+//!
+//! From disk (`Reader::file`), the reader keeps one window of the file (`WINDOW` bytes, more
+//! only for a single read that is longer, up to `MAX_READ`) and fills it with positioned
+//! reads, so a file larger than memory is parsed with a buffer of that size; `skip` moves over
+//! bytes without reading them.
 
+use std::fs::File;
 use std::path::Path;
 
 use crate::error::{Error, Result};
 
+/// Bytes a file-backed reader reads at a time (a leaf of 512 floats is 2 KiB; the tree is read
+/// mostly in order, so one window serves many nodes).
+pub(crate) const WINDOW: usize = 64 << 10;
+
+/// The longest single read from a file-backed reader. The largest block a valid file holds is
+/// an internal node's values (32^3 vec3d, 768 KiB, a little more compressed) or a metadata
+/// value; a size field claiming more is refused rather than allocated.
+pub(crate) const MAX_READ: usize = 64 << 20;
+
+enum Source<'a> {
+    Mem(&'a [u8]),
+    /// `buf` holds the file's bytes `at .. at + buf.len()`.
+    File { file: &'a File, buf: Vec<u8>, at: usize },
+}
+
 pub(crate) struct Reader<'a> {
-    data: &'a [u8],
+    src: Source<'a>,
+    /// Bytes readable: the slice's length, or the end offset given for a file.
+    len: usize,
     pos: usize,
     path: &'a Path,
+    /// Largest window a file-backed reader has held (for tests and reports).
+    peak_window: usize,
 }
 
 impl<'a> Reader<'a> {
     pub fn new(data: &'a [u8], path: &'a Path) -> Self {
-        Reader { data, pos: 0, path }
+        Reader { src: Source::Mem(data), len: data.len(), pos: 0, path, peak_window: 0 }
+    }
+
+    /// A reader of the file's first `len` bytes, read through a window (see the module docs).
+    pub fn file(file: &'a File, len: usize, path: &'a Path) -> Self {
+        Reader { src: Source::File { file, buf: Vec::new(), at: 0 }, len, pos: 0, path, peak_window: 0 }
     }
 
     pub fn path(&self) -> &'a Path {
@@ -23,10 +54,14 @@ impl<'a> Reader<'a> {
         self.pos
     }
     pub fn len(&self) -> usize {
-        self.data.len()
+        self.len
     }
     pub fn remaining(&self) -> usize {
-        self.data.len() - self.pos
+        self.len - self.pos
+    }
+    /// Bytes of the largest window held so far (0 for a reader of memory).
+    pub fn peak_window(&self) -> usize {
+        self.peak_window
     }
 
     /// A format error at the current offset. Names from the file are quoted as excerpts where
@@ -42,27 +77,58 @@ impl<'a> Reader<'a> {
 
     /// Moves to an absolute offset taken from the file (checked against the file size).
     pub fn seek(&mut self, pos: i64, what: &str) -> Result<()> {
-        if pos < 0 || pos as u64 > self.data.len() as u64 {
-            return Err(self.err(format!("{what} offset {pos} lies outside the file ({} bytes)", self.data.len())));
+        if pos < 0 || pos as u64 > self.len as u64 {
+            return Err(self.err(format!("{what} offset {pos} lies outside the file ({} bytes)", self.len)));
         }
         self.pos = pos as usize;
         Ok(())
     }
 
-    pub fn bytes(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
+    pub fn bytes(&mut self, n: usize, what: &str) -> Result<&[u8]> {
         if n > self.remaining() {
             return Err(self.err(format!(
                 "truncated: {what} needs {n} bytes, {} left",
                 self.remaining()
             )));
         }
-        let s = &self.data[self.pos..self.pos + n];
+        let start = self.pos;
+        if let Source::File { buf, at, .. } = &self.src {
+            let inside = start >= *at && start + n <= *at + buf.len();
+            if !inside && n > MAX_READ {
+                return Err(self.err(format!("{what} claims {n} bytes, more than any block of a valid file ({MAX_READ} bytes)")));
+            }
+        }
         self.pos += n;
-        Ok(s)
+        let path = self.path;
+        match &mut self.src {
+            Source::Mem(d) => Ok(&d[start..start + n]),
+            Source::File { file, buf, at } => {
+                if start < *at || start + n > *at + buf.len() {
+                    let want = n.max(WINDOW).min(self.len - start);
+                    buf.resize(want, 0);
+                    *at = start;
+                    self.peak_window = self.peak_window.max(buf.capacity());
+                    if let Err(e) = read_exact_at(file, buf, start as u64) {
+                        // The window is not valid: the next read refills it.
+                        buf.clear();
+                        return Err(Error::io(path, e));
+                    }
+                }
+                Ok(&buf[start - *at..start - *at + n])
+            }
+        }
     }
 
+    /// Moves over `n` bytes (checked against the bytes left; a file's are not read).
     pub fn skip(&mut self, n: usize, what: &str) -> Result<()> {
-        self.bytes(n, what).map(|_| ())
+        if n > self.remaining() {
+            return Err(self.err(format!(
+                "truncated: {what} needs {n} bytes, {} left",
+                self.remaining()
+            )));
+        }
+        self.pos += n;
+        Ok(())
     }
 
     pub fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
@@ -103,6 +169,19 @@ impl<'a> Reader<'a> {
         let b = self.bytes(words * 8, what)?;
         Ok(b.chunks_exact(8).map(|c| u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])).collect())
     }
+}
+
+/// A positioned read (no shared file offset, so readers of one file do not disturb each other).
+#[cfg(unix)]
+pub(crate) fn read_exact_at(f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
+    std::os::unix::fs::FileExt::read_exact_at(f, buf, at)
+}
+
+#[cfg(not(unix))]
+pub(crate) fn read_exact_at(mut f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    f.seek(SeekFrom::Start(at))?;
+    f.read_exact(buf)
 }
 
 /// Little-endian writing into a growing buffer, with offsets to patch afterwards.

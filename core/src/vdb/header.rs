@@ -81,8 +81,9 @@ pub(crate) fn read_meta_map(r: &mut Reader) -> Result<MetaMap> {
         let type_name = r.string("metadata type")?;
         let size = r.u32("metadata size")? as usize;
         let start = r.pos();
-        let body = r.bytes(size, "metadata value")?;
-        let mut b = Reader::new(body, r.path());
+        // Owned: a file-backed reader's window moves on with the next read.
+        let body = r.bytes(size, "metadata value")?.to_vec();
+        let mut b = Reader::new(&body, r.path());
         let expect = |n: usize| -> Result<()> {
             if size != n {
                 return Err(r_err(r, start, &name, &type_name, size, n));
@@ -110,7 +111,7 @@ pub(crate) fn read_meta_map(r: &mut Reader) -> Result<MetaMap> {
                 expect(8)?;
                 MetaValue::Float(b.f64("double")?)
             }
-            "string" => MetaValue::String(String::from_utf8_lossy(body).into_owned()),
+            "string" => MetaValue::String(String::from_utf8_lossy(&body).into_owned()),
             "vec3i" => {
                 expect(12)?;
                 MetaValue::Vec3i([b.i32("x")?, b.i32("y")?, b.i32("z")?])

@@ -25,6 +25,7 @@
 
 pub mod blosc;
 mod bytes;
+pub mod filter;
 pub mod header;
 mod stats;
 pub mod stream_writer;
@@ -33,6 +34,8 @@ mod tree;
 pub mod values;
 pub mod writer;
 
+#[cfg(test)]
+mod filter_tests;
 #[cfg(test)]
 mod region_tests;
 #[cfg(test)]
@@ -50,16 +53,26 @@ use header::{FileHeader, GridDescriptor, MetaMap, MetaValue};
 use transform::GridTransform;
 use values::{Codec, ValueKind};
 
-pub use stream_writer::RgbVdbStream;
+pub use filter::{load_density_filtered, FilterReport};
+pub use stream_writer::{FloatVdbStream, RgbVdbStream};
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 
-/// An OpenVDB file held in memory with its header and grid descriptors parsed.
+/// An OpenVDB file with its header and grid descriptors parsed. Opened from disk, its bytes
+/// stay there: each read goes through a window of `bytes::WINDOW` bytes (bytes.rs), so a file
+/// larger than memory can be opened, inspected and read region by region or filtered
+/// (filter.rs); `from_bytes` parses a file already in memory.
 pub struct VdbFile {
     path: PathBuf,
-    data: Vec<u8>,
+    contents: Contents,
     pub header: FileHeader,
     pub metadata: MetaMap,
     pub grids: Vec<GridDescriptor>,
+}
+
+enum Contents {
+    Mem(Vec<u8>),
+    /// The open file and its size when opened.
+    File(std::fs::File, usize),
 }
 
 /// The parts of a grid before its tree.
@@ -72,7 +85,8 @@ struct GridHead {
 }
 
 impl VdbFile {
-    /// Reads the file; refuses files larger than `max_bytes` before reading them.
+    /// Opens the file (its bytes are read as they are needed, not loaded); refuses files
+    /// larger than `max_bytes`.
     pub fn open(path: &Path, max_bytes: u64) -> Result<Self> {
         // A FIFO passed as `medium.vdb` would block `read` forever (issue 22).
         let size = crate::io::files::regular_file(path, "VDB file")?;
@@ -84,15 +98,19 @@ impl VdbFile {
                 max_bytes >> 20
             )));
         }
-        crate::budget::check(&format!("VDB file {}", path.display()), size)?;
-        let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        Self::from_bytes(data, path)
+        let len = usize::try_from(size).map_err(|_| Error::TooLarge(format!("{}: file of {size} bytes", path.display())))?;
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        Self::parse(Contents::File(file, len), path)
     }
 
     /// Parses a file already in memory; `path` names it in messages.
     pub fn from_bytes(data: Vec<u8>, path: &Path) -> Result<Self> {
+        Self::parse(Contents::Mem(data), path)
+    }
+
+    fn parse(contents: Contents, path: &Path) -> Result<Self> {
         let (header, metadata, grids) = {
-            let mut r = Reader::new(&data, path);
+            let mut r = reader_of(&contents, None, path);
             let header = header::read_header(&mut r)?;
             if !header.has_grid_offsets {
                 return Err(r.err("VDB streams without grid offsets are not supported; save the grids to a file"));
@@ -114,7 +132,7 @@ impl VdbFile {
             }
             (header, metadata, grids)
         };
-        Ok(VdbFile { path: path.to_path_buf(), data, header, metadata, grids })
+        Ok(VdbFile { path: path.to_path_buf(), contents, header, metadata, grids })
     }
 
     pub fn path(&self) -> &Path {
@@ -124,7 +142,7 @@ impl VdbFile {
     /// A reader limited to grid `i`'s bytes, positioned at its start.
     fn grid_reader(&self, i: usize) -> Result<Reader<'_>> {
         let gd = &self.grids[i];
-        let mut r = Reader::new(&self.data[..gd.end_pos as usize], &self.path);
+        let mut r = reader_of(&self.contents, Some(gd.end_pos as usize), &self.path);
         r.seek(gd.grid_pos, "grid")?;
         Ok(r)
     }
@@ -167,6 +185,11 @@ impl VdbFile {
     /// `visit_tree` passing on only what meets `region` (see `tree::read_tree_region`);
     /// returns the leaves skipped.
     fn visit_tree_region(&self, i: usize, kind: ValueKind, visitor: &mut dyn tree::Visitor, region: Option<(IVec3, IVec3)>) -> Result<usize> {
+        self.visit_tree_windowed(i, kind, visitor, region).map(|(skipped, _)| skipped)
+    }
+
+    /// `visit_tree_region`, also returning the largest read window it held (0 in memory).
+    fn visit_tree_windowed(&self, i: usize, kind: ValueKind, visitor: &mut dyn tree::Visitor, region: Option<(IVec3, IVec3)>) -> Result<(usize, usize)> {
         let owner = self.tree_owner(i)?;
         let head = self.grid_head(owner)?;
         let gd = &self.grids[owner];
@@ -176,7 +199,8 @@ impl VdbFile {
         let mut r = self.grid_reader(owner)?;
         r.seek(head.tree_pos as i64, "tree")?;
         let mut codec = Codec { kind, half: gd.half, compression: head.compression, background: vec![0.0; kind.comps] };
-        tree::read_tree_region(&mut r, &mut codec, visitor, region)
+        let skipped = tree::read_tree_region(&mut r, &mut codec, visitor, region)?;
+        Ok((skipped, r.peak_window()))
     }
 
     /// Index of the grid `name` (its name without uniqueness suffix, or its unique name), or
@@ -299,6 +323,15 @@ impl VdbFile {
     }
 }
 
+/// A reader of the first `end` bytes (all of them with None); `end` was checked against the
+/// size when the descriptors were read.
+fn reader_of<'a>(contents: &'a Contents, end: Option<usize>, path: &'a Path) -> Reader<'a> {
+    match contents {
+        Contents::Mem(d) => Reader::new(&d[..end.unwrap_or(d.len())], path),
+        Contents::File(f, len) => Reader::file(f, end.unwrap_or(*len), path),
+    }
+}
+
 fn compression_name(c: u32) -> String {
     let mut parts = Vec::new();
     if c & header::COMPRESS_BLOSC != 0 {
@@ -387,6 +420,21 @@ pub fn load_density(path: &Path, grid: Option<&str>, limits: GridLimits) -> Resu
     f.load_float_grid(i, limits)
 }
 
+/// A density grid's background must be 0 (what the sampling assumes outside the stored voxels).
+fn density_background(path: &Path, value: &[f64]) -> Result<()> {
+    if value[0] != 0.0 {
+        return Err(Error::format(
+            path,
+            format!(
+                "background value is {}: a density grid needs background 0 (a level set is not a density; \
+                 convert it to a fog volume first)",
+                value[0]
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Fills a density grid builder from a float tree.
 struct DensityVisitor {
     builder: DensityGridBuilder,
@@ -395,17 +443,7 @@ struct DensityVisitor {
 
 impl tree::Visitor for DensityVisitor {
     fn background(&mut self, value: &[f64]) -> Result<()> {
-        if value[0] != 0.0 {
-            return Err(Error::format(
-                &self.path,
-                format!(
-                    "background value is {}: a density grid needs background 0 (a level set is not a density; \
-                     convert it to a fog volume first)",
-                    value[0]
-                ),
-            ));
-        }
-        Ok(())
+        density_background(&self.path, value)
     }
 
     fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], _active: bool) -> Result<()> {

@@ -9,7 +9,8 @@ use glam::IVec3;
 use super::*;
 use crate::medium::GridLimits;
 
-fn files() -> Vec<PathBuf> {
+/// The shared fixtures' VDB files (none when shared/fixtures is not beside the repository).
+pub(super) fn files() -> Vec<PathBuf> {
     let f = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures");
     let mut v: Vec<PathBuf> = std::fs::read_dir(f.join("vdb")).map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|e| e == "vdb")).collect()).unwrap_or_default();
     v.push(f.join("blender_noise_cube/volumes/Volume.vdb"));

@@ -1,5 +1,6 @@
-//! Writes a dense RGB grid (three float grids `<prefix>_r/_g/_b`, as [`super::write_rgb_grids`])
-//! z-planes at a time, for grids too large to hold: each row of leaves (8 planes) is encoded
+//! Writes a dense RGB grid (three float grids `<prefix>_r/_g/_b`, as [`super::write_rgb_grids`];
+//! [`RgbVdbStream`]) or a dense float grid ([`FloatVdbStream`], as [`super::write_float_grid`]
+//! of the same values) z-planes at a time, for grids too large to hold: each row of leaves (8 planes) is encoded
 //! as soon as its planes have arrived and appended to a scratch file beside the output; only
 //! the topology (an origin and a mask a leaf) stays in memory. `finish` writes the header and
 //! each grid's topology, then copies the encoded leaves in the order the format wants them
@@ -15,26 +16,74 @@ use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, IVec3, Vec3};
 
-use super::bytes::Writer;
+use super::bytes::{read_exact_at, Writer};
 use super::values::write_float_block;
 use super::writer::{compression_flags, file_head, unique_names, write_grid_head, FloatTree, WriteOptions};
 use crate::error::{Error, Result};
 
-pub struct RgbVdbStream {
+/// The grids of either stream: `k` values a voxel (one per grid), interleaved.
+struct PlaneStream {
     path: PathBuf,
-    names: [String; 3],
+    names: Vec<String>,
     dims: [usize; 3],
     xf: Affine3A,
     options: WriteOptions,
     scratch_path: PathBuf,
     scratch: BufWriter<File>,
     scratch_len: u64,
-    trees: [FloatTree; 3],
-    /// Planes received and not yet encoded (fewer than 8, x fastest).
-    pending: Vec<Vec3>,
+    trees: Vec<FloatTree>,
+    /// Planes received and not yet encoded (fewer than 8, x fastest, `k` values a voxel).
+    pending: Vec<f32>,
     /// The z of `pending`'s first plane.
     z: usize,
     done: bool,
+}
+
+/// S as three float grids, z-planes at a time (see the module docs).
+pub struct RgbVdbStream(PlaneStream);
+
+/// One float grid, z-planes at a time (see the module docs): e.g. a procedural medium larger
+/// than memory, written slab by slab.
+pub struct FloatVdbStream(PlaneStream);
+
+impl RgbVdbStream {
+    pub fn create(path: &Path, prefix: &str, dims: [u32; 3], index_to_world: Affine3A, options: &WriteOptions) -> Result<Self> {
+        let names = vec![format!("{prefix}_r"), format!("{prefix}_g"), format!("{prefix}_b")];
+        PlaneStream::create(path, prefix, names, dims, index_to_world, options).map(RgbVdbStream)
+    }
+
+    /// The next whole z-planes (x fastest), in order.
+    pub fn push_planes(&mut self, data: &[Vec3]) -> Result<()> {
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::InvalidArgument(format!("{}: value {i} of the planes is {}", self.0.path.display(), data[i])));
+        }
+        let flat: Vec<f32> = data.iter().flat_map(|v| v.to_array()).collect();
+        self.0.push_planes(&flat)
+    }
+
+    /// Writes the file once every plane has been pushed.
+    pub fn finish(self) -> Result<()> {
+        self.0.finish()
+    }
+}
+
+impl FloatVdbStream {
+    pub fn create(path: &Path, name: &str, dims: [u32; 3], index_to_world: Affine3A, options: &WriteOptions) -> Result<Self> {
+        PlaneStream::create(path, name, vec![name.to_string()], dims, index_to_world, options).map(FloatVdbStream)
+    }
+
+    /// The next whole z-planes (x fastest), in order.
+    pub fn push_planes(&mut self, data: &[f32]) -> Result<()> {
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::InvalidArgument(format!("{}: value {i} of the planes is {}", self.0.path.display(), data[i])));
+        }
+        self.0.push_planes(data)
+    }
+
+    /// Writes the file once every plane has been pushed.
+    pub fn finish(self) -> Result<()> {
+        self.0.finish()
+    }
 }
 
 fn part(path: &Path, suffix: &str) -> PathBuf {
@@ -43,19 +92,19 @@ fn part(path: &Path, suffix: &str) -> PathBuf {
     PathBuf::from(s)
 }
 
-impl RgbVdbStream {
-    pub fn create(path: &Path, prefix: &str, dims: [u32; 3], index_to_world: Affine3A, options: &WriteOptions) -> Result<Self> {
+impl PlaneStream {
+    fn create(path: &Path, what: &str, names: Vec<String>, dims: [u32; 3], index_to_world: Affine3A, options: &WriteOptions) -> Result<Self> {
         if dims.iter().any(|&d| d == 0 || d > i32::MAX as u32 - 8) {
-            return Err(Error::InvalidArgument(format!("{prefix}: dims {dims:?} out of range")));
+            return Err(Error::InvalidArgument(format!("{what}: dims {dims:?} out of range")));
         }
         // The map, class and names are checked now, not after the solve.
-        file_head(path, 3, index_to_world, options)?;
-        let names = [format!("{prefix}_r"), format!("{prefix}_g"), format!("{prefix}_b")];
+        file_head(path, names.len(), index_to_world, options)?;
         unique_names(names.iter().map(|s| s.as_str()))?;
         let scratch_path = part(path, ".leaves");
         let file = OpenOptions::new().write(true).create(true).truncate(true).open(&scratch_path).map_err(|e| Error::io(&scratch_path, e))?;
-        Ok(RgbVdbStream {
+        Ok(PlaneStream {
             path: path.to_path_buf(),
+            trees: names.iter().map(|_| FloatTree::new()).collect(),
             names,
             dims: dims.map(|d| d as usize),
             xf: index_to_world,
@@ -63,21 +112,17 @@ impl RgbVdbStream {
             scratch_path,
             scratch: BufWriter::new(file),
             scratch_len: 0,
-            trees: [FloatTree::new(), FloatTree::new(), FloatTree::new()],
             pending: Vec::new(),
             z: 0,
             done: false,
         })
     }
 
-    /// The next whole z-planes (x fastest), in order.
-    pub fn push_planes(&mut self, data: &[Vec3]) -> Result<()> {
-        let plane = self.dims[0] * self.dims[1];
+    /// The next whole z-planes, `k` values a voxel (checked finite by the caller).
+    fn push_planes(&mut self, data: &[f32]) -> Result<()> {
+        let plane = self.dims[0] * self.dims[1] * self.names.len();
         if !data.len().is_multiple_of(plane) || self.z + (self.pending.len() + data.len()) / plane > self.dims[2] {
-            return Err(Error::InvalidArgument(format!("{}: {} values are not whole planes within {:?}", self.path.display(), data.len(), self.dims)));
-        }
-        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            return Err(Error::InvalidArgument(format!("{}: value {i} of the planes is {}", self.path.display(), data[i])));
+            return Err(Error::InvalidArgument(format!("{}: {} values are not whole planes within {:?}", self.path.display(), data.len() / self.names.len(), self.dims)));
         }
         self.pending.extend_from_slice(data);
         while self.pending.len() >= 8 * plane {
@@ -89,6 +134,7 @@ impl RgbVdbStream {
     /// Encodes the leaves of the first `planes` pending planes (8, or the last row's rest).
     fn encode_row(&mut self, planes: usize) -> Result<()> {
         let [nx, ny, _] = self.dims;
+        let k = self.names.len();
         let plane = nx * ny;
         let comp = compression_flags(&self.options);
         for by in (0..ny).step_by(8) {
@@ -99,7 +145,7 @@ impl RgbVdbStream {
                     for x in 0..8.min(nx - bx) {
                         for y in 0..8.min(ny - by) {
                             for z in 0..planes {
-                                zf[(x << 6) | (y << 3) | z] = self.pending[(bx + x) + nx * (by + y) + plane * z][c];
+                                zf[(x << 6) | (y << 3) | z] = self.pending[k * ((bx + x) + nx * (by + y) + plane * z) + c];
                             }
                         }
                     }
@@ -113,14 +159,14 @@ impl RgbVdbStream {
                 }
             }
         }
-        self.pending.drain(..planes * plane);
+        self.pending.drain(..planes * plane * k);
         self.z += planes;
         Ok(())
     }
 
     /// Writes the file once every plane has been pushed.
-    pub fn finish(mut self) -> Result<()> {
-        let plane = self.dims[0] * self.dims[1];
+    fn finish(mut self) -> Result<()> {
+        let plane = self.dims[0] * self.dims[1] * self.names.len();
         let rest = self.pending.len() / plane;
         if self.z + rest != self.dims[2] {
             return Err(Error::InvalidArgument(format!("{}: {} of {} planes pushed", self.path.display(), self.z + rest, self.dims[2])));
@@ -148,7 +194,7 @@ impl RgbVdbStream {
         let io = |e| Error::io(out_path, e);
         let mut out = BufWriter::new(File::create(out_path).map_err(io)?);
         let scratch = File::open(&self.scratch_path).map_err(|e| Error::io(&self.scratch_path, e))?;
-        let mut w = file_head(&self.path, 3, self.xf, &self.options)?;
+        let mut w = file_head(&self.path, self.names.len(), self.xf, &self.options)?;
         let mut base = 0u64;
         let names = unique_names(self.names.iter().map(|s| s.as_str()))?;
         let mut buf = Vec::new();
@@ -174,7 +220,7 @@ impl RgbVdbStream {
     }
 }
 
-impl Drop for RgbVdbStream {
+impl Drop for PlaneStream {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.scratch_path);
         if !self.done {
@@ -183,22 +229,10 @@ impl Drop for RgbVdbStream {
     }
 }
 
-#[cfg(unix)]
-fn read_exact_at(f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
-    std::os::unix::fs::FileExt::read_exact_at(f, buf, at)
-}
-
-#[cfg(not(unix))]
-fn read_exact_at(mut f: &File, buf: &mut [u8], at: u64) -> std::io::Result<()> {
-    use std::io::{Read, Seek, SeekFrom};
-    f.seek(SeekFrom::Start(at))?;
-    f.read_exact(buf)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vdb::{write_rgb_grids, VdbCompression};
+    use crate::vdb::{write_dense_float_grids, write_rgb_grids, DenseFloat, VdbCompression};
 
     /// Streamed in uneven batches of planes (1, 3, 8, the rest: rows split across pushes, a
     /// last row of 5 planes), the file equals `write_rgb_grids` of the whole array byte for byte
@@ -237,6 +271,18 @@ mod tests {
             assert!(x[..21] == y[..21] && x[57..] == y[57..], "half {half} {compression:?}");
             assert!(!b.with_extension("vdb.leaves").exists());
             crate::vdb::VdbFile::open(&b, u64::MAX).unwrap();
+            // One float grid (the green channel) streamed: `write_dense_float_grids` of it.
+            let green: Vec<f32> = data.iter().map(|v| v.y.abs()).collect();
+            let (c, d) = (dir.join("float_whole.vdb"), dir.join("float_streamed.vdb"));
+            write_dense_float_grids(&c, &[DenseFloat { name: "density", dims, values: &green }], xf, &o).unwrap();
+            let mut f = FloatVdbStream::create(&d, "density", dims, xf, &o).unwrap();
+            let plane = (dims[0] * dims[1]) as usize;
+            f.push_planes(&green[..5 * plane]).unwrap();
+            assert!(f.push_planes(&green[..plane + 1]).is_err(), "a part of a plane is refused");
+            f.push_planes(&green[5 * plane..]).unwrap();
+            f.finish().unwrap();
+            let (x, y) = (std::fs::read(&c).unwrap(), std::fs::read(&d).unwrap());
+            assert!(x.len() == y.len() && x[..21] == y[..21] && x[57..] == y[57..], "float: half {half} {compression:?}");
         }
         // Unfinished: no output, no scratch file.
         let c = dir.join("unfinished.vdb");

@@ -29,9 +29,19 @@ pub(crate) trait Visitor {
     /// for inactive tiles whose value differs from the background.
     fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], active: bool) -> Result<()>;
     fn leaf(&mut self, origin: IVec3, mask: &[u64; 8], values: &[f64]) -> Result<()>;
+    /// The leaf at `origin`, from the topology, before its buffer is read: false steps over
+    /// the buffer without decoding it (and `leaf` is not called for it).
+    fn wants_leaf(&mut self, _origin: IVec3) -> bool {
+        true
+    }
+    /// Stop after the topology: tiles and `wants_leaf` of every leaf, no leaf buffer read.
+    fn topology_only(&self) -> bool {
+        false
+    }
 }
 
-struct LeafTopo {
+/// What the reader keeps of a leaf between the topology and the buffers.
+pub(crate) struct LeafTopo {
     origin: IVec3,
     mask: [u64; 8],
 }
@@ -56,6 +66,12 @@ impl Visitor for InRegion<'_> {
     }
     fn leaf(&mut self, origin: IVec3, mask: &[u64; 8], values: &[f64]) -> Result<()> {
         self.inner.leaf(origin, mask, values)
+    }
+    fn wants_leaf(&mut self, origin: IVec3) -> bool {
+        meets(origin, INTERNAL4_TILE_LOG2, self.region) && self.inner.wants_leaf(origin)
+    }
+    fn topology_only(&self) -> bool {
+        self.inner.topology_only()
     }
 }
 
@@ -122,12 +138,18 @@ pub(crate) fn read_tree_region(r: &mut Reader, codec: &mut Codec, visitor: &mut 
         let origin = root_origin(r, &mut seen, "root child origin")?;
         read_internal(r, codec, visitor, origin, 5, &mut leaves, &mut scratch)?;
     }
+    if visitor.topology_only() {
+        for leaf in &leaves {
+            visitor.wants_leaf(leaf.origin);
+        }
+        return Ok(leaves.len());
+    }
     // Leaf buffers, in topology order. The value mask is stored again; OpenVDB skips it when
     // reading from a file and keeps the topology's, and so does this reader.
     let mut skipped = 0;
     for leaf in &leaves {
         r.skip(64, "leaf value mask")?;
-        if region.is_some_and(|b| !meets(leaf.origin, INTERNAL4_TILE_LOG2, b)) {
+        if !visitor.wants_leaf(leaf.origin) {
             codec.skip_block(r, 512, &leaf.mask)?;
             skipped += 1;
             continue;

@@ -147,9 +147,15 @@ impl Codec {
                 if m != nbytes as u64 {
                     return Err(to_error(r.path(), at, format!("uncompressed chunk of {m} bytes where the node needs {nbytes}")));
                 }
-                r.bytes(nbytes, "uncompressed values")?
+                if out.is_none() {
+                    r.skip(nbytes, "uncompressed values")?;
+                    &[]
+                } else {
+                    r.bytes(nbytes, "uncompressed values")?
+                }
             } else if out.is_none() {
-                r.bytes(n as usize, "compressed values")?
+                r.skip(n as usize, "compressed values")?;
+                &[]
             } else {
                 if n as u64 > r.remaining() as u64 {
                     return Err(to_error(
@@ -168,6 +174,9 @@ impl Codec {
                 res.map_err(|m| to_error(r.path(), at, m))?;
                 &raw_owned
             }
+        } else if out.is_none() {
+            r.skip(nbytes, "values")?;
+            &[]
         } else {
             r.bytes(nbytes, "values")?
         };

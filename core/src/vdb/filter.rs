@@ -1,0 +1,235 @@
+//! A float grid box-filtered to a working resolution as it is read, for media whose voxels do
+//! not fit in memory (the scene's `medium.max_resolution`; issue 19's "a volume larger than
+//! RAM").
+//!
+//! Design: two passes over the file, each through the reader's bounded window (bytes.rs), so
+//! neither the file nor the full-resolution grid is ever held:
+//! 1. the topology alone (no leaf buffer is read): the index box of the leaves and of the
+//!    non-zero tiles, from which the integer factor `f` (the box's longest side over
+//!    `max_resolution`, rounded up) and the coarse lattice follow;
+//! 2. every leaf and tile, decoded one at a time and added into a dense f64 array of the
+//!    coarse cells (`f`^3 fine voxels each, aligned to multiples of `f` in index space); the
+//!    mean (absent voxels count as the background, 0) becomes the coarse grid.
+//!
+//! Memory: the coarse array (8 bytes a coarse cell, then the 4-byte grid built from it), the
+//! reader's window (64 KiB, more only for one block that is longer), one leaf, and what the
+//! tree reader keeps of the topology between topology and buffers (`LeafTopo`, 76 bytes a
+//! leaf of 512 voxels: 1/27 of the dense size of the leaves it describes). `FilterReport`
+//! gives each.
+//!
+//! The coarse grid is what a solver sees as the medium: values at coarse cell centres,
+//! trilinear between them, as any grid. Leaf voxels are taken as the whole load takes them
+//! (all 512 values, inactive ones included; negatives clamped to 0, counted; NaN or inf an
+//! error); a tile adds its value times the voxels it shares with each cell. Overlapping nodes,
+//! which a valid file does not have, are summed rather than overwritten.
+
+use std::path::Path;
+
+use glam::{Affine3A, I64Vec3, IVec3, Vec3};
+
+use super::tree::{self, LeafTopo};
+use super::values::ValueKind;
+use super::VdbFile;
+use crate::error::{excerpt, Error, Result};
+use crate::medium::{DensityGrid, GridLimits};
+
+/// What a filtered load did and held.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FilterReport {
+    /// Fine voxels per coarse cell side.
+    pub factor: i32,
+    /// Leaf-aligned index box `lo..hi` (exclusive) of the leaves and non-zero tiles.
+    pub fine_box: (I64Vec3, I64Vec3),
+    pub coarse_dims: IVec3,
+    pub leaves: usize,
+    /// Bytes of the coarse accumulator (f64 a cell).
+    pub accumulator_bytes: u64,
+    /// Bytes the tree reader kept of the topology (one `LeafTopo` a leaf).
+    pub topology_bytes: u64,
+    /// Largest read window held (0 when the file was in memory).
+    pub peak_window_bytes: usize,
+    /// Negative voxel values read as 0.
+    pub clamped_negative: u64,
+}
+
+/// Pass 1: the box of the leaves and of the tiles that hold density (64-bit: a tile at the
+/// edge of the index range ends past i32).
+struct Extent<'a> {
+    lo: I64Vec3,
+    hi: I64Vec3,
+    leaves: usize,
+    path: &'a Path,
+}
+
+impl Extent<'_> {
+    fn add(&mut self, origin: IVec3, size: i64) {
+        let lo = origin.as_i64vec3();
+        self.lo = self.lo.min(lo);
+        self.hi = self.hi.max(lo + I64Vec3::splat(size));
+    }
+}
+
+impl tree::Visitor for Extent<'_> {
+    fn background(&mut self, value: &[f64]) -> Result<()> {
+        super::density_background(self.path, value)
+    }
+    fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], _active: bool) -> Result<()> {
+        // A NaN tile is kept too, so that pass 2 reports it.
+        let v = value[0] as f32;
+        if v > 0.0 || v.is_nan() {
+            self.add(origin, 1 << log2);
+        }
+        Ok(())
+    }
+    fn leaf(&mut self, _origin: IVec3, _mask: &[u64; 8], _values: &[f64]) -> Result<()> {
+        Ok(())
+    }
+    fn wants_leaf(&mut self, origin: IVec3) -> bool {
+        self.add(origin, 8);
+        self.leaves += 1;
+        false
+    }
+    fn topology_only(&self) -> bool {
+        true
+    }
+}
+
+/// Pass 2: sums of the fine voxels in each coarse cell.
+struct Accumulate<'a> {
+    f: i64,
+    /// Coarse index of the array's first cell.
+    c0: I64Vec3,
+    dims: I64Vec3,
+    sums: Vec<f64>,
+    clamped_negative: u64,
+    path: &'a Path,
+}
+
+impl Accumulate<'_> {
+    #[inline]
+    fn index(&self, c: I64Vec3) -> usize {
+        let d = c - self.c0;
+        d.x as usize + self.dims.x as usize * (d.y as usize + self.dims.y as usize * d.z as usize)
+    }
+
+    /// The value as the whole load stores it: f32, finite, negatives 0.
+    fn value(&mut self, v: f64, at: IVec3) -> Result<f32> {
+        let v = v as f32;
+        if !v.is_finite() {
+            return Err(Error::InvalidArgument(format!("density at voxel ({}, {}, {}) is {v}: densities must be finite", at.x, at.y, at.z)));
+        }
+        if v < 0.0 {
+            self.clamped_negative += 1;
+            return Ok(0.0);
+        }
+        Ok(v)
+    }
+}
+
+impl tree::Visitor for Accumulate<'_> {
+    fn background(&mut self, value: &[f64]) -> Result<()> {
+        super::density_background(self.path, value)
+    }
+
+    fn tile(&mut self, origin: IVec3, log2: u32, value: &[f64], _active: bool) -> Result<()> {
+        let v = self.value(value[0], origin)?;
+        if v == 0.0 {
+            return Ok(());
+        }
+        let lo = origin.as_i64vec3();
+        let hi = lo + I64Vec3::splat(1 << log2);
+        let f = self.f;
+        let (a, b) = (lo.div_euclid(I64Vec3::splat(f)), (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f)));
+        for z in a.z..=b.z {
+            for y in a.y..=b.y {
+                for x in a.x..=b.x {
+                    let c = I64Vec3::new(x, y, z);
+                    // Fine voxels the tile shares with cell c.
+                    let n = (hi.min((c + I64Vec3::ONE) * f) - lo.max(c * f)).max(I64Vec3::ZERO).as_dvec3();
+                    let i = self.index(c);
+                    self.sums[i] += v as f64 * n.x * n.y * n.z;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn leaf(&mut self, origin: IVec3, _mask: &[u64; 8], values: &[f64]) -> Result<()> {
+        for (i, &raw) in values.iter().enumerate() {
+            // VDB order: x << 6 | y << 3 | z. A leaf's origin is a multiple of 8: no overflow.
+            let p = origin + IVec3::new((i >> 6) as i32, ((i >> 3) & 7) as i32, (i & 7) as i32);
+            let v = self.value(raw, p)?;
+            if v > 0.0 {
+                let c = p.as_i64vec3().div_euclid(I64Vec3::splat(self.f));
+                let k = self.index(c);
+                self.sums[k] += v as f64;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The factor and coarse lattice (first cell, cells) for `max_resolution` cells along the
+/// box's longest side. Every value fits i32: the box spans at most 2^32 voxels, so `f` is
+/// below 2^31 for `max_resolution` >= 2 and the coarse indices are the fine ones over `f`.
+fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: u32) -> (i64, I64Vec3, I64Vec3) {
+    let extent = (hi - lo).max_element().max(1);
+    let m = max_resolution.max(1) as i64;
+    let f = (extent + m - 1) / m;
+    let c0 = lo.div_euclid(I64Vec3::splat(f));
+    let c1 = (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f));
+    (f, c0, c1 - c0 + I64Vec3::ONE)
+}
+
+impl VdbFile {
+    /// Float grid `i` box-filtered to at most `max_resolution` cells along its longest side
+    /// (see the module docs), with the coarse grid's index-to-world map.
+    pub fn load_float_grid_filtered(&self, i: usize, max_resolution: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
+        let name = self.grids[i].name.clone();
+        let in_grid = |e: Error| match e {
+            Error::InvalidArgument(m) => Error::format(&self.path, format!("grid `{}`: {m}", excerpt(&name))),
+            e => e,
+        };
+        let head = self.grid_head(i)?;
+        let mut extent = Extent { lo: I64Vec3::MAX, hi: I64Vec3::MIN, leaves: 0, path: &self.path };
+        let (_, window1) = self.visit_tree_windowed(i, ValueKind::FLOAT, &mut extent, None).map_err(in_grid)?;
+        let fine_xf = head.transform.to_affine3a();
+        let mut report = FilterReport { leaves: extent.leaves, topology_bytes: (extent.leaves * std::mem::size_of::<LeafTopo>()) as u64, ..Default::default() };
+        if extent.lo.cmpge(extent.hi).any() {
+            report.peak_window_bytes = window1;
+            return Ok((DensityGrid::empty(), fine_xf, report));
+        }
+        let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution.max(2));
+        let cells = crate::budget::checked_product("filtered density grid", &[dims.x as u64, dims.y as u64, dims.z as u64])?;
+        crate::budget::check_elements::<f64>("filtered density grid (coarse sums)", cells)?;
+        let mut acc = Accumulate { f, c0, dims, sums: vec![0.0; cells as usize], clamped_negative: 0, path: &self.path };
+        let (_, window2) = self.visit_tree_windowed(i, ValueKind::FLOAT, &mut acc, None).map_err(in_grid)?;
+        let volume = (f as f64).powi(3);
+        let means: Vec<f32> = acc.sums.iter().map(|s| (s / volume) as f32).collect();
+        let (f, c0, dims) = (f as i32, c0.as_ivec3(), dims.as_ivec3());
+        report.factor = f;
+        report.fine_box = (extent.lo, extent.hi);
+        report.coarse_dims = dims;
+        report.accumulator_bytes = cells * 8;
+        report.peak_window_bytes = window1.max(window2);
+        report.clamped_negative = acc.clamped_negative;
+        drop(acc);
+        let grid = DensityGrid::from_dense(c0, dims, &means, limits)?;
+        // Coarse cell c covers fine voxels c f .. c f + f - 1: its centre is c f + (f - 1) / 2.
+        let coarse_to_fine = Affine3A::from_translation(Vec3::splat(0.5 * (f - 1) as f32)) * Affine3A::from_scale(Vec3::splat(f as f32));
+        let xf = fine_xf * coarse_to_fine;
+        let det = glam::Mat3::from(xf.matrix3).determinant();
+        if !xf.is_finite() || !det.is_finite() || det == 0.0 {
+            return Err(Error::format(&self.path, format!("grid `{}`: transform {} is out of single-precision range", excerpt(&name), excerpt(&head.transform.map_type))));
+        }
+        Ok((grid, xf, report))
+    }
+}
+
+/// `load_density` box-filtered to at most `max_resolution` cells a side (see the module docs):
+/// the file is read through a bounded window, never whole.
+pub fn load_density_filtered(path: &Path, grid: Option<&str>, max_resolution: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
+    let f = VdbFile::open(path, u64::MAX)?;
+    let i = f.find_density_grid(grid)?;
+    f.load_float_grid_filtered(i, max_resolution, limits)
+}
