@@ -4,7 +4,8 @@
 //! scattering vertices; the VPLs are gathered on a coarse grid over the medium, each point
 //! connecting to its own interleaved subset of walks with ray-marched transmittance
 //! (gather.rs), G clamped at a radius R of one gather cell and the clamped energy restored by
-//! the paper's bias compensation (compensate.rs, `near_field: compensate`, the default); the
+//! the paper's bias compensation (compensate.rs, `near_field: compensate`; the default is the
+//! ball kernel, `near_field: ball`, settings.rs says why); the
 //! gathered J (per unit sigma_s) is upsampled to the output grid by pop's density-guided joint
 //! bilateral filter (pop/upsample.rs), giving the multiple scattering; the single scattering
 //! is added exactly from the compositor's single-scattering grid, on the same output frame.
