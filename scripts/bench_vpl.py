@@ -64,20 +64,27 @@ def log(*a):
     print(*a, file=sys.stderr, flush=True)
 
 
-def run_bench(cases: str, walks: str, spp: str) -> list[dict]:
-    env = dict(os.environ, VPL_BENCH_CASES=cases, VPL_BENCH_WALKS=walks, VPL_BENCH_SPP=spp)
+def run_ignored_test(test: str, env: dict, what: str) -> list[dict]:
+    """Runs the ignored vpl test `test` with `env` added; returns its `BENCH {json}` rows (and
+    logs them, and its converged-image lines, as they come)."""
     cmd = ["cargo", "nextest", "run", "--cargo-profile", "release", "-p", "volscatter-core", "--run-ignored", "only",
-           "-E", "test(=solvers::vpl::tests::vpl_bench)", "--no-capture"]
-    log("running:", " ".join(cmd), f"(cases {cases}, walks {walks}, spp {spp})")
-    p = subprocess.Popen(cmd, cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+           "-E", f"test(=solvers::vpl::tests::{test})", "--no-capture"]
+    log("running:", " ".join(cmd), f"({what})")
+    p = subprocess.Popen(cmd, cwd=REPO_ROOT, env=dict(os.environ, **env), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     rows = []
     for line in p.stdout:
         if line.startswith("BENCH "):
             rows.append(json.loads(line[6:]))
+        if line.startswith("BENCH ") or "converged image" in line:
             log(line.rstrip())
     if p.wait() != 0:
-        raise SystemExit(f"vpl_bench failed (exit {p.returncode})")
+        raise SystemExit(f"{test} failed (exit {p.returncode})")
     return rows
+
+
+def run_bench(cases: str, walks: str, spp: str) -> list[dict]:
+    return run_ignored_test("vpl_bench", dict(VPL_BENCH_CASES=cases, VPL_BENCH_WALKS=walks, VPL_BENCH_SPP=spp),
+                            f"cases {cases}, walks {walks}, spp {spp}")
 
 
 def run_gpu_bench(walks: str, gathers: str) -> list[dict]:
@@ -97,21 +104,9 @@ def run_gpu_bench(walks: str, gathers: str) -> list[dict]:
 
 
 def run_image_bench(args) -> list[dict]:
-    env = dict(os.environ, VPL_IMAGE_CASES=args.image_cases, VPL_IMAGE_PIXELS=str(args.image_pixels),
+    env = dict(VPL_IMAGE_CASES=args.image_cases, VPL_IMAGE_PIXELS=str(args.image_pixels),
                VPL_IMAGE_REF_SPP=args.image_ref_spp, VPL_IMAGE_SPP=args.image_spp, VPL_IMAGE_WALKS=args.image_walks)
-    cmd = ["cargo", "nextest", "run", "--cargo-profile", "release", "-p", "volscatter-core", "--run-ignored", "only",
-           "-E", "test(=solvers::vpl::tests::vpl_bench_image)", "--no-capture"]
-    log("running:", " ".join(cmd), f"(image cases {args.image_cases})")
-    p = subprocess.Popen(cmd, cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    rows = []
-    for line in p.stdout:
-        if line.startswith("BENCH "):
-            rows.append(json.loads(line[6:]))
-        if line.startswith("BENCH ") or "converged image" in line:
-            log(line.rstrip())
-    if p.wait() != 0:
-        raise SystemExit(f"vpl_bench_image failed (exit {p.returncode})")
-    return rows
+    return run_ignored_test("vpl_bench_image", env, f"image cases {args.image_cases}")
 
 
 def vpl_time_to(runs: list[dict], target: float) -> tuple[float | None, str]:

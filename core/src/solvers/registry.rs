@@ -347,7 +347,9 @@ const VPL: SolverEntry = SolverEntry {
         SettingSpec::int("output_resolution", "largest side of the returned scattering grid").range(2.0, 1024.0),
         SettingSpec::bool("upsample", "joint bilateral upsampling guided by the density (off: trilinear)"),
         SettingSpec { choices: &["mean", "linear"], ..SettingSpec::new("upsample_fit", SettingType::Choice, "upsampling's estimate of J: the weighted mean (default; best on the dense cloud) or a weighted linear fit (flux right at a medium's surface: cube g 0 8 seeds x1.013 against x1.079)") },
-        SettingSpec::float("range_sigma", "range sigma of the bilateral filter, a fraction of the largest density")
+SettingSpec::float("near_refine", "radius in gather cells within which the VPLs are gathered at each output point, not upsampled (0: off)")
+            .open_range(Range { min: Some(0.0), max: Some(4.0), min_exclusive: false, max_exclusive: false }),
+                SettingSpec::float("range_sigma", "range sigma of the bilateral filter, a fraction of the largest density")
             .open_range(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }),
         SettingSpec::float("spatial_sigma", "spatial sigma of the bilateral filter, in gather cells")
             .open_range(Range { min: Some(0.0), max: Some(4.0), min_exclusive: true, max_exclusive: false }),

@@ -44,11 +44,13 @@ pub mod backend;
 pub mod compensate;
 pub mod gather;
 pub mod march;
+pub mod refine;
 pub mod settings;
 pub mod upsample;
 pub mod walks;
 
 
+use super::pop;
 use super::pop::mip::MediumMip;
 use super::pop::settings::PopSettings;
 use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
@@ -110,11 +112,15 @@ impl Vpl {
         }
         let (merged, gstats) = timings.time("vpl gather", || backend.gather(scene, &mip, &walks, s, progress))?;
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
-        let mut scattering = timings.time("vpl upsample", || match (s.upsample, s.upsample_fit) {
+        let upsample = |merged: &pop::merge::Merged| match (s.upsample, s.upsample_fit) {
             // The linear fit on the CPU for both backends (vpl/upsample.rs).
-            (true, UpsampleFit::Linear) => upsample::upsample_linear(medium, &mip, &merged, &pop_like, progress),
-            _ => backend.upsample(medium, &mip, &merged, &pop_like),
-        })?;
+            (true, UpsampleFit::Linear) => upsample::upsample_linear(medium, &mip, merged, &pop_like, progress),
+            _ => backend.upsample(medium, &mip, merged, &pop_like),
+        };
+        let mut scattering = timings.time("vpl upsample", || upsample(&merged))?;
+        if s.near_refine > 0.0 {
+            timings.time("vpl near refine", || refine::refine(scene, &mip, &walks, &merged, &mut scattering, s, progress, upsample))?;
+        }
         let single = timings.time("vpl single scattering", || backend.single_scattering(scene, s, progress))?;
         debug_assert_eq!(single.dims, scattering.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {

@@ -108,6 +108,10 @@ pub struct VplSettings {
     /// ratchet) or the weighted local linear fit (flux right at a medium's surface; see
     /// `UpsampleFit` for both's measured errors).
     pub upsample_fit: UpsampleFit,
+    /// Radius r_n, in gather cells, within which the VPLs' light is gathered at each output
+    /// point instead of upsampled from the coarse grid (refine.rs: the light from VPLs within
+    /// a cell correlates with the density there, which a coarse J loses); 0 = off.
+    pub near_refine: f32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
     /// Spatial sigma of the bilateral filter, in gather cells: at least ~0.8 so that the
@@ -137,6 +141,7 @@ impl Default for VplSettings {
             output_resolution: 64,
             upsample: true,
             upsample_fit: UpsampleFit::Mean,
+            near_refine: 0.0,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
@@ -170,6 +175,9 @@ impl VplSettings {
         }
         if !(2..=256).contains(&self.gather_resolution) {
             return Err(Error::scene("solver.gather_resolution", format!("must be in 2..=256, got {}", self.gather_resolution)));
+        }
+        if !(self.near_refine == 0.0 || (0.5..=4.0).contains(&self.near_refine)) {
+            return Err(Error::scene("solver.near_refine", format!("must be 0 (off) or in [0.5, 4], got {}", self.near_refine)));
         }
         validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
         if !(1..=1024).contains(&self.dome_directions) {
