@@ -105,7 +105,8 @@ def run_gpu_bench(walks: str, gathers: str) -> list[dict]:
 
 def run_image_bench(args) -> list[dict]:
     env = dict(VPL_IMAGE_CASES=args.image_cases, VPL_IMAGE_PIXELS=str(args.image_pixels),
-               VPL_IMAGE_REF_SPP=args.image_ref_spp, VPL_IMAGE_SPP=args.image_spp, VPL_IMAGE_WALKS=args.image_walks)
+               VPL_IMAGE_REF_SPP=args.image_ref_spp, VPL_IMAGE_SPP=args.image_spp, VPL_IMAGE_WALKS=args.image_walks,
+               VPL_IMAGE_REFINE100=",".join(str(round(float(r) * 100)) for r in args.image_refine.split(",")))
     return run_ignored_test("vpl_bench_image", env, f"image cases {args.image_cases}")
 
 
@@ -149,7 +150,8 @@ def image_section(rows: list[dict]) -> str:
         "`volscatter render`); other scenes are fixture scenes with the camera enlarged. Truth: the reference path tracer's",
         "image in two independent halves (seeds 101, 102); its own noise n (half the rel. RMSE between the halves) is taken",
         "out of each error as sqrt(e^2 - n^2) (independent errors add in quadrature; raw error in brackets). vpl runs at",
-        "its default settings (gather 16, output 64, ball near field, mean fit) with the walks varied; its time is the",
+        "its default settings (gather 16, output 64, ball near field, mean fit) with the walks varied, and with",
+        "`near_refine` (refine.rs) where named; its time is the",
         "solve plus the composite (what a host pays for an image), the reference's its render. Time to 5%: log-log",
         "between the runs that bracket it, else extrapolated: the path tracer along error ~ time^-0.5; vpl in walks (its",
         "error against walks at its fitted slope, its time linear in walks from the last two runs), and not at all where",
@@ -163,16 +165,20 @@ def image_section(rows: list[dict]) -> str:
         lines += [f"### `{case}` ({r0['pixels']} pixels; truth {r0['ref_spp']} spp, its noise {r0['ref_noise']:.3f})", "",
                   "| method | spp / walks | time (s) | image rel. RMSE (raw) | image mean ratio |", "|---|---|---|---|---|"]
         for r in rs:
-            what = f"reference path tracer | {r['spp']} spp" if r["solver"] == "reference" else f"vpl (default) | {r['walks']}"
+            refine = r.get("near_refine", 0)
+            label = "vpl (default)" if not refine else f"vpl near_refine {refine:g}"
+            what = f"reference path tracer | {r['spp']} spp" if r["solver"] == "reference" else f"{label} | {r['walks']}"
             lines.append(f"| {what} | {r['seconds']:.2f} | {r['image']:.3f} ({r['image_raw']:.3f}) | x{r['image_ratio']:.3f} |")
         lines.append("")
         ref, how = time_to([(r["seconds"], r["image"]) for r in rs if r["solver"] == "reference"], TARGET, -0.5)
-        vpl, vhow = vpl_time_to([r for r in rs if r["solver"] == "vpl"], TARGET)
-        ratio = "not reached"
-        if ref is not None and vpl is not None:
-            ratio = f"{ref / vpl:.2g}x" + (f" ({vpl / ref:.0f}x slower)" if vpl > ref else "")
-        table.append(f"| `{case}` | {r0['pixels']} | " + (f"{ref:.3g} ({how})" if ref is not None else how) + " | "
-                     + (f"{vpl:.3g} ({vhow})" if vpl is not None else vhow) + f" | {ratio} |")
+        for refine in dict.fromkeys(r.get("near_refine", 0) for r in rs if r["solver"] == "vpl"):
+            vpl, vhow = vpl_time_to([r for r in rs if r["solver"] == "vpl" and r.get("near_refine", 0) == refine], TARGET)
+            ratio = "not reached"
+            if ref is not None and vpl is not None:
+                ratio = f"{ref / vpl:.2g}x" + (f" ({vpl / ref:.0f}x slower)" if vpl > ref else "")
+            label = "default" if not refine else f"near_refine {refine:g}"
+            table.append(f"| `{case}` | {r0['pixels']} | " + (f"{ref:.3g} ({how})" if ref is not None else how) + f" | {label}: "
+                         + (f"{vpl:.3g} ({vhow})" if vpl is not None else vhow) + f" | {ratio} |")
     return "\n".join(lines + table) + "\n"
 
 
@@ -295,6 +301,7 @@ def main() -> None:
                     help="paths per pixel of the converged image (two halves): N, or name:N,...")
     ap.add_argument("--image-spp", default="16,64,256")
     ap.add_argument("--image-walks", default="1024,4096,16384,65536")
+    ap.add_argument("--image-refine", default="0,3", help="near_refine values of the vpl runs (0: the default, off)")
     args = ap.parse_args()
     if args.image_only:
         text = image_section(run_image_bench(args))

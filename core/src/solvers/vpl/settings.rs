@@ -110,7 +110,11 @@ pub struct VplSettings {
     pub upsample_fit: UpsampleFit,
     /// Radius r_n, in gather cells, within which the VPLs' light is gathered at each output
     /// point instead of upsampled from the coarse grid (refine.rs: the light from VPLs within
-    /// a cell correlates with the density there, which a coarse J loses); 0 = off.
+    /// a cell correlates with the density there, which a coarse J loses); 0 = off, the
+    /// default. Measured on plume_point (12-cell gather, 32768 walks, 4 seeds, image mean
+    /// ratio): off x0.920, 1.5 x0.957, 3 x0.973, 4 x0.973, at 1.3x / 2.1x / 3.6x the solve's
+    /// time; but at the ratchets' 4096 walks the finer near part is noisier (image rel. RMSE
+    /// plume 0.561 against 0.365, cloud 1.18 against 0.75, cube g 0.7 0.137 against 0.153).
     pub near_refine: f32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
