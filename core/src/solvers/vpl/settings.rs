@@ -115,6 +115,10 @@ pub struct VplSettings {
     /// ratio): off x0.920, 1.5 x0.957, 3 x0.973, 4 x0.973, at 1.3x / 2.1x / 3.6x the solve's
     /// time; but at the ratchets' 4096 walks the finer near part is noisier (image rel. RMSE
     /// plume 0.561 against 0.365, cloud 1.18 against 0.75, cube g 0.7 0.137 against 0.153).
+    /// On the default scene at 256 x 256 (BENCHMARKS.md vpl-image, 64-cell output) r_n 3 puts
+    /// the flux right (x0.987 / 0.951 / 0.993 at 1024 / 4096 / 16384 walks, off: x0.871 /
+    /// 0.871 / 0.926) but its image error is higher (0.71 / 0.29 / 0.17 against 0.31 / 0.17 /
+    /// 0.11) at 1.3-2.6x the time: each output point sees few VPLs within r_n.
     pub near_refine: f32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
