@@ -4,7 +4,8 @@
 //! scattering vertices; the VPLs are gathered on a coarse grid over the medium, each point
 //! connecting to its own interleaved subset of walks with ray-marched transmittance
 //! (gather.rs), G clamped at a radius R of one gather cell and the clamped energy restored by
-//! the paper's bias compensation (compensate.rs, `near_field: compensate`, the default); the
+//! the paper's bias compensation (compensate.rs, `near_field: compensate`; the default is the
+//! ball kernel, `near_field: ball`, settings.rs says why); the
 //! gathered J (per unit sigma_s) is upsampled to the output grid by pop's density-guided joint
 //! bilateral filter (pop/upsample.rs), giving the multiple scattering; the single scattering
 //! is added exactly from the compositor's single-scattering grid, on the same output frame.
@@ -23,6 +24,10 @@
 //! - `upsample_fit: linear` replaces the bilateral filter's weighted mean by a weighted local
 //!   linear fit (upsample.rs): the mean is J at the weights' centroid, which a medium's
 //!   surface pulls inwards (cube g 0 8 seeds x1.079 bright; the fit x1.013).
+//! - `near_refine` (off by default): the VPLs within a few gather cells of each output point
+//!   gathered there instead of upsampled (refine.rs): the coarse gather loses the correlation
+//!   between the density and the light of VPLs within a cell (local lights beside the plume
+//!   6-8% dark at 12-16 cells); noisier than the coarse near field at a few thousand walks.
 //! - The gather, upsampling and single scattering run on a backend (backend.rs): the CPU, or
 //!   the GPU (volscatter-gpu, shaders/src/vpl), where the connections to the VPLs (the gather
 //!   points' and the compensation vertices') run in WGSL; the walks, the compensation's vertex
@@ -43,11 +48,13 @@ pub mod backend;
 pub mod compensate;
 pub mod gather;
 pub mod march;
+pub mod refine;
 pub mod settings;
 pub mod upsample;
 pub mod walks;
 
 
+use super::pop;
 use super::pop::mip::MediumMip;
 use super::pop::settings::PopSettings;
 use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
@@ -109,11 +116,15 @@ impl Vpl {
         }
         let (merged, gstats) = timings.time("vpl gather", || backend.gather(scene, &mip, &walks, s, progress))?;
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
-        let mut scattering = timings.time("vpl upsample", || match (s.upsample, s.upsample_fit) {
+        let upsample = |merged: &pop::merge::Merged| match (s.upsample, s.upsample_fit) {
             // The linear fit on the CPU for both backends (vpl/upsample.rs).
-            (true, UpsampleFit::Linear) => upsample::upsample_linear(medium, &mip, &merged, &pop_like, progress),
-            _ => backend.upsample(medium, &mip, &merged, &pop_like),
-        })?;
+            (true, UpsampleFit::Linear) => upsample::upsample_linear(medium, &mip, merged, &pop_like, progress),
+            _ => backend.upsample(medium, &mip, merged, &pop_like),
+        };
+        let mut scattering = timings.time("vpl upsample", || upsample(&merged))?;
+        if s.near_refine > 0.0 {
+            timings.time("vpl near refine", || refine::refine(scene, &mip, &walks, &merged, &mut scattering, s, progress, upsample))?;
+        }
         let single = timings.time("vpl single scattering", || backend.single_scattering(scene, s, progress))?;
         debug_assert_eq!(single.dims, scattering.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {

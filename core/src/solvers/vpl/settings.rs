@@ -91,7 +91,13 @@ pub struct VplSettings {
     /// `near_field: compensate`: walks each new vertex connects to (one random subset of the
     /// walks, reweighted).
     pub compensation_walks: u32,
-    /// Largest side of the coarse grid on which VPLs are gathered.
+    /// Largest side of the coarse grid on which VPLs are gathered. Its cells set a bias besides
+    /// the cost: the light a point gets from VPLs within a cell correlates with the density
+    /// there (both sit in the dense wisps), which a coarse J loses, so local lights beside the
+    /// plume come out dark (plume_point, 32768 walks, 4 seeds: 12 / 16 / 24 / 32 cells x0.920 /
+    /// 0.937 / 0.962 / 0.980) and cube_g0 with the mean fit bright (x1.079 / 1.040 / 1.008 at
+    /// 12 / 16 / 24); the gather's cost grows with the cube of it (tests.rs, above
+    /// `vpl_eight_seeds_flux_within_two_percent`).
     pub gather_resolution: u32,
     /// Largest side of the returned scattering grid (the single scattering is computed on it
     /// exactly, the gathered multiple scattering upsampled to it).
@@ -102,6 +108,18 @@ pub struct VplSettings {
     /// ratchet) or the weighted local linear fit (flux right at a medium's surface; see
     /// `UpsampleFit` for both's measured errors).
     pub upsample_fit: UpsampleFit,
+    /// Radius r_n, in gather cells, within which the VPLs' light is gathered at each output
+    /// point instead of upsampled from the coarse grid (refine.rs: the light from VPLs within
+    /// a cell correlates with the density there, which a coarse J loses); 0 = off, the
+    /// default. Measured on plume_point (12-cell gather, 32768 walks, 4 seeds, image mean
+    /// ratio): off x0.920, 1.5 x0.957, 3 x0.973, 4 x0.973, at 1.3x / 2.1x / 3.6x the solve's
+    /// time; but at the ratchets' 4096 walks the finer near part is noisier (image rel. RMSE
+    /// plume 0.561 against 0.365, cloud 1.18 against 0.75, cube g 0.7 0.137 against 0.153).
+    /// On the default scene at 256 x 256 (BENCHMARKS.md vpl-image, 64-cell output) r_n 3 puts
+    /// the flux right (x0.987 / 0.951 / 0.993 at 1024 / 4096 / 16384 walks, off: x0.871 /
+    /// 0.871 / 0.926) but its image error is higher (0.71 / 0.29 / 0.17 against 0.31 / 0.17 /
+    /// 0.11) at 1.3-2.6x the time: each output point sees few VPLs within r_n.
+    pub near_refine: f32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
     /// Spatial sigma of the bilateral filter, in gather cells: at least ~0.8 so that the
@@ -131,6 +149,7 @@ impl Default for VplSettings {
             output_resolution: 64,
             upsample: true,
             upsample_fit: UpsampleFit::Mean,
+            near_refine: 0.0,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
@@ -164,6 +183,9 @@ impl VplSettings {
         }
         if !(2..=256).contains(&self.gather_resolution) {
             return Err(Error::scene("solver.gather_resolution", format!("must be in 2..=256, got {}", self.gather_resolution)));
+        }
+        if !(self.near_refine == 0.0 || (0.5..=4.0).contains(&self.near_refine)) {
+            return Err(Error::scene("solver.near_refine", format!("must be 0 (off) or in [0.5, 4], got {}", self.near_refine)));
         }
         validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
         if !(1..=1024).contains(&self.dome_directions) {
