@@ -256,7 +256,7 @@ def region(n: int, grid: int, full_in_memory: bool) -> None:
         lines.append(f"| {' | '.join(cells)} |")
     lines += [
         "",
-        "The streamed run never holds the file or the full-resolution voxels: its peak RSS is the coarse medium, the per-leaf topology (76 B a leaf), the slab and the output grid (the test `filtered_vdb_load_peaks_at_the_coarse_grid_not_the_file` counts the filter's allocations). The image difference against the half-resolution solve is what the box filter and the resolution change together; the out-of-core solve itself equals the in-memory one to the bit on the same medium (`lpm_out_of_core_equals_in_memory`).",
+        "The streamed run never holds the file or the full-resolution voxels: its peak RSS is the coarse medium, the reader's two 64 KiB windows (nothing is kept per leaf: the topology is walked again beside the leaf buffers, vdb/tree.rs), the slab and the output grid (the test `filtered_vdb_load_peaks_at_the_coarse_grid_not_the_file` counts the filter's allocations). The image difference against the half-resolution solve is what the box filter and the resolution change together; the out-of-core solve itself equals the in-memory one to the bit on the same medium (`lpm_out_of_core_equals_in_memory`).",
     ]
     write_section("lpm-region", "\n".join(lines))
     log("\n".join(lines))

@@ -23,11 +23,12 @@ fn filtered_vdb_load_peaks_at_the_coarse_grid_not_the_file() {
     let ((coarse, _, report), peak) = peak_during(|| load_density_filtered(&path, None, 16, GridLimits::default()).unwrap());
     // What the filter holds by design (filter.rs): the f64 sums, the f32 means and the grid
     // built from them (its bricks, at most the dense size again, and the builder's table),
-    // the topology (a Vec of LeafTopo, up to 2x by growth), the read window; plus 1 MiB for
+    // the two read windows (the tree reader walks the topology again beside the buffers and
+    // keeps nothing per leaf); plus 1 MiB for
     // what does not grow with the file (a level-5 internal node's 32^3 values decoded as f64,
     // 256 KiB, and its raw bytes; the header; one leaf; the builder's few bricks).
     let cells = report.accumulator_bytes / 8;
-    let bound = report.accumulator_bytes + cells * 4 + 2 * coarse.memory_bytes() + 2 * report.topology_bytes + report.peak_window_bytes as u64 + (1 << 20);
+    let bound = report.accumulator_bytes + cells * 4 + 2 * coarse.memory_bytes() + 2 * report.peak_window_bytes as u64 + (1 << 20);
     eprintln!("file {size} B; whole load peak {whole_peak} B; filtered to {:?} (factor {}): peak {peak} B, bound {bound} B ({report:?})", report.coarse_dims, report.factor);
     assert!((peak as u64) <= bound, "peak {peak} over {bound}");
     // The bound is far below what the whole load and the file take: the test can fail.

@@ -59,6 +59,16 @@ impl<'a> Reader<'a> {
     pub fn remaining(&self) -> usize {
         self.len - self.pos
     }
+    /// A second reader of the same bytes at `pos` with its own window (the tree reader walks
+    /// the topology again beside the leaf buffers, tree.rs).
+    pub fn fork(&self, pos: usize) -> Reader<'a> {
+        let src = match &self.src {
+            Source::Mem(d) => Source::Mem(d),
+            Source::File { file, .. } => Source::File { file, buf: Vec::new(), at: 0 },
+        };
+        Reader { src, len: self.len, pos, path: self.path, peak_window: 0 }
+    }
+
     /// Bytes of the largest window held so far (0 for a reader of memory).
     pub fn peak_window(&self) -> usize {
         self.peak_window

@@ -12,10 +12,10 @@
 //!    mean (absent voxels count as the background, 0) becomes the coarse grid.
 //!
 //! Memory: the coarse array (8 bytes a coarse cell, then the 4-byte grid built from it), the
-//! reader's window (64 KiB, more only for one block that is longer), one leaf, and what the
-//! tree reader keeps of the topology between topology and buffers (`LeafTopo`, 76 bytes a
-//! leaf of 512 voxels: 1/27 of the dense size of the leaves it describes). `FilterReport`
-//! gives each.
+//! reader's two windows (64 KiB each, more only for one block that is longer: the tree reader
+//! walks the topology a second time beside the leaf buffers, so it keeps nothing per leaf,
+//! tree.rs) and one leaf: nothing that grows with the file but the coarse array.
+//! `FilterReport` gives each.
 //!
 //! The coarse grid is what a solver sees as the medium: values at coarse cell centres,
 //! trilinear between them, as any grid. Leaf voxels are taken as the whole load takes them
@@ -27,7 +27,7 @@ use std::path::Path;
 
 use glam::{Affine3A, I64Vec3, IVec3, Vec3};
 
-use super::tree::{self, LeafTopo};
+use super::tree;
 use super::values::ValueKind;
 use super::VdbFile;
 use crate::error::{excerpt, Error, Result};
@@ -44,8 +44,6 @@ pub struct FilterReport {
     pub leaves: usize,
     /// Bytes of the coarse accumulator (f64 a cell).
     pub accumulator_bytes: u64,
-    /// Bytes the tree reader kept of the topology (one `LeafTopo` a leaf).
-    pub topology_bytes: u64,
     /// Largest read window held (0 when the file was in memory).
     pub peak_window_bytes: usize,
     /// Negative voxel values read as 0.
@@ -194,7 +192,7 @@ impl VdbFile {
         let mut extent = Extent { lo: I64Vec3::MAX, hi: I64Vec3::MIN, leaves: 0, path: &self.path };
         let (_, window1) = self.visit_tree_windowed(i, ValueKind::FLOAT, &mut extent, None).map_err(in_grid)?;
         let fine_xf = head.transform.to_affine3a();
-        let mut report = FilterReport { leaves: extent.leaves, topology_bytes: (extent.leaves * std::mem::size_of::<LeafTopo>()) as u64, ..Default::default() };
+        let mut report = FilterReport { leaves: extent.leaves, ..Default::default() };
         if extent.lo.cmpge(extent.hi).any() {
             report.peak_window_bytes = window1;
             return Ok((DensityGrid::empty(), fine_xf, report));

@@ -1,9 +1,14 @@
 //! The 5-4-3 tree: root tiles and children, internal nodes of 32^3 and 16^3 slots, leaves of
 //! 8^3 voxels (`openvdb/tree/RootNode.h`, `InternalNode.h`, `LeafNode.h`).
 //!
-//! Topology is parsed first (tiles go straight to the visitor, leaves are remembered as origin
-//! plus value mask), then the leaf buffers follow in the same order. Nothing is allocated from
-//! a count in the file before the bytes that the count implies are known to be there.
+//! The file holds the whole topology first, then the leaf buffers in the same order. The
+//! topology is parsed twice, so that nothing per leaf is kept between the two (a file larger
+//! than memory has more leaves than memory, issue 19): the first walk passes the tiles to the
+//! visitor and finds where the buffers begin; the second walks the topology again with a
+//! second reader, in lockstep with the buffers, handing each leaf's origin and value mask to
+//! its buffer. Parsing the internal nodes twice costs little: they are 1/64 and less of the
+//! leaves. Nothing is allocated from a count in the file before the bytes that the count
+//! implies are known to be there.
 
 use std::collections::HashSet;
 
@@ -38,12 +43,6 @@ pub(crate) trait Visitor {
     fn topology_only(&self) -> bool {
         false
     }
-}
-
-/// What the reader keeps of a leaf between the topology and the buffers.
-pub(crate) struct LeafTopo {
-    origin: IVec3,
-    mask: [u64; 8],
 }
 
 /// Whether the box of `(1 << log2)^3` voxels at `origin` meets the index box `lo..hi`.
@@ -132,42 +131,56 @@ pub(crate) fn read_tree_region(r: &mut Reader, codec: &mut Codec, visitor: &mut 
             visitor.tile(origin, ROOT_TILE_LOG2, &value, active)?;
         }
     }
-    let mut leaves = Vec::new();
+    let codec = &*codec;
+    // First walk: tiles to the visitor (and, topology only, each leaf's origin), leaves counted.
+    let children_at = r.pos();
     let mut scratch = Vec::new();
+    let mut leaves = 0usize;
+    let mut children = Vec::new();
     for _ in 0..num_children {
         let origin = root_origin(r, &mut seen, "root child origin")?;
-        read_internal(r, codec, visitor, origin, 5, &mut leaves, &mut scratch)?;
+        children.push(origin);
+        let mut count = |_: IVec3, _: [u64; 8]| {
+            leaves += 1;
+            Ok(())
+        };
+        read_internal(r, codec, Some(&mut *visitor), origin, 5, &mut count, &mut scratch)?;
     }
     if visitor.topology_only() {
-        for leaf in &leaves {
-            visitor.wants_leaf(leaf.origin);
-        }
-        return Ok(leaves.len());
+        return Ok(leaves);
     }
-    // Leaf buffers, in topology order. The value mask is stored again; OpenVDB skips it when
-    // reading from a file and keeps the topology's, and so does this reader.
+    // Second walk, in lockstep: `t` reads the topology again while `r` reads each leaf's
+    // buffer. The value mask is stored again before the buffer; OpenVDB skips it when reading
+    // from a file and keeps the topology's, and so does this reader.
+    let mut t = r.fork(children_at);
+    let mut values = Vec::new();
     let mut skipped = 0;
-    for leaf in &leaves {
-        r.skip(64, "leaf value mask")?;
-        if !visitor.wants_leaf(leaf.origin) {
-            codec.skip_block(r, 512, &leaf.mask)?;
-            skipped += 1;
-            continue;
-        }
-        codec.read_block(r, 512, &leaf.mask, &mut scratch)?;
-        visitor.leaf(leaf.origin, &leaf.mask, &scratch)?;
+    for &origin in &children {
+        t.skip(12, "root child origin")?;
+        let mut buffer = |origin: IVec3, mask: [u64; 8]| -> Result<()> {
+            r.skip(64, "leaf value mask")?;
+            if !visitor.wants_leaf(origin) {
+                codec.skip_block(r, 512, &mask)?;
+                skipped += 1;
+                return Ok(());
+            }
+            codec.read_block(r, 512, &mask, &mut values)?;
+            visitor.leaf(origin, &mask, &values)
+        };
+        read_internal(&mut t, codec, None, origin, 5, &mut buffer, &mut scratch)?;
     }
     Ok(skipped)
 }
 
-/// An internal node of `1 << (3 * log2)` slots (log2 = 5 or 4) at `origin`.
+/// An internal node of `1 << (3 * log2)` slots (log2 = 5 or 4) at `origin`: its tiles to
+/// `visitor` (none on the second walk), each leaf's origin and value mask to `leaf`.
 fn read_internal(
     r: &mut Reader,
     codec: &Codec,
-    visitor: &mut dyn Visitor,
+    mut visitor: Option<&mut dyn Visitor>,
     origin: IVec3,
     log2: u32,
-    leaves: &mut Vec<LeafTopo>,
+    leaf: &mut dyn FnMut(IVec3, [u64; 8]) -> Result<()>,
     scratch: &mut Vec<f64>,
 ) -> Result<()> {
     let slots = 1usize << (3 * log2);
@@ -184,14 +197,16 @@ fn read_internal(
         let z = n & m;
         origin + (IVec3::new(x as i32, y as i32, z as i32) << child_log2 as i32)
     };
-    for n in 0..slots {
-        if bit(&child_mask, n) {
-            continue;
-        }
-        let v = &scratch[n * comps..(n + 1) * comps];
-        let active = bit(&value_mask, n);
-        if active || v != codec.background.as_slice() {
-            visitor.tile(slot_origin(n), child_log2, v, active)?;
+    if let Some(visitor) = visitor.as_deref_mut() {
+        for n in 0..slots {
+            if bit(&child_mask, n) {
+                continue;
+            }
+            let v = &scratch[n * comps..(n + 1) * comps];
+            let active = bit(&value_mask, n);
+            if active || v != codec.background.as_slice() {
+                visitor.tile(slot_origin(n), child_log2, v, active)?;
+            }
         }
     }
     let children: Vec<usize> = ones(&child_mask).collect();
@@ -201,7 +216,12 @@ fn read_internal(
             return Err(r.err(format!("internal node claims {} children, more than the bytes left can hold", children.len())));
         }
         for n in children {
-            read_internal(r, codec, visitor, slot_origin(n), 4, leaves, scratch)?;
+            // Reborrowed for the child (a trait object's lifetime shortens only by coercion).
+            let v: Option<&mut dyn Visitor> = match &mut visitor {
+                Some(v) => Some(&mut **v),
+                None => None,
+            };
+            read_internal(r, codec, v, slot_origin(n), 4, leaf, scratch)?;
         }
     } else {
         if children.len() as u64 * 64 > r.remaining() as u64 {
@@ -211,7 +231,10 @@ fn read_internal(
             let m = r.mask(8, "leaf value mask")?;
             let mut mask = [0u64; 8];
             mask.copy_from_slice(&m);
-            leaves.push(LeafTopo { origin: slot_origin(n), mask });
+            if let Some(v) = visitor.as_deref_mut().filter(|v| v.topology_only()) {
+                v.wants_leaf(slot_origin(n));
+            }
+            leaf(slot_origin(n), mask)?;
         }
     }
     Ok(())
