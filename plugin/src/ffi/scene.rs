@@ -684,3 +684,7 @@ pub unsafe extern "C" fn vs_scene_render_reference(scene: *mut VsScene, progress
         write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
     })
 }
+
+#[cfg(test)]
+#[path = "lpm_estimate_tests.rs"]
+mod lpm_estimate_tests;
