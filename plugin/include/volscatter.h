@@ -191,6 +191,44 @@ typedef struct VsScene VsScene;
 typedef struct VsSession VsSession;
 
 /**
+ * `vs_scene_lpm_estimate`'s answer: how large a VDB medium is and what `lpm` will hold for
+ * it, from the file's topology alone (no voxel is decoded). Voxel counts are of the leaves'
+ * index box (which can be wider than the active voxels'); bytes count 4 a voxel for the
+ * medium. All 0 when the grid has no voxel.
+ */
+typedef struct {
+  /**
+   * Voxels of the grid read whole, along x, y, z.
+   */
+  uint64_t voxels[3];
+  /**
+   * Bytes of those voxels dense (4 a voxel).
+   */
+  uint64_t dense_bytes;
+  /**
+   * Cells of the medium as it will be held (`max_resolution` applied), and their bytes.
+   */
+  uint64_t medium_dims[3];
+  uint64_t medium_bytes;
+  /**
+   * Cells of lpm's propagation grid.
+   */
+  uint64_t grid_dims[3];
+  /**
+   * lpm in memory: per-cell arrays and sweep buffers (0: `memory_budget` below one layer).
+   */
+  uint64_t in_memory_bytes;
+  /**
+   * lpm out of core: the largest slab under `memory_budget` (0: below one layer).
+   */
+  uint64_t out_of_core_bytes;
+  /**
+   * lpm out of core: its scratch files on disk.
+   */
+  uint64_t scratch_bytes;
+} VsLpmEstimate;
+
+/**
  * Progress callback: `stage` names the current phase (valid only during the call), `fraction`
  * is in [0, 1] within that stage. Return non-zero to continue, 0 to cancel: the call that
  * is running then returns `VS_STATUS_CANCELLED` soon after.
@@ -316,6 +354,27 @@ VsStatus vs_scene_set_medium_vdb(VsScene *scene,
                                  const char *path,
                                  const char *grid_name,
                                  const float *object_to_world);
+
+/**
+ * Estimates, without reading any voxel, the medium the float grid `grid_name` (NULL: `density`,
+ * else the first float grid) of the OpenVDB file at `path` will be, placed by the file's
+ * transform and `object_to_world` (16 floats, row-major; NULL: identity), read box-filtered
+ * to `max_resolution` cells a side (0: whole; else 2..=4096, like `medium.max_resolution`),
+ * and the memory `lpm` with `settings_json` (an object of lpm settings as in a scene's
+ * `solver` block; NULL or "": the defaults) will use over it (core `lpm::estimate`: the
+ * formulas the solver plans with; the medium, its mip and the output grid are not in the lpm
+ * figures). The scene is not changed; errors (bad path, not a VDB, bad settings) are
+ * recorded on it for `vs_scene_last_error`, and `*out` is zeroed.
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_scene_lpm_estimate(VsScene *scene,
+                               const char *path,
+                               const char *grid_name,
+                               const float *object_to_world,
+                               uint32_t max_resolution,
+                               const char *settings_json,
+                               VsLpmEstimate *out);
 
 /**
  * Sets the medium's density from the caller's dense buffer: `len` floats, x fastest then y

@@ -93,6 +93,8 @@ api! {
     vs_scene_load_file: fn(Scene, Cs) -> S;
     vs_scene_load_default: fn(Scene) -> S;
     vs_scene_set_medium_vdb: fn(Scene, Cs, Cs, F) -> S;
+    // The lpm estimate of a VDB medium (issue 19): out is a VsLpmEstimate, 11 uint64.
+    vs_scene_lpm_estimate: fn(Scene, Cs, Cs, F, u32, Cs, *mut [u64; 11]) -> S;
     vs_scene_set_medium_dense: fn(Scene, F, usize, u32, u32, u32, F) -> S;
     vs_scene_set_material: fn(Scene, F, F, f32) -> S;
     vs_scene_clear_lights: fn(Scene) -> S;

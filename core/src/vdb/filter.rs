@@ -179,7 +179,53 @@ fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: u32) -> (i64, I64Vec3, I64V
     (f, c0, c1 - c0 + I64Vec3::ONE)
 }
 
+/// Coarse cell c covers fine voxels c f .. c f + f - 1: its centre is c f + (f - 1) / 2.
+fn coarse_to_fine(f: i32) -> Affine3A {
+    Affine3A::from_translation(Vec3::splat(0.5 * (f - 1) as f32)) * Affine3A::from_scale(Vec3::splat(f as f32))
+}
+
+/// What a float grid will be as a medium, from its topology alone (pass 1: no leaf buffer is
+/// decoded, a sparse 1024^3 grid costs its node headers): for hosts that size a volume before
+/// reading its voxels (`vs_scene_lpm_estimate`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MediumSize {
+    /// Leaf-aligned index box `lo..hi` (exclusive) of the leaves and non-zero tiles: the
+    /// voxels a whole load holds densely (`hi - lo` of them along each axis).
+    pub fine_box: (I64Vec3, I64Vec3),
+    pub leaves: usize,
+    /// Fine voxels per coarse cell side (1 without `max_resolution`).
+    pub factor: i64,
+    /// Voxels (cells) of the grid the medium will hold, along x, y, z.
+    pub dims: I64Vec3,
+    /// The held grid's index-to-object map and its index box as `Medium::index_bounds` gives it
+    /// (the voxel box widened by one voxel): `Medium::world_bounds` once the object's
+    /// transform is applied. Of the leaf box, which may be wider than the active voxels'.
+    pub index_to_object: Affine3A,
+    pub index_bounds: (Vec3, Vec3),
+}
+
 impl VdbFile {
+    /// `MediumSize` of float grid `i` read whole (`max_resolution` None) or box-filtered to
+    /// at most `max_resolution` cells a side; None for a grid with no leaf or non-zero tile.
+    pub fn medium_size(&self, i: usize, max_resolution: Option<u32>) -> Result<Option<MediumSize>> {
+        let head = self.grid_head(i)?;
+        let mut extent = Extent { lo: I64Vec3::MAX, hi: I64Vec3::MIN, leaves: 0, path: &self.path };
+        self.visit_tree_windowed(i, ValueKind::FLOAT, &mut extent, None)?;
+        if extent.lo.cmpge(extent.hi).any() {
+            return Ok(None);
+        }
+        let fine_xf = head.transform.to_affine3a();
+        let (factor, first, dims, xf) = match max_resolution {
+            None => (1, extent.lo, extent.hi - extent.lo, fine_xf),
+            Some(n) => {
+                let (f, c0, dims) = lattice(extent.lo, extent.hi, n.max(2));
+                (f, c0, dims, fine_xf * coarse_to_fine(f as i32))
+            }
+        };
+        let index_bounds = ((first - I64Vec3::ONE).as_vec3(), (first + dims).as_vec3());
+        Ok(Some(MediumSize { fine_box: (extent.lo, extent.hi), leaves: extent.leaves, factor, dims, index_to_object: xf, index_bounds }))
+    }
+
     /// Float grid `i` box-filtered to at most `max_resolution` cells along its longest side
     /// (see the module docs), with the coarse grid's index-to-world map.
     pub fn load_float_grid_filtered(&self, i: usize, max_resolution: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
@@ -213,9 +259,7 @@ impl VdbFile {
         report.clamped_negative = acc.clamped_negative;
         drop(acc);
         let grid = DensityGrid::from_dense(c0, dims, &means, limits)?;
-        // Coarse cell c covers fine voxels c f .. c f + f - 1: its centre is c f + (f - 1) / 2.
-        let coarse_to_fine = Affine3A::from_translation(Vec3::splat(0.5 * (f - 1) as f32)) * Affine3A::from_scale(Vec3::splat(f as f32));
-        let xf = fine_xf * coarse_to_fine;
+        let xf = fine_xf * coarse_to_fine(f);
         let det = glam::Mat3::from(xf.matrix3).determinant();
         if !xf.is_finite() || !det.is_finite() || det == 0.0 {
             return Err(Error::format(&self.path, format!("grid `{}`: transform {} is out of single-precision range", excerpt(&name), excerpt(&head.transform.map_type))));

@@ -42,6 +42,14 @@ _f32p = ctypes.POINTER(ctypes.c_float)
 _u32p = ctypes.POINTER(ctypes.c_uint32)
 _szp = ctypes.POINTER(ctypes.c_size_t)
 
+class LpmEstimate(ctypes.Structure):
+    """``VsLpmEstimate`` (the header's layout: eleven uint64 in groups)."""
+    _fields_ = [("voxels", ctypes.c_uint64 * 3), ("dense_bytes", ctypes.c_uint64),
+                ("medium_dims", ctypes.c_uint64 * 3), ("medium_bytes", ctypes.c_uint64),
+                ("grid_dims", ctypes.c_uint64 * 3), ("in_memory_bytes", ctypes.c_uint64),
+                ("out_of_core_bytes", ctypes.c_uint64), ("scratch_bytes", ctypes.c_uint64)]
+
+
 PROGRESS_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_float)
 
 # name: (restype, argtypes). The only place signatures are written down.
@@ -56,6 +64,8 @@ _SIGNATURES = {
     "vs_scene_last_error": (ctypes.c_char_p, [_vp]),
     "vs_scene_load_json": (_st, [_vp, ctypes.c_char_p, ctypes.c_char_p]),
     "vs_scene_set_solver": (_st, [_vp, ctypes.c_char_p, ctypes.c_char_p]),
+    "vs_scene_lpm_estimate": (_st, [_vp, ctypes.c_char_p, ctypes.c_char_p, _f32p, _u32, ctypes.c_char_p,
+                                    ctypes.POINTER(LpmEstimate)]),
     "vs_scene_light_count": (_st, [_vp, _szp]),
     "vs_scene_solve": (_st, [_vp, PROGRESS_CALLBACK, _vp, ctypes.POINTER(_vp)]),
     "vs_result_destroy": (_st, [_vp]),
@@ -305,6 +315,24 @@ def _solve(call, progress, last_error, handle):
         raise errors[0]
     _check(status, last_error, handle)
     return Result(out)
+
+
+def lpm_estimate(path, grid=None, object_to_world=None, max_resolution=0, settings=None):
+    """What the VDB at `path` is as a medium and what `lpm` with `settings` (a dict of lpm
+    settings) will hold for it, from the file's topology alone (``vs_scene_lpm_estimate``):
+    a dict of the ``VsLpmEstimate`` fields (lists for the dims). `object_to_world`: 16 floats,
+    row-major; `max_resolution` 0: read whole. Raises VolscatterError with the library's
+    message (missing file, not a VDB, bad settings)."""
+    m = None
+    if object_to_world is not None:
+        m = _floats(16)
+        m[:] = [float(v) for v in object_to_world]
+    out = LpmEstimate()
+    with Scene() as sc:
+        sc._call("vs_scene_lpm_estimate", os.fsencode(path), grid.encode() if grid else None, m,
+                 int(max_resolution), json.dumps(settings or {}).encode(), ctypes.byref(out))
+    return {name: (list(getattr(out, name)) if isinstance(getattr(out, name), ctypes.Array) else int(getattr(out, name)))
+            for name, _ in LpmEstimate._fields_}
 
 
 class Session(_Handle):

@@ -207,7 +207,8 @@ class _JobOperator:
         if scene.frame_current != frame:
             scene.frame_set(frame)
         doc, warnings, generated = scene_export.export(context, self._obj, self._out, frame, self._solver,
-                                                       size=self.image_size(context))
+                                                       size=self.image_size(context),
+                                                       max_resolution=self._settings.max_resolution)
         self._files.extend(generated)
         self._inputs.extend(generated)
         for w in warnings:

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import mantaflow, operators, preview_dome, properties
+from . import lpm_offer, mantaflow, operators, preview_dome, properties
 
 
 def preset_rows(s):
@@ -70,6 +70,12 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
             sub.label(text=note)
         if properties.solver_has(s.solver, "seed"):
             col.prop(s, "seed")
+        if s.solver == "lpm":
+            col.prop(s, "lpm_out_of_core")
+            sub = col.column()
+            sub.active = s.lpm_out_of_core
+            sub.prop(s, "lpm_memory_budget_mib")
+        col.prop(s, "max_resolution")
         col.prop(s, "device")
         try:
             note = operators.device_note(s.solver, s.device)
@@ -91,6 +97,14 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
             # The pick's first clause ("auto picked pop preview: ...") fits a panel line.
             col.label(text=s.last_choice.split(":")[0], icon='INFO')
         col.prop(s, "hide_original")
+        offer = lpm_offer.offer(context.object, s)
+        if offer:
+            # A volume too large to solve in memory (lpm_offer.py): its size and what lpm
+            # streamed will use, from the library, and the button that sets it up.
+            box = layout.column(align=True)
+            for line in lpm_offer.lines(*offer):
+                box.label(text=line, icon='INFO')
+            box.operator("volscatter.use_lpm_streamed", icon='MOD_REMESH')
         row = layout.row(align=True)
         row.operator("volscatter.compute_scattering", icon='OUTLINER_DATA_VOLUME')
         row.operator("volscatter.render_preview", icon='RENDER_STILL')

@@ -142,6 +142,18 @@ class VolscatterSettings(bpy.types.PropertyGroup):
                                 description="Hide the source volume in renders once its scattering volume exists "
                                             "(the new volume carries its extinction)")
 
+    # Light Propagation Maps streamed (lpm_offer.py): set together by "Use Light Propagation
+    # Maps (Streamed)" for volumes too large to solve in memory.
+    lpm_out_of_core: BoolProperty(name="Out of Core", default=False,
+                                  description="lpm keeps its per-cell arrays in scratch files and bounds the whole "
+                                              "solve by the memory budget (sun as boundary radiance; no local lights)")
+    lpm_memory_budget_mib: IntProperty(name="Memory Budget (MiB)", default=512, min=1, max=1 << 20,
+                                       description="Memory the lpm solve may use out of core; the slab "
+                                                   "thickness is picked from it")
+    max_resolution: IntProperty(name="Max Resolution", default=0, min=0, max=4096,
+                                description="Read the VDB box-filtered to at most this many voxels along its "
+                                            "longest side (0: whole), for volumes larger than memory")
+
     # What the last Compute Scattering made, for the panel: the result grid's largest side and
     # the one asked for (a solver caps its grid at the source's voxels: said, not silent).
     last_resolution: IntProperty(name="Result Resolution", default=0, options={'HIDDEN'})
@@ -158,6 +170,10 @@ class VolscatterSettings(bpy.types.PropertyGroup):
             s = preset_settings(self.solver, self.quality) or {}
         if solver_has(self.solver, "seed"):
             s["seed"] = self.seed
+        if self.solver == "lpm" and self.lpm_out_of_core:
+            # Out of core streams a sun only as boundary radiance (the exact first order needs
+            # the whole grid): set with it, not left to fail.
+            s.update(out_of_core=True, memory_budget=self.lpm_memory_budget_mib << 20, first_order="boundary")
         return s
 
 

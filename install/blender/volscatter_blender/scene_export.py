@@ -562,8 +562,9 @@ def matrix_rows(m):
 # ---------------------------------------------------------------------------------------------
 
 
-def export(context, obj, out_dir, frame, solver=None, size=None):
-    """-> (scene_dict, warnings, generated_files). Raises ExportError."""
+def export(context, obj, out_dir, frame, solver=None, size=None, max_resolution=0):
+    """-> (scene_dict, warnings, generated_files). Raises ExportError. `max_resolution` > 0:
+    the medium's `max_resolution` (the VDB box-filtered as it is read)."""
     scene = context.scene
     warnings = []
     depsgraph = context.evaluated_depsgraph_get()
@@ -583,6 +584,8 @@ def export(context, obj, out_dir, frame, solver=None, size=None):
               "albedo": med["albedo"], "g": med["g"], "transform": matrix_rows(eval_obj.matrix_world)}
     if med.get("emission"):
         medium["emission"] = med["emission"]
+    if max_resolution > 0:
+        medium["max_resolution"] = int(max_resolution)
     ls = lights(scene, depsgraph, warnings) + world_lights(scene, warnings)
     if not ls and "emission" not in medium:
         if generated:

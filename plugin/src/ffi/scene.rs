@@ -212,6 +212,100 @@ pub unsafe extern "C" fn vs_scene_set_medium_vdb(
     })
 }
 
+/// `vs_scene_lpm_estimate`'s answer: how large a VDB medium is and what `lpm` will hold for
+/// it, from the file's topology alone (no voxel is decoded). Voxel counts are of the leaves'
+/// index box (which can be wider than the active voxels'); bytes count 4 a voxel for the
+/// medium. All 0 when the grid has no voxel.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct VsLpmEstimate {
+    /// Voxels of the grid read whole, along x, y, z.
+    pub voxels: [u64; 3],
+    /// Bytes of those voxels dense (4 a voxel).
+    pub dense_bytes: u64,
+    /// Cells of the medium as it will be held (`max_resolution` applied), and their bytes.
+    pub medium_dims: [u64; 3],
+    pub medium_bytes: u64,
+    /// Cells of lpm's propagation grid.
+    pub grid_dims: [u64; 3],
+    /// lpm in memory: per-cell arrays and sweep buffers (0: `memory_budget` below one layer).
+    pub in_memory_bytes: u64,
+    /// lpm out of core: the largest slab under `memory_budget` (0: below one layer).
+    pub out_of_core_bytes: u64,
+    /// lpm out of core: its scratch files on disk.
+    pub scratch_bytes: u64,
+}
+
+/// Estimates, without reading any voxel, the medium the float grid `grid_name` (NULL: `density`,
+/// else the first float grid) of the OpenVDB file at `path` will be, placed by the file's
+/// transform and `object_to_world` (16 floats, row-major; NULL: identity), read box-filtered
+/// to `max_resolution` cells a side (0: whole; else 2..=4096, like `medium.max_resolution`),
+/// and the memory `lpm` with `settings_json` (an object of lpm settings as in a scene's
+/// `solver` block; NULL or "": the defaults) will use over it (core `lpm::estimate`: the
+/// formulas the solver plans with; the medium, its mip and the output grid are not in the lpm
+/// figures). The scene is not changed; errors (bad path, not a VDB, bad settings) are
+/// recorded on it for `vs_scene_last_error`, and `*out` is zeroed.
+///
+/// Thread safety: any thread; calls on one scene are serialised.
+#[no_mangle]
+pub unsafe extern "C" fn vs_scene_lpm_estimate(
+    scene: *mut VsScene,
+    path: *const c_char,
+    grid_name: *const c_char,
+    object_to_world: *const f32,
+    max_resolution: u32,
+    settings_json: *const c_char,
+    out: *mut VsLpmEstimate,
+) -> VsStatus {
+    with_scene(scene, |_| {
+        if out.is_null() {
+            return Err(FfiError::null("out"));
+        }
+        out.write_unaligned(VsLpmEstimate::default());
+        let path = path_arg(path, "path")?;
+        let grid_name = opt_str_arg(grid_name, "grid_name")?;
+        let o2w = if object_to_world.is_null() { Affine3A::IDENTITY } else { affine_arg(object_to_world, "object_to_world")? };
+        if max_resolution != 0 && !(2..=4096).contains(&max_resolution) {
+            return Err(FfiError::invalid(format!("max_resolution must be 0 (whole) or in 2..=4096, got {max_resolution}")));
+        }
+        let settings = lpm_settings_arg(settings_json)?;
+        let file = volscatter_core::vdb::VdbFile::open(&path, u64::MAX)?;
+        let i = file.find_density_grid(grid_name)?;
+        let Some(size) = file.medium_size(i, (max_resolution != 0).then_some(max_resolution))? else {
+            return Ok(());
+        };
+        let xf = o2w * size.index_to_object;
+        let (lo, hi) = volscatter_core::medium::optics::world_box(&xf, size.index_bounds.0, size.index_bounds.1);
+        let est = volscatter_core::solvers::lpm::estimate::memory(lo, hi, &settings)?;
+        let voxels = (size.fine_box.1 - size.fine_box.0).as_u64vec3().to_array();
+        let medium_dims = size.dims.as_u64vec3().to_array();
+        out.write_unaligned(VsLpmEstimate {
+            voxels,
+            dense_bytes: voxels.iter().product::<u64>().saturating_mul(4),
+            medium_dims,
+            medium_bytes: medium_dims.iter().product::<u64>().saturating_mul(4),
+            grid_dims: est.grid_dims.map(|d| d as u64),
+            in_memory_bytes: est.in_memory_bytes,
+            out_of_core_bytes: est.out_of_core_bytes,
+            scratch_bytes: est.scratch_bytes,
+        });
+        Ok(())
+    })
+}
+
+/// lpm settings from a JSON object (NULL or empty: the defaults), checked like a scene's.
+unsafe fn lpm_settings_arg(p: *const c_char) -> FfiResult<volscatter_core::solvers::lpm::LpmSettings> {
+    let text = opt_str_arg(p, "settings_json")?.unwrap_or("").trim();
+    if text.is_empty() {
+        return Ok(Default::default());
+    }
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| FfiError::invalid(format!("settings_json: {e}")))?;
+    let serde_json::Value::Object(map) = value else {
+        return Err(FfiError::invalid("settings_json must be a JSON object of lpm settings"));
+    };
+    Ok(solvers::parse_settings(&map)?)
+}
+
 /// Sets the medium's density from the caller's dense buffer: `len` floats, x fastest then y
 /// then z, `len == nx * ny * nz`, each finite (negative values are clamped to zero). Voxel
 /// (i, j, k) sits at index coordinates (i, j, k), placed in the world by `index_to_world`
@@ -590,3 +684,7 @@ pub unsafe extern "C" fn vs_scene_render_reference(scene: *mut VsScene, progress
         write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
     })
 }
+
+#[cfg(test)]
+#[path = "lpm_estimate_tests.rs"]
+mod lpm_estimate_tests;

@@ -36,6 +36,12 @@ impl LpmGrid {
     /// allocated: the out-of-core solve builds it block by block).
     pub fn geometry(medium: &Medium, resolution: u32) -> ([usize; 3], Vec3, f32) {
         let (lo, hi) = medium.world_bounds();
+        Self::geometry_of_box(lo, hi, resolution)
+    }
+
+    /// `geometry` over the world box `lo..hi` (what a medium's `world_bounds` gives): hosts
+    /// size the grid from a box before any voxel is read (estimate.rs).
+    pub fn geometry_of_box(lo: Vec3, hi: Vec3, resolution: u32) -> ([usize; 3], Vec3, f32) {
         let extent = (hi - lo).max(Vec3::splat(1e-6));
         let h = extent.max_element() / resolution.max(1) as f32;
         let d = (extent / h).ceil().max(Vec3::ONE).as_uvec3();

@@ -29,6 +29,7 @@
 mod collect;
 pub mod delta_m;
 pub mod directions;
+pub mod estimate;
 pub mod grid;
 pub mod lights;
 pub mod out_of_core;
@@ -162,7 +163,8 @@ impl Lpm {
         let mut u_cur = stream::filled("lpm U (cells x storage directions)", cells * m as u64, progress)?;
         let u_count = u_cur.len();
         let mut j = stream::filled("lpm J", cells, progress)?;
-        report.cell_bytes = cells * 16 + (2 * u_count + grid.len()) as u64 * 12;
+        debug_assert_eq!(u_count as u64, cells * m as u64);
+        report.cell_bytes = estimate::cell_bytes(cells, m);
         report.layers = match ov.layers {
             Some(l) => [l.max(1); FACES],
             None => stream::plan(grid.dims, &dirs, s.memory_budget)?,

@@ -265,3 +265,40 @@ fn lpm_out_of_core_on_a_box_filtered_vdb_medium() {
     assert!(differences[0] <= 0.0202 && differences[1] <= 0.047, "{differences:?}");
     assert!(differences[0] < differences[1], "{differences:?}");
 }
+
+/// The estimate hosts show before a solve (estimate.rs, `vs_scene_lpm_estimate`) against the
+/// solves themselves, from the medium's world box alone: the same grid, the out-of-core
+/// scratch files to the byte, and the sweeps' measured peak within the formula plus O(n^2)
+/// (capacity rounding of map-sized buffers, as `lpm_out_of_core_memory_is_a_slab` allows), in
+/// memory and out of core under a budget of a few layers; a budget below one layer gives 0
+/// where the solve refuses.
+#[test]
+fn lpm_estimate_matches_the_solves_plan() {
+    let sc = case("dome_uniform");
+    let (lo, hi) = sc.medium.world_bounds();
+    let dir = scratch("estimate");
+    let base = LpmSettings { grid_resolution: 16, directions: 9, max_orders: 1, first_order: FirstOrder::Boundary, ..Default::default() };
+    let n2 = 16 * 16;
+    let budget = slab_bytes(n2, 9, 6, 5) + 100;
+    for (out_of_core, memory_budget) in [(false, 0), (false, super::stream::working_bytes(n2, 9, 3)), (true, budget), (true, 0)] {
+        let s = LpmSettings { out_of_core, memory_budget, ..base.clone() };
+        let est = super::estimate::memory(lo, hi, &s).unwrap();
+        let (_, rep) = solve(&sc, s.clone(), Overrides { j_only: true, ..Default::default() }, Some(&dir), &NoProgress).unwrap();
+        assert_eq!(est.grid_dims, rep.grid_dims, "{s:?}");
+        let peak = rep.sweep.peak_working_bytes;
+        let (formula, what) = if out_of_core {
+            assert_eq!(est.scratch_bytes, rep.cell_bytes, "scratch files");
+            (est.out_of_core_bytes, "out of core")
+        } else {
+            (est.in_memory_bytes - rep.cell_bytes, "in memory (sweeps)")
+        };
+        eprintln!("{what}, budget {memory_budget}: estimate {formula} B, measured peak {peak} B, layers {:?}", rep.layers);
+        assert!(peak >= formula && peak <= formula + 64 * n2 as u64, "{what}: peak {peak} vs estimate {formula}");
+        assert!(memory_budget == 0 || formula <= memory_budget, "{what}: {formula} over the budget {memory_budget}");
+    }
+    let tiny = LpmSettings { out_of_core: true, memory_budget: slab_bytes(n2, 9, 6, 1) - 1, ..base.clone() };
+    assert_eq!(super::estimate::memory(lo, hi, &tiny).unwrap().out_of_core_bytes, 0);
+    assert!(solve(&sc, tiny, Overrides::default(), Some(&dir), &NoProgress).is_err());
+    assert!(super::estimate::memory(lo, hi, &LpmSettings { directions: 7, ..base }).is_err(), "invalid settings are refused");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -20,7 +20,7 @@ use glam::Vec3;
 use crate::error::{Error, Result};
 
 /// Bytes of one stored RGB value (three little-endian f32).
-const VALUE_BYTES: usize = 12;
+pub const VALUE_BYTES: usize = 12;
 
 pub struct SlabStore {
     file: File,

@@ -1,0 +1,160 @@
+"""The panel's offer of Light Propagation Maps streamed (`lpm` out of core, issue 19) for a
+volume too large to solve in memory, with the memory it will use.
+
+Large means: the VDB's voxels, dense, take more than OFFER_DENSE_BYTES or half the library's
+memory budget (`vs_memory_budget`: a quarter of physical memory by default), whichever is
+smaller. Why: a whole load holds the voxels (sparse bricks, up to their dense size for a full
+cloud) and every solver adds its own arrays and the density mip (about 1/7 more) on top, so
+past half the budget a load alone can be refused; and 1 GiB (2^28 voxels, about 645^3) is
+where a whole load stops being quick on a workstation whatever its RAM, while lpm streamed
+reads the file once, box-filtered, in a bounded window (the 1024^3 cumulus in 45 MiB).
+
+Every number comes from the library (`native.lpm_estimate`, the formulas the solver plans
+with), read from the file's topology alone, never from the voxels; nothing is computed here.
+Only file-backed volumes get the offer (a generated volume is already in Blender's memory).
+"""
+
+import json
+import os
+
+import bpy
+
+from . import native
+
+OFFER_DENSE_BYTES = 1 << 30
+#: The medium box-filtered to twice the propagation grid: measured (lpm's out_of_core_tests),
+#: it moves the plume's image by 0.017 rel. RMSE, under the grid's own 0.041.
+MEDIUM_PER_GRID_CELL = 2
+#: The out-of-core budget: a quarter of the library's budget, at most this.
+MAX_LPM_BUDGET_MIB = 1024
+
+_cache = {}
+
+
+def source_file(ob):
+    """The VDB file a file-backed Volume object reads at the current frame, or None."""
+    if ob is None or ob.type != 'VOLUME' or not ob.data.filepath:
+        return None
+    if any(m.show_render for m in getattr(ob, "modifiers", [])):
+        return None
+    grids = ob.data.grids
+    path = getattr(grids, "frame_filepath", "") or ob.data.filepath
+    path = bpy.path.abspath(path, library=ob.data.library)
+    return path if os.path.isfile(path) else None
+
+
+def proposal(s):
+    """The settings "Use Light Propagation Maps (Streamed)" sets on `s` (Object.volscatter)."""
+    entry = native.solver("lpm") or {"settings": []}
+    defaults = {x["name"]: x.get("default") for x in entry["settings"]}
+    if s.solver == "lpm" and s.quality == 'CUSTOM':
+        grid = s.grid_resolution
+    else:
+        from . import properties
+        preset = properties.preset_settings("lpm", s.quality) or {}
+        grid = int(preset.get("grid_resolution", defaults.get("grid_resolution", 32)))
+    budget_mib = max(1, min(MAX_LPM_BUDGET_MIB, native.lib().vs_memory_budget() >> 22))
+    return {"lpm_memory_budget_mib": budget_mib, "max_resolution": min(4096, MEDIUM_PER_GRID_CELL * grid),
+            "grid_resolution": grid}
+
+
+def estimate(ob, proposed):
+    """`native.lpm_estimate` of the object's file under the proposed settings, cached by file,
+    modification time, placement and settings (the panel redraws often); None when it fails."""
+    path = source_file(ob)
+    if path is None:
+        return None
+    st = os.stat(path)
+    m = [float(ob.matrix_world[r][c]) for r in range(4) for c in range(4)]
+    settings = {"grid_resolution": proposed["grid_resolution"], "out_of_core": True,
+                "memory_budget": proposed["lpm_memory_budget_mib"] << 20, "first_order": "boundary"}
+    key = (path, st.st_mtime_ns, st.st_size, tuple(m), proposed["max_resolution"], json.dumps(settings, sort_keys=True))
+    if key not in _cache:
+        try:
+            _cache[key] = native.lpm_estimate(path, None, m, proposed["max_resolution"], settings)
+        except Exception:  # unreadable file: no offer (Compute reports the error)
+            _cache[key] = None
+    return _cache[key]
+
+
+def threshold():
+    return min(OFFER_DENSE_BYTES, native.lib().vs_memory_budget() // 2)
+
+
+def offer(ob, s):
+    """(estimate, proposal) when the volume is large enough for the offer, else None."""
+    try:
+        proposed = proposal(s)
+        est = estimate(ob, proposed)
+    except Exception:  # no library: the operators say why
+        return None
+    if est is None or est["dense_bytes"] <= threshold():
+        return None
+    return est, proposed
+
+
+def human(n):
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return ("%d %s" % (n, unit)) if unit == "B" else ("%.1f %s" % (n, unit))
+        n /= 1024.0
+
+
+def lines(est, proposed):
+    """The panel's lines for an offer."""
+    dims = "x".join(str(d) for d in est["voxels"])
+    medium = "x".join(str(d) for d in est["medium_dims"])
+    return [
+        "Large volume: %s voxels, %s dense" % (dims, human(est["dense_bytes"])),
+        "Light Propagation Maps: %s in memory" % human(est["in_memory_bytes"]),
+        "Streamed: %s under a %d MiB budget (+ %s medium at %s)" % (
+            human(est["out_of_core_bytes"]), proposed["lpm_memory_budget_mib"], human(est["medium_bytes"]), medium),
+    ]
+
+
+def apply(s, proposed):
+    """Sets `s` to lpm streamed; running it again changes nothing."""
+    if s.solver != "lpm":
+        s.solver = "lpm"
+    if s.quality == 'CUSTOM':
+        s.grid_resolution = proposed["grid_resolution"]  # what the estimate was for
+    s.lpm_out_of_core = True
+    s.lpm_memory_budget_mib = proposed["lpm_memory_budget_mib"]
+    s.max_resolution = proposed["max_resolution"]
+
+
+class VOLSCATTER_OT_use_lpm_streamed(bpy.types.Operator):
+    """Solve this large volume with Light Propagation Maps streamed: lpm out of core under a memory budget, the VDB read box-filtered to twice lpm's grid"""
+
+    bl_idname = "volscatter.use_lpm_streamed"
+    bl_label = "Use Light Propagation Maps (Streamed)"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == 'VOLUME'
+
+    def execute(self, context):
+        s = context.object.volscatter
+        try:
+            proposed = proposal(s)
+        except Exception as e:
+            self.report({'ERROR'}, "volscatter: %s" % e)
+            return {'CANCELLED'}
+        apply(s, proposed)
+        self.report({'INFO'}, "volscatter: lpm out of core, memory budget %d MiB, medium read at %d voxels a side"
+                    % (s.lpm_memory_budget_mib, s.max_resolution))
+        return {'FINISHED'}
+
+
+classes = (VOLSCATTER_OT_use_lpm_streamed,)
+
+
+def register():
+    for c in classes:
+        bpy.utils.register_class(c)
+
+
+def unregister():
+    for c in reversed(classes):
+        bpy.utils.unregister_class(c)
