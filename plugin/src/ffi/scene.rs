@@ -279,11 +279,13 @@ pub unsafe extern "C" fn vs_scene_lpm_estimate(
         let est = volscatter_core::solvers::lpm::estimate::memory(lo, hi, &settings)?;
         let voxels = (size.fine_box.1 - size.fine_box.0).as_u64vec3().to_array();
         let medium_dims = size.dims.as_u64vec3().to_array();
+        // Saturating: a hostile file's leaf box may span the whole i32 index range.
+        let bytes = |d: [u64; 3]| d.iter().fold(4u64, |a, &n| a.saturating_mul(n));
         out.write_unaligned(VsLpmEstimate {
             voxels,
-            dense_bytes: voxels.iter().product::<u64>().saturating_mul(4),
+            dense_bytes: bytes(voxels),
             medium_dims,
-            medium_bytes: medium_dims.iter().product::<u64>().saturating_mul(4),
+            medium_bytes: bytes(medium_dims),
             grid_dims: est.grid_dims.map(|d| d as u64),
             in_memory_bytes: est.in_memory_bytes,
             out_of_core_bytes: est.out_of_core_bytes,
