@@ -1,7 +1,9 @@
-//! The transmittance march of every VPL connection (gather.rs `connect`): the same midpoint
-//! quadrature as medium::optical_depth, made cheaper, since it is nearly all of a solve's
-//! time (perf on cube_g07, 8192 walks, 12-cell gather: optical_depth 78% and the `floorf`
-//! calls of its trilinear lookups 12% of 15 s).
+//! The density lookups of the hot deterministic marches: every VPL connection (vpl's
+//! gather.rs `connect`), the compositor's shadow rays (single-scattering grid) and its camera
+//! rays. The same midpoint quadrature as medium::optical_depth, made cheaper, since it is
+//! nearly all of their time (perf on cube_g07, 8192 walks, 12-cell gather: optical_depth 78%
+//! and the `floorf` calls of its trilinear lookups 12% of 15 s; on the default scene's vpl
+//! render, optical_depth and floorf were 60% of the whole render through the compositor).
 //!
 //! What changes: the density is read from a dense copy of the grid (zero-padded by two
 //! voxels, so that no lookup needs a bounds test or a brick table), the ray is carried into
@@ -33,8 +35,9 @@ pub struct Marcher<'a> {
     medium: &'a Medium,
     /// Dense density over the grid's box grown by PAD (x fastest), None: sparse lookups.
     dense: Option<Vec<f32>>,
-    /// Index of the dense array's first voxel in the medium's index space.
-    origin: IVec3,
+    /// What lattice coordinates are offset from the medium's index space: the index of the
+    /// dense array's first voxel with the dense copy, zero without.
+    offset: Vec3,
     dims: IVec3,
     /// The medium's world box (rays are clipped to it, as optical_depth does).
     bounds: (Vec3, Vec3),
@@ -48,7 +51,7 @@ impl<'a> Marcher<'a> {
         let origin = lo - IVec3::splat(PAD);
         let dims = hi - lo + IVec3::splat(1 + 2 * PAD);
         let count = dims.x.max(0) as u64 * dims.y.max(0) as u64 * dims.z.max(0) as u64;
-        let wanted = !medium.grid.is_empty() && count <= MAX_DENSE && crate::budget::check_elements::<f32>("vpl dense density copy", count).is_ok();
+        let wanted = !medium.grid.is_empty() && count <= MAX_DENSE && crate::budget::check_elements::<f32>("dense density copy", count).is_ok();
         let dense = wanted.then(|| {
             let mut data = vec![0.0f32; count as usize];
             data.par_chunks_mut((dims.x * dims.y) as usize).enumerate().for_each(|(z, slab)| {
@@ -60,7 +63,46 @@ impl<'a> Marcher<'a> {
             data
         });
         let scale = medium.density_scale.max_element();
-        Marcher { medium, dense, origin, dims, bounds: medium.world_bounds(), opaque: if scale > 0.0 { OPAQUE / scale } else { f32::INFINITY } }
+        // Sparse lookups read the medium's own index space: no offset.
+        let offset = if dense.is_some() { origin.as_vec3() } else { Vec3::ZERO };
+        Marcher { medium, dense, offset, dims, bounds: medium.world_bounds(), opaque: if scale > 0.0 { OPAQUE / scale } else { f32::INFINITY } }
+    }
+
+    /// Whether the density was copied (false: the memory budget or MAX_DENSE refused it, and
+    /// lookups go through the sparse grid).
+    pub fn is_dense(&self) -> bool {
+        self.dense.is_some()
+    }
+
+    /// The ray `x + t d` (world) in this marcher's lattice coordinates (`density_lattice`'s):
+    /// the same `t` reaches the same point. For a caller that marches a ray with its own
+    /// quadrature (the compositor's camera rays) and carries it into index space once.
+    #[inline]
+    pub fn lattice_ray(&self, x: Vec3, d: Vec3) -> (Vec3, Vec3) {
+        let w2i = &self.medium.world_to_index;
+        (w2i.transform_point3(x) - self.offset, w2i.transform_vector3(d))
+    }
+
+    /// Unscaled density at `p` in lattice coordinates (`lattice_ray`), anywhere (zero outside
+    /// the medium's box): the medium's trilinear lookup, up to the float rounding of the
+    /// lattice coordinates.
+    #[inline]
+    pub fn density_lattice(&self, p: Vec3) -> f32 {
+        match &self.dense {
+            Some(data) => self.dense_at(data, p),
+            None => self.medium.grid.sample(p),
+        }
+    }
+
+    /// Trilinear lookup in the dense copy at lattice coordinates `p`.
+    #[inline(always)]
+    fn dense_at(&self, data: &[f32], p: Vec3) -> f32 {
+        let dims = self.dims;
+        // Truncation is floor for p >= 0; below 0 or past the far side the clamped cell lies
+        // in the zero padding (both corners on that axis zero), as the sparse grid reads.
+        // Callers pass finite points (samples of rays clipped to the medium's box).
+        let c = p.max(Vec3::ZERO).as_ivec3().min(dims - IVec3::splat(2));
+        trilinear_cell(c, p - c.as_vec3(), |c: IVec3| data[(c.x + dims.x * (c.y + dims.y * c.z)) as usize])
     }
 
     pub fn medium(&self) -> &'a Medium {
@@ -78,20 +120,11 @@ impl<'a> Marcher<'a> {
         }
         let n = (((t1 - t0) / min_step).ceil() as u32).clamp(1, max_steps);
         let h = (t1 - t0) / n as f32;
-        let w2i = &self.medium.world_to_index;
         // The ray in the dense array's lattice coordinates.
-        let start = w2i.transform_point3(x) - self.origin.as_vec3();
-        let dir = w2i.transform_vector3(d);
-        let last = self.dims - IVec3::splat(2);
-        let dims = self.dims;
-        let fetch = |c: IVec3| data[(c.x + dims.x * (c.y + dims.y * c.z)) as usize];
+        let (start, dir) = self.lattice_ray(x, d);
         let mut tau = 0.0f32;
         for i in 0..n {
-            let p = start + dir * (t0 + (i as f32 + 0.5) * h);
-            // Truncation is floor for p >= 0; below 0 or past the far side the clamped cell lies
-            // in the zero padding (both corners on that axis zero), as the sparse grid reads.
-            let c = p.max(Vec3::ZERO).as_ivec3().min(last);
-            tau += trilinear_cell(c, p - c.as_vec3(), fetch);
+            tau += self.dense_at(data, start + dir * (t0 + (i as f32 + 0.5) * h));
             if tau * h > self.opaque {
                 break;
             }
