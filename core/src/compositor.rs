@@ -201,10 +201,14 @@ fn is_grey(medium: &Medium) -> bool {
     k.x == k.y && k.y == k.z
 }
 
-/// e^-tau per channel; `grey`: tau's channels are equal (`is_grey`), one exp for the three.
+/// e^-tau per channel; `grey`: tau's channels are equal (`is_grey`), one exp for the three,
+/// and none for tau = 0 (e^-0 is 1 exactly: camera rays cross much empty space).
 #[inline]
 fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
     if grey {
+        if tau.x == 0.0 {
+            return Vec3::ONE;
+        }
         Vec3::splat((-tau.x).exp())
     } else {
         (-tau).exp()
