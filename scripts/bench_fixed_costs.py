@@ -9,8 +9,8 @@ neither stage, so its time should not move.
     VOLSCATTER_BIN=target/release/volscatter VOLSCATTER_BIN_BEFORE=/tmp/volscatter.main \\
         nice -n 15 python3 scripts/bench_fixed_costs.py
 
-Each render runs on the CPU (`--device cpu`), best of `--repeat` runs (the machine is shared:
-the minimum is the least disturbed). The images' mean RGB of the two builds are compared too:
+Each render runs on the CPU (`--device cpu`), best of `--repeat` runs, the two builds taking
+turns (the machine is shared: the minimum is the least disturbed). The images' mean RGB of the two builds are compared too:
 the change is meant to move them by float rounding only.
 """
 
@@ -39,17 +39,24 @@ SOLVERS = [
 ]
 
 
-def render(binary: str, solver: str, extra: list[str], repeat: int) -> dict:
-    """Best-of-`repeat` report of one render of the default scene."""
-    best = None
+def render(binary: str, solver: str, extra: list[str]) -> dict:
+    """The report of one render of the default scene."""
     with tempfile.TemporaryDirectory() as d:
-        for _ in range(repeat):
-            report = Path(d) / "r.json"
-            cmd = [binary, "render", "--solver", solver, "--device", "cpu", "-q", "--report", str(report), "--out", str(Path(d) / "o.exr"), *extra]
-            subprocess.run(cmd, check=True, capture_output=True)
-            r = json.loads(report.read_text())
-            if best is None or r["total_seconds"] < best["total_seconds"]:
-                best = r
+        report = Path(d) / "r.json"
+        cmd = [binary, "render", "--solver", solver, "--device", "cpu", "-q", "--report", str(report), "--out", str(Path(d) / "o.exr"), *extra]
+        subprocess.run(cmd, check=True, capture_output=True)
+        return json.loads(report.read_text())
+
+
+def best_of(binaries: list[str], solver: str, extra: list[str], repeat: int) -> list[dict]:
+    """Per binary, the fastest of `repeat` renders, the binaries taking turns (so that a busy
+    spell on the shared machine slows both alike, not one build's every run)."""
+    best: list[dict | None] = [None] * len(binaries)
+    for _ in range(repeat):
+        for k, binary in enumerate(binaries):
+            r = render(binary, solver, extra)
+            if best[k] is None or r["total_seconds"] < best[k]["total_seconds"]:
+                best[k] = r
     return best
 
 
@@ -61,15 +68,15 @@ def phase(report: dict, word: str) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-write", action="store_true", help="print the table only")
     args = ap.parse_args()
     after_bin = os.environ.get("VOLSCATTER_BIN", "target/release/volscatter")
     before_bin = os.environ.get("VOLSCATTER_BIN_BEFORE")
     rows = []
     for solver, extra in SOLVERS:
-        after = render(after_bin, solver, extra, args.repeat)
-        before = render(before_bin, solver, extra, args.repeat) if before_bin else None
+        runs = best_of([after_bin] + ([before_bin] if before_bin else []), solver, extra, args.repeat)
+        after, before = runs[0], (runs[1] if before_bin else None)
         rows.append((solver, before, after))
         print(solver, "done", file=sys.stderr)
 
