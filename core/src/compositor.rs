@@ -391,18 +391,22 @@ pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&
     let cam = &scene.camera;
     Image::check_budget(cam.width, cam.height, "composited image")?;
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let k = opts.subpixels.clamp(1, 16);
+    let bounds = medium.world_bounds();
+    // At most this many density lookups (every ray along the box's diagonal): what decides
+    // whether the dense copy pays.
+    let lookups = (w * h) as f64 * (k * k) as f64 * ((bounds.1 - bounds.0).length() / step).ceil().min(8192.0) as f64;
     let cm = CameraMarch {
         medium,
-        density: Marcher::new(medium),
+        density: Marcher::for_lookups(medium, lookups as u64),
         grey: is_grey(medium),
-        bounds: medium.world_bounds(),
+        bounds,
         s: GridLookup::new(s),
         s1: single.filter(|_| opts.aovs.needs_single()).map(GridLookup::new),
         step,
     };
     let env = scene.environment();
-    let (w, h) = (cam.width as usize, cam.height as usize);
-    let k = opts.subpixels.clamp(1, 16);
     let inv = 1.0 / (k * k) as f32;
     let pixels: Vec<(Vec4, Vec3, Vec3)> = (0..w * h)
         .into_par_iter()

@@ -47,11 +47,19 @@ pub struct Marcher<'a> {
 
 impl<'a> Marcher<'a> {
     pub fn new(medium: &'a Medium) -> Self {
+        Self::for_lookups(medium, u64::MAX)
+    }
+
+    /// `new` for a caller that will make about `lookups` density lookups: the dense copy is
+    /// made only when they are at least as many as its voxels (copying costs about a sparse
+    /// lookup per voxel, and saves a fraction of one per lookup), so that a small image of a
+    /// large medium (a thumbnail) does not pay more for the copy than for its march.
+    pub fn for_lookups(medium: &'a Medium, lookups: u64) -> Self {
         let (lo, hi) = medium.grid.bbox();
         let origin = lo - IVec3::splat(PAD);
         let dims = hi - lo + IVec3::splat(1 + 2 * PAD);
         let count = dims.x.max(0) as u64 * dims.y.max(0) as u64 * dims.z.max(0) as u64;
-        let wanted = !medium.grid.is_empty() && count <= MAX_DENSE && crate::budget::check_elements::<f32>("dense density copy", count).is_ok();
+        let wanted = !medium.grid.is_empty() && count <= MAX_DENSE && lookups >= count && crate::budget::check_elements::<f32>("dense density copy", count).is_ok();
         let dense = wanted.then(|| {
             let mut data = vec![0.0f32; count as usize];
             data.par_chunks_mut((dims.x * dims.y) as usize).enumerate().for_each(|(z, slab)| {
