@@ -10,6 +10,7 @@
 
 use glam::{Affine3A, IVec3, Vec3, Vec4};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::image::Image;
@@ -147,8 +148,9 @@ pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_dire
 pub struct DirectLight<'a> {
     scene: &'a Scene,
     /// The shadow rays' march: a dense copy of the density made once here, not per point
-    /// (optical_depth's sparse lookups were ~60% of a vpl render of the default scene).
-    march: Marcher<'a>,
+    /// (optical_depth's sparse lookups were ~60% of a vpl render of the default scene), or
+    /// the caller's (`with_march`).
+    march: Arc<Marcher<'a>>,
     /// The medium's extinction is the same in every channel: one exp per transmittance.
     grey: bool,
     /// Shadow rays' quadrature step (`shadow_step`).
@@ -161,10 +163,15 @@ pub struct DirectLight<'a> {
 
 impl<'a> DirectLight<'a> {
     pub fn new(scene: &'a Scene, step: f32, dome_directions: u32, near: f32) -> Self {
+        Self::with_march(scene, step, dome_directions, near, Arc::new(Marcher::new(&scene.medium)))
+    }
+
+    /// `new` marching through `march` (of the scene's medium), for a caller that holds one
+    /// already: a second dense copy of the density would cost its memory again.
+    pub fn with_march(scene: &'a Scene, step: f32, dome_directions: u32, near: f32, march: Arc<Marcher<'a>>) -> Self {
         let dome = dome_directions_of(scene, dome_directions);
         let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
-        let medium = &scene.medium;
-        DirectLight { scene, march: Marcher::new(medium), grey: is_grey(medium), step, dome, emitters, near }
+        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, near }
     }
 
     /// p * L * T summed over the lights at `x`; `view` is the direction from the viewer to `x`
