@@ -8,12 +8,15 @@
 //! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
 
-use glam::{Affine3A, Vec3, Vec4};
+use glam::{Affine3A, IVec3, Vec3, Vec4};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::image::Image;
-use crate::medium::{ball_mean_inverse_square, near_field_radius, optical_depth, ray_box, Medium};
+use crate::medium::dense_march::Marcher;
+use crate::medium::trilinear::{inside, trilinear_cell};
+use crate::medium::{ball_mean_inverse_square, near_field_radius, ray_box, Medium};
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::solvers::ScatteringGrid;
@@ -103,7 +106,8 @@ pub const AREA_VPLS_PER_SIDE: u32 = 8;
 
 /// Single scattering S1(x) = sigma_s(x) * sum over lights of p * L * T(x -> light), on a grid
 /// over the medium, with the view direction from the camera. Transmittance by deterministic
-/// ray marching; the dome by a fixed importance-sampled set of directions.
+/// ray marching (through one dense copy of the density per grid, medium::dense_march); the
+/// dome by a fixed importance-sampled set of directions.
 pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid> {
     single_scattering_grid_cancellable(scene, max_dim, dome_directions, &crate::solvers::NoProgress)
 }
@@ -143,6 +147,12 @@ pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_dire
 /// for any view direction (vpl's bias compensation scatters it towards its gather points).
 pub struct DirectLight<'a> {
     scene: &'a Scene,
+    /// The shadow rays' march: a dense copy of the density made once here, not per point
+    /// (optical_depth's sparse lookups were ~60% of a vpl render of the default scene), or
+    /// the caller's (`with_march`).
+    march: Arc<Marcher<'a>>,
+    /// The medium's extinction is the same in every channel: one exp per transmittance.
+    grey: bool,
     /// Shadow rays' quadrature step (`shadow_step`).
     step: f32,
     dome: Vec<(Vec3, Vec3)>,
@@ -153,17 +163,22 @@ pub struct DirectLight<'a> {
 
 impl<'a> DirectLight<'a> {
     pub fn new(scene: &'a Scene, step: f32, dome_directions: u32, near: f32) -> Self {
+        Self::with_march(scene, step, dome_directions, near, Arc::new(Marcher::new(&scene.medium)))
+    }
+
+    /// `new` marching through `march` (of the scene's medium), for a caller that holds one
+    /// already: a second dense copy of the density would cost its memory again.
+    pub fn with_march(scene: &'a Scene, step: f32, dome_directions: u32, near: f32, march: Arc<Marcher<'a>>) -> Self {
         let dome = dome_directions_of(scene, dome_directions);
         let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
-        DirectLight { scene, step, dome, emitters, near }
+        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, near }
     }
 
     /// p * L * T summed over the lights at `x`; `view` is the direction from the viewer to `x`
     /// (the scattered light propagates along -view).
     pub fn inscattered(&self, x: Vec3, view: Vec3) -> Vec3 {
-        let medium = &self.scene.medium;
-        let g = medium.g;
-        let tr = |w: Vec3, t_max: f32| (-optical_depth(medium, x, w, t_max, self.step, 512)).exp();
+        let g = self.scene.medium.g;
+        let tr = |w: Vec3, t_max: f32| exp_neg(self.march.optical_depth(x, w, t_max, self.step, 512), self.grey);
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             match light {
@@ -183,6 +198,27 @@ impl<'a> DirectLight<'a> {
             sum += emitter_single(e, x, view, g, self.near, &tr);
         }
         sum
+    }
+}
+
+/// Whether the medium's extinction per unit density is the same in every channel (then every
+/// optical depth is grey, and one exp serves the three channels, to the bit).
+fn is_grey(medium: &Medium) -> bool {
+    let k = medium.density_scale;
+    k.x == k.y && k.y == k.z
+}
+
+/// e^-tau per channel; `grey`: tau's channels are equal (`is_grey`), one exp for the three,
+/// and none for tau = 0 (e^-0 is 1 exactly: camera rays cross much empty space).
+#[inline]
+fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
+    if grey {
+        if tau.x == 0.0 {
+            return Vec3::ONE;
+        }
+        Vec3::splat((-tau.x).exp())
+    } else {
+        (-tau).exp()
     }
 }
 
@@ -217,51 +253,91 @@ fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f3
     Vec3::ZERO
 }
 
+/// A scattering grid's lookups along camera rays: the ray is carried into the grid's index
+/// space once, and the cell found by truncation (no floorf call): the lookup is
+/// `ScatteringGrid::sample_index`'s to the bit (floor is truncation inside the grid, where
+/// coordinates are non-negative), at the march's sample points up to float rounding.
 struct GridLookup<'a> {
     grid: &'a ScatteringGrid,
     world_to_index: Affine3A,
+    dims: IVec3,
+    /// The largest index coordinate (dims - 1): the lookup reads zero past it, or below 0.
+    hi: Vec3,
 }
 
 impl<'a> GridLookup<'a> {
     fn new(grid: &'a ScatteringGrid) -> Self {
-        GridLookup { grid, world_to_index: grid.index_to_world.inverse() }
+        let dims = IVec3::new(grid.dims[0] as i32, grid.dims[1] as i32, grid.dims[2] as i32);
+        GridLookup { grid, world_to_index: grid.index_to_world.inverse(), dims, hi: (dims - IVec3::ONE).as_vec3() }
     }
+
+    /// The world ray `o + t d` in index space: the same `t` reaches the same point.
+    fn ray(&self, o: Vec3, d: Vec3) -> (Vec3, Vec3) {
+        (self.world_to_index.transform_point3(o), self.world_to_index.transform_vector3(d))
+    }
+
     #[inline]
-    fn at(&self, p: Vec3) -> Vec3 {
-        self.grid.sample_index(self.world_to_index.transform_point3(p))
+    fn at_index(&self, p: Vec3) -> Vec3 {
+        if !inside(p, Vec3::ZERO, self.hi) {
+            return Vec3::ZERO;
+        }
+        if self.dims.min_element() < 2 {
+            return self.grid.sample_index(p);
+        }
+        let (dims, data) = (self.dims, &self.grid.data);
+        let i = p.as_ivec3().min(dims - IVec3::splat(2));
+        trilinear_cell(i, p - i.as_vec3(), |c: IVec3| data[(c.x + dims.x * (c.y + dims.y * c.z)) as usize])
     }
 }
 
-/// Marches one camera ray; returns (in-scattered radiance from S, from S1, transmittance).
-/// Without S1 (no AOV needs it) its integral is zero and it costs no lookups.
-fn march(medium: &Medium, s: &GridLookup, s1: Option<&GridLookup>, o: Vec3, d: Vec3, step: f32) -> (Vec3, Vec3, Vec3) {
-    let (lo, hi) = medium.world_bounds();
-    let Some((t0, t1)) = ray_box(o, d, lo, hi) else { return (Vec3::ZERO, Vec3::ZERO, Vec3::ONE) };
-    let n = (((t1 - t0) / step).ceil() as u32).clamp(1, 8192);
-    let h = (t1 - t0) / n as f32;
-    let mut tr = Vec3::ONE;
-    let mut l = Vec3::ZERO;
-    let mut l1 = Vec3::ZERO;
-    for i in 0..n {
-        let x = o + d * (t0 + (i as f32 + 0.5) * h);
-        let sigma_t = medium.sigma_t(medium.density_world(x));
-        let seg_t = (-sigma_t * h).exp();
-        // Exact integral of T over the step for constant sigma_t: (1 - e^{-sigma h}) / sigma,
-        // by its series where sigma h is small (the difference would cancel catastrophically).
-        let od = sigma_t * h;
-        let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
-        let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
-        l += tr * weight * s.at(x);
-        if let Some(s1) = s1 {
-            l1 += tr * weight * s1.at(x);
+/// What every camera ray of a composite shares: the medium's density as a dense copy (one per
+/// composite), its box, and the S (and S1) lookups.
+struct CameraMarch<'a> {
+    medium: &'a Medium,
+    density: Marcher<'a>,
+    grey: bool,
+    bounds: (Vec3, Vec3),
+    s: GridLookup<'a>,
+    s1: Option<GridLookup<'a>>,
+    step: f32,
+}
+
+impl CameraMarch<'_> {
+    /// Marches one camera ray; returns (in-scattered radiance from S, from S1, transmittance).
+    /// Without S1 (no AOV needs it) its integral is zero and it costs no lookups. The sample
+    /// points are those of the world-space march (t0 + (i + 1/2) h), each grid's carried by
+    /// its own index-space ray.
+    fn march(&self, o: Vec3, d: Vec3) -> (Vec3, Vec3, Vec3) {
+        let Some((t0, t1)) = ray_box(o, d, self.bounds.0, self.bounds.1) else { return (Vec3::ZERO, Vec3::ZERO, Vec3::ONE) };
+        let n = (((t1 - t0) / self.step).ceil() as u32).clamp(1, 8192);
+        let h = (t1 - t0) / n as f32;
+        let (dp, dd) = self.density.lattice_ray(o, d);
+        let (sp, sd) = self.s.ray(o, d);
+        let s1_ray = self.s1.as_ref().map(|s1| (s1, s1.ray(o, d)));
+        let mut tr = Vec3::ONE;
+        let mut l = Vec3::ZERO;
+        let mut l1 = Vec3::ZERO;
+        for i in 0..n {
+            let t = t0 + (i as f32 + 0.5) * h;
+            let sigma_t = self.medium.sigma_t(self.density.density_lattice(dp + dd * t));
+            // Exact integral of T over the step for constant sigma_t: (1 - e^{-sigma h}) / sigma,
+            // by its series where sigma h is small (the difference would cancel catastrophically).
+            let od = sigma_t * h;
+            let seg_t = exp_neg(od, self.grey);
+            let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
+            let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
+            l += tr * weight * self.s.at_index(sp + sd * t);
+            if let Some((s1, (p1, d1))) = &s1_ray {
+                l1 += tr * weight * s1.at_index(*p1 + *d1 * t);
+            }
+            tr *= seg_t;
+            if tr.max_element() < 1e-5 {
+                tr = Vec3::ZERO;
+                break;
+            }
         }
-        tr *= seg_t;
-        if tr.max_element() < 1e-5 {
-            tr = Vec3::ZERO;
-            break;
-        }
+        (l, l1, tr)
     }
-    (l, l1, tr)
 }
 
 /// Renders the scattering grid `s` as seen by the scene's camera, with the AOVs `opts` asks for.
@@ -321,12 +397,23 @@ pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&
     let medium = &scene.medium;
     let cam = &scene.camera;
     Image::check_budget(cam.width, cam.height, "composited image")?;
-    let ls = GridLookup::new(s);
-    let ls1 = single.filter(|_| opts.aovs.needs_single()).map(GridLookup::new);
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
-    let env = scene.environment();
     let (w, h) = (cam.width as usize, cam.height as usize);
     let k = opts.subpixels.clamp(1, 16);
+    let bounds = medium.world_bounds();
+    // At most this many density lookups (every ray along the box's diagonal): what decides
+    // whether the dense copy pays.
+    let lookups = (w * h) as f64 * (k * k) as f64 * ((bounds.1 - bounds.0).length() / step).ceil().min(8192.0) as f64;
+    let cm = CameraMarch {
+        medium,
+        density: Marcher::for_lookups(medium, lookups as u64),
+        grey: is_grey(medium),
+        bounds,
+        s: GridLookup::new(s),
+        s1: single.filter(|_| opts.aovs.needs_single()).map(GridLookup::new),
+        step,
+    };
+    let env = scene.environment();
     let inv = 1.0 / (k * k) as f32;
     let pixels: Vec<(Vec4, Vec3, Vec3)> = (0..w * h)
         .into_par_iter()
@@ -336,7 +423,7 @@ pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&
             for sy in 0..k {
                 for sx in 0..k {
                     let d = cam.ray_dir(x + (sx as f32 + 0.5) / k as f32, y + (sy as f32 + 0.5) / k as f32);
-                    let (a, b, tr) = march(medium, &ls, ls1.as_ref(), cam.position, d, step);
+                    let (a, b, tr) = cm.march(cam.position, d);
                     l += a;
                     l1 += b;
                     tsum += tr;

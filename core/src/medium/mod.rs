@@ -5,6 +5,7 @@
 pub mod blackbody;
 mod cie1931;
 pub mod cumulus;
+pub mod dense_march;
 pub mod emission;
 pub mod grid;
 pub mod majorant;

@@ -47,7 +47,7 @@
 pub mod backend;
 pub mod compensate;
 pub mod gather;
-pub mod march;
+pub use crate::medium::dense_march as march;
 pub mod refine;
 pub mod settings;
 pub mod upsample;
