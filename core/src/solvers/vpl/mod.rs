@@ -48,6 +48,7 @@ pub mod backend;
 pub mod compensate;
 pub mod gather;
 pub mod march;
+pub mod near_ratio;
 pub mod refine;
 pub mod settings;
 pub mod upsample;
@@ -62,7 +63,7 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
 pub use gather::GatherStats;
-pub use settings::{NearField, UpsampleFit, VplSettings};
+pub use settings::{NearField, NearUpsample, UpsampleFit, VplSettings};
 
 pub struct Vpl {
     pub settings: VplSettings,
@@ -121,7 +122,12 @@ impl Vpl {
             (true, UpsampleFit::Linear) => upsample::upsample_linear(medium, &mip, merged, &pop_like, progress),
             _ => backend.upsample(medium, &mip, merged, &pop_like),
         };
-        let mut scattering = timings.time("vpl upsample", || upsample(&merged))?;
+        let ratio = s.upsample && s.near_refine == 0.0 && s.near_upsample == NearUpsample::Ratio;
+        let mut scattering = if ratio {
+            timings.time("vpl upsample", || near_ratio::upsample(scene, &mip, &walks, &merged, s, &pop_like, progress, upsample))?
+        } else {
+            timings.time("vpl upsample", || upsample(&merged))?
+        };
         if s.near_refine > 0.0 {
             timings.time("vpl near refine", || refine::refine(scene, &mip, &walks, &merged, &mut scattering, s, progress, upsample))?;
         }
