@@ -231,22 +231,30 @@ pub fn upsample(
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
-    // kernel_difference as a function of the density (the ball's radius and sigma_t follow it),
-    // tabulated over the output's densities and interpolated linearly.
-    let rho_max = dens.rho.iter().fold(0.0f32, |m, &r| m.max(r)).max(1e-12);
-    const TABLE: usize = 256;
-    let table: Vec<f32> = (0..=TABLE)
+    // kernel_difference as a function of the two densities it depends on: the coarse
+    // neighbours' (the gather's ball radius follows theirs, `mean_free_paths`) and the point's
+    // own (the local transmittance), tabulated and interpolated bilinearly.
+    let rho_max = dens.rho.iter().chain(&merged.density).fold(0.0f32, |m, &r| m.max(r)).max(1e-12);
+    const TABLE: usize = 64;
+    let table: Vec<f32> = (0..(TABLE + 1) * (TABLE + 1))
         .into_par_iter()
-        .map(|i| {
-            let rho = rho_max * i as f32 / TABLE as f32;
-            let b = ball(rho).max(dens.cell_ball);
-            if b <= dens.cell_ball { 0.0 } else { kernel_difference(dens.cell_ball, b, sigma_t(rho)) }
+        .map(|n| {
+            let (gi, li) = (n / (TABLE + 1), n % (TABLE + 1));
+            let b = ball(rho_max * gi as f32 / TABLE as f32).max(dens.cell_ball);
+            if b <= dens.cell_ball { 0.0 } else { kernel_difference(dens.cell_ball, b, sigma_t(rho_max * li as f32 / TABLE as f32)) }
         })
         .collect();
-    let whole = |rho: f32| {
-        let t = (rho / rho_max).clamp(0.0, 1.0) * TABLE as f32;
-        let i = (t as usize).min(TABLE - 1);
-        table[i] + (table[i + 1] - table[i]) * (t - i as f32)
+    let whole = |guide: f32, rho: f32| {
+        let cell = |v: f32| {
+            let t = (v / rho_max).clamp(0.0, 1.0) * TABLE as f32;
+            let i = (t as usize).min(TABLE - 1);
+            (i, t - i as f32)
+        };
+        let ((g, fg), (l, fl)) = (cell(guide), cell(rho));
+        let at = |g: usize, l: usize| table[g * (TABLE + 1) + l];
+        let lo = at(g, l) + (at(g, l + 1) - at(g, l)) * fl;
+        let hi = at(g + 1, l) + (at(g + 1, l + 1) - at(g + 1, l)) * fl;
+        lo + (hi - lo) * fg
     };
     let filter = Bilateral::new(merged, pop_like);
     let [nx, ny, _] = s.dims;
@@ -261,13 +269,19 @@ pub fn upsample(
             }
             let c = IVec3::new((o as u32 % nx) as i32, (o as u32 / nx) as i32, k as i32);
             let q = filter.to_coarse.transform_point3(dens.frame.transform_point3(c.as_vec3()));
-            let (mut num, mut den) = (Vec3::ZERO, 0.0f32);
+            let (mut num, mut den, mut guide, mut wsum) = (Vec3::ZERO, 0.0f32, 0.0f32, 0.0f32);
             filter.visit(q, rho, |ci, _, w| {
                 num += w * j_near.data[ci];
                 den += w * d_coarse[ci];
+                if merged.density[ci] > 0.0 {
+                    guide += w * merged.density[ci];
+                    wsum += w;
+                }
             });
             if den > 0.0 && num != Vec3::ZERO {
-                let correction = dens.correction_at_lattice(c, rho, ball(rho), sigma_t(rho), whole(rho));
+                // The gather's ball at the coarse neighbours: their (weighted) density's.
+                let guide = guide / wsum;
+                let correction = dens.correction_at_lattice(c, rho, ball(guide), sigma_t(rho), whole(guide, rho));
                 *v = (*v + medium.sigma_s(rho) * num * (correction / den)).max(Vec3::ZERO);
             }
         }

@@ -50,20 +50,25 @@ pub enum NearUpsample {
     /// correction a density integral times the near light's level, which is upsampled as a
     /// ratio (near_ratio.rs); deterministic, no per-point VPL noise; only with `near_field:
     /// ball` (the other kernels are left as they are). Measured, the same walks plain ->
-    /// ratio (image mean ratio): plume_point 16-cell gather, 64-cell output, 8 seeds: 4096
-    /// walks x0.877 -> x0.890, 32768 walks x0.934 -> x0.949 (+- 0.009); cube_g0 1024 walks
-    /// x1.041 -> x1.044. At the ratchets' settings (4096 walks, 12 cells, seed 1; image rel.
-    /// RMSE, ratio): plume_point 0.164 -> 0.157 (x0.867 -> x0.876), plume_spot 0.143 -> 0.137
-    /// (x0.914 -> x0.924), plume_rect 0.191 -> 0.185 (x0.896 -> x0.906), plume 0.362 ->
-    /// 0.371 (x0.923 -> x0.937), dense cloud 0.746 -> 0.747, cube g 0 0.076 -> 0.087 (x1.059
-    /// -> x1.077), cube g 0.7 0.153 -> 0.166 (x1.082 -> x1.104). Not the default: it lifts
-    /// every flux by 1-2% (the ball kernel's loss where the medium attenuates over a cell), which
-    /// helps the local lights but not enough for 2%, and makes the cubes (already bright by the
-    /// mean fit's surface bias) worse. What it shows: the dark local lights are only ~1.5% the
-    /// kernel's; the first form of this stage, the near light's sub-cell correlation with the
-    /// density through the gather's own kernel (D_b at the output points over D_b at the coarse
-    /// points), changed plume_point by -0.001 (x0.893 -> x0.892, 2 seeds): the near field's
-    /// density correlation below a gather cell is not what a finer gather restores.
+    /// ratio (image mean ratio over 8 seeds, 16-cell gather, 64-cell output): plume_point
+    /// 4096 walks x0.877 -> x0.891, 32768 walks x0.934 -> x0.950 (+- 0.009; a 32-cell gather
+    /// x0.980); plume_spot 8192 walks x0.934 -> x0.949 (+- 0.004); cube_g0 1024 walks x1.041
+    /// -> x1.044. At the ratchets' settings (4096 walks, 12 cells, seed 1; image rel. RMSE,
+    /// ratio): plume_point 0.164 -> 0.156 (x0.867 -> x0.878), plume_spot 0.143 -> 0.136
+    /// (x0.914 -> x0.926), plume_rect 0.191 -> 0.185 (x0.896 -> x0.908), plume 0.362 -> 0.373
+    /// (x0.923 -> x0.940), dense cloud 0.746 -> 0.747, cube g 0 0.076 -> 0.087 (x1.059 ->
+    /// x1.077), cube g 0.7 0.153 -> 0.166 (x1.082 -> x1.104). Default scene (256 x 256, 4096
+    /// walks): mean RGB +0.5%, 4.27 -> 4.83 s (the stage 0.77 s on 2 cores). Not the default:
+    /// it lifts every flux by 1-2% (what the ball kernel loses where the medium attenuates over
+    /// a cell, and where the density peaks within it), a third of what a finer gather gives
+    /// the local lights, and makes the cubes (already bright by the mean fit's surface bias)
+    /// worse. Where the local lights' darkness comes from, measured on the way (plume_point,
+    /// 4096 walks, plain): a 16-cell gather with half the ball radius (clamp_radius 0.5, no
+    /// mean-free-path limit) x0.904 equals the 32-cell gather x0.899 (4 seeds, the same walks),
+    /// so it is the ball kernel's radius, not the upsampling; and the first form of this stage,
+    /// the near light's sub-cell correlation with the density through the gather's own kernel
+    /// (D_b at the output points over D_b at the coarse points), changed it by -0.001 (2
+    /// seeds).
     Ratio,
 }
 

@@ -614,9 +614,9 @@ fn vpl_near_refine_restores_the_plume_point_flux() {
 
 /// `near_upsample: ratio` (near_ratio.rs) on the point light beside the plume, against the plain
 /// upsampling of the same walks (test settings: 4096 walks, 12-cell gather, seed 1). Measured:
-/// image mean x0.867 -> x0.876, image rel. RMSE 0.1643 -> 0.1567, grid 0.2019 -> 0.1992. The
-/// two share their walks, so the difference is deterministic: bound +0.004 on the flux (about
-/// half the measured +0.009), the image error not higher, and a ratchet on the ratio's errors
+/// image mean x0.867 -> x0.878, image rel. RMSE 0.1643 -> 0.1556, grid 0.2019 -> 0.1986. The
+/// two share their walks, so the difference is deterministic: bound +0.005 on the flux (about
+/// half the measured +0.011), the image error not higher, and a ratchet on the ratio's errors
 /// (measured + 10% + 0.01).
 #[test]
 fn vpl_near_ratio_raises_the_plume_point_flux() {
@@ -628,7 +628,7 @@ fn vpl_near_ratio_raises_the_plume_point_flux() {
     };
     let (plain, ratio) = (run(super::NearUpsample::Plain), run(super::NearUpsample::Ratio));
     eprintln!("{name}: plain {plain}; ratio {ratio}");
-    assert!(ratio.image_ratio > plain.image_ratio + 0.004, "ratio x{:.4} vs plain x{:.4}", ratio.image_ratio, plain.image_ratio);
+    assert!(ratio.image_ratio > plain.image_ratio + 0.005, "ratio x{:.4} vs plain x{:.4}", ratio.image_ratio, plain.image_ratio);
     assert!(ratio.image <= plain.image, "ratio image {:.4} vs plain {:.4}", ratio.image, plain.image);
-    assert!(ratio.image <= 0.183 && ratio.grid <= 0.230, "ratio image {:.4} grid {:.4}", ratio.image, ratio.grid);
+    assert!(ratio.image <= 0.182 && ratio.grid <= 0.229, "ratio image {:.4} grid {:.4}", ratio.image, ratio.grid);
 }
