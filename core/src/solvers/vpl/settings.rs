@@ -62,7 +62,10 @@ pub enum NearUpsample {
     /// it lifts every flux by 1-2% (what the ball kernel loses where the medium attenuates over
     /// a cell, and where the density peaks within it), a third of what a finer gather gives
     /// the local lights, and makes the cubes (already bright by the mean fit's surface bias)
-    /// worse. Where the local lights' darkness comes from, measured on the way (plume_point,
+    /// worse; around a point light inside a g 0 sphere (fig10_g0, 4096 walks, 4 seeds) x1.082
+    /// -> x1.104, where a 32-cell gather gives x1.022: there the finer gather is darker (the
+    /// fluence peaks within a cell, which the model's smooth phi does not follow) and the
+    /// correction goes the other way. Where the local lights' darkness comes from, measured on the way (plume_point,
     /// 4096 walks, plain): a 16-cell gather with half the ball radius (clamp_radius 0.5, no
     /// mean-free-path limit) x0.904 equals the 32-cell gather x0.899 (4 seeds, the same walks),
     /// so it is the ball kernel's radius, not the upsampling; and the first form of this stage,
@@ -157,8 +160,9 @@ pub struct VplSettings {
     /// ignored with `near_refine` (which gathers the near part at the output points instead)
     /// and without `upsample`.
     pub near_upsample: NearUpsample,
-    /// r_n of `near_upsample: ratio`, in gather cells: VPLs within r_n / 2 are near, farther
-    /// ones fade to far at r_n.
+    /// r_n of `near_upsample: ratio`, in gather cells: the VPLs within r_n / 2 (fading out at
+    /// r_n) set the near light's level. Barely matters: plume_point (32768 walks, 8 seeds)
+    /// 0.75 / 1.5 / 3 cells x0.9504 / 0.9503 / 0.9495.
     pub near_radius: f32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,

@@ -632,3 +632,30 @@ fn vpl_near_ratio_raises_the_plume_point_flux() {
     assert!(ratio.image <= plain.image, "ratio image {:.4} vs plain {:.4}", ratio.image, plain.image);
     assert!(ratio.image <= 0.182 && ratio.grid <= 0.229, "ratio image {:.4} grid {:.4}", ratio.image, ratio.grid);
 }
+
+/// `near_upsample: ratio`'s stage (near_ratio.rs) stops with `Error::Cancelled` once the host
+/// has cancelled (its loops look at the flag per plane), rather than finishing the solve.
+#[test]
+fn vpl_near_ratio_stage_cancels() {
+    struct Cancelled;
+    impl crate::solvers::Progress for Cancelled {
+        fn update(&self, _: &str, _: f32) -> bool {
+            false
+        }
+        fn cancelled(&self) -> bool {
+            true
+        }
+    }
+    let sc = case("plume_point");
+    let s = VplSettings { walks: 256, near_field: NearField::Ball, near_upsample: super::NearUpsample::Ratio, ..test_settings() };
+    let walks = super::walks::trace(&sc, &s, u32::MAX, &NoProgress).unwrap();
+    let out = crate::solvers::ScatteringGrid::over_medium(&sc.medium, s.output_resolution).unwrap();
+    let gather = crate::solvers::ScatteringGrid::over_medium(&sc.medium, s.gather_resolution).unwrap();
+    let fp = crate::solvers::pop::merge::footprint(&sc.medium, &out).min(crate::solvers::pop::merge::footprint(&sc.medium, &gather));
+    let mip = crate::solvers::pop::mip::MediumMip::new(&sc.medium, fp);
+    let (merged, _) = super::gather::gather(&sc, &mip, &walks, &s, &NoProgress).unwrap();
+    let pop_like = crate::solvers::pop::settings::PopSettings { output_resolution: s.output_resolution, ..Default::default() };
+    let plain = |m: &crate::solvers::pop::merge::Merged| crate::solvers::pop::upsample::upsample(&sc.medium, &mip, m, &pop_like);
+    let r = super::near_ratio::upsample(&sc, &mip, &walks, &merged, &s, &pop_like, &Cancelled, plain);
+    assert!(matches!(r, Err(crate::error::Error::Cancelled)), "{:?}", r.map(|g| g.dims));
+}
