@@ -65,7 +65,11 @@ pub enum NearUpsample {
     /// worse; around a point light inside a g 0 sphere (fig10_g0, 4096 walks, 4 seeds) x1.082
     /// -> x1.104, where a 32-cell gather gives x1.022: there the finer gather is darker (the
     /// fluence peaks within a cell, which the model's smooth phi does not follow) and the
-    /// correction goes the other way. Where the local lights' darkness comes from, measured on the way (plume_point,
+    /// correction goes the other way. With `upsample_fit: linear` (16 cells, 8 seeds):
+    /// cube_g0 1024 walks x1.009 -> x1.013, plume_point 4096 walks x0.894; the dense cloud is
+    /// unchanged by the ratio (its ball, a quarter mean free path, is below an output cell, so
+    /// the kernels agree), so the linear fit's excess there (0.866 against the ratchet's
+    /// 0.816) stays: linear + ratio is no default either. Where the local lights' darkness comes from, measured on the way (plume_point,
     /// 4096 walks, plain): a 16-cell gather with half the ball radius (clamp_radius 0.5, no
     /// mean-free-path limit) x0.904 equals the 32-cell gather x0.899 (4 seeds, the same walks),
     /// so it is the ball kernel's radius, not the upsampling; and the first form of this stage,
