@@ -90,21 +90,23 @@ fn gpu_gather_matches_cpu() {
 /// The whole solve through `solve` on the GPU against the CPU solver, default near field, on
 /// both scenes: the gather as above, the upsampling and single scattering each within 1e-5 of
 /// the CPU (their own tests). Measured on lavapipe: 3.9e-7 (plume), 1.9e-7 (plume_point)
-/// relative RMSE on S; tolerance 1e-5.
+/// relative RMSE on S; tolerance 1e-5. Also with `near_upsample: ratio`, whose correction runs
+/// on the CPU after either backend's upsampling (near_ratio.rs), on the same tolerance.
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_vpl_solve_matches_cpu() {
     let _ctx = gpu_or_skip();
-    for name in ["plume", "plume_point"] {
+    for (name, near_upsample) in [("plume", "plain"), ("plume_point", "plain"), ("plume_point", "ratio")] {
         let scene = fixture_scene(name);
-        let settings = serde_json::to_value(test_settings(NearField::Ball)).unwrap();
+        let mut settings = serde_json::to_value(test_settings(NearField::Ball)).unwrap();
+        settings["near_upsample"] = serde_json::Value::from(near_upsample);
         let settings = settings.as_object().unwrap();
         let (cpu, _) = crate::solve(DeviceChoice::Cpu, &scene, "vpl", settings, &NoProgress).unwrap();
         let (gpu, used) = crate::solve(DeviceChoice::Gpu, &scene, "vpl", settings, &NoProgress).unwrap();
         assert!(matches!(used, crate::DeviceUsed::Gpu(_)), "{name}: ran on {used:?}");
         let e = relative_rmse(&gpu.scattering.data, &cpu.scattering.data);
-        eprintln!("{name}: S relative RMSE {e:e}");
-        assert!(e < 1e-5, "{name}: S relative RMSE {e}");
+        eprintln!("{name} {near_upsample}: S relative RMSE {e:e}");
+        assert!(e < 1e-5, "{name} {near_upsample}: S relative RMSE {e}");
     }
 }
 

@@ -79,7 +79,7 @@ impl<'a> Compensation<'a> {
             medium,
             mip,
             footprint,
-            direct: DirectLight::new(scene, step, s.dome_directions, radius),
+            direct: DirectLight::with_march(scene, step, s.dome_directions, radius, march.clone()),
             lists: subset_lists(walks, subsets),
             radius,
             step,

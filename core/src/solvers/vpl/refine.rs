@@ -76,8 +76,8 @@ impl<'v> VplHash<'v> {
     }
 }
 
-/// What the near part's gathers share.
-struct Near<'a> {
+/// What the near part's gathers share (also vpl/near_ratio.rs's near part at the coarse points).
+pub(super) struct Near<'a> {
     march: &'a Marcher<'a>,
     hash: VplHash<'a>,
     camera: Vec3,
@@ -90,28 +90,89 @@ struct Near<'a> {
     step: f32,
 }
 
-impl Near<'_> {
-    /// J_near at `x` (density `rho` at the grid's footprint there): the VPLs within r_n,
-    /// weighted by phi, with the kernel the gather uses at that density.
-    fn gather(&self, x: Vec3, rho: f32, list: &mut Vec<Vpl>, stats: &mut GatherStats) -> Vec3 {
-        let medium = self.march.medium();
-        let ball = ball_radius(medium, rho, self.r, self.mean_free_paths);
+impl<'a> Near<'a> {
+    /// The near part of the VPLs within `radius_cells` of the gather grid `frame`'s cells, with
+    /// the kernel the gather uses (`settings`).
+    pub(super) fn new(scene: &Scene, march: &'a Marcher<'a>, walks: &'a Walks, frame: &glam::Affine3A, radius_cells: f32, settings: &VplSettings) -> Self {
+        let spacing = frame.matrix3.x_axis.length().max(frame.matrix3.y_axis.length()).max(frame.matrix3.z_axis.length());
+        Near {
+            march,
+            hash: VplHash::new(&walks.vpls, radius_cells * spacing),
+            camera: scene.camera.position,
+            radius: radius_cells * spacing,
+            r: settings.clamp_radius * near_field_radius(frame),
+            mean_free_paths: settings.mean_free_paths,
+            near_field: settings.near_field,
+            step: march_step(march.medium(), frame),
+        }
+    }
+
+    /// r_n (world units).
+    pub(super) fn radius(&self) -> f32 {
+        self.radius
+    }
+
+    /// The gather's kernel at a point of density `rho`, and the ball radius the clamp's loss is
+    /// measured against.
+    pub(super) fn kernel(&self, rho: f32) -> (Kernel, f32) {
+        let ball = ball_radius(self.march.medium(), rho, self.r, self.mean_free_paths);
         let kernel = match self.near_field {
             NearField::Ball => Kernel::Ball(ball),
             NearField::Clamp | NearField::Compensate => Kernel::Clamp(self.r),
         };
+        (kernel, ball)
+    }
+
+    /// J_near at `x` (density `rho` at the grid's footprint there): the VPLs within r_n,
+    /// weighted by phi, with the kernel the gather uses at that density.
+    pub(super) fn gather(&self, x: Vec3, rho: f32, list: &mut Vec<Vpl>, stats: &mut GatherStats) -> Vec3 {
+        let (kernel, ball) = self.kernel(rho);
         let view = (x - self.camera).normalize_or(Vec3::Z);
         self.hash.near(x, list);
         let mut sum = Vec3::ZERO;
         for v in list.iter() {
-            let d = (x - v.position).length();
-            let phi = (2.0 - 2.0 * d / self.radius).clamp(0.0, 1.0);
+            let phi = near_weight((x - v.position).length(), self.radius);
             if phi > 0.0 {
                 sum += phi * connect(self.march, std::slice::from_ref(v), x, view, kernel, ball, self.step, stats).0;
             }
         }
         sum
     }
+
+    /// J_near at the points of the gather grid `merged` where the gather ran (positive
+    /// density; zero elsewhere). Ends with `Error::Cancelled` within a plane once `progress`
+    /// is cancelled.
+    pub(super) fn at_coarse(&self, merged: &Merged, progress: &dyn Progress) -> Result<ScatteringGrid> {
+        let frame = merged.j.index_to_world;
+        let [cx, cy, _] = merged.j.dims;
+        let mut coarse = merged.j.clone();
+        coarse.data.par_chunks_mut((cx * cy) as usize).enumerate().for_each(|(k, plane)| {
+            let (mut list, mut stats) = (Vec::new(), GatherStats::default());
+            for (o, j) in plane.iter_mut().enumerate() {
+                if progress.cancelled() {
+                    return;
+                }
+                let rho = merged.density[k * (cx * cy) as usize + o];
+                *j = if rho > 0.0 {
+                    let (i, jj) = (o as u32 % cx, o as u32 / cx);
+                    self.gather(frame.transform_point3(Vec3::new(i as f32, jj as f32, k as f32)), rho, &mut list, &mut stats)
+                } else {
+                    Vec3::ZERO
+                };
+            }
+        });
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
+        Ok(coarse)
+    }
+}
+
+/// The share of a VPL at distance `d` that is near for r_n = `radius`: 1 within r_n / 2,
+/// falling linearly to 0 at r_n.
+#[inline]
+pub(super) fn near_weight(d: f32, radius: f32) -> f32 {
+    (2.0 - 2.0 * d / radius).clamp(0.0, 1.0)
 }
 
 /// Replaces the near part of `s` (S on the output grid, upsampled from `merged` by `upsample`)
@@ -130,40 +191,9 @@ pub fn refine(
 ) -> Result<()> {
     let medium: &Medium = &scene.medium;
     let frame = merged.j.index_to_world;
-    let spacing = frame.matrix3.x_axis.length().max(frame.matrix3.y_axis.length()).max(frame.matrix3.z_axis.length());
     let march = Marcher::new(medium);
-    let near = Near {
-        march: &march,
-        hash: VplHash::new(&walks.vpls, settings.near_refine * spacing),
-        camera: scene.camera.position,
-        radius: settings.near_refine * spacing,
-        r: settings.clamp_radius * near_field_radius(&frame),
-        mean_free_paths: settings.mean_free_paths,
-        near_field: settings.near_field,
-        step: march_step(medium, &frame),
-    };
-    // The near part at the coarse points (where the gather ran: positive density).
-    let [cx, cy, _] = merged.j.dims;
-    let mut coarse = merged.j.clone();
-    coarse.data.par_chunks_mut((cx * cy) as usize).enumerate().for_each(|(k, plane)| {
-        let (mut list, mut stats) = (Vec::new(), GatherStats::default());
-        for (o, j) in plane.iter_mut().enumerate() {
-            if progress.cancelled() {
-                return;
-            }
-            let idx = k * (cx * cy) as usize + o;
-            let rho = merged.density[idx];
-            *j = if rho > 0.0 {
-                let (i, jj) = (o as u32 % cx, o as u32 / cx);
-                near.gather(frame.transform_point3(Vec3::new(i as f32, jj as f32, k as f32)), rho, &mut list, &mut stats)
-            } else {
-                Vec3::ZERO
-            };
-        }
-    });
-    if progress.cancelled() {
-        return Err(Error::Cancelled);
-    }
+    let near = Near::new(scene, &march, walks, &frame, settings.near_refine, settings);
+    let coarse = near.at_coarse(merged, progress)?;
     let near_up = upsample(&Merged { j: coarse, density: merged.density.clone() })?;
     // At the output points: the upsampled near part out, the near part gathered there in.
     let [nx, ny, _] = s.dims;

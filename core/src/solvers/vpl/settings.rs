@@ -39,6 +39,46 @@ pub enum UpsampleFit {
     Linear,
 }
 
+/// How the near part of J (the light of VPLs within `near_radius` gather cells) reaches the
+/// output points (vpl/near_ratio.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NearUpsample {
+    /// Upsampled with the rest of J (`upsample_fit`).
+    Plain,
+    /// The gather's ball kernel (radius ~ a gather cell) corrected to the output cell's, the
+    /// correction a density integral times the near light's level, which is upsampled as a
+    /// ratio (near_ratio.rs); deterministic, no per-point VPL noise; only with `near_field:
+    /// ball` (the other kernels are left as they are). Measured, the same walks plain ->
+    /// ratio (image mean ratio over 8 seeds, 16-cell gather, 64-cell output): plume_point
+    /// 4096 walks x0.877 -> x0.891, 32768 walks x0.934 -> x0.950 (+- 0.009; a 32-cell gather
+    /// x0.980); plume_spot 8192 walks x0.934 -> x0.949 (+- 0.004); cube_g0 1024 walks x1.041
+    /// -> x1.044. At the ratchets' settings (4096 walks, 12 cells, seed 1; image rel. RMSE,
+    /// ratio): plume_point 0.164 -> 0.156 (x0.867 -> x0.878), plume_spot 0.143 -> 0.136
+    /// (x0.914 -> x0.926), plume_rect 0.191 -> 0.185 (x0.896 -> x0.908), plume 0.362 -> 0.373
+    /// (x0.923 -> x0.940), dense cloud 0.746 -> 0.747, cube g 0 0.076 -> 0.087 (x1.059 ->
+    /// x1.077), cube g 0.7 0.153 -> 0.166 (x1.082 -> x1.104). Default scene (256 x 256, 4096
+    /// walks): mean RGB +0.5%, 4.27 -> 4.83 s (the stage 0.77 s on 2 cores). Not the default:
+    /// it lifts every flux by 1-2% (what the ball kernel loses where the medium attenuates over
+    /// a cell, and where the density peaks within it), a third of what a finer gather gives
+    /// the local lights, and makes the cubes (already bright by the mean fit's surface bias)
+    /// worse; around a point light inside a g 0 sphere (fig10_g0, 4096 walks, 4 seeds) x1.082
+    /// -> x1.104, where a 32-cell gather gives x1.022: there the finer gather is darker (the
+    /// fluence peaks within a cell, which the model's smooth phi does not follow) and the
+    /// correction goes the other way. With `upsample_fit: linear` (16 cells, 8 seeds):
+    /// cube_g0 1024 walks x1.009 -> x1.013, plume_point 4096 walks x0.894; the dense cloud is
+    /// unchanged by the ratio (its ball, a quarter mean free path, is below an output cell, so
+    /// the kernels agree), so the linear fit's excess there (0.866 against the ratchet's
+    /// 0.816) stays: linear + ratio is no default either. Where the local lights' darkness comes from, measured on the way (plume_point,
+    /// 4096 walks, plain): a 16-cell gather with half the ball radius (clamp_radius 0.5, no
+    /// mean-free-path limit) x0.904 equals the 32-cell gather x0.899 (4 seeds, the same walks),
+    /// so it is the ball kernel's radius, not the upsampling; and the first form of this stage,
+    /// the near light's sub-cell correlation with the density through the gather's own kernel
+    /// (D_b at the output points over D_b at the coarse points), changed it by -0.001 (2
+    /// seeds).
+    Ratio,
+}
+
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VplSettings {
@@ -120,6 +160,14 @@ pub struct VplSettings {
     /// 0.871 / 0.926) but its image error is higher (0.71 / 0.29 / 0.17 against 0.31 / 0.17 /
     /// 0.11) at 1.3-2.6x the time: each output point sees few VPLs within r_n.
     pub near_refine: f32,
+    /// How the near part of J reaches the output points (`NearUpsample`, near_ratio.rs);
+    /// ignored with `near_refine` (which gathers the near part at the output points instead)
+    /// and without `upsample`.
+    pub near_upsample: NearUpsample,
+    /// r_n of `near_upsample: ratio`, in gather cells: the VPLs within r_n / 2 (fading out at
+    /// r_n) set the near light's level. Barely matters: plume_point (32768 walks, 8 seeds)
+    /// 0.75 / 1.5 / 3 cells x0.9504 / 0.9503 / 0.9495.
+    pub near_radius: f32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
     /// Spatial sigma of the bilateral filter, in gather cells: at least ~0.8 so that the
@@ -150,6 +198,8 @@ impl Default for VplSettings {
             upsample: true,
             upsample_fit: UpsampleFit::Mean,
             near_refine: 0.0,
+            near_upsample: NearUpsample::Plain,
+            near_radius: 1.5,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
@@ -186,6 +236,9 @@ impl VplSettings {
         }
         if !(self.near_refine == 0.0 || (0.5..=4.0).contains(&self.near_refine)) {
             return Err(Error::scene("solver.near_refine", format!("must be 0 (off) or in [0.5, 4], got {}", self.near_refine)));
+        }
+        if !(self.near_radius.is_finite() && (0.5..=4.0).contains(&self.near_radius)) {
+            return Err(Error::scene("solver.near_radius", format!("must be in [0.5, 4], got {}", self.near_radius)));
         }
         validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
         if !(1..=1024).contains(&self.dome_directions) {
