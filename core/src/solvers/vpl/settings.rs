@@ -99,6 +99,20 @@ pub struct VplSettings {
     /// since fewer walks per point see fewer of the rare close VPLs that carry the dense
     /// parts' multiple scattering (a heavy-tailed estimator: its typical value is below its
     /// mean until enough walks are gathered).
+    /// A lead, measured later (not yet a default; vpl_explore_seeds with VPL_WPS, 64-cell
+    /// output, image mean ratio over 4 seeds +- standard error, time per solve on 2 cores):
+    /// a 32-cell gather with 8 subsets of 4096 walks (32768 walks) against the defaults (16
+    /// cells, 4096 walks, no subsets): cube_g0 x1.001 +- 0.003 (image 0.025-0.032) against
+    /// x0.986 +- 0.012 (0.044-0.068), 2.0 s against 1.9 s; plume_point x0.972 +- 0.012 against
+    /// x0.878 +- 0.013, 0.29 s against 0.07 s; plume x0.989 +- 0.031 against x0.850 +- 0.040,
+    /// 1.4 s against 0.3 s; cube_g07 (2 seeds) x0.989 against x0.984; the dense cloud (2
+    /// seeds) x0.72 against x0.44 but one seed's image 1.01 (a heavy tail) against 0.63-0.75,
+    /// 14 s against 3 s. 64 subsets of 512 walks at the same 32 cells are heavy-tailed (plume
+    /// one seed x2.6). On plume_point the 16-cell gather stays dark with more walks (262144
+    /// walks x0.938 +- 0.008), a 32-cell gather with every walk reaches x0.985 (2 seeds, 17 s):
+    /// the gather's resolution, not the walks, sets that flux; of it the ball kernel's radius
+    /// is about half (no mean-free-path limit, 262144 walks: radius 1 / 0.5 / 0.25 cells
+    /// x0.917 / 0.953 / 0.963; `near_upsample: ratio` at radius 1 x0.948).
     pub walks_per_subset: u32,
     /// Near-field handling of the VPL connections (see `NearField`). `ball`, the default,
     /// because at equal cost it is as good or better on every fixture (scripts/bench_vpl.py,

@@ -474,7 +474,7 @@ fn vpl_explore_seeds() {
         };
         let upsample = env_u32("VPL_UPSAMPLE", 1) != 0;
         let upsample_fit = if std::env::var("VPL_FIT").as_deref() == Ok("linear") { super::UpsampleFit::Linear } else { super::UpsampleFit::Mean };
-        let s = VplSettings { walks, seed, near_field, upsample, upsample_fit, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), mean_free_paths: env_u32("VPL_MFP100", 25) as f32 / 100.0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, near_refine: env_u32("VPL_REFINE100", 0) as f32 / 100.0, near_upsample: env_near_upsample(), near_radius: env_u32("VPL_RN100", 150) as f32 / 100.0, ..Default::default() };
+        let s = VplSettings { walks, seed, near_field, upsample, upsample_fit, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), mean_free_paths: env_u32("VPL_MFP100", 25) as f32 / 100.0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, near_refine: env_u32("VPL_REFINE100", 0) as f32 / 100.0, near_upsample: env_near_upsample(), near_radius: env_u32("VPL_RN100", 150) as f32 / 100.0, walks_per_subset: env_u32("VPL_WPS", 0), ..Default::default() };
         let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
         let e = errors_against_fixture(&name, &sc, &out.scattering);
         eprintln!("{name} seed {seed}: {e} ({:.2} s)", t.elapsed().as_secs_f64());
