@@ -112,7 +112,13 @@ pub struct VplSettings {
     /// walks x0.938 +- 0.008), a 32-cell gather with every walk reaches x0.985 (2 seeds, 17 s):
     /// the gather's resolution, not the walks, sets that flux; of it the ball kernel's radius
     /// is about half (no mean-free-path limit, 262144 walks: radius 1 / 0.5 / 0.25 cells
-    /// x0.917 / 0.953 / 0.963; `near_upsample: ratio` at radius 1 x0.948).
+    /// x0.917 / 0.953 / 0.963; `near_upsample: ratio` at radius 1 x0.948). At host image
+    /// sizes (vpl_bench_image, VPL_GATHER=32, 8 subsets; against BENCHMARKS.md vpl-image's
+    /// defaults) it is no clear win: the default scene 256 x 256 at 8192 / 32768 / 131072 walks
+    /// 1.4 / 4.0 / 13.8 s, image 0.346 / 0.150 / 0.074, x1.022 / 0.970 / 0.964 (defaults:
+    /// 16384 walks 3.4 s 0.114 x0.926, 65536 11.9 s 0.090 x0.928); plume_point 128 x 128 at
+    /// 32768 / 131072 walks 0.31 / 1.11 s, 0.140 / 0.088, x0.947 / 0.940 (defaults 16384 0.29 s
+    /// 0.106 x0.950, 65536 1.02 s 0.086 x0.939).
     pub walks_per_subset: u32,
     /// Near-field handling of the VPL connections (see `NearField`). `ball`, the default,
     /// because at equal cost it is as good or better on every fixture (scripts/bench_vpl.py,

@@ -527,7 +527,7 @@ fn converged_image(name: &str, sc: &Scene, spp: u32, dir: &std::path::Path) -> (
 /// scene in VPL_IMAGE_CASES (`default`, or fixture names enlarged to VPL_IMAGE_PIXELS square)
 /// a converged reference image (VPL_IMAGE_REF_SPP paths per pixel in two halves, `N` or
 /// `name:N,...`, cached in VPL_IMAGE_CACHE, default the temp dir) and one `BENCH {json}` line
-/// per reference run at VPL_IMAGE_SPP and per vpl run (default settings, walks from
+/// per reference run at VPL_IMAGE_SPP and per vpl run (default settings but VPL_GATHER and VPL_WPS if set, walks from
 /// VPL_IMAGE_WALKS, `near_refine` from VPL_IMAGE_REFINE100 in hundredths, default 0, and
 /// `near_upsample` from VPL_NU; time = solve and composite, as a host pays for an image): seconds, image
 /// rel. RMSE against the converged image raw and with the converged image's own noise taken
@@ -568,7 +568,8 @@ fn vpl_bench_image() {
         }
         // near_refine in hundredths of a gather cell (0: the default, off).
         for (walks, refine) in list("VPL_IMAGE_WALKS", "4096,16384").into_iter().flat_map(|w| list("VPL_IMAGE_REFINE100", "0").into_iter().map(move |r| (w, r))) {
-            let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), ..Default::default() };
+            let d = VplSettings::default();
+            let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), ..d };
             let t = std::time::Instant::now();
             let (out, _) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
             let solve = t.elapsed().as_secs_f64();
