@@ -50,26 +50,21 @@ use crate::solvers::pop::settings::PopSettings;
 use crate::solvers::pop::upsample::Bilateral;
 use crate::solvers::{Progress, ScatteringGrid};
 
-/// Refinement of the output grid for the density integrals' quadrature. 1: the output grid
-/// itself. Measured on plume_point (4096 walks, 16-cell gather, 8 seeds): 2 (the density at
+/// The density's near-field integral D, summed over the output grid's own points. Measured on
+/// plume_point (4096 walks, 16-cell gather, 8 seeds): a lattice refined twice (the density at
 /// half the output's spacing, 8x the taps) gave the same 8-seed flux to 4 digits (x0.8913), so
-/// the correction is not limited by its quadrature.
-const SUPERSAMPLE: i32 = 1;
-
-/// The density's near-field integral D on the output grid's density.
+/// the correction is not limited by this quadrature.
 struct DensityIntegral {
     /// Density at the output grid's points (the mip at the output's footprint; 0 outside).
     rho: Vec<f32>,
-    /// Density on the quadrature's lattice: the output grid refined `SUPERSAMPLE` times (the
-    /// mip at that footprint).
-    fine: Vec<f32>,
-    /// The quadrature lattice's dims.
+    /// The output grid's dims.
     dims: IVec3,
     frame: Affine3A,
-    fine_frame: Affine3A,
     to_index: Affine3A,
-    /// Quadrature lattice offsets within r_n: (offset, distance, cell volume).
-    taps: Vec<(IVec3, f32, f32)>,
+    /// Volume of one output cell (each point's share of the integrals).
+    volume: f32,
+    /// Lattice offsets within r_n: (offset, distance).
+    taps: Vec<(IVec3, f32)>,
     /// Half-extent of the taps' box in output cells, per axis.
     reach: IVec3,
     radius: f32,
@@ -81,30 +76,22 @@ impl DensityIntegral {
     fn new(medium: &Medium, mip: &MediumMip, out: &ScatteringGrid, radius: f32, progress: &dyn Progress) -> Result<Self> {
         let (frame, fp) = (out.index_to_world, footprint(medium, out));
         let w2i = medium.world_to_index;
-        let sample = |dims: [u32; 3], frame: Affine3A, fp: f32| -> Vec<f32> {
-            let mut rho = vec![0.0f32; (dims[0] * dims[1] * dims[2]) as usize];
-            rho.par_chunks_mut((dims[0] * dims[1]) as usize).enumerate().for_each(|(k, plane)| {
-                if progress.cancelled() {
-                    return;
-                }
-                for (o, r) in plane.iter_mut().enumerate() {
-                    let x = frame.transform_point3(Vec3::new((o as u32 % dims[0]) as f32, (o as u32 / dims[0]) as f32, k as f32));
-                    *r = mip.sample(medium, w2i.transform_point3(x), fp).max(0.0);
-                }
-            });
-            rho
-        };
-        let rho = sample(out.dims, frame, fp);
-        let n = SUPERSAMPLE as u32;
-        let fine_dims = out.dims.map(|d| (d - 1) * n + 1);
-        let fine_frame = frame * Affine3A::from_scale(Vec3::splat(1.0 / SUPERSAMPLE as f32));
-        let fine = if n == 1 { rho.clone() } else { sample(fine_dims, fine_frame, fp / SUPERSAMPLE as f32) };
+        let [nx, ny, nz] = out.dims;
+        let mut rho = vec![0.0f32; (nx * ny * nz) as usize];
+        rho.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, plane)| {
+            if progress.cancelled() {
+                return;
+            }
+            for (o, r) in plane.iter_mut().enumerate() {
+                let x = frame.transform_point3(Vec3::new((o as u32 % nx) as f32, (o as u32 / nx) as f32, k as f32));
+                *r = mip.sample(medium, w2i.transform_point3(x), fp).max(0.0);
+            }
+        });
         if progress.cancelled() {
             return Err(Error::Cancelled);
         }
-        let m = fine_frame.matrix3;
+        let m = frame.matrix3;
         let reach = IVec3::new((radius / m.x_axis.length()).ceil() as i32, (radius / m.y_axis.length()).ceil() as i32, (radius / m.z_axis.length()).ceil() as i32);
-        let volume = glam::Mat3::from(m).determinant().abs();
         let mut taps = Vec::new();
         for dz in -reach.z..=reach.z {
             for dy in -reach.y..=reach.y {
@@ -112,13 +99,14 @@ impl DensityIntegral {
                     let o = IVec3::new(dx, dy, dz);
                     let d = (m * o.as_vec3()).length();
                     if d < radius {
-                        taps.push((o, d, volume));
+                        taps.push((o, d));
                     }
                 }
             }
         }
-        let dims = IVec3::new(fine_dims[0] as i32, fine_dims[1] as i32, fine_dims[2] as i32);
-        Ok(DensityIntegral { rho, fine, dims, frame, fine_frame, to_index: fine_frame.inverse(), taps, reach, radius, cell_ball: near_field_radius(&frame) })
+        let dims = IVec3::new(nx as i32, ny as i32, nz as i32);
+        let volume = glam::Mat3::from(m).determinant().abs();
+        Ok(DensityIntegral { rho, dims, frame, to_index: frame.inverse(), volume, taps, reach, radius, cell_ball: near_field_radius(&frame) })
     }
 
     /// The kernel K x T at distance d for a point of density `rho` using `kernel`.
@@ -146,14 +134,13 @@ impl DensityIntegral {
         if ball <= self.cell_ball {
             return 0.0;
         }
-        let c = c * SUPERSAMPLE;
         let Some(at) = self.index(c) else { return 0.0 };
-        let rho = self.fine[at];
+        let rho = self.rho[at];
         let mut sum = 0.0;
-        for &(o, d, volume) in &self.taps {
-            let r = self.index(c + o).map_or(0.0, |i| self.fine[i]);
+        for &(o, d) in &self.taps {
+            let r = self.index(c + o).map_or(0.0, |i| self.rho[i]);
             let k = ball_mean_inverse_square(d, self.cell_ball) - ball_mean_inverse_square(d, ball);
-            sum += (r - rho) * volume * k * (-sigma_t * d).exp();
+            sum += (r - rho) * self.volume * k * (-sigma_t * d).exp();
         }
         sum + rho * whole(rho)
     }
@@ -161,21 +148,20 @@ impl DensityIntegral {
     /// D at any point `x` (world), over the output points within r_n.
     fn at(&self, x: Vec3, kernel: Kernel, sigma_t: f32) -> f32 {
         let q = self.to_index.transform_point3(x).round().as_ivec3();
-        let volume = glam::Mat3::from(self.fine_frame.matrix3).determinant().abs();
         let mut sum = 0.0;
         for dz in -self.reach.z - 1..=self.reach.z + 1 {
             for dy in -self.reach.y - 1..=self.reach.y + 1 {
                 for dx in -self.reach.x - 1..=self.reach.x + 1 {
                     let c = q + IVec3::new(dx, dy, dz);
                     let Some(i) = self.index(c) else { continue };
-                    let r = self.fine[i];
+                    let r = self.rho[i];
                     if r <= 0.0 {
                         continue;
                     }
-                    let d = (self.fine_frame.transform_point3(c.as_vec3()) - x).length();
+                    let d = (self.frame.transform_point3(c.as_vec3()) - x).length();
                     let w = near_weight(d, self.radius);
                     if w > 0.0 {
-                        sum += r * w * volume * self.weight(d, kernel, sigma_t);
+                        sum += r * w * self.volume * self.weight(d, kernel, sigma_t);
                     }
                 }
             }
@@ -255,7 +241,7 @@ pub fn upsample(
     // kernel_difference as a function of the two densities it depends on: the coarse
     // neighbours' (the gather's ball radius follows theirs, `mean_free_paths`) and the point's
     // own (the local transmittance), tabulated and interpolated bilinearly.
-    let rho_max = dens.rho.iter().chain(&dens.fine).chain(&merged.density).fold(0.0f32, |m, &r| m.max(r)).max(1e-12);
+    let rho_max = dens.rho.iter().chain(&merged.density).fold(0.0f32, |m, &r| m.max(r)).max(1e-12);
     const TABLE: usize = 64;
     let table: Vec<f32> = (0..(TABLE + 1) * (TABLE + 1))
         .into_par_iter()
