@@ -19,7 +19,7 @@ import os
 
 import bpy
 
-from . import native
+from . import native, properties, scene_export
 
 OFFER_DENSE_BYTES = 1 << 30
 #: The medium box-filtered to twice the propagation grid: measured (lpm's out_of_core_tests),
@@ -28,6 +28,8 @@ MEDIUM_PER_GRID_CELL = 2
 #: The out-of-core budget: a quarter of the library's budget, at most this.
 MAX_LPM_BUDGET_MIB = 1024
 
+#: One estimate per file: path -> (key, estimate). The panel redraws often, and a transform
+#: dragged in the viewport changes the key at every step: only the newest is kept.
 _cache = {}
 
 
@@ -35,23 +37,21 @@ def source_file(ob):
     """The VDB file a file-backed Volume object reads at the current frame, or None."""
     if ob is None or ob.type != 'VOLUME' or not ob.data.filepath:
         return None
-    if any(m.show_render for m in getattr(ob, "modifiers", [])):
+    if scene_export._has_generating_modifiers(ob):
         return None
     grids = ob.data.grids
-    path = getattr(grids, "frame_filepath", "") or ob.data.filepath
-    path = bpy.path.abspath(path, library=ob.data.library)
+    path = scene_export._abs(getattr(grids, "frame_filepath", "") or ob.data.filepath, ob.data.library)
     return path if os.path.isfile(path) else None
 
 
 def proposal(s):
     """The settings "Use Light Propagation Maps (Streamed)" sets on `s` (Object.volscatter)."""
-    entry = native.solver("lpm") or {"settings": []}
-    defaults = {x["name"]: x.get("default") for x in entry["settings"]}
     if s.solver == "lpm" and s.quality == 'CUSTOM':
         grid = s.grid_resolution
     else:
-        from . import properties
         preset = properties.preset_settings("lpm", s.quality) or {}
+        entry = native.solver("lpm") or {"settings": []}
+        defaults = {x["name"]: x.get("default") for x in entry["settings"]}
         grid = int(preset.get("grid_resolution", defaults.get("grid_resolution", 32)))
     budget_mib = max(1, min(MAX_LPM_BUDGET_MIB, native.lib().vs_memory_budget() >> 22))
     return {"lpm_memory_budget_mib": budget_mib, "max_resolution": min(4096, MEDIUM_PER_GRID_CELL * grid),
@@ -65,16 +65,18 @@ def estimate(ob, proposed):
     if path is None:
         return None
     st = os.stat(path)
-    m = [float(ob.matrix_world[r][c]) for r in range(4) for c in range(4)]
+    m = scene_export.matrix_rows(ob.matrix_world)
     settings = {"grid_resolution": proposed["grid_resolution"], "out_of_core": True,
                 "memory_budget": proposed["lpm_memory_budget_mib"] << 20, "first_order": "boundary"}
     key = (path, st.st_mtime_ns, st.st_size, tuple(m), proposed["max_resolution"], json.dumps(settings, sort_keys=True))
-    if key not in _cache:
+    cached = _cache.get(path)
+    if cached is None or cached[0] != key:
         try:
-            _cache[key] = native.lpm_estimate(path, None, m, proposed["max_resolution"], settings)
+            est = native.lpm_estimate(path, None, m, proposed["max_resolution"], settings)
         except Exception:  # unreadable file: no offer (Compute reports the error)
-            _cache[key] = None
-    return _cache[key]
+            est = None
+        cached = _cache[path] = (key, est)
+    return cached[1]
 
 
 def threshold():
@@ -149,12 +151,4 @@ class VOLSCATTER_OT_use_lpm_streamed(bpy.types.Operator):
 
 classes = (VOLSCATTER_OT_use_lpm_streamed,)
 
-
-def register():
-    for c in classes:
-        bpy.utils.register_class(c)
-
-
-def unregister():
-    for c in reversed(classes):
-        bpy.utils.unregister_class(c)
+register, unregister = bpy.utils.register_classes_factory(classes)
