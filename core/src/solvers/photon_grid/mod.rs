@@ -61,9 +61,6 @@ const SPLIT_ORDER: u32 = 2;
 
 pub struct PhotonGrid {
     settings: PhotonGridSettings,
-    /// Diagnosis only: trace.rs `Tracer::view_from` with the scene's camera.
-    #[cfg(test)]
-    view_oracle: bool,
 }
 
 /// What a solve measured besides S.
@@ -78,25 +75,11 @@ pub struct PhotonGridReport {
 impl PhotonGrid {
     pub fn new(settings: PhotonGridSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(PhotonGrid {
-            settings,
-            #[cfg(test)]
-            view_oracle: false,
-        })
+        Ok(PhotonGrid { settings })
     }
 
     pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
         PhotonGrid::new(parse_settings(map)?)
-    }
-
-    /// Whether deposits are weighted towards the camera (`Angular::Camera`, or the tests'
-    /// oracle, which is the same thing).
-    fn camera_deposits(&self) -> bool {
-        #[cfg(test)]
-        if self.view_oracle {
-            return true;
-        }
-        self.settings.angular == Angular::Camera
     }
 
     /// Traces `generations` (ring.rs) of `scene` into caches on the frame it returns, on
@@ -117,7 +100,7 @@ impl PhotonGrid {
             deposit_unscattered: s.single_scattering == SingleScattering::Photons,
             split_order: SPLIT_ORDER,
             progress,
-            view_from: self.camera_deposits().then_some(scene.camera.position),
+            view_from: (s.angular == Angular::Camera).then_some(scene.camera.position),
         };
         let job = TraceJob { tracer: &tracer, sampler: &sampler, empty: &empty };
         // Camera weights exist in trace.rs only (settings.rs `needs_cpu`): such a solve traces

@@ -343,8 +343,8 @@ fn bias_sources() {
             if !only.is_empty() && !only.split(',').any(|w| what.contains(w)) {
                 continue;
             }
-            let mut pg = PhotonGrid::new(s.clone()).unwrap();
-            pg.view_oracle = *oracle;
+            let s = if *oracle { PhotonGridSettings { angular: Angular::Camera, ..s.clone() } } else { s.clone() };
+            let pg = PhotonGrid::new(s).unwrap();
             let t = std::time::Instant::now();
             let (out, rep) = pg.solve_detailed(&sc, &NoProgress).unwrap();
             let secs = t.elapsed().as_secs_f64();
@@ -375,10 +375,10 @@ fn error_by_brightness() {
     let name = std::env::var("PG_CASE").unwrap_or_else(|_| "cloud".into());
     let sc = fixture_scene(&name);
     let fx = load_fixture(&name);
-    let s = PhotonGridSettings { photons: env_u32("PG_PHOTONS", 1 << 20), cache_resolution: env_u32("PG_CACHE", 24), ..Default::default() };
-    let mut pg = PhotonGrid::new(s).unwrap();
-    // PG_ORACLE=1: deposits weighted by the exact phase towards the camera (bias_sources).
-    pg.view_oracle = env_u32("PG_ORACLE", 0) == 1;
+    // PG_ORACLE=1: deposits weighted by the exact phase towards the camera (`angular: camera`).
+    let angular = if env_u32("PG_ORACLE", 0) == 1 { Angular::Camera } else { Angular::Lobes };
+    let s = PhotonGridSettings { photons: env_u32("PG_PHOTONS", 1 << 20), cache_resolution: env_u32("PG_CACHE", 24), angular, ..Default::default() };
+    let pg = PhotonGrid::new(s).unwrap();
     let t = std::time::Instant::now();
     let out = SolverOutput::of(&sc, &pg.solve(&sc, &NoProgress).unwrap().scattering);
     eprintln!("{name}: {} ({:.1} s)", crate::solvers::testing::Errors::against(&out, &fx), t.elapsed().as_secs_f64());
@@ -440,8 +440,10 @@ fn floor_anatomy() {
     if env_u32("PG_CUTOFF", 1) == 0 {
         s.cutoff = 0.0;
     }
-    let mut pg = PhotonGrid::new(s).unwrap();
-    pg.view_oracle = env_u32("PG_ORACLE", 0) == 1;
+    if env_u32("PG_ORACLE", 0) == 1 {
+        s.angular = Angular::Camera;
+    }
+    let pg = PhotonGrid::new(s).unwrap();
     let t = std::time::Instant::now();
     let (out, rep) = pg.solve_detailed(&sc, &NoProgress).unwrap();
     print("cloud", "floor", &errors_against_fixture("cloud", &sc, &out.scattering), &rep, t.elapsed().as_secs_f64());
