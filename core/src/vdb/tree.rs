@@ -188,7 +188,13 @@ fn read_internal(
     let child_log2 = if log2 == 5 { INTERNAL5_TILE_LOG2 } else { INTERNAL4_TILE_LOG2 };
     let child_mask = r.mask(words, "child mask")?;
     let value_mask = r.mask(words, "value mask")?;
-    codec.read_block(r, slots, &value_mask, scratch)?;
+    // The tile values go to the visitor; the second walk has none and skips them undecoded
+    // (a corrupt block already failed the first walk).
+    if visitor.is_some() {
+        codec.read_block(r, slots, &value_mask, scratch)?;
+    } else {
+        codec.skip_block(r, slots, &value_mask)?;
+    }
     let comps = codec.kind.comps;
     let slot_origin = |n: usize| {
         let m = (1usize << log2) - 1;

@@ -161,9 +161,7 @@ impl Lpm {
         let cells = grid.len() as u64;
         let mut u_prev = stream::filled("lpm U (cells x storage directions)", cells * m as u64, progress)?;
         let mut u_cur = stream::filled("lpm U (cells x storage directions)", cells * m as u64, progress)?;
-        let u_count = u_cur.len();
         let mut j = stream::filled("lpm J", cells, progress)?;
-        debug_assert_eq!(u_count as u64, cells * m as u64);
         report.cell_bytes = estimate::cell_bytes(cells, m);
         report.layers = match ov.layers {
             Some(l) => [l.max(1); FACES],
