@@ -16,7 +16,7 @@ use volscatter_core::medium::Medium;
 use volscatter_core::solvers::pop::merge::Merged;
 use volscatter_core::solvers::pop::mip::MediumMip;
 use volscatter_core::solvers::vpl::compensate::{Compensation, Vertex};
-use volscatter_core::solvers::vpl::gather::{GatherPlan, GatherPoint, Kernel};
+use volscatter_core::solvers::vpl::gather::{GatherPlan, GatherPoint, Gathered, Kernel};
 use volscatter_core::solvers::vpl::{GatherStats, VplSettings};
 use volscatter_core::solvers::vpl::walks::Walks;
 use volscatter_core::solvers::Progress;
@@ -67,10 +67,15 @@ const _: () = assert!(size_of::<GpuVpl>() == 48);
 /// About 2^21 ray marches of tens of steps: tens of milliseconds on a large GPU.
 const CONNECTIONS_PER_DISPATCH: u64 = 1 << 21;
 
+/// Bytes of `out` per point in gather.wgsl: (sum, near), (lost, -), (iso, -).
+const SUMS_BYTES: u64 = 48;
+
 /// What `connect` returned for each point, with its count of near connections.
 pub struct Connected {
     pub sum: Vec3,
     pub lost: Vec3,
+    /// `sum` with the point's phase function replaced by 1 / 4 pi (`connect_iso`).
+    pub iso: Vec3,
     pub near: u64,
 }
 
@@ -85,7 +90,7 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
     let total_vpls: usize = lists.iter().map(Vec::len).sum();
     ctx.check_storage_size("vpl gather: VPLs", total_vpls as u64 * size_of::<GpuVpl>() as u64).map_err(to_gpu)?;
     ctx.check_storage_size("vpl gather: points", points.len() as u64 * size_of::<GpuPoint>() as u64).map_err(to_gpu)?;
-    ctx.check_storage_size("vpl gather: sums", points.len() as u64 * 32).map_err(to_gpu)?;
+    ctx.check_storage_size("vpl gather: sums", points.len() as u64 * SUMS_BYTES).map_err(to_gpu)?;
     ctx.check_storage_size("vpl gather: density", bricked_density_bytes(medium)).map_err(to_gpu)?;
     let mut starts = Vec::with_capacity(lists.len());
     let mut vpls = Vec::with_capacity(total_vpls);
@@ -96,12 +101,12 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
     let gpu_points: Vec<GpuPoint> = points
         .iter()
         .map(|p| {
-            let (radius, kind) = match p.kernel {
-                Kernel::Clamp(r) => (r, 0),
-                Kernel::Ball(r) => (r, 1),
+            let (radius, kind, cone) = match p.kernel {
+                Kernel::Clamp(r) => (r, 0, 0.0f32),
+                Kernel::Ball { radius, cone } => (radius, 1, cone),
             };
             let s = p.subset as usize;
-            GpuPoint { position: p.position.extend(radius).to_array(), view: p.view.extend(p.ball).to_array(), list: [starts[s], lists[s].len() as u32, kind, 0] }
+            GpuPoint { position: p.position.extend(radius).to_array(), view: p.view.extend(p.ball).to_array(), list: [starts[s], lists[s].len() as u32, kind, cone.to_bits()] }
         })
         .collect();
     let longest = lists.iter().map(Vec::len).max().unwrap_or(0) as u64;
@@ -130,7 +135,7 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
     let density = ctx.storage_buffer("vpl gather: density", bytemuck::cast_slice(&density.words)).map_err(to_gpu)?;
     let point_buf = ctx.storage_buffer("vpl gather: points", bytemuck::cast_slice(&gpu_points)).map_err(to_gpu)?;
     let vpl_buf = ctx.storage_buffer("vpl gather: VPLs", bytemuck::cast_slice(&vpls)).map_err(to_gpu)?;
-    let out = ctx.zeroed_storage("vpl gather: sums", n * 32).map_err(to_gpu)?;
+    let out = ctx.zeroed_storage("vpl gather: sums", n * SUMS_BYTES).map_err(to_gpu)?;
     let pipeline = ctx.pipeline("vpl/gather.wgsl", WGSL, "main").map_err(to_gpu)?;
     let mut first = 0u64;
     while first < longest {
@@ -144,18 +149,18 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
         ctx.submit_and_wait(enc).map_err(to_gpu)?;
         first += chunk;
     }
-    let bytes = ctx.read_buffer(&out, n * 32).map_err(to_gpu)?;
+    let bytes = ctx.read_buffer(&out, n * SUMS_BYTES).map_err(to_gpu)?;
     let sums: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     Ok(sums
-        .chunks_exact(2)
-        .map(|c| Connected { sum: Vec3::new(c[0][0], c[0][1], c[0][2]), lost: Vec3::new(c[1][0], c[1][1], c[1][2]), near: c[0][3] as u64 })
+        .chunks_exact(3)
+        .map(|c| Connected { sum: Vec3::new(c[0][0], c[0][1], c[0][2]), lost: Vec3::new(c[1][0], c[1][1], c[1][2]), iso: Vec3::new(c[2][0], c[2][1], c[2][2]), near: c[0][3] as u64 })
         .collect())
 }
 
 /// `volscatter_core::solvers::vpl::gather::gather` with the connections on the GPU: the
 /// gather points' to their subsets, then (`near_field: compensate`) the compensation vertices'
 /// to theirs, all vertices sampled on the CPU first (`Compensation::vertices`).
-pub fn gather(ctx: &GpuContext, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
+pub fn gather(ctx: &GpuContext, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered> {
     let plan = GatherPlan::new(scene, mip, walks, s)?;
     let [nx, ny, nz] = plan.grid.dims;
     let mut density = vec![0.0f32; plan.grid.len()];
@@ -179,12 +184,14 @@ pub fn gather(ctx: &GpuContext, scene: &Scene, mip: &MediumMip, walks: &Walks, s
         return Err(Error::Cancelled);
     }
     let mut j = plan.grid.clone();
+    let mut iso = vec![Vec3::ZERO; j.len()];
     for (n, (p, c)) in points.iter().zip(&connected).enumerate() {
+        iso[p.index as usize] = plan.reweight(c.iso);
         stats.connections += plan.lists[p.subset as usize].len() as u64;
         stats.near += c.near;
         j.data[p.index as usize] = plan.finish_with(p, c.sum, c.lost, back.as_ref().map(|b| b[n]), &mut stats);
     }
-    Ok((Merged { j, density }, stats))
+    Ok(Gathered { merged: Merged { j, density }, stats, iso })
 }
 
 /// The compensation's estimate at every point (`Compensation::estimate`), its connections on

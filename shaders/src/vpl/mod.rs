@@ -14,7 +14,8 @@ use volscatter_core::solvers::pop::merge::Merged;
 use volscatter_core::solvers::pop::mip::MediumMip;
 use volscatter_core::solvers::pop::PopSettings;
 use volscatter_core::solvers::vpl::walks::Walks;
-use volscatter_core::solvers::vpl::{GatherStats, VplBackend, VplSettings};
+use volscatter_core::solvers::vpl::gather::Gathered;
+use volscatter_core::solvers::vpl::{VplBackend, VplSettings};
 use volscatter_core::solvers::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result, Scene};
 
@@ -29,7 +30,7 @@ impl<'a> GpuBackend<'a> {
 }
 
 impl VplBackend for GpuBackend<'_> {
-    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
+    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered> {
         gather::gather(self.ctx, scene, mip, walks, s, progress)
     }
 

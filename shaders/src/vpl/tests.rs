@@ -71,13 +71,18 @@ fn gpu_gather_matches_cpu() {
         let g = volscatter_core::solvers::ScatteringGrid::over_medium(&scene.medium, s.gather_resolution).unwrap();
         let fp = volscatter_core::solvers::pop::merge::footprint(&scene.medium, &out).min(volscatter_core::solvers::pop::merge::footprint(&scene.medium, &g));
         let mip = MediumMip::new(&scene.medium, fp);
-        let (cpu, cs) = cpu_gather::gather(&scene, &mip, &w, &s, &NoProgress).unwrap();
-        let (gpu, gs) = gather::gather(&ctx, &scene, &mip, &w, &s, &NoProgress).unwrap();
+        let cpu_all = cpu_gather::gather(&scene, &mip, &w, &s, &NoProgress).unwrap();
+        let gpu_all = gather::gather(&ctx, &scene, &mip, &w, &s, &NoProgress).unwrap();
+        let (cpu, cs, gpu, gs) = (&cpu_all.merged, cpu_all.stats, &gpu_all.merged, gpu_all.stats);
         assert_eq!(gpu.density, cpu.density, "{name} {near_field:?}: density guide");
         let e = relative_rmse(&gpu.j.data, &cpu.j.data);
         eprintln!("{name} {near_field:?} subsets of {per_subset}: J relative RMSE {e:e}, near {} / {}, clamped {:e} / {:e}", gs.near, cs.near, gs.clamped, cs.clamped);
         assert!(cpu.j.data.iter().any(|v| v.x > 0.0), "{name}: the CPU gathered nothing");
         assert!(e < 2e-5, "{name} {near_field:?}: J relative RMSE {e}");
+        // J_iso (normalize_energy's integrand): the same connections, the same tolerance.
+        let e_iso = relative_rmse(&gpu_all.iso, &cpu_all.iso);
+        assert!(cpu_all.iso.iter().any(|v| v.x > 0.0), "{name}: the CPU's J_iso is zero");
+        assert!(e_iso < 2e-5, "{name} {near_field:?}: J_iso relative RMSE {e_iso}");
         assert_eq!(gs.connections, cs.connections, "{name} {near_field:?}: connections");
         assert!((gs.near as f64 - cs.near as f64).abs() <= 1e-3 * cs.near as f64 + 1.0, "{name} {near_field:?}: near {} vs {}", gs.near, cs.near);
         assert_eq!(gs.vertices, cs.vertices, "{name} {near_field:?}: compensation vertices");

@@ -3,7 +3,7 @@
 //! `VplBackend`: the CPU code of this module's siblings (`CpuBackend`), or the GPU port in
 //! volscatter-gpu (shaders/src/vpl).
 
-use super::gather::{self, GatherStats};
+use super::gather::{self, Gathered};
 use super::settings::VplSettings;
 use super::walks::Walks;
 use crate::compositor::single_scattering_grid_cancellable;
@@ -17,8 +17,9 @@ use crate::solvers::pop::upsample;
 use crate::solvers::{Progress, ScatteringGrid};
 
 pub trait VplBackend: Sync {
-    /// gather.rs: J on the gather grid with its density guide, and the near field's report.
-    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)>;
+    /// gather.rs: J on the gather grid with its density guide, J_iso, and the near field's
+    /// report.
+    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered>;
 
     /// pop's upsample.rs: the multiple scattering S on the output grid.
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid>;
@@ -31,7 +32,7 @@ pub trait VplBackend: Sync {
 pub struct CpuBackend;
 
 impl VplBackend for CpuBackend {
-    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
+    fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered> {
         gather::gather(scene, mip, walks, s, progress)
     }
 

@@ -117,7 +117,7 @@ impl<'a> Compensation<'a> {
 
     /// The kernel a vertex takes the VPLs with, and the ball radius of `connect`'s report.
     pub fn kernel(&self, v: &Vertex) -> (Kernel, f32) {
-        (if v.last { Kernel::Ball(self.radius) } else { Kernel::Clamp(self.radius) }, self.radius)
+        (if v.last { Kernel::Ball { radius: self.radius, cone: 0.0 } } else { Kernel::Clamp(self.radius) }, self.radius)
     }
 
     /// The compensation's vertices around a gather point x (light leaving it along `out`), in

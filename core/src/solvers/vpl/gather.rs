@@ -62,13 +62,38 @@ impl GatherStats {
     }
 }
 
+/// What a backend's gather returns (backend.rs).
+pub struct Gathered {
+    /// J on the gather grid with its density guide.
+    pub merged: Merged,
+    pub stats: GatherStats,
+    /// J_iso at the gather grid's points (`connect_iso`, the subset reweighted; zero where there
+    /// is no density): what `normalize_energy` integrates (energy.rs).
+    pub iso: Vec<Vec3>,
+}
+
 /// How 1/d^2 is kept finite near a VPL.
 #[derive(Clone, Copy, Debug)]
 pub enum Kernel {
     /// 1 / max(d, R)^2.
     Clamp(f32),
-    /// The mean of 1/d^2 over a ball of this radius (medium::ball_mean_inverse_square).
-    Ball(f32),
+    /// The mean of 1/d^2 over a ball of radius `radius` around the VPL
+    /// (medium::ball_mean_inverse_square): the VPL's light spread over the ball. With `cone` > 0
+    /// both phase functions are smoothed as if the VPL were spread over a ball of radius `cone`:
+    /// HG with g times the mean cosine of the cone that ball subtends (`cone_mean_cosine`;
+    /// isotropic inside it). Mean cosines multiply under such a convolution, so the lobes keep
+    /// their integral (the energy) and only lose the peaks that, times the ball's 3 / r^2, make
+    /// the dense cloud's heavy tail (settings.rs `phase_cone`).
+    Ball { radius: f32, cone: f32 },
+}
+
+impl Kernel {
+    /// R of the clamp or the ball's radius.
+    pub fn radius(self) -> f32 {
+        match self {
+            Kernel::Clamp(r) | Kernel::Ball { radius: r, .. } => r,
+        }
+    }
 }
 
 /// Light from `vpls` at `x`, scattered towards a viewer looking along `view` (the scattered
@@ -77,11 +102,18 @@ pub enum Kernel {
 /// Transmittance to each VPL by a deterministic march of `step`.
 #[allow(clippy::too_many_arguments)]
 pub fn connect(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3) {
+    let (sum, lost, _) = connect_iso(march, vpls, x, view, kernel, ball, step, stats);
+    (sum, lost)
+}
+
+/// `connect`, and the same light with the point's phase function replaced by 1 / 4 pi (J_iso,
+/// the fluence over 4 pi per unit sigma_s): what `normalize_energy` integrates (energy.rs).
+#[allow(clippy::too_many_arguments)]
+pub fn connect_iso(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3, Vec3) {
     let g = march.medium().g;
-    let (mut sum, mut lost) = (Vec3::ZERO, Vec3::ZERO);
-    let radius = match kernel {
-        Kernel::Clamp(r) | Kernel::Ball(r) => r,
-    };
+    let (mut sum, mut lost, mut iso) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+    const ISO: f32 = 0.25 * std::f32::consts::FRAC_1_PI;
+    let radius = kernel.radius();
     for v in vpls {
         let to = x - v.position;
         let d = to.length();
@@ -91,21 +123,44 @@ pub fn connect(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kerne
         }
         let w = to / d.max(1e-12);
         // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
+        // The ball kernel's phases smoothed over the cone of its `cone` ball (kernel doc).
+        let g = match kernel {
+            Kernel::Ball { cone, .. } if cone > 0.0 => g * cone_mean_cosine(d, cone),
+            _ => g,
+        };
         let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
         let tr = if d > 1e-6 { (-march.optical_depth(v.position, w, d, step, 1024)).exp() } else { Vec3::ONE };
         let light = v.power * (p_vpl * p_view) * tr;
+        let light_iso = v.power * (p_vpl * ISO) * tr;
         match kernel {
-            Kernel::Ball(r) => sum += light * ball_mean_inverse_square(d, r),
+            Kernel::Ball { radius: r, .. } => {
+                let b = ball_mean_inverse_square(d, r);
+                sum += light * b;
+                iso += light_iso * b;
+            }
             Kernel::Clamp(r) => {
                 let clamped = 1.0 / d.max(r).powi(2);
                 sum += light * clamped;
+                iso += light_iso * clamped;
                 if d < r {
                     lost += light * (ball_mean_inverse_square(d, ball) - clamped).max(0.0);
                 }
             }
         }
     }
-    (sum, lost)
+    (sum, lost, iso)
+}
+
+/// Mean cosine of the directions from a point to a ball of radius r at distance d, uniform over
+/// the solid angle of the cone it subtends ((1 + cos a) / 2, sin a = r / d; 0 inside the ball,
+/// where the directions cover the sphere). Uniform over the cone is a little wider than the
+/// ball's own chord-weighted spread: the smoothing errs towards the smooth side.
+pub fn cone_mean_cosine(d: f32, r: f32) -> f32 {
+    if d <= r {
+        return 0.0;
+    }
+    let s = r / d;
+    0.5 * (1.0 + (1.0 - s * s).max(0.0).sqrt())
 }
 
 /// The subset of walks grid point (i, j, k) connects to.
@@ -155,6 +210,8 @@ pub struct GatherPlan<'a> {
     r: f32,
     /// Transmittance march step to the VPLs (`march_step`).
     pub step: f32,
+    /// Largest radius of the ball kernel's phase smoothing (`phase_cone` gather-cell radii).
+    cone: f32,
     near_field: NearField,
     mean_free_paths: f32,
     seed: u64,
@@ -191,6 +248,7 @@ impl<'a> GatherPlan<'a> {
         let fp = footprint(medium, &grid);
         let subsets = s.subsets();
         let r = s.clamp_radius * near_field_radius(&grid.index_to_world);
+        let cone = s.phase_cone * near_field_radius(&grid.index_to_world);
         let step = march_step(medium, &grid.index_to_world);
         let march = Arc::new(Marcher::new(medium));
         let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step, march.clone()));
@@ -205,6 +263,7 @@ impl<'a> GatherPlan<'a> {
             lists: subset_lists(walks, subsets),
             r,
             step,
+            cone,
             near_field: s.near_field,
             mean_free_paths: s.mean_free_paths,
             seed: s.seed,
@@ -226,7 +285,7 @@ impl<'a> GatherPlan<'a> {
         let view = (y - self.camera).normalize_or(Vec3::Z);
         let ball = ball_radius(medium, rho, self.r, self.mean_free_paths);
         let kernel = match self.near_field {
-            NearField::Ball => Kernel::Ball(ball),
+            NearField::Ball => Kernel::Ball { radius: ball, cone: ball.min(self.cone) },
             NearField::Clamp | NearField::Compensate => Kernel::Clamp(self.r),
         };
         let point = GatherPoint { index: i + nx * (jj + ny * k), position: y, view, rho, kernel, ball, subset: subset_of(i, jj, k, self.subsets) };
@@ -259,9 +318,14 @@ impl<'a> GatherPlan<'a> {
         Rng::new(self.seed ^ 0x5eed_c0de, p.index as u64)
     }
 
+    /// A point's sum over its subset of walks as an estimate over all walks.
+    pub fn reweight(&self, sum: Vec3) -> Vec3 {
+        sum * self.subsets as f32
+    }
+
     /// `finish` with the compensation's estimate `back` already made (None: off).
     pub fn finish_with(&self, p: &GatherPoint, sum: Vec3, lost: Vec3, back: Option<Vec3>, stats: &mut GatherStats) -> Vec3 {
-        let mut total = sum * self.subsets as f32;
+        let mut total = self.reweight(sum);
         let sigma_s = self.medium.sigma_s(p.rho);
         let energy = |v: Vec3| (sigma_s * v).element_sum() as f64 * self.cell_volume;
         stats.gathered += energy(total);
@@ -274,17 +338,24 @@ impl<'a> GatherPlan<'a> {
     }
 }
 
+/// One plane (fixed k) of the gather grid: J, J_iso and the density guide, row-major.
+struct Plane {
+    j: Vec<Vec3>,
+    iso: Vec<Vec3>,
+    density: Vec<f32>,
+    stats: GatherStats,
+}
+
 /// J on the gather grid, with each point's mean density over its cell (the upsampling's guide).
 /// Ends with `Error::Cancelled` within a row of gather points once `progress` is cancelled.
-pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<(Merged, GatherStats)> {
+pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered> {
     let plan = GatherPlan::new(scene, mip, walks, s)?;
     let [nx, ny, nz] = plan.grid.dims;
-    let rows: Vec<(Vec<Vec3>, Vec<f32>, GatherStats)> = (0..nz)
+    let planes: Vec<Plane> = (0..nz)
         .into_par_iter()
         .map(|k| {
-            let mut jv = vec![Vec3::ZERO; (nx * ny) as usize];
-            let mut dens = vec![0.0f32; (nx * ny) as usize];
-            let mut stats = GatherStats::default();
+            let n = (nx * ny) as usize;
+            let mut plane = Plane { j: vec![Vec3::ZERO; n], iso: vec![Vec3::ZERO; n], density: vec![0.0; n], stats: GatherStats::default() };
             'rows: for jj in 0..ny {
                 for i in 0..nx {
                     // Per cell: a cell connects to thousands of VPLs (a row took 300 ms).
@@ -293,13 +364,14 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
                     }
                     let idx = (i + nx * jj) as usize;
                     let (rho, point) = plan.point(i, jj, k);
-                    dens[idx] = rho;
+                    plane.density[idx] = rho;
                     let Some(p) = point else { continue };
-                    let (sum, lost) = connect(plan.march(), &plan.lists[p.subset as usize], p.position, p.view, p.kernel, p.ball, plan.step, &mut stats);
-                    jv[idx] = plan.finish(&p, sum, lost, &mut stats);
+                    let (sum, lost, iso) = connect_iso(plan.march(), &plan.lists[p.subset as usize], p.position, p.view, p.kernel, p.ball, plan.step, &mut plane.stats);
+                    plane.j[idx] = plan.finish(&p, sum, lost, &mut plane.stats);
+                    plane.iso[idx] = plan.reweight(iso);
                 }
             }
-            (jv, dens, stats)
+            plane
         })
         .collect();
     if progress.cancelled() {
@@ -308,13 +380,15 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
     let mut j = plan.grid;
     let mut density = Vec::with_capacity(j.len());
     let mut stats = GatherStats::default();
-    for (k, (jv, dens, st)) in rows.into_iter().enumerate() {
+    let mut iso = Vec::with_capacity(j.len());
+    for (k, plane) in planes.into_iter().enumerate() {
         let base = k * (nx * ny) as usize;
-        j.data[base..base + jv.len()].copy_from_slice(&jv);
-        density.extend(dens);
-        stats.add(&st);
+        j.data[base..base + plane.j.len()].copy_from_slice(&plane.j);
+        iso.extend(plane.iso);
+        density.extend(plane.density);
+        stats.add(&plane.stats);
     }
-    Ok((Merged { j, density }, stats))
+    Ok(Gathered { merged: Merged { j, density }, stats, iso })
 }
 
 /// Radius of the ball kernel at a point of density `rho`: `r`, at most `mean_free_paths` mean

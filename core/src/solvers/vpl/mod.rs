@@ -33,6 +33,13 @@
 //!   the near light's level upsampled as a ratio (near_ratio.rs): deterministic; +1-2% flux
 //!   everywhere (point light beside the plume x0.934 -> x0.950 at 32768 walks), a third of what
 //!   a finer gather gives there, and the cubes brighter, so not the default.
+//! - `normalize_energy` (on by default): the multiple scattering scaled so that the power it
+//!   scatters equals the walks' (energy.rs): the global share of the coarse gather's bias
+//!   (point light beside the plume x0.878 -> x0.926 at 4096 walks).
+//! - `phase_cone` (on by default): the ball kernel's two phase functions smoothed over the cone
+//!   of a ball of up to a quarter gather cell around the VPL (gather.rs `Kernel::Ball`): the
+//!   dense cloud's heavy tail, two g 0.9 lobes times 3 / r^2, gone (8 seeds x1.40 +- 0.83 ->
+//!   x0.97 +- 0.07).
 //! - The gather, upsampling and single scattering run on a backend (backend.rs): the CPU, or
 //!   the GPU (volscatter-gpu, shaders/src/vpl), where the connections to the VPLs (the gather
 //!   points' and the compensation vertices') run in WGSL; the walks, the compensation's vertex
@@ -51,6 +58,7 @@
 
 pub mod backend;
 pub mod compensate;
+pub mod energy;
 pub mod gather;
 pub use crate::medium::dense_march as march;
 pub mod near_ratio;
@@ -63,7 +71,7 @@ pub mod walks;
 use super::pop;
 use super::pop::mip::MediumMip;
 use super::pop::settings::PopSettings;
-use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
+use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
@@ -83,6 +91,8 @@ pub struct VplReport {
     pub vpl_power: [f32; 3],
     pub walks_cut: u32,
     pub gather: GatherStats,
+    /// `normalize_energy`'s powers and factor (None where it does not apply).
+    pub energy: Option<energy::EnergyCheck>,
 }
 
 impl Vpl {
@@ -120,7 +130,8 @@ impl Vpl {
         if !progress.update("vpl gather", 0.0) {
             return Err(Error::Cancelled);
         }
-        let (merged, gstats) = timings.time("vpl gather", || backend.gather(scene, &mip, &walks, s, progress))?;
+        let gathered = timings.time("vpl gather", || backend.gather(scene, &mip, &walks, s, progress))?;
+        let (merged, gstats) = (&gathered.merged, gathered.stats);
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
         let upsample = |merged: &pop::merge::Merged| match (s.upsample, s.upsample_fit) {
             // The linear fit on the CPU for both backends (vpl/upsample.rs).
@@ -129,20 +140,29 @@ impl Vpl {
         };
         let ratio = s.upsample && s.near_refine == 0.0 && s.near_upsample == NearUpsample::Ratio;
         let mut scattering = if ratio {
-            timings.time("vpl upsample", || near_ratio::upsample(scene, &mip, &walks, &merged, s, &pop_like, progress, upsample))?
+            timings.time("vpl upsample", || near_ratio::upsample(scene, &mip, &walks, merged, s, &pop_like, progress, upsample))?
         } else {
-            timings.time("vpl upsample", || upsample(&merged))?
+            timings.time("vpl upsample", || upsample(merged))?
         };
         if s.near_refine > 0.0 {
-            timings.time("vpl near refine", || refine::refine(scene, &mip, &walks, &merged, &mut scattering, s, progress, upsample))?;
+            timings.time("vpl near refine", || refine::refine(scene, &mip, &walks, merged, &mut scattering, s, progress, upsample))?;
         }
+        let energy = if s.normalize_energy && s.near_field != NearField::Compensate && s.near_refine == 0.0 && !ratio && max_orders == u32::MAX {
+            let iso = timings.time("vpl energy", || {
+                let j = ScatteringGrid { data: gathered.iso, ..merged.j.clone() };
+                upsample(&pop::merge::Merged { j, density: merged.density.clone() })
+            })?;
+            Some(energy::normalize(&mut scattering, &iso, &walks))
+        } else {
+            None
+        };
         let single = timings.time("vpl single scattering", || backend.single_scattering(scene, s, progress))?;
         debug_assert_eq!(single.dims, scattering.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {
             *a += *b;
         }
         progress.update("vpl upsample", 1.0);
-        let report = VplReport { walks: s.walks, vpls: walks.vpls.len(), vpl_power: walks.total_power().to_array(), walks_cut: walks.cut, gather: gstats };
+        let report = VplReport { walks: s.walks, vpls: walks.vpls.len(), vpl_power: walks.total_power().to_array(), walks_cut: walks.cut, gather: gstats, energy };
         Ok((SolveOutput::new(scattering, timings), report))
     }
 }

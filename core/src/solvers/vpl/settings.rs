@@ -135,6 +135,26 @@ pub struct VplSettings {
     /// of `clamp` and `compensate`, the largest ball of `ball` (and of `compensate`'s last
     /// level).
     pub clamp_radius: f32,
+    /// `near_field: ball`: the largest radius, in gather-cell radii, over which both phase
+    /// functions of a connection are smoothed to the cone of the ball around the VPL
+    /// (gather.rs `Kernel::Ball`): at each point min(ball radius, this); 0 = off. Why: where the
+    /// ball is a fraction of a mean free path (the dense cloud: a quarter), a VPL within a few
+    /// ball radii of a point gives up to 3 / r^2 times two g 0.9 lobes (each peaks at 190x the
+    /// isotropic 1 / 4 pi), so a rare VPL behind a point, in line with the camera, outweighs the rest:
+    /// a heavy tail whose typical seed is dark and whose rare seed is many times too bright.
+    /// Measured (vpl_explore_seeds, defaults, 8 seeds, image mean ratio +- standard error, the
+    /// seeds' image rel. RMSE): dense cloud without x1.395 +- 0.83 (typical seeds x0.39-0.67,
+    /// one seed x7.2 with image error 22), cone at the whole ball x0.953 +- 0.070 (errors
+    /// 0.44-1.13), at a quarter cell x0.965 +- 0.069 (0.48-1.13). Capped because on thin media
+    /// the ball is a whole cell and smoothing the lobes over it blurs the angular distribution
+    /// the gather resolves (with the energy normalization): the spot beside the plume without
+    /// x0.969, cone at the whole ball x1.063, half x1.001, a quarter x0.978; capped at a quarter
+    /// cell: spot x0.984, point light x0.943 (without x0.926), rect light x0.955 (x0.936),
+    /// plume x1.000 (x0.909), cube g 0.7 x1.012 (x1.010); only one lobe smoothed does not
+    /// remove the cloud's tail (view lobe alone x1.08 +- 0.17, the VPL's alone x0.85 +- 0.15).
+    /// Default scene 256 x 256 (vpl_bench_image): image error 0.146 -> 0.129 at 4096 walks,
+    /// 0.105 -> 0.087 at 16384, flux x0.913 -> x0.964 and x0.943 -> x0.992.
+    pub phase_cone: f32,
     /// The ball kernel's radius is also kept below this many mean free paths of the point
     /// (1 / sigma_t of its cell's mean density); 0 = no such limit. Why: the ball kernel is
     /// lossless only where the transmittance is flat over the ball; in a cell many mean free
@@ -188,6 +208,21 @@ pub struct VplSettings {
     /// r_n) set the near light's level. Barely matters: plume_point (32768 walks, 8 seeds)
     /// 0.75 / 1.5 / 3 cells x0.9504 / 0.9503 / 0.9495.
     pub near_radius: f32,
+    /// Scale the multiple scattering so that the power it scatters equals the power the walks
+    /// scattered after their first collision (energy.rs): corrects the share of the coarse
+    /// gather's bias that is global, at the cost of one more upsampling of the gather grid.
+    /// Ignored with `near_field: compensate`, `near_refine` and `near_upsample: ratio`.
+    /// Measured (vpl_explore_seeds, defaults without `phase_cone`, 8 seeds, image mean ratio
+    /// off -> on, the factor's range): plume_point (4096 walks) x0.878 (4 seeds) -> x0.926,
+    /// factors 1.00-1.13; at 32768 walks (4 seeds) x0.934 -> x0.970, 1.05-1.08 (a bias of the
+    /// coarse gather, not noise); spot light x0.931 -> x0.969, 1.03-1.07; plume x0.850 -> x0.909;
+    /// cube g 0 x0.986 (4 seeds) -> x1.004, 0.99-1.01; cube g 0.7 x1.010, 1.00-1.02. Default
+    /// scene 256 x 256 (vpl_bench_image): image rel. RMSE 0.176 -> 0.146 at 4096 walks, 0.116
+    /// -> 0.105 at 16384, flux x0.871 -> x0.913 and x0.926 -> x0.943, time unchanged within
+    /// noise. What it leaves is where the light lands: the local lights are still a few per
+    /// cent dark, a finer gather's share (32 cells with 8 interleaved subsets of 4096 walks,
+    /// with it: spot x0.997, rect x0.977, point x0.988, cube g 0 x1.006, 4 seeds).
+    pub normalize_energy: bool,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
     /// Spatial sigma of the bilateral filter, in gather cells: at least ~0.8 so that the
@@ -210,6 +245,7 @@ impl Default for VplSettings {
             near_field: NearField::Ball,
             clamp_radius: 1.0,
             mean_free_paths: 0.25,
+            phase_cone: 0.25,
             compensation_vertices: 4,
             compensation_depth: 2,
             compensation_walks: 256,
@@ -220,6 +256,7 @@ impl Default for VplSettings {
             near_refine: 0.0,
             near_upsample: NearUpsample::Plain,
             near_radius: 1.5,
+            normalize_energy: true,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
@@ -241,6 +278,9 @@ impl VplSettings {
         }
         if !(self.mean_free_paths.is_finite() && self.mean_free_paths >= 0.0) {
             return Err(Error::scene("solver.mean_free_paths", format!("must be >= 0, got {}", self.mean_free_paths)));
+        }
+        if !(self.phase_cone.is_finite() && (0.0..=16.0).contains(&self.phase_cone)) {
+            return Err(Error::scene("solver.phase_cone", format!("must be in [0, 16], got {}", self.phase_cone)));
         }
         if !(1..=256).contains(&self.compensation_vertices) {
             return Err(Error::scene("solver.compensation_vertices", format!("must be in 1..=256, got {}", self.compensation_vertices)));

@@ -73,25 +73,29 @@ macro_rules! against_reference {
 // bounds = error measured with `test_settings()` (4096 walks, 12-cell gather) when written,
 // plus 10% and 0.01. Measured (image / grid, image mean ratio): cube g 0 0.0755 / 0.0639
 // x1.059; cube g 0.7 0.1529 / 0.1444 x1.082; plume 0.3654 / 0.5329 x0.923 (VPL noise: at
-// 32768 walks 0.304 / 0.419, x1.024). The clamp at the same radius on cube g 0.7: 0.1511 /
+// 32768 walks 0.304 / 0.419, x1.024). Tightened after `normalize_energy` and `phase_cone`
+// (the ball's rows): cube g 0 0.0693 / 0.0671 x1.046, cube g 0.7 0.1481 / 0.1392 x1.079,
+// plume 0.3272 / 0.4460 x1.069 (the clamp's row, unchanged by the cone: 0.1393 / 0.1360). The clamp at the same radius on cube g 0.7: 0.1511 /
 // 0.1946 x0.935, and at 32768 walks 0.146 / 0.164 x0.897 against the ball's 0.082 / 0.067
 // x1.024: the clamp loses ~10% of the multiple scattering, the ball kernel does not, so
 // `near_field: ball` is the default.
 against_reference! {
-    vpl_cube_g0_against_reference: "cube_g0", NearField::Ball, 0.094, 0.081;
-    vpl_cube_g07_against_reference: "cube_g07", NearField::Ball, 0.179, 0.169;
-    vpl_plume_against_reference: "plume", NearField::Ball, 0.412, 0.597;
+    vpl_cube_g0_against_reference: "cube_g0", NearField::Ball, 0.086, 0.081;
+    vpl_cube_g07_against_reference: "cube_g07", NearField::Ball, 0.173, 0.163;
+    vpl_plume_against_reference: "plume", NearField::Ball, 0.370, 0.501;
     vpl_cube_g07_clamp_against_reference: "cube_g07", NearField::Clamp, 0.177, 0.225;
 }
 
 // Local lights beside the plume (pop/radial's fixtures; no multiple-scattering AOV in them),
 // same settings and margins. Measured (image / grid, image mean ratio): point 0.166 / 0.203
 // x0.865 (only 327 of the 4096 walks reach the plume); spot 0.145 / 0.177 x0.912; rect 0.192
-// / 0.264 x0.894. (pop's radial grids: image 0.37 on the point case.)
+// / 0.264 x0.894. (pop's radial grids: image 0.37 on the point case.) Tightened after
+// `normalize_energy` and `phase_cone`: point 0.1114 / 0.2234 x0.923, spot 0.0932 / 0.1343
+// x0.977, rect 0.1470 / 0.2251 x0.960.
 against_reference! {
-    vpl_plume_point_against_reference: "plume_point", NearField::Ball, 0.193, 0.233;
-    vpl_plume_spot_against_reference: "plume_spot", NearField::Ball, 0.17, 0.205;
-    vpl_plume_rect_against_reference: "plume_rect", NearField::Ball, 0.221, 0.301;
+    vpl_plume_point_against_reference: "plume_point", NearField::Ball, 0.133, 0.233;
+    vpl_plume_spot_against_reference: "plume_spot", NearField::Ball, 0.113, 0.158;
+    vpl_plume_rect_against_reference: "plume_rect", NearField::Ball, 0.172, 0.258;
 }
 
 // The dense cloud (optical depth over 30, g 0.9), same settings and margins. Measured: image
@@ -99,9 +103,11 @@ against_reference! {
 // x0.779 in 46 s (pop: image 0.50, grid 0.94). Too dark: the multiple scattering of a cell
 // many mean free paths thick comes from the rare VPLs within a mean free path of the gather
 // point, a heavy-tailed estimator whose typical value is below its mean; the paper's bias
-// compensation (not in this landing) is the cure.
+// compensation (not in this landing) is the cure. With `normalize_energy` and `phase_cone`
+// (which smooths the two g 0.9 lobes below a quarter cell, the tail's source): 0.7072 /
+// 0.7643, x1.036; ratchet tightened.
 against_reference! {
-    vpl_cloud_against_reference: "cloud", NearField::Ball, 0.816, 0.888;
+    vpl_cloud_against_reference: "cloud", NearField::Ball, 0.788, 0.851;
 }
 
 // The default near field, `compensate` (4 vertices per gather point, depth 2, 256 walks per
@@ -241,7 +247,7 @@ fn vpl_explore_furnace() {
 /// The decisive check of the bias compensation (issue 16): in the white furnace box S /
 /// sigma_s is 1 everywhere. Clamping G at R = 2 gather cells alone loses the light scattered
 /// within R of each point, so the mean falls below 1 (measured 0.695); the compensation puts
-/// it back (measured 0.991). Bounds: clamp below 0.85 (its loss is ~26%, far beyond the
+/// it back (measured 0.991); so does, as a whole, `normalize_energy` (measured 0.965). Bounds: clamp below 0.85 (its loss is ~26%, far beyond the
 /// walks' noise); compensated within 0.025 of 1: the noise of 2048 walks and 4 vertices per
 /// point over the interior points, plus the ball kernel's blur (radius R) at the faces in the
 /// last level. The energy clamped and restored are reported and must
@@ -250,12 +256,19 @@ fn vpl_explore_furnace() {
 fn vpl_white_furnace_clamp_loses_compensation_restores() {
     let sc = furnace_box();
     let s = VplSettings { walks: 2048, gather_resolution: 10, output_resolution: 12, clamp_radius: 2.0, ..Default::default() };
-    let (clamp, rep_c) = furnace_ratio(&sc, VplSettings { near_field: NearField::Clamp, ..s.clone() });
+    // The paper's clamp alone: without normalize_energy, which would restore its loss globally.
+    let (clamp, rep_c) = furnace_ratio(&sc, VplSettings { near_field: NearField::Clamp, normalize_energy: false, ..s.clone() });
+    let (clamp_normalized, rep_n) = furnace_ratio(&sc, VplSettings { near_field: NearField::Clamp, ..s.clone() });
     let (comp, rep) = furnace_ratio(&sc, VplSettings { near_field: NearField::Compensate, ..s });
     let g = rep.gather;
-    eprintln!("white furnace box S / sigma_s: clamp {clamp:.4}, compensated {comp:.4}; clamped {:.3}, restored {:.3} (of {:.3} gathered)", g.clamped, g.restored, g.gathered);
+    let factor = rep_n.energy.expect("normalize_energy applies to the clamp").factor[0];
+    eprintln!("white furnace box S / sigma_s: clamp {clamp:.4}, clamp normalized {clamp_normalized:.4} (factor {factor:.3}), compensated {comp:.4}; clamped {:.3}, restored {:.3} (of {:.3} gathered)", g.clamped, g.restored, g.gathered);
     assert_eq!(rep_c.gather.restored, 0.0);
+    assert!(rep.energy.is_none(), "normalize_energy is skipped with compensate");
     assert!(clamp < 0.85, "clamping alone should lose energy: S / sigma_s {clamp}");
+    // normalize_energy puts the clamp's loss back as a whole (factor 1/0.695 where it took
+    // 30%): measured 0.965; bound 0.94 (what remains is where: the faces' points lose less).
+    assert!(clamp_normalized > 0.94 && clamp_normalized < 1.03, "normalized clamp S / sigma_s {clamp_normalized}");
     assert!((comp - 1.0).abs() < 0.025, "compensated S / sigma_s {comp}");
     assert!(g.clamped > 0.0 && g.restored > 0.5 * g.clamped && g.restored < 2.0 * g.clamped, "clamped {} restored {}", g.clamped, g.restored);
 }
@@ -363,60 +376,25 @@ fn vpl_bench() {
     }
 }
 
-/// Issue 16: the mean of 8 seeds within 2% of the reference's flux, on cube_g0 (sun + dome,
-/// g 0), with `upsample_fit: linear` (the default weighted mean is x1.079 bright there, a bias
-/// of its centroid at the surface: upsample.rs). 1024 walks, 12-cell gather, 24-cell output,
-/// seeds 1-8: measured image mean x1.013, the seeds' standard deviation 0.041, so the 8-seed
-/// mean's standard error is 1.4% (the fixture's own noise ~0.5%): the test tells the mean
-/// fit's x1.079 (over 4 standard errors past the bound) from the bound, not a 1% bias. At 2048
-/// walks: x0.985, standard error 1.2%, for twice the time (1024 walks: 6 s on a loaded core
-/// with the dense march, march.rs), so more walks do not buy a much tighter test.
-/// Not met elsewhere (vpl_explore_seeds, ball, 8 seeds): cube_g07 (1024 walks) linear x1.034,
-/// mean x1.086 (standard error 2.2%); the point light beside the plume (plume_point, g 0.9,
-/// 4096 walks) x0.873 mean, x0.886 linear, x0.890 trilinear, x0.927 at a 24-cell gather,
-/// x0.846 at 48 cells and 2048 walks: no upsampling fixes it, a heavy-tailed g 0.9 estimator
-/// whose 8-seed mean sits below its expectation; the point light inside a g 0 sphere
-/// (fig10_g0, 1024 walks) mean x1.132, linear x0.917 (the light's peak is narrower than a
-/// gather cell: neither estimate of J there is right).
-/// Checked next (vpl_explore_seeds, ball, mean fit, image mean ratio, mean of the seeds with its
-/// standard error): plume_point's darkness is **not** a heavy tail. With more walks at the
-/// 12-cell gather it settles near x0.92 instead of rising to 1: 4096 walks x0.873 +- 0.029
-/// (8 seeds), 32768 x0.919 +- 0.013 (8), 131072 x0.909 +- 0.009 (4), 1048576 x0.927 +- 0.011
-/// (2). It is a bias of the gather's resolution: at 32768 walks (4 seeds, +- ~0.013) the gather
-/// at 12 / 16 / 24 / 32 cells gives x0.920 / 0.937 / 0.962 / 0.980; plume_spot (8192 walks,
-/// 64-cell output) 16 cells x0.934 +- 0.004 (8 seeds), 32 cells x0.973 +- 0.007 (4); plume_rect
-/// at the defaults x0.917 +- 0.020. Not the cause (plume_point, 32768 walks, 12 cells, 4
-/// seeds): the march's step (a quarter of it: x0.920), the 64-cell output (x0.911), coarse
-/// points without density holding J = 0 in the filter (gathered there too: x0.921, or left
-/// out of the filter: x0.922), the fit (linear x0.914, trilinear x0.933). The ball's radius
-/// moves it (limit 1 / 0.25 / 0.05 mean free paths: x0.868 / 0.920 / 0.934), the clamp alone
-/// loses more (x0.711), compensate x0.920. Reading: the light scattered within a gather cell of
-/// a point comes from VPLs that sit, like the point's own density, in the plume's dense wisps
-/// (walks collide in proportion to the density); a coarse J multiplied by the fine sigma_s
-/// loses that correlation below a gather cell (S = sigma_s J averages to mean(sigma_s)
-/// mean(J) + their covariance, and the covariance is what a coarse J cannot carry), so the
-/// estimate is dark until the gather resolves the wisps. The same resolution sets cube_g0's
-/// brightness with the mean fit: x1.079 at 12 cells, x1.040 +- 0.015 at the defaults (16
-/// cells, 64-cell output, 8 seeds), x1.008 at 24 (seeds 1-4); cube_g07 at the defaults x1.038
-/// +- 0.024. So no default fit is within 2% on a local light at a 12-16-cell gather;
-/// `near_refine` (refine.rs) addresses the cause (test below).
-/// Fits tried for the default (cube_g0 8 seeds at 1024 walks; dense cloud image rel. RMSE at
-/// the ratchet's settings, bound 0.816, mean fit 0.746): the linear fit with a ridge that
-/// shrinks with the filter's weight sum (ridge 0.02 + k / sum of weights, k 0.1 / 0.5 / 2):
-/// cube x1.023 / 1.041 / 1.061, cloud 0.841 / 0.798 / 0.766 -- the same trade as the fixed
-/// ridge, no k reaches both; the fit clamped to its neighbours' range: cloud 0.8655 (unclamped
-/// 0.8658: the cloud's error is the fit's noise, not overshoot); the fit in log J: diverges
-/// where a neighbour's J is 0 (cloud x1.3e5), clamped 0.729 but x0.348; leaving out coarse
-/// points without density: cloud 0.866. The cloud's flux with the linear fit is nearer the
-/// truth (x0.727 against the mean's x0.660), its error higher: a local linear fit has the
-/// larger variance, and the cloud's J is heavy-tailed.
-#[test]
-fn vpl_eight_seeds_flux_within_two_percent() {
-    let name = "cube_g0";
+/// Issue 16: the mean of 8 seeds (1-8) within 2% of the reference's flux, at the DEFAULT
+/// settings (16-cell gather, 64-cell output, ball kernel with `phase_cone`, `normalize_energy`),
+/// on the default 4096 walks but for the point light: of its walks only 8% reach the plume (327
+/// VPLs at 4096), so it takes 32768 (2600 VPLs, 0.5 s a solve). Measured (image mean ratio +-
+/// the 8-seed mean's standard error): cube g 0 x1.004 +- 0.010, cube g 0.7 x1.012 +- 0.014,
+/// spot light x0.984 +- 0.007, point light x0.986 +- 0.010, plume x1.000 +- 0.048 (its seeds
+/// spread more than the bound: there the test only pins the mean, it does not resolve 2%).
+/// Not met, so not asserted (measured the same way): the rect light x0.955 +- 0.015 at 4096
+/// walks, x0.965 +- 0.018 at 16384, x0.966 +- 0.011 at 32768: a bias of 3-4% that more walks
+/// do not move (a 32-cell gather with 8 subsets of 4096 walks: x0.977, 4 seeds); the dense
+/// cloud x0.965 +- 0.069 (seeds x0.71-1.35: still heavy-tailed, 3 s a solve).
+/// History: before `normalize_energy` and `phase_cone` this held only for cube g 0 with
+/// `upsample_fit: linear` at a 12-cell gather (x1.013); the defaults gave the point light
+/// x0.878, the spot x0.931, the plume x0.850 and the cloud x1.395 with one seed x7.2.
+fn eight_seeds_flux(name: &str, walks: u32) {
     let sc = case(name);
     let ratios: Vec<f64> = (1..=8u64)
         .map(|seed| {
-            let s = VplSettings { walks: 1024, seed, near_field: NearField::Ball, upsample_fit: super::UpsampleFit::Linear, ..test_settings() };
+            let s = VplSettings { walks, seed, ..Default::default() };
             let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
             errors_against_fixture(name, &sc, &out.scattering).image_ratio
         })
@@ -424,6 +402,83 @@ fn vpl_eight_seeds_flux_within_two_percent() {
     let mean = ratios.iter().sum::<f64>() / 8.0;
     eprintln!("{name}: image mean ratio over 8 seeds x{mean:.4} ({ratios:.3?})");
     assert!((mean - 1.0).abs() < 0.02, "{name}: 8-seed image mean x{mean:.4}");
+}
+
+macro_rules! eight_seeds_within_two_percent {
+    ($($test:ident: $case:literal, $walks:literal;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                eight_seeds_flux($case, $walks);
+            }
+        )*
+    };
+}
+
+eight_seeds_within_two_percent! {
+    vpl_eight_seeds_flux_cube_g0: "cube_g0", 4096;
+    vpl_eight_seeds_flux_cube_g07: "cube_g07", 4096;
+    vpl_eight_seeds_flux_plume: "plume", 4096;
+    vpl_eight_seeds_flux_spot_light: "plume_spot", 4096;
+    vpl_eight_seeds_flux_point_light: "plume_point", 32768;
+}
+
+/// `normalize_energy` (energy.rs) sets two estimates of one power against each other: the walks'
+/// collisions after their first, and 4 pi sum sigma_s J_iso dV of the upsampled gather. Where
+/// the coarse gather is nearly unbiased (cube g 0: g 0, sun + dome, a smooth J) they agree:
+/// factor within 3% of 1 on seeds 1-2 (measured 1.013 / 0.993; over 8 seeds 0.99-1.01), which
+/// checks the 4 pi and the quadrature of `grid_power` (a lost 4 pi would be 12.6x, the gather
+/// grid's cell volume for the output's 64x). Beside the point light it corrects a loss: factor
+/// above 1.02 (measured 1.041 on seed 1; 1.00-1.13 over 8 seeds, 1.05-1.08 at 32768 walks).
+/// And it scales only the multiple scattering: with the same walks, S with it is the single
+/// scattering plus the factor times S without it less the single scattering (to 1e-5).
+#[test]
+fn vpl_energy_normalization_agrees_where_unbiased_and_lifts_the_point_light() {
+    for seed in 1..=2u64 {
+        let sc = case("cube_g0");
+        let (_, rep) = Vpl::new(VplSettings { seed, ..Default::default() }).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+        let check = rep.energy.expect("on by default");
+        eprintln!("cube_g0 seed {seed}: {check:?}");
+        assert!((check.factor[0] - 1.0).abs() < 0.03, "cube_g0 seed {seed}: factor {:?}", check.factor);
+    }
+    let sc = case("plume_point");
+    let s = VplSettings::default();
+    let (on, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+    let off = Vpl::new(VplSettings { normalize_energy: false, ..s.clone() }).unwrap().solve(&sc, &NoProgress).unwrap();
+    let f = Vec3::from(rep.energy.expect("on by default").factor);
+    eprintln!("plume_point: {:?}", rep.energy);
+    assert!(f.x > 1.02, "plume_point: factor {f}");
+    let single = single_scattering_grid(&sc, s.output_resolution, s.dome_directions).unwrap();
+    let scale = off.scattering.data.iter().map(|v| v.max_element()).fold(0.0f32, f32::max);
+    for ((a, b), c) in on.scattering.data.iter().zip(&off.scattering.data).zip(&single.data) {
+        let want = *c + f * (*b - *c);
+        assert!((*a - want).abs().max_element() <= 1e-5 * scale, "{a} vs {want}");
+    }
+}
+
+/// `phase_cone`'s smoothing (gather.rs `cone_mean_cosine`): 0 inside the ball (directions over
+/// the whole sphere), rising to 1 far away, and at most the mean cosine of the ball's own
+/// chord-weighted spread (numerically integrated: 0.690 / 0.826 / 0.947 / 0.9980 at d = 1.01 /
+/// 1.2 / 2 / 10 r against the cone's 0.570 / 0.776 / 0.933 / 0.9975): the cone errs towards
+/// the smooth side, within 0.12 just outside the ball and 0.014 at two radii.
+#[test]
+fn cone_mean_cosine_is_zero_inside_the_ball_and_tends_to_one() {
+    use super::gather::cone_mean_cosine;
+    assert_eq!(cone_mean_cosine(0.5, 1.0), 0.0);
+    assert_eq!(cone_mean_cosine(1.0, 1.0), 0.0);
+    let chord_weighted = [(1.01f32, 0.6899f32), (1.2, 0.8262), (2.0, 0.9468), (10.0, 0.9980)];
+    for (d, chord) in chord_weighted {
+        let c = cone_mean_cosine(d, 1.0);
+        assert!(c <= chord + 1e-4 && c > chord - 0.125, "d {d}: cone {c} chord-weighted {chord}");
+    }
+    assert!((cone_mean_cosine(2.0, 1.0) - 0.5 * (1.0 + 0.75f32.sqrt())).abs() < 1e-6);
+    let mut last = 0.0;
+    for i in 1..200 {
+        let c = cone_mean_cosine(1.0 + i as f32 * 0.1, 1.0);
+        assert!(c > last && c < 1.0, "not rising at {i}: {c}");
+        last = c;
+    }
+    assert!(cone_mean_cosine(1e4, 1.0) > 0.999_999);
 }
 
 /// Exploration (not in CI): the image flux of several seeds against a fixture (VPL_CASE,
@@ -474,10 +529,11 @@ fn vpl_explore_seeds() {
         };
         let upsample = env_u32("VPL_UPSAMPLE", 1) != 0;
         let upsample_fit = if std::env::var("VPL_FIT").as_deref() == Ok("linear") { super::UpsampleFit::Linear } else { super::UpsampleFit::Mean };
-        let s = VplSettings { walks, seed, near_field, upsample, upsample_fit, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), mean_free_paths: env_u32("VPL_MFP100", 25) as f32 / 100.0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, near_refine: env_u32("VPL_REFINE100", 0) as f32 / 100.0, near_upsample: env_near_upsample(), near_radius: env_u32("VPL_RN100", 150) as f32 / 100.0, walks_per_subset: env_u32("VPL_WPS", 0), ..Default::default() };
-        let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
+        let s = VplSettings { walks, seed, near_field, upsample, upsample_fit, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), mean_free_paths: env_u32("VPL_MFP100", 25) as f32 / 100.0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, near_refine: env_u32("VPL_REFINE100", 0) as f32 / 100.0, near_upsample: env_near_upsample(), near_radius: env_u32("VPL_RN100", 150) as f32 / 100.0, walks_per_subset: env_u32("VPL_WPS", 0), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, ..Default::default() };
+        let (out, rep) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
         let e = errors_against_fixture(&name, &sc, &out.scattering);
-        eprintln!("{name} seed {seed}: {e} ({:.2} s)", t.elapsed().as_secs_f64());
+        let factor = rep.energy.map_or(f32::NAN, |c| c.factor[0]);
+        eprintln!("{name} seed {seed}: {e}, energy factor {factor:.4} ({:.2} s)", t.elapsed().as_secs_f64());
         ratios.push(e.image_ratio);
     }
     let n = ratios.len() as f64;
@@ -569,7 +625,7 @@ fn vpl_bench_image() {
         // near_refine in hundredths of a gather cell (0: the default, off).
         for (walks, refine) in list("VPL_IMAGE_WALKS", "4096,16384").into_iter().flat_map(|w| list("VPL_IMAGE_REFINE100", "0").into_iter().map(move |r| (w, r))) {
             let d = VplSettings::default();
-            let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), ..d };
+            let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, ..d };
             let t = std::time::Instant::now();
             let (out, _) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
             let solve = t.elapsed().as_secs_f64();
@@ -590,7 +646,11 @@ fn vpl_bench_image() {
 /// without x0.920 (the gather's resolution bias: 24 cells x0.962, 32 cells x0.980), with
 /// r_n = 3 cells x0.973, r_n = 1.5 x0.957 (4 seeds, standard error ~0.013 each, but the two
 /// share their walks, so their difference is far less noisy). Bound: the refined mean at
-/// least 0.03 above the unrefined one (measured +0.053) and within 5% of the fixture. At 4096
+/// least 0.03 above the unrefined one (measured +0.053) and within 5% of the fixture. Since
+/// `normalize_energy` (on by default, not with `near_refine`) the unrefined gather with it
+/// gives the same walks x0.985 (refined x1.001, without it x0.937; all with `phase_cone`,
+/// before which the unrefined was x0.920): asserted within 3% of the fixture (the seeds'
+/// standard error ~0.013). At 4096
 /// walks it does not pay: the near part gathered at each output point is noisier than the
 /// coarse one (image rel. RMSE plume 0.561 against 0.365, dense cloud 1.18 against 0.75, cube
 /// g 0.7 0.137 against 0.153), so it is off by default.
@@ -598,24 +658,26 @@ fn vpl_bench_image() {
 fn vpl_near_refine_restores_the_plume_point_flux() {
     let name = "plume_point";
     let sc = case(name);
-    let mean_ratio = |near_refine: f32| {
+    let mean_ratio = |near_refine: f32, normalize_energy: bool| {
         (1..=4u64)
             .map(|seed| {
-                let s = VplSettings { walks: 32768, seed, near_field: NearField::Ball, near_refine, ..test_settings() };
+                let s = VplSettings { walks: 32768, seed, near_field: NearField::Ball, near_refine, normalize_energy, ..test_settings() };
                 errors_against_fixture(name, &sc, &Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap().scattering).image_ratio
             })
             .sum::<f64>()
             / 4.0
     };
-    let (off, on) = (mean_ratio(0.0), mean_ratio(3.0));
-    eprintln!("{name}: image mean ratio over 4 seeds x{off:.4} without near_refine, x{on:.4} with r_n = 3 cells");
+    let (off, on, normalized) = (mean_ratio(0.0, false), mean_ratio(3.0, false), mean_ratio(0.0, true));
+    eprintln!("{name}: image mean ratio over 4 seeds x{off:.4} without near_refine, x{on:.4} with r_n = 3 cells, x{normalized:.4} with normalize_energy instead");
     assert!(on > off + 0.03, "near_refine should raise the flux: x{off:.4} -> x{on:.4}");
     assert!((on - 1.0).abs() < 0.05, "refined flux x{on:.4}");
+    assert!((normalized - 1.0).abs() < 0.03, "normalized flux x{normalized:.4}");
 }
 
 /// `near_upsample: ratio` (near_ratio.rs) on the point light beside the plume, against the plain
-/// upsampling of the same walks (test settings: 4096 walks, 12-cell gather, seed 1). Measured:
-/// image mean x0.867 -> x0.878, image rel. RMSE 0.1643 -> 0.1556, grid 0.2019 -> 0.1986. The
+/// upsampling of the same walks (test settings: 4096 walks, 12-cell gather, seed 1; neither
+/// normalized). Measured: image mean x0.905 -> x0.916, image rel. RMSE 0.1260 -> 0.1178, grid
+/// 0.2187 -> 0.2168 (before `phase_cone`: x0.867 -> x0.878, 0.1643 -> 0.1556). The
 /// two share their walks, so the difference is deterministic: bound +0.005 on the flux (about
 /// half the measured +0.011), the image error not higher, and a ratchet on the ratio's errors
 /// (measured + 10% + 0.01).
@@ -624,14 +686,15 @@ fn vpl_near_ratio_raises_the_plume_point_flux() {
     let name = "plume_point";
     let sc = case(name);
     let run = |near_upsample| {
-        let s = VplSettings { near_field: NearField::Ball, near_upsample, ..test_settings() };
+        // Without normalize_energy, which the ratio stage skips: the same estimate both ways.
+        let s = VplSettings { near_field: NearField::Ball, near_upsample, normalize_energy: false, ..test_settings() };
         errors_against_fixture(name, &sc, &Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap().scattering)
     };
     let (plain, ratio) = (run(super::NearUpsample::Plain), run(super::NearUpsample::Ratio));
     eprintln!("{name}: plain {plain}; ratio {ratio}");
     assert!(ratio.image_ratio > plain.image_ratio + 0.005, "ratio x{:.4} vs plain x{:.4}", ratio.image_ratio, plain.image_ratio);
     assert!(ratio.image <= plain.image, "ratio image {:.4} vs plain {:.4}", ratio.image, plain.image);
-    assert!(ratio.image <= 0.182 && ratio.grid <= 0.229, "ratio image {:.4} grid {:.4}", ratio.image, ratio.grid);
+    assert!(ratio.image <= 0.14 && ratio.grid <= 0.229, "ratio image {:.4} grid {:.4}", ratio.image, ratio.grid);
 }
 
 /// `near_upsample: ratio`'s stage (near_ratio.rs) stops with `Error::Cancelled` once the host
@@ -654,7 +717,7 @@ fn vpl_near_ratio_stage_cancels() {
     let gather = crate::solvers::ScatteringGrid::over_medium(&sc.medium, s.gather_resolution).unwrap();
     let fp = crate::solvers::pop::merge::footprint(&sc.medium, &out).min(crate::solvers::pop::merge::footprint(&sc.medium, &gather));
     let mip = crate::solvers::pop::mip::MediumMip::new(&sc.medium, fp);
-    let (merged, _) = super::gather::gather(&sc, &mip, &walks, &s, &NoProgress).unwrap();
+    let merged = super::gather::gather(&sc, &mip, &walks, &s, &NoProgress).unwrap().merged;
     let pop_like = crate::solvers::pop::settings::PopSettings { output_resolution: s.output_resolution, ..Default::default() };
     let plain = |m: &crate::solvers::pop::merge::Merged| crate::solvers::pop::upsample::upsample(&sc.medium, &mip, m, &pop_like);
     let r = super::near_ratio::upsample(&sc, &mip, &walks, &merged, &s, &pop_like, &Cancelled, plain);
