@@ -627,8 +627,9 @@ fn vpl_bench_image() {
             let d = VplSettings::default();
             let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, ..d };
             let t = std::time::Instant::now();
-            let (out, _) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+            let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
             let solve = t.elapsed().as_secs_f64();
+            eprintln!("{name} {walks} walks: {} VPLs, {} connections; {:?}", rep.vpls, rep.gather.connections, out.timings);
             let img = rgb(&composite(&sc, &out.scattering, &CompositeOptions { transparent: true, aovs: Aovs::NONE, ..Default::default() }).unwrap());
             let secs = t.elapsed().as_secs_f64();
             let (e, ec, ratio) = err(&img);
