@@ -724,3 +724,34 @@ fn vpl_near_ratio_stage_cancels() {
     let r = super::near_ratio::upsample(&sc, &mip, &walks, &merged, &s, &pop_like, &Cancelled, plain);
     assert!(matches!(r, Err(crate::error::Error::Cancelled)), "{:?}", r.map(|g| g.dims));
 }
+
+/// Exploration (not in CI): the compositor's single scattering (vpl's exact part) against the
+/// reference path tracer cut at one scattering event (`max_depth` 1), image mean ratio, on
+/// VPL_CASES (default: the local lights and cube g 0). Exact for the local lights (next-event
+/// estimation only); under a dome the cut also drops the phase-sampled half of its MIS, so
+/// cube g 0's x0.969 says nothing. Measured (4096 spp, noise ~0.2%): at the default 64 cells
+/// point light x0.984, rect x0.985, spot x0.993; at 32 cells point x1.018, rect x1.018; the
+/// camera march's step (0.5 / 0.125 voxel) and subpixels (2 / 6) move it by 0.1% at most. So
+/// of the point light's 8-seed x0.986 (tests above) nearly all is this shared single
+/// scattering, which every solver's composite uses; of the rect light's x0.966 about half.
+/// Not yet explained: the 64-cell grid is the plume's own voxel lattice.
+#[test]
+#[ignore]
+fn vpl_explore_single_scattering() {
+    use crate::compositor::{composite, Aovs, CompositeOptions};
+    use crate::solvers::reference::{Reference, ReferenceSettings};
+    use crate::solvers::testing::{env_u32, mean, rgb};
+    let cases = std::env::var("VPL_CASES").unwrap_or_else(|_| "cube_g0,plume_point,plume_spot,plume_rect".into());
+    for name in cases.split(',') {
+        let sc = case(name);
+        let r = Reference::new(ReferenceSettings { spp: env_u32("VPL_SPP", 16384), seed: 3, transparent: true, max_depth: 1, ..Default::default() }).unwrap();
+        let truth = rgb(&r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap());
+        for res in [32u32, 64] {
+            let single = single_scattering_grid(&sc, res, 32).unwrap();
+            for (step_voxels, subpixels) in [(0.5f32, 2u32), (0.125, 2), (0.5, 6)] {
+                let img = rgb(&composite(&sc, &single, &CompositeOptions { transparent: true, aovs: Aovs::NONE, step_voxels, subpixels, ..Default::default() }).unwrap());
+                eprintln!("{name}: compositor single ({res} cells, camera step {step_voxels} voxels, {subpixels}^2 subpixels) / reference depth 1: x{:.4}", mean(&img) / mean(&truth));
+            }
+        }
+    }
+}
