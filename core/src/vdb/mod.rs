@@ -53,7 +53,7 @@ use header::{FileHeader, GridDescriptor, MetaMap, MetaValue};
 use transform::GridTransform;
 use values::{Codec, ValueKind};
 
-pub use filter::{load_density_filtered, FilterReport};
+pub use filter::{load_density_filtered, FilterReport, MaxResolution};
 pub use stream_writer::{FloatVdbStream, RgbVdbStream};
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 
