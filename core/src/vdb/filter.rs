@@ -254,6 +254,7 @@ impl VdbFile {
                 (f, c0, dims, fine_xf * coarse_to_fine(f as i32))
             }
         };
+        let xf = self.checked_transform(i, &head, xf)?; // as the load will
         let index_bounds = ((first - I64Vec3::ONE).as_vec3(), (first + dims).as_vec3());
         Ok(Some(MediumSize { fine_box: (extent.lo, extent.hi), leaves: extent.leaves, factor, dims, index_to_object: xf, index_bounds }))
     }
@@ -273,9 +274,11 @@ impl VdbFile {
         let mut report = FilterReport { leaves: extent.leaves, ..Default::default() };
         if extent.lo.cmpge(extent.hi).any() {
             report.peak_window_bytes = window1;
-            return Ok((DensityGrid::empty(), fine_xf, report));
+            return Ok((DensityGrid::empty(), self.checked_transform(i, &head, fine_xf)?, report));
         }
         let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution);
+        // Before pass 2 reads every leaf: a transform the medium cannot use fails at once.
+        let xf = self.checked_transform(i, &head, fine_xf * coarse_to_fine(f as i32))?;
         let cells = crate::budget::checked_product("filtered density grid", &[dims.x as u64, dims.y as u64, dims.z as u64])?;
         crate::budget::check_elements::<f64>("filtered density grid (coarse sums)", cells)?;
         let mut acc = Accumulate { f, c0, dims, sums: vec![0.0; cells as usize], clamped_negative: 0, path: &self.path };
@@ -291,11 +294,6 @@ impl VdbFile {
         report.clamped_negative = acc.clamped_negative;
         drop(acc);
         let grid = DensityGrid::from_dense(c0, dims, &means, limits)?;
-        let xf = fine_xf * coarse_to_fine(f);
-        let det = glam::Mat3::from(xf.matrix3).determinant();
-        if !xf.is_finite() || !det.is_finite() || det == 0.0 {
-            return Err(Error::format(&self.path, format!("grid `{}`: transform {} is out of single-precision range", excerpt(&name), excerpt(&head.transform.map_type))));
-        }
         Ok((grid, xf, report))
     }
 }

@@ -78,6 +78,32 @@ fn max_resolution_out_of_range_is_refused_not_clamped() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A transform past f32's range (a scale of 1e30: its determinant overflows) is the whole
+/// load's error in the filtered load (empty grid too) and in `medium_size`, which sizes a
+/// medium that would not load (it returned a size).
+#[test]
+fn a_transform_out_of_f32_range_is_refused_everywhere() {
+    let dir = temp_dir("xf");
+    let (plume, _) = crate::medium::procedural::plume(16, GridLimits::default()).unwrap();
+    let huge = glam::Affine3A::from_scale(glam::Vec3::splat(1e30));
+    for (name, grid) in [("plume", plume), ("empty", DensityGrid::empty())] {
+        let p = dir.join(format!("{name}.vdb"));
+        write_float_grid(&p, "density", &grid, huge, &WriteOptions::default()).unwrap();
+        let file = VdbFile::open(&p, u64::MAX).unwrap();
+        let whole = file.load_float_grid(0, GridLimits::default()).unwrap_err().to_string();
+        assert!(whole.contains("out of single-precision range"), "{name}: {whole}");
+        let filtered = file.load_float_grid_filtered(0, res(8), GridLimits::default()).unwrap_err().to_string();
+        assert_eq!(filtered, whole, "{name}");
+        if name == "plume" {
+            for m in [None, Some(res(8))] {
+                let e = file.medium_size(0, m).unwrap_err().to_string();
+                assert_eq!(e, whole, "{name} {m:?}");
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Filtered (from disk) against the whole load of `path`, at `max_resolution`; returns the
 /// report. Tolerance: the two sum the same f32 values in f64 in different orders, so their
 /// means differ by f64 rounding, well under one f32 ulp: 1e-6 of the largest density.
