@@ -59,7 +59,9 @@ def proposal(s):
         defaults = {x["name"]: x.get("default") for x in entry["settings"]}
         grid = int(preset.get("grid_resolution", defaults.get("grid_resolution", 32)))
     budget_mib = max(1, min(MAX_LPM_BUDGET_MIB, native.lib().vs_memory_budget() >> 22))
-    return {"lpm_memory_budget_mib": budget_mib, "max_resolution": min(4096, MEDIUM_PER_GRID_CELL * grid),
+    # At most 1024 (grid_resolution is at most 512): inside the library's 2..=4096, which
+    # refuses anything else with a clear error.
+    return {"lpm_memory_budget_mib": budget_mib, "max_resolution": MEDIUM_PER_GRID_CELL * grid,
             "grid_resolution": grid}
 
 
