@@ -6,7 +6,7 @@ mod counting_alloc;
 
 use counting_alloc::peak_during;
 use volscatter_core::medium::GridLimits;
-use volscatter_core::vdb::{load_density, load_density_filtered, write_float_grid, VdbCompression, WriteOptions};
+use volscatter_core::vdb::{load_density, load_density_filtered, write_float_grid, MaxResolution, VdbCompression, WriteOptions};
 
 #[test]
 fn filtered_vdb_load_peaks_at_the_coarse_grid_not_the_file() {
@@ -20,7 +20,7 @@ fn filtered_vdb_load_peaks_at_the_coarse_grid_not_the_file() {
     let size = std::fs::metadata(&path).unwrap().len() as usize;
     let (whole, whole_peak) = peak_during(|| load_density(&path, None, GridLimits::default()).unwrap());
     drop(whole);
-    let ((coarse, _, report), peak) = peak_during(|| load_density_filtered(&path, None, 16, GridLimits::default()).unwrap());
+    let ((coarse, _, report), peak) = peak_during(|| load_density_filtered(&path, None, MaxResolution::new(16).unwrap(), GridLimits::default()).unwrap());
     // What the filter holds by design (filter.rs): the f64 sums, the f32 means and the grid
     // built from them (its bricks, at most the dense size again, and the builder's table),
     // the two read windows (the tree reader walks the topology again beside the buffers and

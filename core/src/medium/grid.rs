@@ -301,7 +301,8 @@ impl DensityGridBuilder {
         Ok(())
     }
 
-    fn check_value(v: f32, ijk: IVec3) -> Result<()> {
+    /// A density value must be finite (the VDB filter checks each voxel with this too).
+    pub(crate) fn check_value(v: f32, ijk: IVec3) -> Result<()> {
         if !v.is_finite() {
             return Err(Error::InvalidArgument(format!(
                 "density at voxel ({}, {}, {}) is {v}: densities must be finite",

@@ -348,9 +348,7 @@ fn build_medium(m: &json::MediumJson, base_dir: &Path) -> Result<Medium> {
 /// The `vdb` medium box-filtered to `max_resolution` as it is read (`medium.max_resolution`,
 /// vdb/filter.rs). Emission is refused: its grids would be read whole, at full resolution.
 fn filtered_vdb(file: &Path, m: &json::MediumJson, max_resolution: u32, limits: GridLimits) -> Result<(crate::medium::DensityGrid, Affine3A)> {
-    if !(2..=4096).contains(&max_resolution) {
-        return Err(Error::scene("medium.max_resolution", format!("must be in 2..=4096, got {max_resolution}")));
-    }
+    let max_resolution = crate::vdb::MaxResolution::new(max_resolution).map_err(|why| Error::scene("medium.max_resolution", why))?;
     if m.emission.is_some() {
         return Err(Error::scene(
             "medium.max_resolution",
@@ -443,6 +441,8 @@ mod tests {
         let vdb = |extra: &str| DEFAULT_SCENE_JSON.replace(r#""procedural": "plume", "dims": [64]"#, &format!(r#""vdb": "missing.vdb"{extra}"#));
         let e = err_of(&vdb(r#", "max_resolution": 1"#));
         assert!(e.contains("medium.max_resolution") && e.contains("2..=4096"), "{e}");
+        let e = err_of(&vdb(r#", "max_resolution": 4097"#));
+        assert!(e.contains("medium.max_resolution") && e.contains("got 4097"), "{e}");
         let e = err_of(&vdb(r#", "max_resolution": 32, "emission": {"grid": "density"}"#));
         assert!(e.contains("medium.max_resolution") && e.contains("emission"), "{e}");
         let e = err_of(&vdb(r#", "max_resolution": 32"#));

@@ -23,6 +23,7 @@
 //! error); a tile adds its value times the voxels it shares with each cell. Overlapping nodes,
 //! which a valid file does not have, are summed rather than overwritten.
 
+use std::ops::RangeInclusive;
 use std::path::Path;
 
 use glam::{Affine3A, I64Vec3, IVec3, Vec3};
@@ -31,7 +32,34 @@ use super::tree;
 use super::values::ValueKind;
 use super::VdbFile;
 use crate::error::{excerpt, Error, Result};
-use crate::medium::{DensityGrid, GridLimits};
+use crate::medium::{DensityGrid, DensityGridBuilder, GridLimits};
+
+/// The most cells a box-filtered read keeps along the grid's longest side (the scene's
+/// `medium.max_resolution`, `vs_scene_lpm_estimate`'s argument): checked once, where it comes
+/// in, so the filter never meets a value out of range (it refuses; it does not clamp).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaxResolution(u32);
+
+impl MaxResolution {
+    /// 2: one coarse cell a side has no interior to interpolate, and from 2 up `lattice`'s
+    /// factor fits i32. 4096: the coarse sums alone (8 bytes a cell) are 512 GiB at 4096^3; a
+    /// read that fine is the whole load's (leave `max_resolution` out).
+    pub const RANGE: RangeInclusive<u32> = 2..=4096;
+
+    /// `cells` when in `RANGE`, else why not ("must be in 2..=4096, got 1"), for the caller to
+    /// prefix with the name its user knows the value by.
+    pub fn new(cells: u32) -> std::result::Result<Self, String> {
+        if Self::RANGE.contains(&cells) {
+            Ok(Self(cells))
+        } else {
+            Err(format!("must be in {}..={}, got {cells}", Self::RANGE.start(), Self::RANGE.end()))
+        }
+    }
+
+    pub fn cells(self) -> u32 {
+        self.0
+    }
+}
 
 /// What a filtered load did and held.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -110,12 +138,10 @@ impl Accumulate<'_> {
         d.x as usize + self.dims.x as usize * (d.y as usize + self.dims.y as usize * d.z as usize)
     }
 
-    /// The value as the whole load stores it: f32, finite, negatives 0.
+    /// The value as the whole load stores it: f32, finite (the whole load's check), negatives 0.
     fn value(&mut self, v: f64, at: IVec3) -> Result<f32> {
         let v = v as f32;
-        if !v.is_finite() {
-            return Err(Error::InvalidArgument(format!("density at voxel ({}, {}, {}) is {v}: densities must be finite", at.x, at.y, at.z)));
-        }
+        DensityGridBuilder::check_value(v, at)?;
         if v < 0.0 {
             self.clamped_negative += 1;
             return Ok(0.0);
@@ -174,10 +200,11 @@ impl tree::Visitor for Accumulate<'_> {
 
 /// The factor and coarse lattice (first cell, cells) for `max_resolution` cells along the
 /// box's longest side. Every value fits i32: the box spans at most 2^32 voxels, so `f` is
-/// below 2^31 for `max_resolution` >= 2 and the coarse indices are the fine ones over `f`.
-fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: u32) -> (i64, I64Vec3, I64Vec3) {
+/// below 2^31 for `max_resolution` >= 2 (`MaxResolution::RANGE`) and the coarse indices are
+/// the fine ones over `f`.
+fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: MaxResolution) -> (i64, I64Vec3, I64Vec3) {
     let extent = (hi - lo).max_element().max(1);
-    let m = max_resolution.max(1) as i64;
+    let m = max_resolution.cells() as i64;
     let f = (extent + m - 1) / m;
     let c0 = lo.div_euclid(I64Vec3::splat(f));
     let c1 = (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f));
@@ -212,7 +239,7 @@ pub struct MediumSize {
 impl VdbFile {
     /// `MediumSize` of float grid `i` read whole (`max_resolution` None) or box-filtered to
     /// at most `max_resolution` cells a side; None for a grid with no leaf or non-zero tile.
-    pub fn medium_size(&self, i: usize, max_resolution: Option<u32>) -> Result<Option<MediumSize>> {
+    pub fn medium_size(&self, i: usize, max_resolution: Option<MaxResolution>) -> Result<Option<MediumSize>> {
         let head = self.grid_head(i)?;
         let mut extent = Extent { lo: I64Vec3::MAX, hi: I64Vec3::MIN, leaves: 0, path: &self.path };
         self.visit_tree_windowed(i, ValueKind::FLOAT, &mut extent, None)?;
@@ -223,17 +250,18 @@ impl VdbFile {
         let (factor, first, dims, xf) = match max_resolution {
             None => (1, extent.lo, extent.hi - extent.lo, fine_xf),
             Some(n) => {
-                let (f, c0, dims) = lattice(extent.lo, extent.hi, n.max(2));
+                let (f, c0, dims) = lattice(extent.lo, extent.hi, n);
                 (f, c0, dims, fine_xf * coarse_to_fine(f as i32))
             }
         };
+        let xf = self.checked_transform(i, &head, xf)?; // as the load will
         let index_bounds = ((first - I64Vec3::ONE).as_vec3(), (first + dims).as_vec3());
         Ok(Some(MediumSize { fine_box: (extent.lo, extent.hi), leaves: extent.leaves, factor, dims, index_to_object: xf, index_bounds }))
     }
 
     /// Float grid `i` box-filtered to at most `max_resolution` cells along its longest side
     /// (see the module docs), with the coarse grid's index-to-world map.
-    pub fn load_float_grid_filtered(&self, i: usize, max_resolution: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
+    pub fn load_float_grid_filtered(&self, i: usize, max_resolution: MaxResolution, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
         let name = self.grids[i].name.clone();
         let in_grid = |e: Error| match e {
             Error::InvalidArgument(m) => Error::format(&self.path, format!("grid `{}`: {m}", excerpt(&name))),
@@ -246,9 +274,11 @@ impl VdbFile {
         let mut report = FilterReport { leaves: extent.leaves, ..Default::default() };
         if extent.lo.cmpge(extent.hi).any() {
             report.peak_window_bytes = window1;
-            return Ok((DensityGrid::empty(), fine_xf, report));
+            return Ok((DensityGrid::empty(), self.checked_transform(i, &head, fine_xf)?, report));
         }
-        let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution.max(2));
+        let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution);
+        // Before pass 2 reads every leaf: a transform the medium cannot use fails at once.
+        let xf = self.checked_transform(i, &head, fine_xf * coarse_to_fine(f as i32))?;
         let cells = crate::budget::checked_product("filtered density grid", &[dims.x as u64, dims.y as u64, dims.z as u64])?;
         crate::budget::check_elements::<f64>("filtered density grid (coarse sums)", cells)?;
         let mut acc = Accumulate { f, c0, dims, sums: vec![0.0; cells as usize], clamped_negative: 0, path: &self.path };
@@ -264,18 +294,13 @@ impl VdbFile {
         report.clamped_negative = acc.clamped_negative;
         drop(acc);
         let grid = DensityGrid::from_dense(c0, dims, &means, limits)?;
-        let xf = fine_xf * coarse_to_fine(f);
-        let det = glam::Mat3::from(xf.matrix3).determinant();
-        if !xf.is_finite() || !det.is_finite() || det == 0.0 {
-            return Err(Error::format(&self.path, format!("grid `{}`: transform {} is out of single-precision range", excerpt(&name), excerpt(&head.transform.map_type))));
-        }
         Ok((grid, xf, report))
     }
 }
 
 /// `load_density` box-filtered to at most `max_resolution` cells a side (see the module docs):
 /// the file is read through a bounded window, never whole.
-pub fn load_density_filtered(path: &Path, grid: Option<&str>, max_resolution: u32, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
+pub fn load_density_filtered(path: &Path, grid: Option<&str>, max_resolution: MaxResolution, limits: GridLimits) -> Result<(DensityGrid, Affine3A, FilterReport)> {
     let f = VdbFile::open(path, u64::MAX)?;
     let i = f.find_density_grid(grid)?;
     f.load_float_grid_filtered(i, max_resolution, limits)

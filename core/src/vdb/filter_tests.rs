@@ -55,6 +55,55 @@ fn coarse_values(g: &DensityGrid, report: &FilterReport) -> Vec<f32> {
     out
 }
 
+fn res(cells: u32) -> MaxResolution {
+    MaxResolution::new(cells).unwrap()
+}
+
+/// `max_resolution` out of 2..=4096 is refused with the range and the value (it was clamped
+/// into range by the filter, and its range written out in three places), and both ends of the
+/// range are taken: at 2 the plume is 2 cells along its longest side.
+#[test]
+fn max_resolution_out_of_range_is_refused_not_clamped() {
+    for bad in [0, 1, 4097, u32::MAX] {
+        let why = MaxResolution::new(bad).unwrap_err();
+        assert!(why.contains("2..=4096") && why.contains(&bad.to_string()), "{bad}: {why}");
+    }
+    assert_eq!(MaxResolution::new(4096).map(MaxResolution::cells), Ok(4096));
+    let dir = temp_dir("range");
+    let (plume, xf) = crate::medium::procedural::plume(16, GridLimits::default()).unwrap();
+    let p = dir.join("plume.vdb");
+    write_float_grid(&p, "density", &plume, xf, &WriteOptions::default()).unwrap();
+    let (_, _, r) = load_density_filtered(&p, None, res(2), GridLimits::default()).unwrap();
+    assert_eq!(r.coarse_dims.max_element(), 2, "{r:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A transform past f32's range (a scale of 1e30: its determinant overflows) is the whole
+/// load's error in the filtered load (empty grid too) and in `medium_size`, which sizes a
+/// medium that would not load (it returned a size).
+#[test]
+fn a_transform_out_of_f32_range_is_refused_everywhere() {
+    let dir = temp_dir("xf");
+    let (plume, _) = crate::medium::procedural::plume(16, GridLimits::default()).unwrap();
+    let huge = glam::Affine3A::from_scale(glam::Vec3::splat(1e30));
+    for (name, grid) in [("plume", plume), ("empty", DensityGrid::empty())] {
+        let p = dir.join(format!("{name}.vdb"));
+        write_float_grid(&p, "density", &grid, huge, &WriteOptions::default()).unwrap();
+        let file = VdbFile::open(&p, u64::MAX).unwrap();
+        let whole = file.load_float_grid(0, GridLimits::default()).unwrap_err().to_string();
+        assert!(whole.contains("out of single-precision range"), "{name}: {whole}");
+        let filtered = file.load_float_grid_filtered(0, res(8), GridLimits::default()).unwrap_err().to_string();
+        assert_eq!(filtered, whole, "{name}");
+        if name == "plume" {
+            for m in [None, Some(res(8))] {
+                let e = file.medium_size(0, m).unwrap_err().to_string();
+                assert_eq!(e, whole, "{name} {m:?}");
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Filtered (from disk) against the whole load of `path`, at `max_resolution`; returns the
 /// report. Tolerance: the two sum the same f32 values in f64 in different orders, so their
 /// means differ by f64 rounding, well under one f32 ulp: 1e-6 of the largest density.
@@ -62,7 +111,7 @@ fn check_file(path: &Path, max_resolution: u32) -> Option<FilterReport> {
     let file = VdbFile::open(path, u64::MAX).unwrap();
     let i = file.find_density_grid(None).ok()?;
     let Ok((whole, xf)) = file.load_float_grid(i, GridLimits::default()) else { return None };
-    let (coarse, cxf, report) = file.load_float_grid_filtered(i, max_resolution, GridLimits::default()).unwrap();
+    let (coarse, cxf, report) = file.load_float_grid_filtered(i, res(max_resolution), GridLimits::default()).unwrap();
     if whole.is_empty() {
         assert!(coarse.is_empty(), "{}", path.display());
         return Some(report);
@@ -79,7 +128,7 @@ fn check_file(path: &Path, max_resolution: u32) -> Option<FilterReport> {
     assert!((cxf.transform_point3(c) - xf.transform_point3(fine_centre)).length() < 1e-4 * xf.transform_vector3(glam::Vec3::ONE).length() * f);
     // In memory, the same filter gives the same grid to the bit.
     let mem = VdbFile::from_bytes(std::fs::read(path).unwrap(), path).unwrap();
-    let (m, mxf, mreport) = mem.load_float_grid_filtered(i, max_resolution, GridLimits::default()).unwrap();
+    let (m, mxf, mreport) = mem.load_float_grid_filtered(i, res(max_resolution), GridLimits::default()).unwrap();
     assert_eq!(coarse_values(&m, &report).iter().map(|v| v.to_bits()).collect::<Vec<_>>(), got.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
     assert_eq!((mxf, mreport.peak_window_bytes), (cxf, 0));
     assert_eq!(FilterReport { peak_window_bytes: report.peak_window_bytes, ..mreport }, report);
@@ -103,7 +152,7 @@ fn filtered_load_equals_the_whole_load_box_filtered_and_reads_one_window() {
             assert!(r.leaves > 0);
         }
         // At the full resolution the filter is the identity: the whole load to the bit.
-        let (full, _, r) = load_density_filtered(&p, None, 1024, GridLimits::default()).unwrap();
+        let (full, _, r) = load_density_filtered(&p, None, res(1024), GridLimits::default()).unwrap();
         let (whole, _) = load_density(&p, None, GridLimits::default()).unwrap();
         assert_eq!(r.factor, 1);
         let (lo, hi) = whole.bbox();
@@ -126,7 +175,7 @@ fn filtered_load_equals_the_whole_load_box_filtered_and_reads_one_window() {
         if r.is_none() && p.file_name().is_some_and(|n| n == "roottile_blosc_full.vdb") {
             // Root tiles of 4096^3 voxels (12288 x 4096 x 4096 here), which the whole load refuses (over the grid
             // limits): filtered, it is 12^3 cells of its value at most.
-            let (g, _, r) = load_density_filtered(&p, None, 12, GridLimits::default()).unwrap();
+            let (g, _, r) = load_density_filtered(&p, None, res(12), GridLimits::default()).unwrap();
             eprintln!("{}: filtered {r:?}, max {}", p.display(), g.max_value());
             assert!(r.coarse_dims.max_element() <= 12 && r.factor >= 4096 / 12, "{r:?}");
         }
@@ -147,12 +196,12 @@ fn truncated_files_are_clear_errors_when_filtered() {
     let n = bytes.len();
     for at in (0..40).map(|k| k * n / 40).chain([n - 1]) {
         std::fs::write(&cut, &bytes[..at]).unwrap();
-        let e = load_density_filtered(&cut, None, 8, GridLimits::default()).err().unwrap_or_else(|| panic!("cut at {at} of {n} loaded")).to_string();
+        let e = load_density_filtered(&cut, None, res(8), GridLimits::default()).err().unwrap_or_else(|| panic!("cut at {at} of {n} loaded")).to_string();
         assert!(e.contains("cut.vdb"), "cut at {at}: {e}");
     }
     // The descriptor's offsets past the end: said so before any tree is read.
     std::fs::write(&cut, &bytes[..n - 100]).unwrap();
-    let e = load_density_filtered(&cut, None, 8, GridLimits::default()).unwrap_err().to_string();
+    let e = load_density_filtered(&cut, None, res(8), GridLimits::default()).unwrap_err().to_string();
     assert!(e.contains("past the end of the file"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

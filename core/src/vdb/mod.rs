@@ -53,7 +53,7 @@ use header::{FileHeader, GridDescriptor, MetaMap, MetaValue};
 use transform::GridTransform;
 use values::{Codec, ValueKind};
 
-pub use filter::{load_density_filtered, FilterReport};
+pub use filter::{load_density_filtered, FilterReport, MaxResolution};
 pub use stream_writer::{FloatVdbStream, RgbVdbStream};
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 
@@ -158,6 +158,20 @@ impl VdbFile {
         Ok(GridHead { compression, metadata, transform, tree_pos: r.pos() })
     }
 
+    /// `xf`, grid `i`'s index-to-world map (its file transform, maybe times the filter's
+    /// coarse cells), when a medium can use it: finite and invertible in f32 (the file holds
+    /// doubles, which may be past f32's range); else an error naming the file and grid.
+    fn checked_transform(&self, i: usize, head: &GridHead, xf: Affine3A) -> Result<Affine3A> {
+        let det = glam::Mat3::from(xf.matrix3).determinant();
+        if !xf.is_finite() || !det.is_finite() || det == 0.0 {
+            return Err(Error::format(
+                &self.path,
+                format!("grid `{}`: transform {} is out of single-precision range", excerpt(&self.grids[i].name), excerpt(&head.transform.map_type)),
+            ));
+        }
+        Ok(xf)
+    }
+
     /// Index of the grid whose tree grid `i` uses (itself, or its instance parent).
     fn tree_owner(&self, i: usize) -> Result<usize> {
         let gd = &self.grids[i];
@@ -260,14 +274,7 @@ impl VdbFile {
             Err(Error::InvalidArgument(m)) => return Err(Error::format(&self.path, format!("grid `{}`: {m}", excerpt(&name)))),
             Err(e) => return Err(e),
         };
-        let xf = head.transform.to_affine3a();
-        let det = glam::Mat3::from(xf.matrix3).determinant();
-        if !xf.is_finite() || !det.is_finite() || det == 0.0 {
-            return Err(Error::format(
-                &self.path,
-                format!("grid `{}`: transform {} is out of single-precision range", excerpt(&name), excerpt(&head.transform.map_type)),
-            ));
-        }
+        let xf = self.checked_transform(i, &head, head.transform.to_affine3a())?;
         let grid = v.builder.build()?;
         Ok((grid, xf, skipped))
     }

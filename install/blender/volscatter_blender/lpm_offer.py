@@ -12,14 +12,19 @@ reads the file once, box-filtered, in a bounded window (the 1024^3 cumulus in 45
 Every number comes from the library (`native.lpm_estimate`, the formulas the solver plans
 with), read from the file's topology alone, never from the voxels; nothing is computed here.
 Only file-backed volumes get the offer (a generated volume is already in Blender's memory).
+The offer describes what Compute Scattering would solve (`operators.source_of`'s lookup: a
+result volume's source, a smoke domain's cache) with the settings it would run
+(`properties.solver_settings` of the settings as the operator leaves them).
 """
 
 import json
 import os
 
 import bpy
+import mathutils
 
-from . import native, properties, scene_export
+from . import mantaflow, native, operators, properties, scene_export
+from .scene_export import ExportError
 
 OFFER_DENSE_BYTES = 1 << 30
 #: The medium box-filtered to twice the propagation grid: measured (lpm's out_of_core_tests),
@@ -54,20 +59,59 @@ def proposal(s):
         defaults = {x["name"]: x.get("default") for x in entry["settings"]}
         grid = int(preset.get("grid_resolution", defaults.get("grid_resolution", 32)))
     budget_mib = max(1, min(MAX_LPM_BUDGET_MIB, native.lib().vs_memory_budget() >> 22))
-    return {"lpm_memory_budget_mib": budget_mib, "max_resolution": min(4096, MEDIUM_PER_GRID_CELL * grid),
+    # At most 1024 (grid_resolution is at most 512): inside the library's 2..=4096, which
+    # refuses anything else with a clear error.
+    return {"lpm_memory_budget_mib": budget_mib, "max_resolution": MEDIUM_PER_GRID_CELL * grid,
             "grid_resolution": grid}
 
 
-def estimate(ob, proposed):
-    """`native.lpm_estimate` of the object's file under the proposed settings, cached by file,
-    modification time, placement and settings (the panel redraws often); None when it fails."""
-    path = source_file(ob)
+class _AsApplied:
+    """Object.volscatter `s` as `apply(s, proposed)` would leave it, `s` itself unchanged: the
+    fields `apply` sets are held here, the rest read from `s`."""
+
+    def __init__(self, s, proposed):
+        self._s = s
+        apply(self, proposed)
+
+    def __getattr__(self, name):  # only for the fields not set here
+        return getattr(self._s, name)
+
+
+def run_settings(s, proposed):
+    """The solver settings Compute Scattering runs with once the operator applied `proposed`
+    to `s`: `properties.solver_settings` itself, so that the estimate cannot drift from the
+    run (the preset's `directions`, lpm streamed's overrides)."""
+    return properties.solver_settings(_AsApplied(s, proposed))
+
+
+def target(ob, context):
+    """-> (the VDB file Compute Scattering would solve when asked on `ob`, or None; its
+    object-to-world rows; the object whose settings drive it), as `operators.source_of` finds
+    them, read only (the panel calls this while drawing): a result volume stands for its source,
+    a Mantaflow domain for its cache volume, or before Compute made that, for the cache file of
+    the current frame placed as `mantaflow.cache_volume` places it (untransformed)."""
+    owner = operators.owner_of(ob)
+    if owner is None:
+        return None, None, None
+    vol = owner
+    if mantaflow.gas_domain(owner) is not None:
+        vol = mantaflow.find_cache_volume(owner)
+        if vol is None:
+            try:
+                path = mantaflow.cache_file(owner, context.scene.frame_current)
+            except ExportError:  # no bake: Compute says so
+                path = None
+            return path, scene_export.matrix_rows(mathutils.Matrix.Identity(4)), owner
+    return source_file(vol), scene_export.matrix_rows(vol.matrix_world), owner
+
+
+def estimate(path, m, proposed, settings):
+    """`native.lpm_estimate` of the VDB at `path` placed by `m` under the proposed settings,
+    cached by file, modification time, placement and settings (the panel redraws often); None
+    when it fails."""
     if path is None:
         return None
     st = os.stat(path)
-    m = scene_export.matrix_rows(ob.matrix_world)
-    settings = {"grid_resolution": proposed["grid_resolution"], "out_of_core": True,
-                "memory_budget": proposed["lpm_memory_budget_mib"] << 20, "first_order": "boundary"}
     key = (path, st.st_mtime_ns, st.st_size, tuple(m), proposed["max_resolution"], json.dumps(settings, sort_keys=True))
     cached = _cache.get(path)
     if cached is None or cached[0] != key:
@@ -83,11 +127,16 @@ def threshold():
     return min(OFFER_DENSE_BYTES, native.lib().vs_memory_budget() // 2)
 
 
-def offer(ob, s):
-    """(estimate, proposal) when the volume is large enough for the offer, else None."""
+def offer(ob, context):
+    """(estimate, proposal) when the volume Compute Scattering would solve, asked on `ob`, is
+    large enough for the offer, else None."""
     try:
+        path, m, owner = target(ob, context)
+        if path is None:
+            return None
+        s = owner.volscatter
         proposed = proposal(s)
-        est = estimate(ob, proposed)
+        est = estimate(path, m, proposed, run_settings(s, proposed))
     except Exception:  # no library: the operators say why
         return None
     if est is None or est["dense_bytes"] <= threshold():
@@ -134,10 +183,11 @@ class VOLSCATTER_OT_use_lpm_streamed(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.object is not None and context.object.type == 'VOLUME'
+        ob = context.object
+        return ob is not None and (ob.type == 'VOLUME' or mantaflow.gas_domain(ob) is not None)
 
     def execute(self, context):
-        s = context.object.volscatter
+        s = operators.owner_of(context.object).volscatter  # the settings Compute Scattering reads
         try:
             proposed = proposal(s)
         except Exception as e:

@@ -51,12 +51,27 @@ def cache_sequence(domain_ob):
     return folder, files
 
 
+def find_cache_volume(domain_ob):
+    """The Volume object `cache_volume` made for the domain, or None (read only)."""
+    return next((o for o in bpy.data.objects if o.type == 'VOLUME' and o.get(DOMAIN_TAG) == domain_ob.name), None)
+
+
+def cache_file(domain_ob, frame):
+    """The cache file the domain's cache volume reads at `frame` (read only, nothing made): as
+    `cache_volume` sets the sequence, frame f reads fluid_data_f.vdb, clipped to the first and
+    last file; an ExportError when there is no cache, None when that frame's file is missing."""
+    folder, files = cache_sequence(domain_ob)
+    f = min(max(frame, files[0][0]), files[-1][0])
+    name = dict(files).get(f)
+    return os.path.join(folder, name) if name else None
+
+
 def cache_volume(domain_ob, context):
     """The Volume object reading the domain's cache sequence, with the domain's material:
     made on first use, updated after. Frame f reads fluid_data_<f>.vdb."""
     folder, files = cache_sequence(domain_ob)
     first, last = files[0][0], files[-1][0]
-    ob = next((o for o in bpy.data.objects if o.type == 'VOLUME' and o.get(DOMAIN_TAG) == domain_ob.name), None)
+    ob = find_cache_volume(domain_ob)
     if ob is None:
         vol = bpy.data.volumes.new(domain_ob.name + "_cache")
         ob = bpy.data.objects.new(domain_ob.name + "_cache", vol)

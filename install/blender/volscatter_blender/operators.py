@@ -27,16 +27,23 @@ RESULT_TAG = "volscatter_source"
 KEYED_TAG = "volscatter_keyed_frames"
 
 
-def source_of(ob, context):
-    """-> (the Volume object to solve, the object whose settings drive it and that renders the
-    original smoke). A result volume stands for its source; a Mantaflow smoke domain for the
-    Volume reading its cache (mantaflow.cache_volume), with the domain's settings."""
+def owner_of(ob):
+    """The object whose settings drive a solve asked on `ob` and that renders the original
+    smoke: a result volume stands for its source, a Mantaflow cache volume for its domain.
+    Reads only (the panel calls it while drawing)."""
     src = ob.get(RESULT_TAG) if ob is not None else None
     if src and src in bpy.data.objects and bpy.data.objects[src].type == 'VOLUME':
         ob = bpy.data.objects[src]  # asked on a result volume: work on its source
     dom = ob.get(mantaflow.DOMAIN_TAG) if ob is not None else None
     if dom and dom in bpy.data.objects and mantaflow.gas_domain(bpy.data.objects[dom]):
         ob = bpy.data.objects[dom]  # a domain's cache volume: the domain holds the settings
+    return ob
+
+
+def source_of(ob, context):
+    """-> (the Volume object to solve, `owner_of(ob)`). A Mantaflow smoke domain stands for the
+    Volume reading its cache (mantaflow.cache_volume: made or refreshed here)."""
+    ob = owner_of(ob)
     if mantaflow.gas_domain(ob) is not None:
         return mantaflow.cache_volume(ob, context), ob
     return ob, ob

@@ -97,7 +97,7 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
             # The pick's first clause ("auto picked pop preview: ...") fits a panel line.
             col.label(text=s.last_choice.split(":")[0], icon='INFO')
         col.prop(s, "hide_original")
-        offer = lpm_offer.offer(context.object, s)
+        offer = lpm_offer.offer(context.object, context)
         if offer:
             # A volume too large to solve in memory (lpm_offer.py): its size and what lpm
             # streamed will use, from the library, and the button that sets it up.

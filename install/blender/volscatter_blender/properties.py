@@ -110,6 +110,29 @@ def solver_has(name, setting):
     return entry is not None and any(s["name"] == setting for s in entry["settings"])
 
 
+def lpm_streamed(memory_budget_mib):
+    """The settings that make lpm run streamed (out of core) under a memory budget of
+    `memory_budget_mib` MiB. Out of core streams a sun only as boundary radiance (the exact
+    first order needs the whole grid): set with it, not left to fail."""
+    return {"out_of_core": True, "memory_budget": memory_budget_mib << 20, "first_order": "boundary"}
+
+
+def solver_settings(s):
+    """The JSON settings for the chosen solver of `s` (Object.volscatter, or an object with its
+    fields: lpm_offer estimates the settings its operator would leave): the registry preset, or
+    under Custom the fields whose setting the solver has; the seed wherever the solver has one;
+    lpm streamed when it is on."""
+    if s.quality == CUSTOM:
+        out = {setting: getattr(s, field) for field, setting in CUSTOM_FIELDS if solver_has(s.solver, setting)}
+    else:
+        out = preset_settings(s.solver, s.quality) or {}
+    if solver_has(s.solver, "seed"):
+        out["seed"] = s.seed
+    if s.solver == "lpm" and s.lpm_out_of_core:
+        out.update(lpm_streamed(s.lpm_memory_budget_mib))
+    return out
+
+
 class VolscatterSettings(bpy.types.PropertyGroup):
     solver: EnumProperty(name="Solver", items=_solver_items, default=AUTO_NUMBER, update=_show_preset)
     # default 1: the registry's second preset, "preview" (the Custom fields' defaults below are
@@ -162,19 +185,8 @@ class VolscatterSettings(bpy.types.PropertyGroup):
                                 description="What the Automatic solver picked for the last result, and why")
 
     def solver_settings(self):
-        """The JSON settings for the chosen solver: its registry preset, or under Custom the
-        fields whose setting the solver has; the seed wherever the solver has one."""
-        if self.quality == CUSTOM:
-            s = {setting: getattr(self, field) for field, setting in CUSTOM_FIELDS if solver_has(self.solver, setting)}
-        else:
-            s = preset_settings(self.solver, self.quality) or {}
-        if solver_has(self.solver, "seed"):
-            s["seed"] = self.seed
-        if self.solver == "lpm" and self.lpm_out_of_core:
-            # Out of core streams a sun only as boundary radiance (the exact first order needs
-            # the whole grid): set with it, not left to fail.
-            s.update(out_of_core=True, memory_budget=self.lpm_memory_budget_mib << 20, first_order="boundary")
-        return s
+        """`solver_settings` of these settings: what Compute Scattering runs."""
+        return solver_settings(self)
 
 
 classes = (VolscatterSettings,)

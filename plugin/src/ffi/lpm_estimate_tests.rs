@@ -87,6 +87,7 @@ fn lpm_estimate_of_a_sparse_1024_vdb_without_reading_its_voxels() {
         ("missing file", "/nonexistent/cloud.vdb", 0, None, VsStatus::Io),
         ("not a VDB", junk.to_str().unwrap(), 0, None, VsStatus::Format),
         ("max_resolution 1", p, 1, None, VsStatus::InvalidArgument),
+        ("max_resolution 4097", p, 4097, None, VsStatus::InvalidArgument),
         ("settings not JSON", p, 0, Some("{"), VsStatus::InvalidArgument),
         ("unknown setting", p, 0, Some(r#"{"grid_res": 3}"#), VsStatus::InvalidScene),
         ("invalid setting", p, 0, Some(r#"{"directions": 7}"#), VsStatus::InvalidScene),

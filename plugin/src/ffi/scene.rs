@@ -265,13 +265,14 @@ pub unsafe extern "C" fn vs_scene_lpm_estimate(
         let path = path_arg(path, "path")?;
         let grid_name = opt_str_arg(grid_name, "grid_name")?;
         let o2w = if object_to_world.is_null() { Affine3A::IDENTITY } else { affine_arg(object_to_world, "object_to_world")? };
-        if max_resolution != 0 && !(2..=4096).contains(&max_resolution) {
-            return Err(FfiError::invalid(format!("max_resolution must be 0 (whole) or in 2..=4096, got {max_resolution}")));
-        }
+        let max_resolution = match max_resolution {
+            0 => None,
+            n => Some(volscatter_core::vdb::MaxResolution::new(n).map_err(|why| FfiError::invalid(format!("max_resolution (0: whole) {why}")))?),
+        };
         let settings = lpm_settings_arg(settings_json)?;
         let file = volscatter_core::vdb::VdbFile::open(&path, u64::MAX)?;
         let i = file.find_density_grid(grid_name)?;
-        let Some(size) = file.medium_size(i, (max_resolution != 0).then_some(max_resolution))? else {
+        let Some(size) = file.medium_size(i, max_resolution)? else {
             return Ok(());
         };
         let xf = o2w * size.index_to_object;

@@ -230,7 +230,7 @@ fn lpm_out_of_core_on_a_box_filtered_vdb_medium() {
         );
         let streamed = Scene::from_json_str(&json, &dir).unwrap().medium;
         let file = crate::vdb::VdbFile::from_bytes(std::fs::read(&vdb).unwrap(), &vdb).unwrap();
-        let (grid, xf, report) = file.load_float_grid_filtered(0, max_resolution, Default::default()).unwrap();
+        let (grid, xf, report) = file.load_float_grid_filtered(0, crate::vdb::MaxResolution::new(max_resolution).unwrap(), Default::default()).unwrap();
         assert_eq!(streamed.index_to_world, xf);
         let (lo, hi) = grid.bbox();
         assert_eq!(streamed.grid.bbox(), (lo, hi));
