@@ -58,6 +58,7 @@
 
 pub mod backend;
 pub mod compensate;
+pub mod depth_map;
 pub mod energy;
 pub mod gather;
 pub use crate::medium::dense_march as march;
@@ -76,7 +77,7 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
 pub use gather::GatherStats;
-pub use settings::{NearField, NearUpsample, UpsampleFit, VplSettings};
+pub use settings::{NearField, NearUpsample, Transmittance, UpsampleFit, VplSettings};
 
 pub struct Vpl {
     pub settings: VplSettings,

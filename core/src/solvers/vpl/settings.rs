@@ -39,6 +39,17 @@ pub enum UpsampleFit {
     Linear,
 }
 
+/// How the gather finds each connection's transmittance (gather.rs, depth_map.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Transmittance {
+    /// A deterministic ray march to every VPL (`gather::march_step`).
+    March,
+    /// Per gather point, a map of the optical depth along `map_resolution`^2 directions
+    /// (depth_map.rs), looked up for the VPLs beyond two gather cells, the nearer ones marched.
+    Map,
+}
+
 /// How the near part of J (the light of VPLs within `near_radius` gather cells) reaches the
 /// output points (vpl/near_ratio.rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -223,6 +234,10 @@ pub struct VplSettings {
     /// cent dark, a finer gather's share (32 cells with 8 interleaved subsets of 4096 walks,
     /// with it: spot x0.997, rect x0.977, point x0.988, cube g 0 x1.006, 4 seeds).
     pub normalize_energy: bool,
+    /// How the gather's connections get their transmittance (`Transmittance`). MEASURE
+    pub transmittance: Transmittance,
+    /// `transmittance: map`: the map's side n (n x n directions, equal-area octahedral). MEASURE
+    pub map_resolution: u32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
     /// Spatial sigma of the bilateral filter, in gather cells: at least ~0.8 so that the
@@ -257,6 +272,8 @@ impl Default for VplSettings {
             near_upsample: NearUpsample::Plain,
             near_radius: 1.5,
             normalize_energy: true,
+            transmittance: Transmittance::March,
+            map_resolution: 16,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
@@ -299,6 +316,9 @@ impl VplSettings {
         }
         if !(self.near_radius.is_finite() && (0.5..=4.0).contains(&self.near_radius)) {
             return Err(Error::scene("solver.near_radius", format!("must be in [0.5, 4], got {}", self.near_radius)));
+        }
+        if !(2..=64).contains(&self.map_resolution) {
+            return Err(Error::scene("solver.map_resolution", format!("must be in 2..=64, got {}", self.map_resolution)));
         }
         validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
         if !(1..=1024).contains(&self.dome_directions) {
