@@ -3,8 +3,8 @@
 //!
 //! Why: the march to each VPL is nearly all of the gather's time (default scene, 16384 walks:
 //! 17.7M connections at ~35 trilinear lookups each, 2.9 s of a 3.5 s render). The map marches
-//! once along each of n x n directions outwards from the point (pop's equal-area octahedral
-//! map, radial/octahedral.rs), storing the cumulative density integral at radial nodes one
+//! once along each of n x n directions outwards from the point (the octahedral map's folded
+//! square, `octahedral_encode`), storing the cumulative density integral at radial nodes one
 //! march step apart; a VPL's optical depth is then bilinear in direction (across the map's
 //! folded border) and linear in distance, the same midpoint quadrature along each direction.
 //! Cost per point n^2 x nodes lookups once, against VPLs x ~35.
@@ -18,7 +18,26 @@
 use glam::{Vec2, Vec3};
 
 use super::march::Marcher;
-use crate::solvers::pop::radial::octahedral::{sphere_to_square, square_to_sphere, wrap};
+use crate::solvers::pop::radial::octahedral::wrap;
+
+/// Point of the unit square for a unit direction: the plain octahedral map (not pop's
+/// equal-area one: no atan per lookup, which was 8% of a render's time; its cells differ in
+/// solid angle by up to ~2x, which only matters for the angular resolution). The square's
+/// border is folded as the equal-area map's (octahedral::wrap).
+#[inline]
+fn octahedral_encode(d: Vec3) -> Vec2 {
+    let p = Vec2::new(d.x, d.y) / (d.x.abs() + d.y.abs() + d.z.abs());
+    let p = if d.z < 0.0 { Vec2::new((1.0 - p.y.abs()).copysign(p.x), (1.0 - p.x.abs()).copysign(p.y)) } else { p };
+    p * 0.5 + 0.5
+}
+
+/// Unit direction of a point of the unit square; inverse of `octahedral_encode`.
+fn octahedral_decode(uv: Vec2) -> Vec3 {
+    let p = uv * 2.0 - 1.0;
+    let z = 1.0 - p.x.abs() - p.y.abs();
+    let (x, y) = if z < 0.0 { ((1.0 - p.y.abs()).copysign(p.x), (1.0 - p.x.abs()).copysign(p.y)) } else { (p.x, p.y) };
+    Vec3::new(x, y, z).normalize()
+}
 
 /// The map of one point, its buffers reused from point to point.
 pub struct DepthMap {
@@ -36,7 +55,7 @@ pub struct DepthMap {
 impl DepthMap {
     /// An empty map of n x n directions.
     pub fn new(n: u32) -> Self {
-        let directions = (0..n * n).map(|c| square_to_sphere(Vec2::new(((c % n) as f32 + 0.5) / n as f32, ((c / n) as f32 + 0.5) / n as f32))).collect();
+        let directions = (0..n * n).map(|c| octahedral_decode(Vec2::new(((c % n) as f32 + 0.5) / n as f32, ((c / n) as f32 + 0.5) / n as f32))).collect();
         let d = (n * n) as usize;
         DepthMap { n, directions, inv_h: vec![0.0; d], start: vec![0; d], len: vec![0; d], nodes: Vec::new() }
     }
@@ -58,10 +77,11 @@ impl DepthMap {
     #[inline]
     pub fn lookup(&self, d: Vec3, t: f32) -> f32 {
         let n = self.n as i32;
-        let p = sphere_to_square(d) * self.n as f32 - 0.5;
-        let (i0, j0) = (p.x.floor(), p.y.floor());
-        let (fx, fy) = (p.x - i0, p.y - j0);
-        let (i0, j0) = (i0 as i32, j0 as i32);
+        // + 1 so that truncation is floor (p >= -0.5).
+        let p = octahedral_encode(d) * self.n as f32 + 0.5;
+        let (i0, j0) = (p.x as i32, p.y as i32);
+        let (fx, fy) = (p.x - i0 as f32, p.y - j0 as f32);
+        let (i0, j0) = (i0 - 1, j0 - 1);
         let at = |i: i32, j: i32| {
             let (i, j) = wrap(i, j, n);
             self.along((i + self.n * j) as usize, t)
@@ -91,6 +111,27 @@ impl DepthMap {
 mod tests {
     use super::*;
     use crate::medium::optical_depth;
+
+    /// The octahedral map's decode inverts its encode (to 1e-5 of the square), and its border
+    /// is folded as octahedral::wrap assumes: the point u of an edge is the point 1 - u of the
+    /// same edge (so the cell across the edge from (i, 0) is (n - 1 - i, 0)), to 1e-5.
+    #[test]
+    fn octahedral_encode_inverts_decode_and_folds_as_wrap() {
+        let n = 8;
+        for j in 0..n {
+            for i in 0..n {
+                let uv = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                assert!((octahedral_encode(octahedral_decode(uv)) - uv).length() < 1e-5, "cell ({i}, {j})");
+            }
+        }
+        for k in 0..=16 {
+            let t = k as f32 / 16.0;
+            for (a, b) in [(Vec2::new(t, 0.0), Vec2::new(1.0 - t, 0.0)), (Vec2::new(t, 1.0), Vec2::new(1.0 - t, 1.0)), (Vec2::new(0.0, t), Vec2::new(0.0, 1.0 - t)), (Vec2::new(1.0, t), Vec2::new(1.0, 1.0 - t))] {
+                assert!((octahedral_decode(a) - octahedral_decode(b)).length() < 1e-5, "{a} and {b}");
+            }
+        }
+        assert_eq!(wrap(2, -1, n as i32), (n as u32 - 3, 0));
+    }
 
     /// On the plume, from points inside it, the transmittance to random targets from the map
     /// and from the connections' march (same step), both against a march of an eighth of the

@@ -137,6 +137,8 @@ pub fn connect_iso_mapped(march: &Marcher, map: &DepthMap, exact: f32, vpls: &[V
 #[inline(always)]
 fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, stats: &mut GatherStats, depth: impl Fn(&Vpl, Vec3, f32) -> Vec3) -> (Vec3, Vec3, Vec3) {
     let g = medium.g;
+    let scale = medium.density_scale;
+    let gray = scale.x == scale.y && scale.y == scale.z;
     let (mut sum, mut lost, mut iso) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     const ISO: f32 = 0.25 * std::f32::consts::FRAC_1_PI;
     let radius = kernel.radius();
@@ -155,7 +157,13 @@ fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kern
             _ => g,
         };
         let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
-        let tr = if d > 1e-6 { (-depth(v, w, d)).exp() } else { Vec3::ONE };
+        let tr = if d > 1e-6 {
+            let tau = depth(v, w, d);
+            // One exp where the channels' extinction is the same (the same values).
+            if gray { Vec3::splat((-tau.x).exp()) } else { (-tau).exp() }
+        } else {
+            Vec3::ONE
+        };
         let light = v.power * (p_vpl * p_view) * tr;
         let light_iso = v.power * (p_vpl * ISO) * tr;
         match kernel {

@@ -272,7 +272,7 @@ impl Default for VplSettings {
             near_upsample: NearUpsample::Plain,
             near_radius: 1.5,
             normalize_energy: true,
-            transmittance: Transmittance::March,
+            transmittance: Transmittance::Map,
             map_resolution: 16,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
