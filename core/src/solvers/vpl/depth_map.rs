@@ -10,7 +10,7 @@
 //! Cost per point n^2 x nodes lookups once, against VPLs x ~35.
 //!
 //! What it approximates: a VPL off a map direction gets the optical depth of the neighbouring
-//! directions' rays, a lateral offset up to d x the cells' angular size (n = 16: 0.22 rad).
+//! directions' rays, a lateral offset up to d x the cells' angular size (n = 16: ~0.2 rad).
 //! VPLs within `exact_radius` of the point (the near ones, which carry most of J and where
 //! the offset would be largest relative to the density's detail) are still marched exactly;
 //! their march is short, so cheap.
@@ -135,7 +135,7 @@ mod tests {
 
     /// On the plume, from points inside it, the transmittance to random targets from the map
     /// and from the connections' march (same step), both against a march of an eighth of the
-    /// step (the truth here): mean absolute difference over 8 points x 256 targets.
+    /// step (the truth here): mean absolute difference over 8 points x 256 targets, bound 0.01.
     #[test]
     fn map_transmittance_is_as_close_to_a_fine_march_as_the_march() {
         let sc = crate::solvers::testing::fixture_scene("plume");
@@ -163,7 +163,8 @@ mod tests {
             }
             let (map_err, march_err) = (map_err / count as f64, march_err / count as f64);
             eprintln!("n = {n}: mean |T - T_fine| map {map_err:.5}, march {march_err:.5}");
-            assert!(map_err < 0.03, "n = {n}: map's mean transmittance error {map_err}");
+            // Measured 0.0057 (n = 16) and 0.0024 (n = 32), the march 0.0006-0.0008.
+            assert!(map_err < 0.01, "n = {n}: map's mean transmittance error {map_err}");
         }
     }
 }

@@ -11,7 +11,8 @@
 //!
 //! Transmittance: a deterministic ray march (medium::optical_depth) at the gather grid's
 //! spacing (at least one voxel, as the compositor's shadow rays): noise-free, and finer detail
-//! is lost in the coarse grid anyway.
+//! is lost in the coarse grid anyway. With `transmittance: map` (the default) only for the
+//! VPLs within `MAP_EXACT_CELLS`; the farther ones read a per-point map (depth_map.rs).
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -261,6 +262,9 @@ pub struct GatherPlan<'a> {
 
 /// `transmittance: map`: connections shorter than this many gather-grid spacings are marched,
 /// not looked up (depth_map.rs: the near VPLs carry most of J, and their march is short).
+/// Measured on the default scene (16384 walks): 2 / 1 / 0 cells, gather 0.55 / 0.50 / 0.51 s,
+/// image rel. RMSE 0.08688 / 0.08688 / 0.08684: neither time nor error tells them apart there;
+/// 2 keeps the lookups' lateral offset (d x the cells' angle) above two cells.
 pub const MAP_EXACT_CELLS: f32 = 2.0;
 
 /// One gather point's connection: where, seen from where, with which kernel, to which subset.
