@@ -74,7 +74,7 @@ impl DepthMap {
 
     /// Unscaled density integral from the map's point along unit `d` over `t` (times the
     /// medium's density_scale: the optical depth).
-    #[inline]
+    #[inline(always)]
     pub fn lookup(&self, d: Vec3, t: f32) -> f32 {
         let n = self.n as i32;
         // + 1 so that truncation is floor (p >= -0.5).
@@ -93,17 +93,17 @@ impl DepthMap {
 
     /// Direction c's cumulative integral at distance t: linear between its nodes, the last
     /// node's value past them (the ray has left the box, or the march stopped opaque).
-    #[inline]
+    #[inline(always)]
     fn along(&self, c: usize, t: f32) -> f32 {
         let (start, len) = (self.start[c] as usize, self.len[c] as usize);
+        let nodes = &self.nodes[start..start + len];
         let u = t * self.inv_h[c];
         let k = u as usize;
-        if k + 1 >= len {
-            return self.nodes[start + len - 1];
+        match nodes.get(k..k + 2) {
+            Some(&[a, b]) => a + (b - a) * (u - k as f32),
+            // Past the last node (the ray has left the box, or the march stopped opaque).
+            _ => nodes[len - 1],
         }
-        let f = u - k as f32;
-        let (a, b) = (self.nodes[start + k], self.nodes[start + k + 1]);
-        a + (b - a) * f
     }
 }
 
@@ -130,7 +130,7 @@ mod tests {
                 assert!((octahedral_decode(a) - octahedral_decode(b)).length() < 1e-5, "{a} and {b}");
             }
         }
-        assert_eq!(wrap(2, -1, n as i32), (n as u32 - 3, 0));
+        assert_eq!(wrap(2, -1, n), (n as u32 - 3, 0));
     }
 
     /// On the plume, from points inside it, the transmittance to random targets from the map
