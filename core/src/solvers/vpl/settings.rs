@@ -241,7 +241,8 @@ pub struct VplSettings {
     /// (n = 16): default scene 256 x 256 (vpl_bench_image, 2 cores, same run): 4096 walks
     /// 1.33 -> 0.75 s (gather 0.73 -> 0.18 s), image rel. RMSE 0.1286 -> 0.1285; 16384 walks
     /// 3.64 -> 1.07 s (gather 3.03 -> 0.51 s: 17.7M connections, ~340 -> ~57 ns each per core),
-    /// 0.0869 -> 0.0869; 65536 walks 12.6 -> 2.41 s (gather 12.0 -> 1.77 s), 0.0440 -> 0.0439,
+    /// 0.0869 -> 0.0869; 65536 walks 12.6 -> 2.41 s (gather 12.0 -> 1.77 s; 2.26 / 1.65 s once
+    /// the node lookup was inlined), 0.0440 -> 0.0439,
     /// flux x0.992 both; 131072 walks (map) 4.14 s, 0.0438 (the 16-cell gather's bias floor,
     /// ~0.7% by a fit of error^2 = b^2 + c / walks, which puts 5% at ~50000 walks, ~1.9 s; the
     /// reference reaches 5% in ~21 s: 11x, not the aim's 30x). At equal time the map gives

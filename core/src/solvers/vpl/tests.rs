@@ -495,7 +495,8 @@ fn cone_mean_cosine_is_zero_inside_the_ball_and_tends_to_one() {
 /// Exploration (not in CI): the image flux of several seeds against a fixture (VPL_CASE,
 /// VPL_WALKS, VPL_SEEDS, VPL_GATHER, VPL_OUT, VPL_UPSAMPLE=0 for trilinear, VPL_NEAR=clamp|ball,
 /// default compensate, VPL_FIT=linear for `upsample_fit: linear`, VPL_R100 and VPL_MFP100 for
-/// `clamp_radius` and `mean_free_paths` in hundredths).
+/// `clamp_radius` and `mean_free_paths` in hundredths, VPL_TR=map|march and VPL_MAPN for
+/// `transmittance` and `map_resolution`).
 /// Measured on cube_g0 (image mean ratio, mean over seeds 1-8 unless said): 1024 walks,
 /// 12-cell gather: compensate x1.111 (x1.054-x1.171), ball x1.079 (x1.026-x1.136): every seed
 /// bright, a bias, so issue 16's "8 seeds within 2%" is not met at the tests' settings. The
@@ -597,7 +598,8 @@ fn converged_image(name: &str, sc: &Scene, spp: u32, dir: &std::path::Path) -> (
 /// `name:N,...`, cached in VPL_IMAGE_CACHE, default the temp dir) and one `BENCH {json}` line
 /// per reference run at VPL_IMAGE_SPP and per vpl run (default settings but VPL_GATHER and VPL_WPS if set, walks from
 /// VPL_IMAGE_WALKS, `near_refine` from VPL_IMAGE_REFINE100 in hundredths, default 0, and
-/// `near_upsample` from VPL_NU; time = solve and composite, as a host pays for an image): seconds, image
+/// `near_upsample` from VPL_NU, `transmittance` from VPL_TR and `map_resolution` from
+/// VPL_MAPN; time = solve and composite, as a host pays for an image): seconds, image
 /// rel. RMSE against the converged image raw and with the converged image's own noise taken
 /// out (sqrt(e^2 - n^2): the two are independent), and the image mean ratio.
 #[test]
