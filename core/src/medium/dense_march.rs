@@ -139,6 +139,27 @@ impl<'a> Marcher<'a> {
         }
         self.medium.density_scale * tau * h
     }
+
+    /// The unscaled density integral from `x` along unit `d` at the nodes 0, h, 2h, ... up to
+    /// where the ray leaves the medium's box, appended to `out` (at least one node, 0): the
+    /// midpoint quadrature of `optical_depth` with steps h of at most `min_step` (at most
+    /// `max_steps` of them). Returns h (0 when the ray misses the box). Past OPAQUE the
+    /// remaining nodes are not marched: they hold the last value (vpl's depth_map.rs).
+    pub fn depth_profile(&self, x: Vec3, d: Vec3, min_step: f32, max_steps: u32, out: &mut Vec<f32>) -> f32 {
+        out.push(0.0);
+        let Some((_, t1)) = ray_box(x, d, self.bounds.0, self.bounds.1) else { return 0.0 };
+        let n = ((t1 / min_step).ceil() as u32).clamp(1, max_steps);
+        let h = t1 / n as f32;
+        let (start, dir) = self.lattice_ray(x, d);
+        let mut tau = 0.0f32;
+        for i in 0..n {
+            if tau * h <= self.opaque {
+                tau += self.density_lattice(start + dir * ((i as f32 + 0.5) * h));
+            }
+            out.push(tau * h);
+        }
+        h
+    }
 }
 
 #[cfg(test)]

@@ -4,6 +4,11 @@
 //! (every point x every VPL of its subset, each a ray-marched transmittance), made on the GPU,
 //! and each point finished on the CPU as there (`GatherPlan::finish`: reweighting, energy
 //! report, and the bias compensation of `near_field: compensate`, which stays on the CPU).
+//!
+//! Transmittance: the GPU marches every connection, whatever `transmittance` says. `map` (the
+//! CPU default, core's vpl/depth_map.rs) approximates this march to save the CPU's time; on
+//! the GPU the march is the cheap part it was built for, and its result is the one the map
+//! is measured against (default scene, 16384 walks: the same image error to 3e-5).
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;

@@ -7,7 +7,7 @@ use std::mem::size_of;
 use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{procedural, GridLimits};
 use volscatter_core::scene::{Camera, Light};
-use volscatter_core::solvers::vpl::{gather as cpu_gather, walks, NearField};
+use volscatter_core::solvers::vpl::{gather as cpu_gather, walks, NearField, Transmittance};
 use volscatter_core::solvers::NoProgress;
 use volscatter_core::Medium;
 
@@ -39,9 +39,11 @@ fn fixture_scene(name: &str) -> Scene {
     Scene { medium, lights: vec![light], camera: cam, solver: Default::default() }
 }
 
-/// Small enough for lavapipe (each gather a few seconds there).
+/// Small enough for lavapipe (each gather a few seconds there). `transmittance: march`: the
+/// GPU marches every connection whatever that setting says (gather.rs), so the CPU is compared
+/// on the same estimator.
 fn test_settings(near_field: NearField) -> VplSettings {
-    VplSettings { walks: 512, gather_resolution: 10, output_resolution: 20, near_field, compensation_vertices: 2, compensation_walks: 64, ..Default::default() }
+    VplSettings { walks: 512, gather_resolution: 10, output_resolution: 20, near_field, compensation_vertices: 2, compensation_walks: 64, transmittance: Transmittance::March, ..Default::default() }
 }
 
 /// The GPU gather against the CPU's (`gather::gather`) on the same walks: the plume lit by

@@ -11,17 +11,19 @@
 //!
 //! Transmittance: a deterministic ray march (medium::optical_depth) at the gather grid's
 //! spacing (at least one voxel, as the compositor's shadow rays): noise-free, and finer detail
-//! is lost in the coarse grid anyway.
+//! is lost in the coarse grid anyway. With `transmittance: map` (the default) only for the
+//! VPLs within `MAP_EXACT_CELLS`; the farther ones read a per-point map (depth_map.rs).
 
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
 
 use super::compensate::Compensation;
-use super::settings::{NearField, VplSettings};
+use super::settings::{NearField, Transmittance, VplSettings};
 use super::walks::{Vpl, Walks};
 use crate::rng::Rng;
 use crate::scene::Scene;
+use super::depth_map::DepthMap;
 use super::march::Marcher;
 use crate::medium::{ball_mean_inverse_square, near_field_radius, Medium};
 use crate::phase::hg;
@@ -110,7 +112,34 @@ pub fn connect(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kerne
 /// the fluence over 4 pi per unit sigma_s): what `normalize_energy` integrates (energy.rs).
 #[allow(clippy::too_many_arguments)]
 pub fn connect_iso(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3, Vec3) {
-    let g = march.medium().g;
+    connect_with(march.medium(), vpls, x, view, kernel, ball, stats, |v: &Vpl, w: Vec3, d: f32| march.optical_depth(v.position, w, d, step, MAX_STEPS))
+}
+
+/// Most steps of a connection's transmittance march.
+const MAX_STEPS: u32 = 1024;
+
+/// `connect_iso` with the transmittance of `map` (`transmittance: map`, depth_map.rs) for the
+/// VPLs at least `exact` away from `x`, the march of `step` for the nearer ones.
+#[allow(clippy::too_many_arguments)]
+pub fn connect_iso_mapped(march: &Marcher, map: &DepthMap, exact: f32, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, step: f32, stats: &mut GatherStats) -> (Vec3, Vec3, Vec3) {
+    let scale = march.medium().density_scale;
+    connect_with(march.medium(), vpls, x, view, kernel, ball, stats, |v: &Vpl, w: Vec3, d: f32| {
+        if d < exact {
+            march.optical_depth(v.position, w, d, step, MAX_STEPS)
+        } else {
+            // The map looks from x towards the VPL.
+            scale * map.lookup(-w, d)
+        }
+    })
+}
+
+/// `connect_iso` with the optical depth (RGB) from each VPL along unit w over d from `depth`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, stats: &mut GatherStats, depth: impl Fn(&Vpl, Vec3, f32) -> Vec3) -> (Vec3, Vec3, Vec3) {
+    let g = medium.g;
+    let scale = medium.density_scale;
+    let gray = scale.x == scale.y && scale.y == scale.z;
     let (mut sum, mut lost, mut iso) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     const ISO: f32 = 0.25 * std::f32::consts::FRAC_1_PI;
     let radius = kernel.radius();
@@ -129,7 +158,13 @@ pub fn connect_iso(march: &Marcher, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: K
             _ => g,
         };
         let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
-        let tr = if d > 1e-6 { (-march.optical_depth(v.position, w, d, step, 1024)).exp() } else { Vec3::ONE };
+        let tr = if d > 1e-6 {
+            let tau = depth(v, w, d);
+            // One exp where the channels' extinction is the same (the same values).
+            if gray { Vec3::splat((-tau.x).exp()) } else { (-tau).exp() }
+        } else {
+            Vec3::ONE
+        };
         let light = v.power * (p_vpl * p_view) * tr;
         let light_iso = v.power * (p_vpl * ISO) * tr;
         match kernel {
@@ -219,7 +254,18 @@ pub struct GatherPlan<'a> {
     cell_volume: f64,
     /// The connections' transmittance march (march.rs), shared with the compensation.
     march: Arc<Marcher<'a>>,
+    /// `transmittance: map`: the depth map's side (0: march every connection) and the
+    /// distance below which connections are still marched (`MAP_EXACT_CELLS`).
+    pub map_resolution: u32,
+    pub map_exact: f32,
 }
+
+/// `transmittance: map`: connections shorter than this many gather-grid spacings are marched,
+/// not looked up (depth_map.rs: the near VPLs carry most of J, and their march is short).
+/// Measured on the default scene (16384 walks): 2 / 1 / 0 cells, gather 0.55 / 0.50 / 0.51 s,
+/// image rel. RMSE 0.08688 / 0.08688 / 0.08684: neither time nor error tells them apart there;
+/// 2 keeps the lookups' lateral offset (d x the cells' angle) above two cells.
+pub const MAP_EXACT_CELLS: f32 = 2.0;
 
 /// One gather point's connection: where, seen from where, with which kernel, to which subset.
 #[derive(Clone, Copy, Debug)]
@@ -250,6 +296,8 @@ impl<'a> GatherPlan<'a> {
         let r = s.clamp_radius * near_field_radius(&grid.index_to_world);
         let cone = s.phase_cone * near_field_radius(&grid.index_to_world);
         let step = march_step(medium, &grid.index_to_world);
+        let m3 = grid.index_to_world.matrix3;
+        let spacing = m3.x_axis.length().min(m3.y_axis.length()).min(m3.z_axis.length());
         let march = Arc::new(Marcher::new(medium));
         let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step, march.clone()));
         let cell_volume = glam::Mat3::from(grid.index_to_world.matrix3).determinant().abs() as f64;
@@ -270,6 +318,8 @@ impl<'a> GatherPlan<'a> {
             compensation,
             cell_volume,
             march,
+            map_resolution: if s.transmittance == Transmittance::Map { s.map_resolution } else { 0 },
+            map_exact: MAP_EXACT_CELLS * spacing,
         })
     }
 
@@ -356,6 +406,7 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
         .map(|k| {
             let n = (nx * ny) as usize;
             let mut plane = Plane { j: vec![Vec3::ZERO; n], iso: vec![Vec3::ZERO; n], density: vec![0.0; n], stats: GatherStats::default() };
+            let mut map = (plan.map_resolution > 0).then(|| DepthMap::new(plan.map_resolution));
             'rows: for jj in 0..ny {
                 for i in 0..nx {
                     // Per cell: a cell connects to thousands of VPLs (a row took 300 ms).
@@ -366,7 +417,14 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
                     let (rho, point) = plan.point(i, jj, k);
                     plane.density[idx] = rho;
                     let Some(p) = point else { continue };
-                    let (sum, lost, iso) = connect_iso(plan.march(), &plan.lists[p.subset as usize], p.position, p.view, p.kernel, p.ball, plan.step, &mut plane.stats);
+                    let vpls = &plan.lists[p.subset as usize];
+                    let (sum, lost, iso) = match map.as_mut() {
+                        Some(map) => {
+                            map.build(plan.march(), p.position, plan.step, MAX_STEPS);
+                            connect_iso_mapped(plan.march(), map, plan.map_exact, vpls, p.position, p.view, p.kernel, p.ball, plan.step, &mut plane.stats)
+                        }
+                        None => connect_iso(plan.march(), vpls, p.position, p.view, p.kernel, p.ball, plan.step, &mut plane.stats),
+                    };
                     plane.j[idx] = plan.finish(&p, sum, lost, &mut plane.stats);
                     plane.iso[idx] = plan.reweight(iso);
                 }

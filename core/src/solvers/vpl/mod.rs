@@ -20,7 +20,10 @@
 //! - Transmittance to VPLs is ray marched (deterministic) at the gather grid's spacing but at
 //!   most half a mean free path of the densest voxel (gather::march_step), on a dense copy of
 //!   the density (march.rs: the march is ~90% of a solve; 2.8x faster than the sparse lookups,
-//!   same values to float rounding).
+//!   same values to float rounding). By default (`transmittance: map`) only the connections
+//!   within two gather cells are marched: the farther ones look their optical depth up in a
+//!   per-point directional map (depth_map.rs): default scene 16384 walks gather 3.03 -> 0.51 s,
+//!   image error 0.0869 both (settings.rs).
 //! - `upsample_fit: linear` replaces the bilateral filter's weighted mean by a weighted local
 //!   linear fit (upsample.rs): the mean is J at the weights' centroid, which a medium's
 //!   surface pulls inwards (cube g 0 8 seeds x1.079 bright; the fit x1.013).
@@ -58,6 +61,7 @@
 
 pub mod backend;
 pub mod compensate;
+pub mod depth_map;
 pub mod energy;
 pub mod gather;
 pub use crate::medium::dense_march as march;
@@ -76,7 +80,7 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
 pub use gather::GatherStats;
-pub use settings::{NearField, NearUpsample, UpsampleFit, VplSettings};
+pub use settings::{NearField, NearUpsample, Transmittance, UpsampleFit, VplSettings};
 
 pub struct Vpl {
     pub settings: VplSettings,

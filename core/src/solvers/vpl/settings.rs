@@ -39,6 +39,17 @@ pub enum UpsampleFit {
     Linear,
 }
 
+/// How the gather finds each connection's transmittance (gather.rs, depth_map.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Transmittance {
+    /// A deterministic ray march to every VPL (`gather::march_step`).
+    March,
+    /// Per gather point, a map of the optical depth along `map_resolution`^2 directions
+    /// (depth_map.rs), looked up for the VPLs beyond two gather cells, the nearer ones marched.
+    Map,
+}
+
 /// How the near part of J (the light of VPLs within `near_radius` gather cells) reaches the
 /// output points (vpl/near_ratio.rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -223,6 +234,35 @@ pub struct VplSettings {
     /// cent dark, a finer gather's share (32 cells with 8 interleaved subsets of 4096 walks,
     /// with it: spot x0.997, rect x0.977, point x0.988, cube g 0 x1.006, 4 seeds).
     pub normalize_energy: bool,
+    /// How the gather's connections get their transmittance (`Transmittance`; the
+    /// compensation's connections and `near_refine`'s are marched either way, and the GPU
+    /// marches every connection). `map`, the default, because it changes no fixture's error
+    /// beyond the third decimal and makes the gather 4-7x cheaper. Measured, march -> map
+    /// (n = 16): default scene 256 x 256 (vpl_bench_image, 2 cores, same run): 4096 walks
+    /// 1.33 -> 0.75 s (gather 0.73 -> 0.18 s), image rel. RMSE 0.1286 -> 0.1285; 16384 walks
+    /// 3.64 -> 1.07 s (gather 3.03 -> 0.51 s: 17.7M connections, ~340 -> ~57 ns each per core),
+    /// 0.0869 -> 0.0869; 65536 walks 12.6 -> 2.41 s (gather 12.0 -> 1.77 s; 2.26 / 1.65 s once
+    /// the node lookup was inlined), 0.0440 -> 0.0439,
+    /// flux x0.992 both; 131072 walks (map) 4.14 s, 0.0438 (the 16-cell gather's bias floor,
+    /// ~0.7% by a fit of error^2 = b^2 + c / walks, which puts 5% at ~50000 walks, ~1.9 s; the
+    /// reference reaches 5% in ~21 s: 11x, not the aim's 30x). At equal time the map gives
+    /// 0.087 at 1.07 s where the march gives 0.129 at 1.33 s. Fixtures (test settings, 4096 walks,
+    /// 12-cell gather; image / grid rel. RMSE march -> map): cube g 0 0.0693 / 0.0671 -> 0.0693
+    /// / 0.0672, cube g 0.7 0.1481 / 0.1392 -> 0.1480 / 0.1389, plume 0.3272 / 0.4460 -> 0.3267
+    /// / 0.4459, dense cloud 0.7072 / 0.7643 -> 0.7075 / 0.7645, point light 0.1114 / 0.2234
+    /// -> 0.1115 / 0.2231; 8 seeds at the defaults unchanged to 0.001 (cube g 0 x1.004, g 0.7
+    /// x1.012, plume x0.999, spot x0.984, point x0.986); dense cloud at the defaults (8 seeds,
+    /// vpl_explore_seeds) x0.9648 +- 0.069 -> x0.9645 +- 0.070, each seed's image error within
+    /// 0.001, 3.1-3.6 -> 0.55-0.64 s a solve. Furnaces (testing/furnace.rs, 2048 walks, 10
+    /// cells): white box S / sigma_s 0.9723 -> 0.9722, white cloud 0.7681 -> 0.7689; the
+    /// energy balance 1.0500 -> 1.0502 (over its bound of 0.048 with the march as well).
+    pub transmittance: Transmittance,
+    /// `transmittance: map`: the map's side n (n x n directions, octahedral). Measured: the
+    /// transmittance's mean absolute error against a fine march on the plume 0.0057 at n = 16,
+    /// 0.0024 at 32 (the march's own 0.0006; depth_map.rs test); default scene 256 x 256, n =
+    /// 16 -> 32: 16384 walks 1.07 -> 1.34 s, image 0.0869 -> 0.0869; 65536 walks 2.41 -> 2.58
+    /// s, 0.0439 -> 0.0440: 16 is enough there.
+    pub map_resolution: u32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
     /// Spatial sigma of the bilateral filter, in gather cells: at least ~0.8 so that the
@@ -257,6 +297,8 @@ impl Default for VplSettings {
             near_upsample: NearUpsample::Plain,
             near_radius: 1.5,
             normalize_energy: true,
+            transmittance: Transmittance::Map,
+            map_resolution: 16,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
@@ -299,6 +341,9 @@ impl VplSettings {
         }
         if !(self.near_radius.is_finite() && (0.5..=4.0).contains(&self.near_radius)) {
             return Err(Error::scene("solver.near_radius", format!("must be in [0.5, 4], got {}", self.near_radius)));
+        }
+        if !(2..=64).contains(&self.map_resolution) {
+            return Err(Error::scene("solver.map_resolution", format!("must be in 2..=64, got {}", self.map_resolution)));
         }
         validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
         if !(1..=1024).contains(&self.dome_directions) {
