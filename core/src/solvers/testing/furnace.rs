@@ -66,12 +66,18 @@ fn expectation(name: &str) -> Expectation {
         // 30, a gather cell 5 mean free paths thick): 0.2235 (compensate 0.426): few of the 2048
         // dome walks enter it, and its multiple scattering arrives from VPLs within a mean free
         // path, a heavy-tailed estimator whose typical value is far below its mean. Bounds: measured
-        // deviation + 10% + 0.01 (ratchets).
+        // deviation + 10% + 0.01 (ratchets). Since `normalize_energy` (the multiple scattering's
+        // total power set to the walks', vpl/energy.rs; with the transmittance map): box S /
+        // sigma_s 0.9722 (without it 0.9600), image 0.9988 (0.9920), cloud 0.8002 (0.6567); the
+        // energy balance 1.0502 (without it 1.0366): the total scattered is now the walks', and
+        // what remains is where it sits, the weighted mean's surface bias at a 10-cell gather
+        // (light pulled to the faces, where it escapes more: vpl/upsample.rs), which the gather's
+        // lower total had partly hidden. The box's bounds tightened, the balance's re-measured.
         "vpl" => Expectation {
             settings: serde_json::json!({"name": "vpl", "walks": 2048, "gather_resolution": 10, "output_resolution": 12}),
-            furnace: [0.057, 0.02],
+            furnace: [0.041, 0.012],
             furnace_cloud: 0.86,
-            energy: 0.048,
+            energy: 0.065,
         },
         // Monte Carlo every order, so near 1 up to noise (65536 photons, seed 1) and two
         // approximations: the two HG lobes per cell evaluated towards the camera (in a furnace
