@@ -151,12 +151,12 @@ fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kern
             stats.near += 1;
         }
         let w = to / d.max(1e-12);
-        // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
         // The ball kernel's phases smoothed over the cone of its `cone` ball (kernel doc).
         let g = match kernel {
             Kernel::Ball { cone, .. } if cone > 0.0 => g * cone_mean_cosine(d, cone),
             _ => g,
         };
+        // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
         let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
         let tr = if d > 1e-6 {
             let tau = depth(v, w, d);

@@ -52,12 +52,13 @@
 //!   walk's first collision to a point is double scattering, and so on. (Counting the light
 //!   source as a walk's vertex 0, VPLs start at the walk's second vertex.)
 //!
-//! Measured (tests.rs, 4096 walks, 12-cell gather, 1 loaded core), image rel. RMSE with
-//! compensation (ball kernel alone): cube g 0 0.093 (0.076), cube g 0.7 0.138 (0.153), plume
-//! g 0.9 0.311 (0.362), dense cloud 0.62 (0.75), flux x0.66: still too dark there (its
-//! multiple scattering comes from VPLs within a mean free path behind two g 0.9 lobes, a
-//! heavy-tailed estimator at 10^4 VPLs). White furnace box S / sigma_s 0.991 (clamp alone
-//! 0.695 at R = 2 cells).
+//! Measured (tests.rs, 4096 walks, 12-cell gather), image rel. RMSE with the defaults (ball
+//! kernel, `normalize_energy`, `phase_cone`, the depth map): cube g 0 0.069, cube g 0.7 0.148,
+//! plume g 0.9 0.327, point / spot / rect light beside it 0.111 / 0.093 / 0.147, dense cloud
+//! 0.707 with flux x1.04 (before the last two: 0.076, 0.153, 0.362, 0.166 / 0.145 / 0.192 and
+//! 0.75 with x0.66). With compensation (not normalized): cube g 0 0.093, cube g 0.7 0.138,
+//! plume 0.311, dense cloud 0.62 (x0.66). White furnace box S / sigma_s 0.991 compensated
+//! (clamp alone 0.695 at R = 2 cells).
 
 pub mod backend;
 pub mod compensate;

@@ -748,8 +748,9 @@ fn vpl_near_ratio_stage_cancels() {
 /// point light x0.984, rect x0.985, spot x0.993; at 32 cells point x1.018, rect x1.018; the
 /// camera march's step (0.5 / 0.125 voxel) and subpixels (2 / 6) move it by 0.1% at most. So
 /// of the point light's 8-seed x0.986 (tests above) nearly all is this shared single
-/// scattering, which every solver's composite uses; of the rect light's x0.966 about half.
-/// Not yet explained: the 64-cell grid is the plume's own voxel lattice.
+/// scattering, which every solver's composite uses; the rect light's x0.966 is darker than
+/// its single scattering's x0.985 explains. Not yet explained: the 64-cell grid is the
+/// plume's own voxel lattice.
 #[test]
 #[ignore]
 fn vpl_explore_single_scattering() {
