@@ -203,7 +203,7 @@ impl<'a> DirectLight<'a> {
 
 /// Whether the medium's extinction per unit density is the same in every channel (then every
 /// optical depth is grey, and one exp serves the three channels, to the bit).
-fn is_grey(medium: &Medium) -> bool {
+pub(crate) fn is_grey(medium: &Medium) -> bool {
     let k = medium.density_scale;
     k.x == k.y && k.y == k.z
 }
@@ -211,7 +211,7 @@ fn is_grey(medium: &Medium) -> bool {
 /// e^-tau per channel; `grey`: tau's channels are equal (`is_grey`), one exp for the three,
 /// and none for tau = 0 (e^-0 is 1 exactly: camera rays cross much empty space).
 #[inline]
-fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
+pub(crate) fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
     if grey {
         if tau.x == 0.0 {
             return Vec3::ONE;

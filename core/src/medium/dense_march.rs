@@ -166,15 +166,20 @@ impl<'a> Marcher<'a> {
 mod tests {
     use super::*;
 
+    /// The plume fixture's medium in a rotated frame (the sparse grid's bounds and ramps, and a
+    /// world-to-index map that is not axis-aligned).
+    fn rotated_plume() -> Medium {
+        let p = crate::solvers::testing::fixture_scene("plume").medium;
+        Medium::new(p.grid.clone(), glam::Affine3A::from_rotation_z(0.4) * p.index_to_world, p.density_scale, p.albedo, p.g)
+    }
+
     /// The dense march gives optical_depth's result on the plume (heterogeneous, a rotated
     /// and scaled frame: the sparse grid's bounds and ramps) for rays from inside and outside,
     /// to 5e-4 relative (measured 1.2e-4: the index-space ray's float rounding, ~1e-6 of a
     /// voxel, times the density's gradient, over small optical depths; plus 1e-6 absolute).
     #[test]
     fn dense_march_equals_optical_depth() {
-        let sc = crate::solvers::testing::fixture_scene("plume");
-        let p = &sc.medium;
-        let m = &Medium::new(p.grid.clone(), glam::Affine3A::from_rotation_z(0.4) * p.index_to_world, p.density_scale, p.albedo, p.g);
+        let m = &rotated_plume();
         let marcher = Marcher::new(m);
         assert!(marcher.dense.is_some());
         let (lo, hi) = m.world_bounds();
@@ -199,9 +204,7 @@ mod tests {
     /// (the lattice ray's float rounding times the density's gradient; measured 1.1e-6 both).
     #[test]
     fn lattice_lookups_equal_density_world() {
-        let sc = crate::solvers::testing::fixture_scene("plume");
-        let p = &sc.medium;
-        let m = &Medium::new(p.grid.clone(), glam::Affine3A::from_rotation_z(0.4) * p.index_to_world, p.density_scale, p.albedo, p.g);
+        let m = &rotated_plume();
         let dense = Marcher::new(m);
         let mut sparse = Marcher::new(m);
         (sparse.dense, sparse.offset) = (None, Vec3::ZERO);

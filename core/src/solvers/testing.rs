@@ -79,6 +79,18 @@ pub(crate) fn fixture_scene(name: &str) -> Scene {
     }
 }
 
+/// A host that has cancelled: every progress callback answers stop.
+pub(crate) struct Cancelled;
+
+impl crate::solvers::Progress for Cancelled {
+    fn update(&self, _: &str, _: f32) -> bool {
+        false
+    }
+    fn cancelled(&self) -> bool {
+        true
+    }
+}
+
 pub(crate) fn env_u32(key: &str, default: u32) -> u32 {
     std::env::var(key).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }

@@ -26,6 +26,7 @@ use crate::scene::Scene;
 use super::depth_map::DepthMap;
 use super::march::Marcher;
 use crate::medium::{ball_mean_inverse_square, near_field_radius, Medium};
+use crate::compositor::{exp_neg, is_grey};
 use crate::phase::hg;
 use crate::solvers::pop::merge::{footprint, Merged};
 use crate::solvers::pop::mip::MediumMip;
@@ -138,8 +139,7 @@ pub fn connect_iso_mapped(march: &Marcher, map: &DepthMap, exact: f32, vpls: &[V
 #[inline(always)]
 fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kernel, ball: f32, stats: &mut GatherStats, depth: impl Fn(&Vpl, Vec3, f32) -> Vec3) -> (Vec3, Vec3, Vec3) {
     let g = medium.g;
-    let scale = medium.density_scale;
-    let gray = scale.x == scale.y && scale.y == scale.z;
+    let grey = is_grey(medium);
     let (mut sum, mut lost, mut iso) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     const ISO: f32 = 0.25 * std::f32::consts::FRAC_1_PI;
     let radius = kernel.radius();
@@ -158,13 +158,8 @@ fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kern
         };
         // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
         let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
-        let tr = if d > 1e-6 {
-            let tau = depth(v, w, d);
-            // One exp where the channels' extinction is the same (the same values).
-            if gray { Vec3::splat((-tau.x).exp()) } else { (-tau).exp() }
-        } else {
-            Vec3::ONE
-        };
+        // One exp where the channels' extinction is the same (the same values).
+        let tr = if d > 1e-6 { exp_neg(depth(v, w, d), grey) } else { Vec3::ONE };
         let light = v.power * (p_vpl * p_view) * tr;
         let light_iso = v.power * (p_vpl * ISO) * tr;
         match kernel {
@@ -214,6 +209,12 @@ pub fn subset_lists(walks: &Walks, subsets: u32) -> Vec<Vec<Vpl>> {
     lists
 }
 
+/// The smallest spacing of a grid's frame along its three axes.
+fn min_spacing(frame: &glam::Affine3A) -> f32 {
+    let m = frame.matrix3;
+    m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length())
+}
+
 /// The transmittance march's step for connections on a grid of this frame: its spacing, but
 /// at most half a mean free path of the densest voxel, and at least one voxel. Why: a midpoint
 /// march of steps several mean free paths long misses the dense parts between its samples (or
@@ -221,8 +222,7 @@ pub fn subset_lists(walks: &Walks, subsets: u32) -> Vec<Vec<Vpl>> {
 /// (Jensen): on the white dense cloud (g 0.9), steps of the 10-cell gather grid's spacing (5
 /// mean free paths) gave the compensated furnace S / sigma_s 1.29, a voxel step 1.0x (below).
 pub fn march_step(medium: &Medium, frame: &glam::Affine3A) -> f32 {
-    let m = frame.matrix3;
-    let spacing = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
+    let spacing = min_spacing(frame);
     let sigma_max = medium.sigma_t(medium.grid.max_value()).max_element();
     let mfp_step = if sigma_max > 0.0 { 0.5 / sigma_max } else { spacing };
     spacing.min(mfp_step).max(medium.voxel_size_world().min_element())
@@ -295,9 +295,8 @@ impl<'a> GatherPlan<'a> {
         let subsets = s.subsets();
         let r = s.clamp_radius * near_field_radius(&grid.index_to_world);
         let cone = s.phase_cone * near_field_radius(&grid.index_to_world);
+        let map_exact = MAP_EXACT_CELLS * min_spacing(&grid.index_to_world);
         let step = march_step(medium, &grid.index_to_world);
-        let m3 = grid.index_to_world.matrix3;
-        let spacing = m3.x_axis.length().min(m3.y_axis.length()).min(m3.z_axis.length());
         let march = Arc::new(Marcher::new(medium));
         let compensation = (s.near_field == NearField::Compensate).then(|| Compensation::new(scene, mip, fp, walks, s, r, step, march.clone()));
         let cell_volume = glam::Mat3::from(grid.index_to_world.matrix3).determinant().abs() as f64;
@@ -319,7 +318,7 @@ impl<'a> GatherPlan<'a> {
             cell_volume,
             march,
             map_resolution: if s.transmittance == Transmittance::Map { s.map_resolution } else { 0 },
-            map_exact: MAP_EXACT_CELLS * spacing,
+            map_exact,
         })
     }
 

@@ -717,15 +717,7 @@ fn vpl_near_ratio_raises_the_plume_point_flux() {
 /// has cancelled (its loops look at the flag per plane), rather than finishing the solve.
 #[test]
 fn vpl_near_ratio_stage_cancels() {
-    struct Cancelled;
-    impl crate::solvers::Progress for Cancelled {
-        fn update(&self, _: &str, _: f32) -> bool {
-            false
-        }
-        fn cancelled(&self) -> bool {
-            true
-        }
-    }
+    use crate::solvers::testing::Cancelled;
     let sc = case("plume_point");
     let s = VplSettings { walks: 256, near_field: NearField::Ball, near_upsample: super::NearUpsample::Ratio, ..test_settings() };
     let walks = super::walks::trace(&sc, &s, u32::MAX, &NoProgress).unwrap();
