@@ -154,7 +154,7 @@ impl Vpl {
         }
         let energy = if s.normalize_energy && s.near_field != NearField::Compensate && s.near_refine == 0.0 && !ratio && max_orders == u32::MAX {
             let iso = timings.time("vpl energy", || {
-                let j = ScatteringGrid { data: gathered.iso, ..merged.j.clone() };
+                let j = ScatteringGrid { dims: merged.j.dims, index_to_world: merged.j.index_to_world, data: gathered.iso };
                 upsample(&pop::merge::Merged { j, density: merged.density.clone() })
             })?;
             Some(energy::normalize(&mut scattering, &iso, &walks))
