@@ -115,9 +115,15 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
 /// `single_scattering_grid` that stops within a row of grid points (each a few shadow rays)
 /// once `progress` is cancelled, with `Error::Cancelled` (issue 22: a 1024^3 grid takes minutes).
 pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_directions: u32, progress: &dyn crate::solvers::Progress) -> Result<ScatteringGrid> {
+    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
+    single_scattering_onto(scene, &mut grid, dome_directions, progress)?;
+    Ok(grid)
+}
+
+/// `single_scattering_grid_cancellable` on a grid the caller has framed.
+pub(crate) fn single_scattering_onto(scene: &Scene, grid: &mut ScatteringGrid, dome_directions: u32, progress: &dyn crate::solvers::Progress) -> Result<()> {
     let medium = &scene.medium;
-    let mut grid = ScatteringGrid::over_medium(medium, max_dim)?;
-    let direct = DirectLight::new(scene, shadow_step(medium, &grid), dome_directions, near_field_radius(&grid.index_to_world));
+    let direct = DirectLight::new(scene, shadow_step(medium, grid), dome_directions, near_field_radius(&grid.index_to_world));
     let frame = grid.index_to_world;
     let [nx, ny, _] = grid.dims;
     grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
@@ -139,7 +145,7 @@ pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_dire
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
-    Ok(grid)
+    Ok(())
 }
 
 /// The light arriving at a point straight from the scene's lights, scattered towards a viewer
@@ -347,11 +353,16 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> 
 }
 
 /// The single-scattering grid `opts`' AOVs need, or None when none needs it (then it is not
-/// computed at all: it costs more than the march).
+/// computed at all: it costs more than the march). Its nodes are made for trilinear rendering
+/// as the solvers' S is (lattice_product::finish), so that the `multiple` AOV, S less it, is
+/// the multiple scattering's share alone.
 pub fn single_for(scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>> {
-    opts.aovs.needs_single()
-        .then(|| single_scattering_grid(scene, opts.single_resolution, dome_directions_for(scene, opts.dome_directions)))
-        .transpose()
+    if !opts.aovs.needs_single() {
+        return Ok(None);
+    }
+    let mut single = single_scattering_grid(scene, opts.single_resolution, dome_directions_for(scene, opts.dome_directions))?;
+    crate::lattice_product::finish(&scene.medium, &mut single);
+    Ok(Some(single))
 }
 
 /// How many of at most `max` directions the single-scattering grid gives the dome: all of them

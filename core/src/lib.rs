@@ -6,6 +6,7 @@ pub mod compositor;
 pub mod error;
 pub mod image;
 pub mod io;
+pub mod lattice_product;
 pub mod medium;
 pub mod phase;
 pub mod rng;

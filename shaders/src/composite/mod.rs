@@ -66,7 +66,12 @@ pub fn composite(ctx: &GpuContext, scene: &Scene, s: &ScatteringGrid, opts: &Com
 /// the GPU twin of `compositor::single_for`.
 pub fn single_for(ctx: &GpuContext, scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>, GpuError> {
     let dome_directions = volscatter_core::compositor::dome_directions_for(scene, opts.dome_directions);
-    opts.aovs.needs_single().then(|| single::single_scattering_grid(ctx, scene, opts.single_resolution, dome_directions)).transpose()
+    if !opts.aovs.needs_single() {
+        return Ok(None);
+    }
+    let mut single = single::single_scattering_grid(ctx, scene, opts.single_resolution, dome_directions)?;
+    volscatter_core::lattice_product::finish(&scene.medium, &mut single);
+    Ok(Some(single))
 }
 
 /// `composite` with the single-scattering grid given. Without one, the kernel reads a 2^3 grid

@@ -144,7 +144,7 @@ impl Lpm {
         let mut report = LpmReport::default();
         let (out_probe, single) = output_start(s, scene, progress, ov, &mut timings)?;
         if !scatters(scene) {
-            return Ok((SolveOutput::new(single, timings), report));
+            return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
         }
         // The mip serves both the cells' mean density and the upsampling.
         let (lo, hi) = medium.world_bounds();
@@ -252,7 +252,7 @@ impl Lpm {
         let j_grid = grid.as_scattering_grid(j);
         if ov.j_only {
             report.j = Some(j_grid);
-            return Ok((SolveOutput::new(single, timings), report));
+            return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
         }
         let merged = Merged { j: j_grid, density: grid.density.clone() };
         let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
@@ -262,6 +262,8 @@ impl Lpm {
             *a += *b;
         }
         report.j = Some(merged.j);
+        // Before the file is written: it holds what the solve returns.
+        crate::lattice_product::finish(medium, &mut scattering);
         if let Some(path) = &self.s_vdb {
             crate::vdb::write_rgb_grids(path, "scattering", scattering.dims, &scattering.data, scattering.index_to_world, &Default::default())?;
         }

@@ -41,6 +41,7 @@ mod tests;
 
 pub use settings::NetworkSettings;
 
+use crate::lattice_product::finished;
 use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput, VisibilityInput};
 
 use super::pop::reuse::MediumKey;
@@ -138,7 +139,7 @@ impl Network {
         let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
             // Nothing scatters twice: S is its single scattering.
-            return Ok((SolveOutput::new(scattering, timings), report));
+            return Ok((SolveOutput::new(finished(medium, scattering), timings), report));
         }
         // Radiance, source, first-scattering and visibility arrays: ~4 RGB values per
         // (particle, direction) pair.
@@ -149,7 +150,7 @@ impl Network {
             None => {
                 let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
                 if p.mean_sigma_t <= 0.0 {
-                    return Ok((SolveOutput::new(scattering, timings), report));
+                    return Ok((SolveOutput::new(finished(medium, scattering), timings), report));
                 }
                 let dirs = directions::fibonacci(s.directions);
                 let sphere = BoundingSphere::of(medium);
@@ -206,7 +207,7 @@ impl Network {
         kept.0 = Some(net);
         splatted?;
         progress.update("network splat", 1.0);
-        Ok((SolveOutput::new(scattering, timings), report))
+        Ok((SolveOutput::new(finished(medium, scattering), timings), report))
     }
 }
 

@@ -146,7 +146,7 @@ impl PhotonGrid {
             }
         }
         progress.update("done", 1.0);
-        Ok((SolveOutput::new(s, timings), PhotonGridReport { energy: ring.energy(), generations: ring.generations() }))
+        Ok((SolveOutput::new(crate::lattice_product::finished(medium, s), timings), PhotonGridReport { energy: ring.energy(), generations: ring.generations() }))
     }
 
     /// Solves and returns the energy report with S and the timings.

@@ -329,7 +329,7 @@ impl Pop {
         }
         let scattering = timings.time("pop upsample", || backend.upsample(medium, &mip, &merged, s))?;
         progress.update("pop upsample", 1.0);
-        Ok((SolveOutput::new(scattering, merge_timings(timings)), report))
+        Ok((SolveOutput::new(crate::lattice_product::finished(medium, scattering), merge_timings(timings)), report))
     }
 }
 

@@ -284,7 +284,8 @@ impl Solver for Reference {
         let scattering = if self.settings.output_resolution == 0 {
             self.scattering_grid(scene, progress, &mut timings)?
         } else {
-            self.scattering_on_voxels(scene, progress, &mut timings)?
+            // On the voxels a host renders it trilinearly: its nodes made for that.
+            crate::lattice_product::finished(&scene.medium, self.scattering_on_voxels(scene, progress, &mut timings)?)
         };
         Ok(SolveOutput::new(scattering, timings))
     }

@@ -155,7 +155,10 @@ impl Vpl {
         let energy = if s.normalize_energy && s.near_field != NearField::Compensate && s.near_refine == 0.0 && !ratio && max_orders == u32::MAX {
             let iso = timings.time("vpl energy", || {
                 let j = ScatteringGrid { dims: merged.j.dims, index_to_world: merged.j.index_to_world, data: gathered.iso };
-                upsample(&pop::merge::Merged { j, density: merged.density.clone() })
+                let mut iso = upsample(&pop::merge::Merged { j, density: merged.density.clone() })?;
+                // Its power as the host will render it: the same node values as S's (below).
+                crate::lattice_product::finish(medium, &mut iso);
+                Ok::<_, Error>(iso)
             })?;
             Some(energy::normalize(&mut scattering, &iso, &walks))
         } else {
@@ -166,6 +169,7 @@ impl Vpl {
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {
             *a += *b;
         }
+        timings.time("vpl lattice product", || crate::lattice_product::finish(medium, &mut scattering));
         progress.update("vpl upsample", 1.0);
         let report = VplReport { walks: s.walks, vpls: walks.vpls.len(), vpl_power: walks.total_power().to_array(), walks_cut: walks.cut, gather: gstats, energy };
         Ok((SolveOutput::new(scattering, timings), report))
