@@ -741,9 +741,9 @@ fn vpl_near_ratio_stage_cancels() {
 /// phase-sampled half of its MIS, so cube g 0 says little. Grids: 32 cells (coarser than the
 /// plume's 34-point voxel lattice), 64 (the lattice itself: plain products), "65" (the same
 /// nodes made for trilinear rendering, lattice_product.rs) and 128 (twice the lattice, plain).
-/// Measured (4096 spp, noise ~0.2%): point light x1.018 / x0.984 / x1.003 / x0.998, rect
-/// x1.018 / x0.985 / x1.002 / x0.998; the camera march's step (0.5 / 0.125 voxel) and
-/// subpixels (2 / 6) move them by 0.1% at most. So the plain products' deficit on the lattice
+/// Measured: point light x1.018 / x0.983 / x1.006 / x0.998, rect x1.018 / x0.983 / x1.006 /
+/// x0.998 (32 and 128 cells at 4096 spp, the lattice at 16384; noise ~0.2%); the camera
+/// march's step (0.5 / 0.125 voxel) and subpixels (2 / 6) move them by 0.1% at most. So the plain products' deficit on the lattice
 /// was the representation, not the shadow rays: lattice_product.rs has its numbers.
 #[test]
 #[ignore]
