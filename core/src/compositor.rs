@@ -233,9 +233,7 @@ pub(crate) fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
 /// on the plume (64 voxels, a 48-point grid) this is 3/4 of the steps of a one-voxel step, and
 /// the single AOV moves by 0.05% (relative RMSE against a one-voxel step, 32 dome directions).
 pub fn shadow_step(medium: &Medium, grid: &ScatteringGrid) -> f32 {
-    let m = grid.index_to_world.matrix3;
-    let spacing = m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length());
-    spacing.max(medium.voxel_size_world().min_element())
+    crate::medium::min_spacing(&grid.index_to_world).max(medium.voxel_size_world().min_element())
 }
 
 /// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2

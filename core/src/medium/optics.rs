@@ -66,6 +66,12 @@ pub fn world_box(index_to_world: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) 
     (wmin, wmax)
 }
 
+/// The smallest spacing of a grid placed by `index_to_world` along its three axes.
+pub fn min_spacing(index_to_world: &Affine3A) -> f32 {
+    let m = index_to_world.matrix3;
+    m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length())
+}
+
 /// A grid holding point samples of a field that is interpolated trilinearly must carry, at a
 /// grid point, the mean of the field around it, not its value at the point, or an emitter
 /// inside the medium (1/d^2) is over- or under-counted by where it falls between grid points.

@@ -25,7 +25,7 @@ use crate::rng::Rng;
 use crate::scene::Scene;
 use super::depth_map::DepthMap;
 use super::march::Marcher;
-use crate::medium::{ball_mean_inverse_square, near_field_radius, Medium};
+use crate::medium::{ball_mean_inverse_square, min_spacing, near_field_radius, Medium};
 use crate::compositor::{exp_neg, is_grey};
 use crate::phase::hg;
 use crate::solvers::pop::merge::{footprint, Merged};
@@ -207,12 +207,6 @@ pub fn subset_lists(walks: &Walks, subsets: u32) -> Vec<Vec<Vpl>> {
         lists[w % subsets as usize].extend_from_slice(walks.of_walk(w));
     }
     lists
-}
-
-/// The smallest spacing of a grid's frame along its three axes.
-fn min_spacing(frame: &glam::Affine3A) -> f32 {
-    let m = frame.matrix3;
-    m.x_axis.length().min(m.y_axis.length()).min(m.z_axis.length())
 }
 
 /// The transmittance march's step for connections on a grid of this frame: its spacing, but
