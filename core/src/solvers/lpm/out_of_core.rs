@@ -377,6 +377,8 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
         timings.time("lpm S to VDB", || v.finish())?;
     }
     progress.update("lpm upsample", 1.0);
+    // Plain products, not lattice_product::finish's points: S went to its VDB slab by slab as
+    // the upsampling made it, and the returned grid must be what the file holds.
     Ok((SolveOutput::new(scattering, timings), report))
 }
 
