@@ -21,7 +21,9 @@
 //!   The output (S at `output_resolution`, the compositor's exact single scattering plus the
 //!   upsampled J) is a fixed size, independent of the grid; it is upsampled a window of J's
 //!   planes at a time (pop's `upsample_plane`, the same values as the whole), and with
-//!   `Lpm::with_s_vdb` each 8 planes go to the VDB as they are done (vdb/stream_writer.rs).
+//!   `Lpm::with_s_vdb` it goes to the VDB 8 planes at a time once its points are made for
+//!   trilinear rendering (lattice_product.rs, which needs each plane's neighbours;
+//!   vdb/stream_writer.rs).
 //! - The medium: the cells are sampled from the scene's medium and pop's density mip, both in
 //!   memory. For a VDB larger than memory the scene reads it box-filtered to a working
 //!   resolution (`medium.max_resolution`, vdb/filter.rs: the file through a 64 KiB window,
@@ -283,14 +285,14 @@ fn build(scene: &Scene, mip: &MediumMip, geometry: ([usize; 3], Vec3, f32), thic
 
 /// The solve with every per-cell array in `scratch` (see the module docs).
 pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overrides, scratch: &Path) -> Result<(SolveOutput, LpmReport)> {
-    let s = lpm.settings();
+    let s = &lpm.settings().for_output(&scene.medium);
     let medium = &scene.medium;
     let mut timings = Timings::default();
     let mut report = LpmReport::default();
     refuse_unstreamed_lights(scene, s.first_order)?;
     let (out_probe, single) = super::output_start(s, scene, progress, ov, &mut timings)?;
     if !super::scatters(scene) {
-        return Ok((SolveOutput::new(single, timings), report));
+        return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
     }
     let geometry = LpmGrid::geometry(medium, s.grid_resolution);
     let (dims, _, h) = geometry;
@@ -365,20 +367,27 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
         // For tests: J whole, as the in-memory solve reports it.
         let frame = LpmGrid { dims, lo: geometry.1, h, offset: [0; 3], density: Vec::new(), sigma_t: Vec::new() };
         report.j = Some(frame.as_scattering_grid(whole(&stores.j)?));
-        return Ok((SolveOutput::new(single, timings), report));
+        return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
     }
     let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
-    let mut vdb = match lpm.s_vdb.as_deref() {
+    // Created before the solve: a path that cannot be written fails now, not after it.
+    let vdb = match lpm.s_vdb.as_deref() {
         Some(p) => Some(RgbVdbStream::create(p, "scattering", out_probe.dims, out_probe.index_to_world, &Default::default())?),
         None => None,
     };
-    let scattering = timings.time("lpm upsample (out of core)", || upsample_streamed(scene, &mip, &stores, geometry, &pop_like, &single, vdb.as_mut(), progress))?;
-    if let Some(v) = vdb {
-        timings.time("lpm S to VDB", || v.finish())?;
+    let scattering = timings.time("lpm upsample (out of core)", || upsample_streamed(scene, &mip, &stores, geometry, &pop_like, &single, progress))?;
+    // The in-memory solve's points (lattice_product.rs), then to the file as they are returned.
+    let scattering = crate::lattice_product::finished(medium, scattering);
+    if let Some(mut v) = vdb {
+        timings.time("lpm S to VDB", || {
+            let plane = (scattering.dims[0] * scattering.dims[1]) as usize;
+            for chunk in scattering.data.chunks(plane * OUTPUT_PLANES) {
+                v.push_planes(chunk)?;
+            }
+            v.finish()
+        })?;
     }
     progress.update("lpm upsample", 1.0);
-    // Plain products, not lattice_product::finish's points: S went to its VDB slab by slab as
-    // the upsampling made it, and the returned grid must be what the file holds.
     Ok((SolveOutput::new(scattering, timings), report))
 }
 
@@ -395,7 +404,6 @@ fn upsample_streamed(
     geometry: ([usize; 3], Vec3, f32),
     settings: &PopSettings,
     single: &ScatteringGrid,
-    mut vdb: Option<&mut RgbVdbStream>,
     progress: &dyn Progress,
 ) -> Result<ScatteringGrid> {
     use rayon::prelude::*;
@@ -445,9 +453,6 @@ fn upsample_streamed(
         // S = the upsampled multiple scattering + the exact single scattering, as in memory.
         for (a, b) in chunk.iter_mut().zip(&single.data[k0 * plane..]) {
             *a += *b;
-        }
-        if let Some(v) = vdb.as_deref_mut() {
-            v.push_planes(chunk)?;
         }
     }
     Ok(out)
