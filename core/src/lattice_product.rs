@@ -57,10 +57,8 @@ pub fn on_voxel_lattice(medium: &Medium, grid_index_to_world: &Affine3A) -> bool
 /// the medium's voxel lattice; any other grid is left as it is. Every solver calls it once on
 /// the S it returns, single and multiple scattering together (in a white furnace, where their
 /// sum is uniform, it changes nothing, which the single part alone would not be); and the
-/// compositor calls it on its single-scattering AOV. The returned grids are on the lattice
-/// whenever the medium fits their resolution (`ScatteringGrid::output_points`). Memory: three
-/// planes of the grid at a time, not a second grid (S of a large medium takes what memory the
-/// solve could have).
+/// compositor calls it on its single-scattering AOV. Memory: three planes of the grid at a
+/// time, not a second grid (S of a large medium takes what memory the solve could have).
 pub fn finish(medium: &Medium, grid: &mut ScatteringGrid) {
     if !on_voxel_lattice(medium, &grid.index_to_world) {
         return;

@@ -64,24 +64,6 @@ impl ScatteringGrid {
         Ok(ScatteringGrid { dims: dims.to_array(), index_to_world, data: vec![Vec3::ZERO; count as usize] })
     }
 
-    /// The largest side to give `over_medium` for the S a solver returns when it is asked for
-    /// at most `max_dim` points a side: the medium's own voxel lattice (its voxels and the
-    /// ramp's two points) when its voxels fit in `max_dim`, else `max_dim`. Why: a medium of
-    /// exactly `max_dim` voxels (a 64^3 simulation at the default 64) would otherwise get
-    /// `max_dim` points over its `max_dim` + 2, 1.03 voxels apart, beating against the voxels a
-    /// host reads the density from, and missing the lattice's point values
-    /// (lattice_product.rs). Only for the returned grid: the solvers' coarse grids keep
-    /// `over_medium`'s sizes.
-    pub fn output_points(medium: &Medium, max_dim: u32) -> u32 {
-        let (lo, hi) = medium.grid.bbox();
-        let voxels = (hi - lo + IVec3::ONE).max_element().max(1) as u32;
-        if !medium.grid.is_empty() && voxels <= max_dim {
-            voxels + 2
-        } else {
-            max_dim
-        }
-    }
-
     pub fn len(&self) -> usize {
         self.data.len()
     }

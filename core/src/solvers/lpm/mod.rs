@@ -133,7 +133,7 @@ impl Lpm {
 
     /// `solve_detailed` with the sweeps (propagate and collect, every order) on `backend`.
     pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
-        let s = &self.settings.for_output(&scene.medium);
+        let s = &self.settings;
         if s.out_of_core {
             // The CPU's: the GPU's sweeps keep their arrays on the device.
             let dir = self.scratch_dir.clone().unwrap_or_else(std::env::temp_dir);

@@ -285,7 +285,7 @@ fn build(scene: &Scene, mip: &MediumMip, geometry: ([usize; 3], Vec3, f32), thic
 
 /// The solve with every per-cell array in `scratch` (see the module docs).
 pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overrides, scratch: &Path) -> Result<(SolveOutput, LpmReport)> {
-    let s = &lpm.settings().for_output(&scene.medium);
+    let s = lpm.settings();
     let medium = &scene.medium;
     let mut timings = Timings::default();
     let mut report = LpmReport::default();

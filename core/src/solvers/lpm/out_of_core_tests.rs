@@ -258,13 +258,11 @@ fn lpm_out_of_core_on_a_box_filtered_vdb_medium() {
     }
     assert_eq!(files_in(&dir), 1, "the VDB alone, no scratch left");
     let _ = std::fs::remove_dir_all(&dir);
-    // Measured 0.0231 (2x the grid) and 0.0315 (the grid's resolution); bounds = measured +
-    // 10% + 0.002, as the ratchets. (0.0165 and 0.0408 before the returned grid took a medium's
-    // own lattice where it fits, ScatteringGrid::output_points: the filtered media's S is now on
-    // their lattice, with its points made for trilinear rendering, the full medium's is not.) A medium filtered to twice the grid's cells changes the
+    // Measured 0.0165 (2x the grid) and 0.0408 (the grid's resolution); bounds = measured +
+    // 10% + 0.002, as the ratchets. A medium filtered to twice the grid's cells changes the
     // answer by under 2%: the grid's cells average 4^3 voxels either way, what differs is the
     // mip's finer levels (the upsampling guide) and the compositor's transmittance.
-    assert!(differences[0] <= 0.0275 && differences[1] <= 0.037, "{differences:?}");
+    assert!(differences[0] <= 0.0202 && differences[1] <= 0.047, "{differences:?}");
     assert!(differences[0] < differences[1], "{differences:?}");
 }
 

@@ -103,12 +103,6 @@ impl Default for LpmSettings {
 }
 
 impl LpmSettings {
-    /// These settings with the returned grid on the medium's lattice where it fits
-    /// (ScatteringGrid::output_points): what every stage of a solve sizes it from.
-    pub fn for_output(&self, medium: &crate::medium::Medium) -> LpmSettings {
-        LpmSettings { output_resolution: crate::solvers::ScatteringGrid::output_points(medium, self.output_resolution), ..self.clone() }
-    }
-
     /// Side k of the k x k direction lattice per face.
     pub fn lattice_side(&self) -> u32 {
         (self.directions as f64).sqrt().round() as u32

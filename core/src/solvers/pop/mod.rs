@@ -178,9 +178,8 @@ impl Pop {
         backend: &B,
         mut reuse: Option<&mut reuse::PopReuse>,
     ) -> Result<(SolveOutput, PopReport)> {
+        let s = &self.settings;
         let medium = &scene.medium;
-        // The returned grid on the medium's lattice where it fits (ScatteringGrid::output_points).
-        let s = &PopSettings { output_resolution: ScatteringGrid::output_points(medium, self.settings.output_resolution), ..self.settings.clone() };
         let mut timings = Timings::default();
         let mut report = PopReport::default();
         // The finest footprint asked of the mip: the output grid's spacing or the light grids'

@@ -229,8 +229,7 @@ impl Reference {
     pub fn scattering_on_voxels(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
         let s = &self.settings;
         let medium = &scene.medium;
-        let points = ScatteringGrid::output_points(medium, s.output_resolution);
-        let (out, density) = timings.time("output grid", || on_voxels::output_frame(medium, points))?;
+        let (out, density) = timings.time("output grid", || on_voxels::output_frame(medium, s.output_resolution))?;
         let mut radiance = ScatteringGrid::over_medium(medium, s.grid_resolution)?;
         let needed = on_voxels::needed_points(&radiance, &out, &density);
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));

@@ -118,9 +118,8 @@ impl Vpl {
 
     /// `solve_detailed` with the gather, upsampling and single scattering on `backend`.
     pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, max_orders: u32, backend: &dyn VplBackend) -> Result<(SolveOutput, VplReport)> {
+        let s = &self.settings;
         let medium = &scene.medium;
-        // Every stage (and the backend) sizes the returned grid from these settings.
-        let s = &VplSettings { output_resolution: ScatteringGrid::output_points(medium, self.settings.output_resolution), ..self.settings.clone() };
         let mut timings = Timings::default();
         if !progress.update("vpl walks", 0.0) {
             return Err(Error::Cancelled);
