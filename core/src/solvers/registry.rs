@@ -335,7 +335,7 @@ const VPL: SolverEntry = SolverEntry {
         SettingSpec::int("max_vertices", "most VPLs one walk leaves before it is cut").range(1.0, (1u32 << 20) as f64),
         SettingSpec::int("rr_depth", "scattering vertices before Russian roulette starts"),
         SettingSpec::int("walks_per_subset", "walks per interleaved subset gathered at each point").zero("every point uses every walk"),
-        SettingSpec { choices: &["clamp", "ball", "compensate"], ..SettingSpec::new("near_field", SettingType::Choice, "near field of 1/d^2: clamp at the radius, the lossless ball kernel (default: as good or better at equal cost on every fixture), or the clamp with bias compensation (right in a white furnace, heavy-tailed on thin smoke)") },
+        SettingSpec { choices: &["auto", "clamp", "ball", "hat", "compensate"], ..SettingSpec::new("near_field", SettingType::Choice, "near field of 1/d^2: auto (default: the hat in a medium whose gather cells span over a mean free path where light scatters, as a dense cloud; the ball elsewhere), clamp at the radius, the lossless ball kernel (as good or better at equal cost on every thin fixture), the attenuated top hat (lossless at any optical thickness: dense cloud 8 seeds x0.998, image error 0.19 at 32768 walks against the ball's 0.5), or the clamp with bias compensation (right in a white furnace, heavy-tailed on thin smoke)") },
         SettingSpec::int("compensation_vertices", "compensation: new vertices per gather point").range(1.0, 256.0),
         SettingSpec::int("compensation_depth", "compensation: recursion levels (the last takes the VPLs with the ball kernel)").range(1.0, 8.0),
         SettingSpec::int("compensation_walks", "compensation: walks each new vertex connects to").range(1.0, (1u32 << 24) as f64),

@@ -55,8 +55,9 @@ pub struct GpuPoint {
     pub position: [f32; 4],
     pub view: [f32; 4],
     pub list: [u32; 4],
+    pub hat: [f32; 4],
 }
-const _: () = assert!(size_of::<GpuPoint>() == 48);
+const _: () = assert!(size_of::<GpuPoint>() == 64);
 
 /// Mirrors `struct Vpl` in gather.wgsl.
 #[repr(C)]
@@ -106,12 +107,13 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
     let gpu_points: Vec<GpuPoint> = points
         .iter()
         .map(|p| {
-            let (radius, kind, cone) = match p.kernel {
-                Kernel::Clamp(r) => (r, 0, 0.0f32),
-                Kernel::Ball { radius, cone } => (radius, 1, cone),
+            let (radius, kind, cone, hat) = match p.kernel {
+                Kernel::Clamp(r) => (r, 0, 0.0f32, Vec3::ZERO),
+                Kernel::Ball { radius, cone } => (radius, 1, cone, Vec3::ZERO),
+                Kernel::Hat { radius, cone, inside } => (radius, 2, cone, inside),
             };
             let s = p.subset as usize;
-            GpuPoint { position: p.position.extend(radius).to_array(), view: p.view.extend(p.ball).to_array(), list: [starts[s], lists[s].len() as u32, kind, cone.to_bits()] }
+            GpuPoint { position: p.position.extend(radius).to_array(), view: p.view.extend(p.ball).to_array(), list: [starts[s], lists[s].len() as u32, kind, cone.to_bits()], hat: hat.extend(0.0).to_array() }
         })
         .collect();
     let longest = lists.iter().map(Vec::len).max().unwrap_or(0) as u64;

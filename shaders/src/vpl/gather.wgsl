@@ -22,7 +22,8 @@ struct Params {
 struct Point {
     position: vec4<f32>,               // w = kernel radius (R of the clamp, or the ball's radius)
     view: vec4<f32>,                   // direction camera -> point, w = the ball radius the clamp's loss is measured against
-    list: vec4<u32>,                   // first VPL of the point's list in `vpls`, its length, kernel (0 clamp, 1 ball), the ball's phase-smoothing radius (f32 bits)
+    list: vec4<u32>,                   // first VPL of the point's list in `vpls`, its length, kernel (0 clamp, 1 ball, 2 hat), the phase-smoothing radius (f32 bits)
+    hat: vec4<f32>,                    // kernel 2: the top hat's value inside its ball (RGB), -
 };
 
 struct Vpl {
@@ -78,8 +79,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let w = to / max(d, 1e-12);
             // The ball kernel's phases smoothed over the cone of a ball of radius `cone`
             // (vpl/gather.rs `Kernel::Ball`, `cone_mean_cosine`).
+            // Inside the top hat's ball: its constant, the phases' mean over the ball's
+            // directions (HG with g^2), no transmittance (vpl/gather.rs `Kernel::Hat`).
+            if (p.list.z == 2u && d < radius) {
+                let pg = hg(-dot(vpl.incident.xyz, view), g0 * g0);
+                sum += vpl.power.xyz * ((0.25 / PI) * pg) * p.hat.xyz;
+                iso += vpl.power.xyz * ((0.25 / PI) * (0.25 / PI)) * p.hat.xyz;
+                continue;
+            }
             var g = g0;
-            if (p.list.z == 1u && cone > 0.0) {
+            if (p.list.z >= 1u && cone > 0.0) {
                 g = g0 * cone_mean_cosine(d, cone);
             }
             // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
@@ -95,6 +104,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let light_iso = vpl.power.xyz * (p_vpl * (0.25 / PI)) * tr;
             if (p.list.z == 1u) {
                 let b = ball_mean_inverse_square(d, radius);
+                sum += light * b;
+                iso += light_iso * b;
+            } else if (p.list.z == 2u) {
+                let b = 1.0 / (d * d);
                 sum += light * b;
                 iso += light_iso * b;
             } else {

@@ -47,7 +47,7 @@ fn test_settings(near_field: NearField) -> VplSettings {
 }
 
 /// The GPU gather against the CPU's (`gather::gather`) on the same walks: the plume lit by
-/// the sun and the plume beside a point light, with each near field (ball, clamp, compensate:
+/// the sun and the plume beside a point light, with each near field (ball, the hat, clamp, compensate:
 /// the compensation's vertices sampled on the CPU, connected on the GPU; depths 2 and 3) and
 /// interleaved subsets twice. Same points, kernels and march positions; the GPU sums each
 /// point's VPLs in a tree of 64 partial sums (the CPU in list order) and its exp/log/sqrt
@@ -61,6 +61,7 @@ fn gpu_gather_matches_cpu() {
     let ctx = gpu_or_skip();
     for (name, near_field, per_subset, depth) in [
         ("plume", NearField::Ball, 0, 2),
+        ("plume", NearField::Hat, 0, 2),
         ("plume", NearField::Clamp, 128, 2),
         ("plume", NearField::Compensate, 0, 2),
         ("plume_point", NearField::Ball, 0, 2),

@@ -113,7 +113,7 @@ impl DensityIntegral {
     #[inline]
     fn weight(&self, d: f32, kernel: Kernel, sigma_t: f32) -> f32 {
         let k = match kernel {
-            Kernel::Ball { radius: b, .. } => ball_mean_inverse_square(d, b.max(self.cell_ball)),
+            Kernel::Ball { radius: b, .. } | Kernel::Hat { radius: b, .. } => ball_mean_inverse_square(d, b.max(self.cell_ball)),
             Kernel::Clamp(r) => 1.0 / d.max(r.max(self.cell_ball)).powi(2),
         };
         k * (-sigma_t * d).exp()
@@ -217,7 +217,7 @@ pub fn upsample(
     let dens = DensityIntegral::new(medium, mip, &s, near.radius(), progress)?;
     let sigma_t = |rho: f32| medium.sigma_t(rho).max_element();
     let ball = |rho: f32| match near.kernel(rho).0 {
-        Kernel::Ball { radius: b, .. } => b,
+        Kernel::Ball { radius: b, .. } | Kernel::Hat { radius: b, .. } => b,
         Kernel::Clamp(_) => 0.0,
     };
     // D at the coarse points where the gather ran, with their kernel.

@@ -117,7 +117,9 @@ impl<'a> Near<'a> {
     pub(super) fn kernel(&self, rho: f32) -> (Kernel, f32) {
         let ball = ball_radius(self.march.medium(), rho, self.r, self.mean_free_paths);
         let kernel = match self.near_field {
-            NearField::Ball => Kernel::Ball { radius: ball, cone: 0.0 },
+            // (`auto` is resolved before the solve, mod.rs; as `ball` should it get here.)
+            NearField::Ball | NearField::Auto => Kernel::Ball { radius: ball, cone: 0.0 },
+            NearField::Hat => super::gather::hat(self.march.medium(), rho, self.r),
             NearField::Clamp | NearField::Compensate => Kernel::Clamp(self.r),
         };
         (kernel, ball)

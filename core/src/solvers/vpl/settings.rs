@@ -16,6 +16,22 @@ pub enum NearField {
     /// (medium::ball_mean_inverse_square): bounded (3/r^2 at the VPL) and with the same
     /// integral over space as 1/d^2, so no energy is lost, only blurred over r.
     Ball,
+    /// The attenuated top hat (gather.rs `Kernel::Hat`): a VPL within r of a point counts
+    /// as a density estimate over the ball, with the mean over the ball of the homogeneous
+    /// kernel e^{-sigma d} / d^2 (sigma the point's extinction) and both phase functions
+    /// replaced by their mean over the ball's directions (HG with g^2 from the VPL's incident
+    /// direction to the viewer); beyond r, T / d^2. Lossless at any optical thickness of the
+    /// ball, so r stays a whole gather cell where `ball` must shrink to a fraction of a mean
+    /// free path (`mean_free_paths`) and turns heavy-tailed.
+    Hat,
+    /// `ball` or `hat` by the medium: the hat where the near field's ball spans more than
+    /// `gather::HAT_ABOVE` mean free paths where the medium typically scatters
+    /// (`gather::scattering_optical_radius`), the ball elsewhere. Measured (16-cell gather):
+    /// the optical radius is 0.18 on the cubes, 0.28-0.42 on the plume and its local lights,
+    /// 0.62 on the default scene (all: ball, their results unchanged) and 2.0 on the dense
+    /// cloud (hat). There, 8 seeds at 32768 walks: hat x0.998 +- 0.010 with image errors
+    /// 0.14-0.23, ball x1.080 +- 0.038 with 0.25-0.80 (tests.rs).
+    Auto,
     /// The clamp, and the clamped energy put back by the paper's bias compensation
     /// (compensate.rs): new vertices within r of each gather point, connected to subsets of
     /// the walks and to the lights, recursively.
@@ -131,7 +147,11 @@ pub struct VplSettings {
     /// 32768 / 131072 walks 0.31 / 1.11 s, 0.140 / 0.088, x0.947 / 0.940 (defaults 16384 0.29 s
     /// 0.106 x0.950, 65536 1.02 s 0.086 x0.939).
     pub walks_per_subset: u32,
-    /// Near-field handling of the VPL connections (see `NearField`). `ball`, the default,
+    /// Near-field handling of the VPL connections (see `NearField`). `auto`, the default: the
+    /// hat on media whose gather cells span more than a mean free path where light scatters
+    /// (the dense cloud: 8 seeds at 32768 walks x0.998 with image errors 0.14-0.23, against
+    /// the ball's x1.080 with 0.25-0.80; 4096 walks, 12-cell gather: image 0.42 against
+    /// 0.71), the ball on every other fixture, where it was the default before the hat,
     /// because at equal cost it is as good or better on every fixture (scripts/bench_vpl.py,
     /// BENCHMARKS.md `vpl`, 8192 walks): cube g 0.7 0.114 (compensate 0.112), point light
     /// beside the plume 0.16 (0.19), dense cloud 0.57 with flux x0.80 (0.58, x0.59), and on the
@@ -282,7 +302,7 @@ impl Default for VplSettings {
             max_vertices: 4096,
             rr_depth: 4,
             walks_per_subset: 0,
-            near_field: NearField::Ball,
+            near_field: NearField::Auto,
             clamp_radius: 1.0,
             mean_free_paths: 0.25,
             phase_cone: 0.25,

@@ -110,6 +110,14 @@ against_reference! {
     vpl_cloud_against_reference: "cloud", NearField::Ball, 0.788, 0.851;
 }
 
+// The dense cloud with the attenuated top hat (`near_field: hat`, what `auto` takes there):
+// its ball stays a whole gather cell (2-3 mean free paths) where the ball kernel's shrinks to a
+// quarter of one, so no VPL's 1/d^2 peaks. Measured: image 0.4209 / grid 0.4179, x0.945
+// (the ball's row above: 0.7072 / 0.7643). Same margins.
+against_reference! {
+    vpl_cloud_hat_against_reference: "cloud", NearField::Hat, 0.473, 0.470;
+}
+
 // The default near field, `compensate` (4 vertices per gather point, depth 2, 256 walks per
 // vertex), same settings and margins. Measured (image / grid, image mean ratio): cube g 0
 // 0.0928 / 0.0609 x1.090 (ball 0.0755 / 0.0639 x1.059: the same walks, both bright by their
@@ -284,6 +292,69 @@ fn vpl_white_furnace_clamp_loses_compensation_restores() {
     assert!(g.clamped > 0.0 && g.restored > 0.5 * g.clamped && g.restored < 2.0 * g.clamped, "clamped {} restored {}", g.clamped, g.restored);
 }
 
+/// Rel. RMSE of S / sigma_s against its exact 1 over the white furnace box's interior, over
+/// `seeds` seeds (the mean of their squared errors), and the mean S / sigma_s.
+fn furnace_error(s: &VplSettings, seeds: u64) -> (f64, f64) {
+    let sc = furnace_box();
+    let (mut sq, mut sum, mut n) = (0.0f64, 0.0f64, 0usize);
+    for seed in 1..=seeds {
+        let out = Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(&sc, &NoProgress).unwrap();
+        for r in crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99) {
+            sq += (r as f64 - 1.0).powi(2);
+            sum += r as f64;
+            n += 1;
+        }
+    }
+    ((sq / n as f64).sqrt(), sum / n as f64)
+}
+
+/// Exploration (not in CI): `furnace_error` against the walks (VPL_WALKS_LIST) for the clamp
+/// and the compensation, VPL_CW_DIV > 0 giving the compensation walks / VPL_CW_DIV walks.
+/// Measured (1 seed, VPL_CW_DIV=4; rel. RMSE of S / sigma_s over the box's interior, mean):
+/// clamp 512 / 2048 / 8192 / 32768 walks 0.29 / 0.31 / 0.30 / 0.29, mean 0.70-0.74 (its
+/// bias); compensate 0.142 / 0.083 / 0.076 / 0.065, mean 1.05 / 1.00 / 1.013 / 1.018. The
+/// compensation has no plateau at the clamp's loss, but its error does not fall as
+/// walks^-0.5 beyond 2048 walks either: two seeds' mean keeps 0.06-0.07 (one seed's noise
+/// 0.029 at 32768), a deterministic part by point (the upsampling at the box's faces is a
+/// suspect, not confirmed), so the slope check is not asserted.
+#[test]
+#[ignore]
+fn vpl_explore_furnace_convergence() {
+    use crate::solvers::testing::env_u32;
+    let list: Vec<u32> = std::env::var("VPL_WALKS_LIST").unwrap_or_else(|_| "512,2048,8192".into()).split(',').map(|w| w.parse().unwrap()).collect();
+    let div = env_u32("VPL_CW_DIV", 0);
+    for nf in [NearField::Clamp, NearField::Compensate] {
+        for &walks in &list {
+            let cw = if div > 0 { (walks / div).max(1) } else { 256 };
+            let s = VplSettings { walks, gather_resolution: 10, output_resolution: 12, clamp_radius: 2.0, near_field: nf, normalize_energy: false, compensation_walks: cw, compensation_vertices: env_u32("VPL_CV", 4), ..Default::default() };
+            let t = std::time::Instant::now();
+            let (e, m) = furnace_error(&s, env_u32("VPL_SEEDS", 2) as u64);
+            eprintln!("furnace {nf:?} {walks} walks (compensation walks {cw}): rel. RMSE {e:.4}, mean {m:.4} ({:.2} s)", t.elapsed().as_secs_f64());
+            // Noise against bias: two seeds' difference, and their mean's error, by point.
+            let sc = furnace_box();
+            let core = env_u32("VPL_CORE1000", 1000) as f32 / 1000.0;
+            let r = |seed| {
+                let g = Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
+                let mut v = Vec::new();
+                for c in 0..g.len() {
+                    let (i, j, k) = (c as u32 % g.dims[0], (c as u32 / g.dims[0]) % g.dims[1], c as u32 / (g.dims[0] * g.dims[1]));
+                    let p = g.position(i, j, k);
+                    let dens = sc.medium.density_world(p);
+                    if dens > 0.99 && p.abs().max_element() < core {
+                        v.push(g.data[c].x / sc.medium.sigma_s(dens).x);
+                    }
+                }
+                v
+            };
+            let (a, b) = (r(1), r(2));
+            let n = a.len() as f64;
+            let noise = (a.iter().zip(&b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / n / 2.0).sqrt();
+            let bias = (a.iter().zip(&b).map(|(x, y)| (0.5 * (x + y) as f64 - 1.0).powi(2)).sum::<f64>() / n).sqrt();
+            eprintln!("    one seed's noise {noise:.4}, the two seeds' mean's error {bias:.4} ({} points)", a.len());
+        }
+    }
+}
+
 /// A sun turned by 1 degree changes S by a small, stated amount: each walk keeps its random
 /// stream (walk w is stream w of the seed), so the paths start from the same draws. Measured
 /// on the cube g 0 (1024 walks, 8-cell gather): rel. RMSE between the two grids 0.057 (the
@@ -402,10 +473,12 @@ fn vpl_bench() {
 /// x1.015 +- 0.014 (x1.012), spot light x0.985 +- 0.007 (x0.984), point light x0.990 +- 0.010
 /// (x0.986), plume x0.997 +- 0.048 (x1.000; its seeds spread more than the bound: there the
 /// test only pins the mean, it does not resolve 2%), rect light as above.
-/// Not met, so not asserted: the dense cloud, heavy-tailed at every walk count tried: x0.965
-/// +- 0.069 at 4096 walks (seeds x0.71-1.35, 3 s a solve), x1.080 +- 0.038 at 32768 (seeds
-/// x0.95-1.25, 6 s a solve; without `normalize_energy`, same walks, x1.034 +- 0.035): its
-/// seeds spread 10% or more, so 8 of them cannot resolve 2%.
+/// The dense cloud, with the default `near_field: auto` (the hat there, settings.rs): x0.998 +-
+/// 0.010 at 32768 walks (seeds x0.961-1.036, image errors 0.14-0.23, 3.9 s a solve),
+/// asserted there; at 4096 walks x0.94 +- 0.07 (seeds x0.68-1.22: the walks' own noise, each
+/// seed's image error 0.42-0.61). With the ball kernel it was heavy-tailed at every walk
+/// count tried: x0.965 +- 0.069 at 4096 walks (seeds x0.71-1.35, image errors 0.48-1.13),
+/// x1.080 +- 0.038 at 32768 (seeds x0.95-1.25, image errors 0.25-0.80, one seed's grid 3.8).
 /// History: before `normalize_energy` and `phase_cone` this held only for cube g 0 with
 /// `upsample_fit: linear` at a 12-cell gather (x1.013); the defaults gave the point light
 /// x0.878, the spot x0.931, the plume x0.850 and the cloud x1.395 with one seed x7.2.
@@ -441,6 +514,7 @@ eight_seeds_within_two_percent! {
     vpl_eight_seeds_flux_spot_light: "plume_spot", 4096;
     vpl_eight_seeds_flux_point_light: "plume_point", 32768;
     vpl_eight_seeds_flux_rect_light: "plume_rect", 131072;
+    vpl_eight_seeds_flux_dense_cloud: "cloud", 32768;
 }
 
 /// `normalize_energy` (energy.rs) sets two estimates of one power against each other: the walks'
@@ -476,6 +550,70 @@ fn vpl_energy_normalization_agrees_where_unbiased_and_lifts_the_point_light() {
     let (m_on, m_off) = (sum(&on.scattering.data) - sum(&single.data), sum(&off.scattering.data) - sum(&single.data));
     eprintln!("plume_point: multiple scattering's sum with / without x{:.4}, factor {}", m_on / m_off, f.x);
     assert!((m_on / m_off - f.x as f64).abs() < 0.01 * f.x as f64, "multiple x{} against the factor {}", m_on / m_off, f.x);
+}
+
+/// The top hat's constant (gather.rs `hat_inside`) is the mean over its ball of the
+/// homogeneous kernel e^{-sigma d} / d^2 (a midpoint quadrature of 4 pi int_0^R e^{-sigma r} dr
+/// over the ball's volume, 20000 shells), from a thin ball (sigma R 0: 3 / R^2, the ball
+/// kernel's peak) to one 60 mean free paths thick (the dense cloud's cells are 2-8); so the
+/// kernel's integral over space (the constant over the ball, e^{-sigma d} / d^2 beyond) is
+/// 4 pi / sigma, that of e^{-sigma d} / d^2: lossless. Tolerance 1e-4 relative (f32 rounding).
+#[test]
+fn hat_inside_is_the_ball_mean_of_the_attenuated_kernel_and_loses_nothing() {
+    use super::gather::hat_inside;
+    use std::f64::consts::PI;
+    let r = 0.3f64;
+    for sigma_r in [0.0f64, 1e-5, 0.01, 0.25, 1.0, 2.0, 8.0, 60.0] {
+        let sigma = sigma_r / r;
+        let n = 20000;
+        let dr = r / n as f64;
+        let radial: f64 = (0..n).map(|i| (-sigma * (i as f64 + 0.5) * dr).exp() * dr).sum::<f64>() * 4.0 * PI;
+        let mean = radial / (4.0 / 3.0 * PI * r.powi(3));
+        let ours = hat_inside(Vec3::splat(sigma as f32), r as f32);
+        assert!(ours.x == ours.y && ours.y == ours.z, "channels differ: {ours}");
+        assert!((ours.x as f64 / mean - 1.0).abs() < 1e-4, "sigma R {sigma_r}: {} against the quadrature {mean}", ours.x);
+        if sigma_r > 0.0 {
+            // Inside: the constant over the ball; beyond: 4 pi int_R^inf e^{-sigma r} dr.
+            let total = ours.x as f64 * 4.0 / 3.0 * PI * r.powi(3) + 4.0 * PI * (-sigma_r).exp() / sigma;
+            assert!((total * sigma / (4.0 * PI) - 1.0).abs() < 1e-4, "sigma R {sigma_r}: integral {total} against 4 pi / sigma");
+        }
+    }
+    // Per channel: a red-only extinction leaves green and blue at 3 / R^2.
+    let rgb = hat_inside(Vec3::new(10.0, 0.0, 0.0), 0.3);
+    assert!(rgb.x < 0.5 * rgb.y && (rgb.y - 3.0 / 0.09).abs() < 1e-3 && rgb.y == rgb.z, "{rgb}");
+}
+
+/// The hat's phase (gather.rs `connect_with`): the two HG lobes of a connection averaged over
+/// the directions of the ball, int p(a . w, g) p(w . b, g) dw, is HG of g^2 (Legendre
+/// coefficients multiply under convolution on the sphere; exact, not an approximation).
+/// Checked by a 400 x 800 quadrature in (cos, phi) for g 0.5 and 0.9 at five angles;
+/// tolerance 1% (the g 0.9 lobe's peak on the quadrature's cells).
+#[test]
+fn hg_convolved_with_itself_is_hg_of_g_squared() {
+    use crate::phase::hg;
+    use std::f32::consts::PI;
+    for g in [0.5f32, 0.9] {
+        for cos_ab in [-0.9f32, -0.3, 0.2, 0.7, 0.98] {
+            let a = Vec3::Z;
+            let b = Vec3::new((1.0 - cos_ab * cos_ab).sqrt(), 0.0, cos_ab);
+            let (nu, nphi) = (400, 800);
+            let mut sum = 0.0f64;
+            for i in 0..nu {
+                // Denser cells towards the forward lobe: u = cos in [-1, 1] through t^3.
+                let (t0, t1) = (i as f64 / nu as f64, (i + 1) as f64 / nu as f64);
+                let (u0, u1) = (1.0 - 2.0 * (1.0 - t0).powi(3), 1.0 - 2.0 * (1.0 - t1).powi(3));
+                let u = 0.5 * (u0 + u1) as f32;
+                let s = (1.0 - u * u).max(0.0).sqrt();
+                for j in 0..nphi {
+                    let phi = (j as f32 + 0.5) * 2.0 * PI / nphi as f32;
+                    let w = Vec3::new(s * phi.cos(), s * phi.sin(), u);
+                    sum += (hg(a.dot(w), g) * hg(w.dot(b), g)) as f64 * (u1 - u0) * (2.0 * std::f64::consts::PI / nphi as f64);
+                }
+            }
+            let want = hg(cos_ab, g * g) as f64;
+            assert!((sum / want - 1.0).abs() < 0.01, "g {g} cos {cos_ab}: {sum} against HG(g^2) {want}");
+        }
+    }
 }
 
 /// `phase_cone`'s smoothing (gather.rs `cone_mean_cosine`): 0 inside the ball (directions over
@@ -548,6 +686,7 @@ fn vpl_explore_seeds() {
         let near_field = match std::env::var("VPL_NEAR").as_deref() {
             Ok("clamp") => NearField::Clamp,
             Ok("ball") => NearField::Ball,
+            Ok("hat") => NearField::Hat,
             _ => NearField::Compensate,
         };
         let upsample = env_u32("VPL_UPSAMPLE", 1) != 0;
@@ -827,4 +966,30 @@ fn vpl_explore_multiple_share() {
             eprintln!("{name} gather {gather_resolution}: single x{:.4}, multiple x{:.4}, total x{:.4}", single / n, multiple / n, total / n);
         }
     }
+}
+
+/// `near_field: auto` (settings.rs): the hat on the dense cloud, the ball on every thin
+/// fixture and the default scene, by the near field's scattering-weighted optical radius
+/// (gather::scattering_optical_radius, 16-cell gather) against `HAT_ABOVE`; the values as
+/// measured are printed. A wrong sigma_t, radius or weighting moves them by far more than
+/// the margins to the threshold stated in `NearField::Auto`.
+#[test]
+fn vpl_auto_near_field_takes_the_hat_on_the_dense_cloud_only() {
+    let s = VplSettings::default();
+    assert_eq!(s.near_field, NearField::Auto);
+    let vpl = Vpl::new(s.clone()).unwrap();
+    let radius = |sc: &Scene| {
+        let grid = crate::solvers::ScatteringGrid::over_medium(&sc.medium, s.gather_resolution).unwrap();
+        super::gather::scattering_optical_radius(&sc.medium, s.clamp_radius * crate::medium::near_field_radius(&grid.index_to_world))
+    };
+    let mut cases: Vec<(String, Scene)> = ["cube_g0", "cube_g07", "cube_g09", "plume", "plume_point", "plume_spot", "plume_rect", "plume_sphere", "fig10_g0", "fig10_g08", "cloud"].iter().map(|n| (n.to_string(), case(n))).collect();
+    cases.push(("default scene".into(), Scene::default_scene()));
+    for (name, sc) in &cases {
+        let chosen = vpl.near_field_for(&sc.medium).unwrap();
+        eprintln!("{name}: scattering-weighted optical radius {:.3} -> {chosen:?}", radius(sc));
+        let want = if name == "cloud" { NearField::Hat } else { NearField::Ball };
+        assert_eq!(chosen, want, "{name}: optical radius {}", radius(sc));
+    }
+    // A setting other than auto is kept.
+    assert_eq!(Vpl::new(VplSettings { near_field: NearField::Clamp, ..s }).unwrap().near_field_for(&case("cloud").medium).unwrap(), NearField::Clamp);
 }
