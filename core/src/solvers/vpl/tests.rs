@@ -308,25 +308,83 @@ fn furnace_error(s: &VplSettings, seeds: u64) -> (f64, f64) {
     ((sq / n as f64).sqrt(), sum / n as f64)
 }
 
-/// Exploration (not in CI): `furnace_error` against the walks (VPL_WALKS_LIST) for the clamp
-/// and the compensation, VPL_CW_DIV > 0 giving the compensation walks / VPL_CW_DIV walks.
+/// S / sigma_s at the white furnace box's interior points (density above 0.99 of its peak),
+/// in grid order, for `s` (its seed included).
+fn furnace_points(s: &VplSettings) -> Vec<f64> {
+    let sc = furnace_box();
+    let out = Vpl::new(s.clone()).unwrap().solve(&sc, &NoProgress).unwrap();
+    crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99).into_iter().map(|r| r as f64).collect()
+}
+
+/// One seed's noise (RMS over the points of two seeds' difference / sqrt 2) and the two
+/// seeds' mean's RMS error against the exact 1, on the white furnace box.
+fn furnace_noise_and_error(s: &VplSettings) -> (f64, f64) {
+    let (a, b) = (furnace_points(&VplSettings { seed: 1, ..s.clone() }), furnace_points(&VplSettings { seed: 2, ..s.clone() }));
+    let n = a.len() as f64;
+    let noise = (a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n / 2.0).sqrt();
+    let error = (a.iter().zip(&b).map(|(x, y)| (0.5 * (x + y) - 1.0).powi(2)).sum::<f64>() / n).sqrt();
+    (noise, error)
+}
+
+/// Issue 16's convergence check, on the white furnace box (S / sigma_s exactly 1 at every
+/// point; 10-cell gather, 12-cell output, near-field radius 2 cells as the other furnace
+/// tests): from 2048 to 32768 walks (16x) one seed's noise falls with slope near -0.5 for the
+/// default kernels (measured over the box's 512 interior points: ball 0.117 -> 0.027, slope
+/// -0.54; hat 0.070 -> 0.024, -0.39), bounds -0.65..-0.3 (two noise estimates
+/// from two seeds each: each ~9% uncertain over ~500 points, so the slope ~ +-0.05, and the
+/// slope of a VPL estimator can only flatten where its kernel's bias takes over). The clamp
+/// plateaus at its loss (mean 0.70-0.71 at both; error 0.311 -> 0.299, asserted: at least
+/// 0.9x), and the compensation does not: its two seeds' mean error at 32768 walks stays below
+/// a third of the clamp's (measured 0.062 against 0.299) with its mean within 3% of 1
+/// (measured 1.016). Not asserted, and why: at fixed compensation settings (4 vertices a point, 256
+/// walks each) the compensation's noise falls slower (0.063 -> 0.037, slope -0.19): its
+/// vertices' own sampling does not scale with the walks (`vpl_explore_furnace_convergence`,
+/// VPL_CV_DIV / VPL_CW_DIV: scaling both still gives -0.25, not understood).
+#[test]
+fn vpl_furnace_error_falls_as_inverse_square_root_of_walks() {
+    let base = VplSettings { gather_resolution: 10, output_resolution: 12, clamp_radius: 2.0, normalize_energy: false, ..Default::default() };
+    let slope = |a: f64, b: f64| (b / a).ln() / 16f64.ln();
+    for nf in [NearField::Ball, NearField::Hat] {
+        let (n1, _) = furnace_noise_and_error(&VplSettings { walks: 2048, near_field: nf, ..base.clone() });
+        let (n2, _) = furnace_noise_and_error(&VplSettings { walks: 32768, near_field: nf, ..base.clone() });
+        eprintln!("{nf:?}: one seed's noise {n1:.4} at 2048 walks, {n2:.4} at 32768: slope {:.3}", slope(n1, n2));
+        assert!((-0.65..=-0.3).contains(&slope(n1, n2)), "{nf:?}: noise {n1} -> {n2}, slope {}", slope(n1, n2));
+    }
+    let clamp = |walks| furnace_noise_and_error(&VplSettings { walks, near_field: NearField::Clamp, ..base.clone() }).1;
+    let (c1, c2) = (clamp(2048), clamp(32768));
+    eprintln!("clamp: two seeds' mean error {c1:.4} at 2048 walks, {c2:.4} at 32768");
+    assert!(c2 > 0.9 * c1 && c2 > 0.2, "the clamp's plateau: {c1} -> {c2}");
+    let comp = VplSettings { walks: 32768, near_field: NearField::Compensate, ..base.clone() };
+    let (_, e) = furnace_noise_and_error(&comp);
+    let mean = furnace_points(&comp).iter().sum::<f64>() / furnace_points(&comp).len() as f64;
+    eprintln!("compensate: two seeds' mean error {e:.4} at 32768 walks, seed 1's mean {mean:.4}");
+    assert!(e < c2 / 3.0 && (mean - 1.0).abs() < 0.03, "compensation: error {e} (clamp {c2}), mean {mean}");
+}
+
+/// Exploration (not in CI): `furnace_error` against the walks (VPL_WALKS_LIST) for the near
+/// fields in VPL_NFS (default clamp,compensate), VPL_CW_DIV > 0 giving the compensation walks
+/// walks / VPL_CW_DIV, VPL_CV_DIV > 0 its vertices walks / VPL_CV_DIV.
 /// Measured (1 seed, VPL_CW_DIV=4; rel. RMSE of S / sigma_s over the box's interior, mean):
 /// clamp 512 / 2048 / 8192 / 32768 walks 0.29 / 0.31 / 0.30 / 0.29, mean 0.70-0.74 (its
 /// bias); compensate 0.142 / 0.083 / 0.076 / 0.065, mean 1.05 / 1.00 / 1.013 / 1.018. The
 /// compensation has no plateau at the clamp's loss, but its error does not fall as
-/// walks^-0.5 beyond 2048 walks either: two seeds' mean keeps 0.06-0.07 (one seed's noise
-/// 0.029 at 32768), a deterministic part by point (the upsampling at the box's faces is a
-/// suspect, not confirmed), so the issue's slope check is not asserted.
+/// walks^-0.5 beyond 2048 walks either: two seeds' mean keeps 0.06-0.07, one seed's noise
+/// 0.063 -> 0.037 from 2048 to 32768 walks (64 innermost points, VPL_CORE1000=300), -0.25
+/// with its vertices and walks scaled with the walks; ball and hat fall near -0.5 (asserted in
+/// `vpl_furnace_error_falls_as_inverse_square_root_of_walks`).
 #[test]
 #[ignore]
 fn vpl_explore_furnace_convergence() {
     use crate::solvers::testing::env_u32;
     let list: Vec<u32> = std::env::var("VPL_WALKS_LIST").unwrap_or_else(|_| "512,2048,8192".into()).split(',').map(|w| w.parse().unwrap()).collect();
     let div = env_u32("VPL_CW_DIV", 0);
-    for nf in [NearField::Clamp, NearField::Compensate] {
+    let nfs: Vec<NearField> = std::env::var("VPL_NFS").unwrap_or_else(|_| "clamp,compensate".into()).split(',').map(|n| serde_json::from_value(serde_json::Value::from(n)).unwrap()).collect();
+    for nf in nfs {
         for &walks in &list {
             let cw = if div > 0 { (walks / div).max(1) } else { 256 };
-            let s = VplSettings { walks, gather_resolution: 10, output_resolution: 12, clamp_radius: 2.0, near_field: nf, normalize_energy: false, compensation_walks: cw, compensation_vertices: env_u32("VPL_CV", 4), ..Default::default() };
+            let cv_div = env_u32("VPL_CV_DIV", 0);
+            let cv = if cv_div > 0 { (walks / cv_div).clamp(1, 256) } else { env_u32("VPL_CV", 4) };
+            let s = VplSettings { walks, gather_resolution: 10, output_resolution: 12, clamp_radius: 2.0, near_field: nf, normalize_energy: false, compensation_walks: cw, compensation_vertices: cv, ..Default::default() };
             let t = std::time::Instant::now();
             let (e, m) = furnace_error(&s, env_u32("VPL_SEEDS", 2) as u64);
             eprintln!("furnace {nf:?} {walks} walks (compensation walks {cw}): rel. RMSE {e:.4}, mean {m:.4} ({:.2} s)", t.elapsed().as_secs_f64());
