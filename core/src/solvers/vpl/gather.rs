@@ -93,7 +93,10 @@ pub enum Kernel {
     /// is the mean over the ball of the homogeneous kernel e^{-sigma d} / d^2, sigma the
     /// extinction at the gather point (`hat_inside`), so the kernel's integral over space is
     /// that of T / d^2 in a medium of that extinction: lossless however many mean free paths
-    /// the ball spans. Phases as `Ball`'s.
+    /// the ball spans. Inside, the two phase functions are replaced by their mean over the
+    /// ball's directions, HG of g^2 from the VPL's incident direction to the viewer (the
+    /// uniform density the hat assumes makes every direction from the VPL to the point equally
+    /// likely); beyond, they are smoothed over the cone of a ball of radius `cone`, as `Ball`'s.
     Hat { radius: f32, cone: f32, inside: Vec3 },
 }
 
@@ -167,15 +170,8 @@ fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kern
         if d < radius {
             stats.near += 1;
         }
-        let w = to / d.max(1e-12);
-        // The ball kernel's phases smoothed over the cone of its `cone` ball (kernel doc).
-        let g = match kernel {
-            Kernel::Ball { cone, .. } | Kernel::Hat { cone, .. } if cone > 0.0 => g * cone_mean_cosine(d, cone),
-            _ => g,
-        };
-        // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
-        let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
-        // Inside the top hat's ball: its constant, no transmittance (the kernel doc).
+        // Inside the top hat's ball: its constant, the lobes' mean over the ball's directions,
+        // no transmittance (the kernel doc).
         if let Kernel::Hat { inside, .. } = kernel {
             if d < radius {
                 let pg = hg(-v.incident.dot(view), medium.g * medium.g);
@@ -184,6 +180,14 @@ fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kern
                 continue;
             }
         }
+        let w = to / d.max(1e-12);
+        // The ball kernel's phases smoothed over the cone of its `cone` ball (kernel doc).
+        let g = match kernel {
+            Kernel::Ball { cone, .. } | Kernel::Hat { cone, .. } if cone > 0.0 => g * cone_mean_cosine(d, cone),
+            _ => g,
+        };
+        // At the VPL itself the direction is undefined: both lobes' mean, 1/4 pi.
+        let (p_vpl, p_view) = if d > 1e-6 { (hg(v.incident.dot(w), g), hg(-w.dot(view), g)) } else { (0.25 * std::f32::consts::FRAC_1_PI, 0.25 * std::f32::consts::FRAC_1_PI) };
         // One exp where the channels' extinction is the same (the same values).
         let tr = if d > 1e-6 { exp_neg(depth(v, w, d), grey) } else { Vec3::ONE };
         let light = v.power * (p_vpl * p_view) * tr;
@@ -484,9 +488,10 @@ pub fn hat(medium: &Medium, rho: f32, r: f32) -> Kernel {
     Kernel::Hat { radius: r, cone: r, inside: hat_inside(medium.sigma_t(rho), r) }
 }
 
-/// The scattering-weighted mean optical radius of the near field: sum of rho^2 sigma_t(rho) r
-/// over the voxels / sum of rho (rho the density, sigma_t its largest channel), i.e. how many
-/// mean free paths a ball of radius r spans where the medium's light typically scatters.
+/// The scattering-weighted mean optical radius of the near field: the sum over the voxels of
+/// rho sigma_t(rho) r / the sum of rho (rho the density, sigma_t its largest channel), i.e. how
+/// many mean free paths a ball of radius r spans where the medium's light typically scatters
+/// (scattering, for a given light, goes with the density).
 /// `near_field: auto` takes the hat where it exceeds `HAT_ABOVE` (mod.rs).
 pub fn scattering_optical_radius(medium: &Medium, r: f32) -> f32 {
     let (mut num, mut den) = (0.0f64, 0.0f64);

@@ -99,6 +99,8 @@ pub struct Vpl {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct VplReport {
     pub walks: u32,
+    /// The near field that ran (`auto` resolved).
+    pub near_field: NearField,
     pub vpls: usize,
     /// Power scattered by all VPLs (W, RGB).
     pub vpl_power: [f32; 3],
@@ -183,12 +185,10 @@ impl Vpl {
         }
         timings.time("vpl lattice product", || crate::lattice_product::finish(medium, &mut scattering));
         progress.update("vpl upsample", 1.0);
-        let report = VplReport { walks: s.walks, vpls: walks.vpls.len(), vpl_power: walks.total_power().to_array(), walks_cut: walks.cut, gather: gstats, energy };
+        let report = VplReport { walks: s.walks, near_field: s.near_field, vpls: walks.vpls.len(), vpl_power: walks.total_power().to_array(), walks_cut: walks.cut, gather: gstats, energy };
         Ok((SolveOutput::new(scattering, timings), report))
     }
-}
 
-impl Vpl {
     /// The near field this solve uses: the setting, `auto` resolved for `medium` (the hat
     /// where the gather's cells span more than `gather::HAT_ABOVE` mean free paths where light
     /// scatters, settings.rs `NearField::Auto`).

@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use crate::solvers::pop::settings::validate_upsampling;
 
 /// How the 1/d^2 of a VPL's connection is kept finite near the VPL (paper Sec. 4.3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum NearField {
     /// G = 1 / max(d, r)^2: the paper's clamp. Loses the energy of every connection shorter
@@ -31,6 +31,7 @@ pub enum NearField {
     /// 0.62 on the default scene (all: ball, their results unchanged) and 2.0 on the dense
     /// cloud (hat). There, 8 seeds at 32768 walks: hat x0.998 +- 0.010 with image errors
     /// 0.14-0.23, ball x1.080 +- 0.038 with 0.25-0.80 (tests.rs).
+    #[default]
     Auto,
     /// The clamp, and the clamped energy put back by the paper's bias compensation
     /// (compensate.rs): new vertices within r of each gather point, connected to subsets of

@@ -764,13 +764,13 @@ fn vpl_explore_seeds() {
 }
 
 /// The scene of `vpl_bench_image` by name: the embedded default scene (the README's
-/// `volscatter render`, 256 x 256 pixels) or a fixture scene with its camera enlarged to
+/// `volscatter render`, 256 x 256 pixels; `default_small`: at `pixels` square) or a fixture scene with its camera enlarged to
 /// `pixels` x `pixels` (the fixtures' images are 16-24 pixels wide).
 fn bench_image_scene(name: &str, pixels: u32) -> Scene {
     if name == "default" {
         return Scene::default_scene();
     }
-    let mut sc = case(name);
+    let mut sc = if name == "default_small" { Scene::default_scene() } else { case(name) };
     sc.camera.width = pixels;
     sc.camera.height = pixels;
     sc
@@ -849,6 +849,10 @@ fn vpl_bench_image() {
             let d = VplSettings::default();
             let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, ..d };
             let s = env_transmittance(s);
+            let s = match std::env::var("VPL_NEAR") {
+                Ok(n) => VplSettings { near_field: serde_json::from_value(serde_json::Value::from(n)).unwrap(), ..s },
+                Err(_) => s,
+            };
             let t = std::time::Instant::now();
             let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
             let solve = t.elapsed().as_secs_f64();
@@ -858,7 +862,7 @@ fn vpl_bench_image() {
             let (e, ec, ratio) = err(&img);
             println!(
                 "BENCH {{{head},\"solver\":\"vpl\",\"transmittance\":\"{:?}\",\"map_resolution\":{},\"near_upsample\":\"{:?}\",\"near_field\":\"{:?}\",\"fit\":\"{:?}\",\"near_refine\":{},\"walks\":{walks},\"gather\":{},\"seconds\":{secs:.4},\"solve_seconds\":{solve:.4},\"image_raw\":{e:.5},\"image\":{ec:.5},\"image_ratio\":{ratio:.5}}}",
-                s.transmittance, s.map_resolution, s.near_upsample, s.near_field, s.upsample_fit, s.near_refine, s.gather_resolution
+                s.transmittance, s.map_resolution, s.near_upsample, rep.near_field, s.upsample_fit, s.near_refine, s.gather_resolution
             );
         }
     }
@@ -1049,5 +1053,31 @@ fn vpl_auto_near_field_takes_the_hat_on_the_dense_cloud_only() {
         assert_eq!(chosen, want, "{name}: optical radius {}", radius(sc));
     }
     // A setting other than auto is kept.
-    assert_eq!(Vpl::new(VplSettings { near_field: NearField::Clamp, ..s }).unwrap().near_field_for(&case("cloud").medium).unwrap(), NearField::Clamp);
+    assert_eq!(Vpl::new(VplSettings { near_field: NearField::Clamp, ..s.clone() }).unwrap().near_field_for(&case("cloud").medium).unwrap(), NearField::Clamp);
+    // And the solve runs what it resolved, and says so.
+    for (name, want) in [("cloud", NearField::Hat), ("cube_g0", NearField::Ball)] {
+        let (_, rep) = Vpl::new(VplSettings { walks: 256, ..s.clone() }).unwrap().solve_detailed(&case(name), &NoProgress, u32::MAX).unwrap();
+        assert_eq!(rep.near_field, want, "{name}");
+        assert_eq!(rep.energy.is_some(), want == NearField::Ball, "{name}: normalize_energy runs with the ball only");
+    }
+}
+
+/// Exploration (not in CI): `auto`'s optical radius (gather::scattering_optical_radius) of the
+/// benchmark scenes (bench/scenes/*/scene.json) at the presets' gather resolutions 12 / 16 / 24.
+#[test]
+#[ignore]
+fn vpl_explore_auto_on_bench_scenes() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../bench/scenes");
+    for entry in std::fs::read_dir(&root).unwrap() {
+        let path = entry.unwrap().path().join("scene.json");
+        let sc = Scene::load(&path).unwrap();
+        let radii: Vec<String> = [12u32, 16, 24]
+            .iter()
+            .map(|&g| {
+                let grid = crate::solvers::ScatteringGrid::over_medium(&sc.medium, g).unwrap();
+                format!("{g} cells {:.3}", super::gather::scattering_optical_radius(&sc.medium, crate::medium::near_field_radius(&grid.index_to_world)))
+            })
+            .collect();
+        eprintln!("{}: {}", path.display(), radii.join(", "));
+    }
 }
