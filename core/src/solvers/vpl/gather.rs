@@ -508,10 +508,22 @@ pub fn scattering_optical_radius(medium: &Medium, r: f32) -> f32 {
     if den > 0.0 { (num / den) as f32 } else { 0.0 }
 }
 
-/// `near_field: auto` takes the hat where the scattering-weighted optical radius of the near
-/// field (`scattering_optical_radius`) is above this, the ball below. Measured (16-cell
-/// gather): see `NearField::Auto`.
-pub const HAT_ABOVE: f32 = 1.0;
+/// `near_field: auto`'s measure of a medium: `scattering_optical_radius` of the ball with the
+/// volume of a cell of the medium's `AUTO_CELLS`-cell grid, i.e. how many mean free paths a
+/// 16th of the medium's extent spans where its light scatters (the dense cloud fixture 2.0,
+/// the plume 0.42: how many times light scatters before it leaves, which is what makes the
+/// ball kernel heavy-tailed and the hat's density estimate sound).
+pub fn optical_size(medium: &Medium) -> Result<f32> {
+    let grid = ScatteringGrid::over_medium(medium, AUTO_CELLS)?;
+    Ok(scattering_optical_radius(medium, near_field_radius(&grid.index_to_world)))
+}
+
+/// Cells of `optical_size`'s grid (the default gather's).
+pub const AUTO_CELLS: u32 = 16;
+
+/// `near_field: auto` takes the hat where `optical_size` is above this, the ball below.
+/// Measured: see `NearField::Auto`.
+pub const HAT_ABOVE: f32 = 0.9;
 
 /// Radius of the ball kernel at a point of density `rho`: `r`, at most `mean_free_paths` mean
 /// free paths there (0: no such limit; see the setting).

@@ -189,17 +189,17 @@ impl Vpl {
         Ok((SolveOutput::new(scattering, timings), report))
     }
 
-    /// The near field this solve uses: the setting, `auto` resolved for `medium` (the hat
-    /// where the gather's cells span more than `gather::HAT_ABOVE` mean free paths where light
-    /// scatters, settings.rs `NearField::Auto`).
+    /// The near field this solve uses: the setting, `auto` resolved for `medium`: the hat where
+    /// the medium's scattering-weighted optical radius at `gather::AUTO_CELLS` cells
+    /// (`gather::scattering_optical_radius`) is above `gather::HAT_ABOVE`, else the ball
+    /// (settings.rs `NearField::Auto`). A property of the medium, not of the settings, so that
+    /// a medium gets the same kernel at every preset.
     pub fn near_field_for(&self, medium: &crate::medium::Medium) -> Result<NearField> {
         let s = &self.settings;
         if s.near_field != NearField::Auto {
             return Ok(s.near_field);
         }
-        let grid = super::ScatteringGrid::over_medium(medium, s.gather_resolution)?;
-        let r = s.clamp_radius * crate::medium::near_field_radius(&grid.index_to_world);
-        Ok(if gather::scattering_optical_radius(medium, r) > gather::HAT_ABOVE { NearField::Hat } else { NearField::Ball })
+        Ok(if gather::optical_size(medium)? > gather::HAT_ABOVE { NearField::Hat } else { NearField::Ball })
     }
 }
 

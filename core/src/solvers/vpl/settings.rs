@@ -24,13 +24,21 @@ pub enum NearField {
     /// ball, so r stays a whole gather cell where `ball` must shrink to a fraction of a mean
     /// free path (`mean_free_paths`) and turns heavy-tailed.
     Hat,
-    /// `ball` or `hat` by the medium: the hat where the near field's ball spans more than
-    /// `gather::HAT_ABOVE` mean free paths where the medium typically scatters
-    /// (`gather::scattering_optical_radius`), the ball elsewhere. Measured (16-cell gather):
-    /// the optical radius is 0.18 on the cubes, 0.28-0.42 on the plume and its local lights,
-    /// 0.62 on the default scene (all: ball, their results unchanged) and 2.0 on the dense
-    /// cloud (hat). There, 8 seeds at 32768 walks: hat x0.998 +- 0.010 with image errors
-    /// 0.14-0.23, ball x1.080 +- 0.038 with 0.25-0.80 (tests.rs).
+    /// `ball` or `hat` by the medium: the hat where its optical size (`gather::optical_size`:
+    /// the mean free paths a 16th of its extent spans where light scatters) is above
+    /// `gather::HAT_ABOVE` (0.9), the ball below, at every gather resolution. Measured optical
+    /// sizes: cubes 0.18, the plume and its local lights 0.28-0.42, the benchmark smokes
+    /// 0.18-0.27, the default scene 0.62 (all: ball, their results unchanged), the benchmark's
+    /// Blender dense cloud 1.20 and the dense cloud fixture 2.0 (hat). Why the medium's and
+    /// not the gather cell's thickness: the hat is better on the dense clouds at every gather
+    /// resolution (benchmark dense cloud at draft / preview / final, 12 / 16 / 24 cells: image
+    /// 0.400 / 0.271 / 0.315 against the ball's 0.441 / 0.344 / 0.601; the fixture cloud, 8
+    /// seeds at 32768 walks: x0.998 +- 0.010 with image errors 0.14-0.23 against x1.080 +-
+    /// 0.038 with 0.25-0.80), but worse on the default scene at 12 cells, where its cells are
+    /// as thick as the benchmark cloud's at 24 (64 x 64 pixels, 16384 walks: 0.095 x0.935
+    /// against the ball's 0.087 x0.981; at 16 cells 0.081 x0.967 against 0.086 x0.992):
+    /// the hat's density estimate wants the many, evenly spread VPLs of a medium in which light
+    /// scatters many times.
     #[default]
     Auto,
     /// The clamp, and the clamped energy put back by the paper's bias compensation
@@ -149,11 +157,11 @@ pub struct VplSettings {
     /// 0.106 x0.950, 65536 1.02 s 0.086 x0.939).
     pub walks_per_subset: u32,
     /// Near-field handling of the VPL connections (see `NearField`). `auto`, the default: the
-    /// hat on media whose gather cells span more than a mean free path where light scatters
-    /// (the dense cloud: 8 seeds at 32768 walks x0.998 with image errors 0.14-0.23, against
-    /// the ball's x1.080 with 0.25-0.80; 4096 walks, 12-cell gather: image 0.42 against
-    /// 0.71), the ball on every other fixture, where it was the default before the hat,
-    /// because at equal cost it is as good or better on every fixture (scripts/bench_vpl.py,
+    /// hat on media in which light scatters many times (optical size over 0.9; the dense
+    /// cloud: 8 seeds at 32768 walks x0.998 with image errors 0.14-0.23, against the ball's
+    /// x1.080 with 0.25-0.80; 4096 walks, 12-cell gather: image 0.42 against 0.71), the ball
+    /// on every other fixture, where it was the default before the hat, because at equal cost
+    /// it is as good or better on every fixture (scripts/bench_vpl.py,
     /// BENCHMARKS.md `vpl`, 8192 walks): cube g 0.7 0.114 (compensate 0.112), point light
     /// beside the plume 0.16 (0.19), dense cloud 0.57 with flux x0.80 (0.58, x0.59), and on the
     /// plume the compensation is heavy-tailed (one run 1.47, flux x1.62; ball 0.41); its
