@@ -501,7 +501,7 @@ fn vpl_bench() {
         }
         for walks in list("VPL_BENCH_WALKS", "1024,4096") {
             let walks: u32 = walks.parse().unwrap();
-            for (nf, label) in [(NearField::Clamp, "clamp"), (NearField::Ball, "ball"), (NearField::Compensate, "compensate")] {
+            for (nf, label) in [(NearField::Clamp, "clamp"), (NearField::Ball, "ball"), (NearField::Hat, "hat"), (NearField::Compensate, "compensate")] {
                 let s = VplSettings { walks, near_field: nf, ..test_settings() };
                 let t = std::time::Instant::now();
                 let (out, _) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
