@@ -1,7 +1,7 @@
 // The VPL gather (volscatter-core solvers/vpl/gather.rs `connect`): for each gather point, the
 // light of the VPLs of its subset of walks, scattered towards the viewer: power x p(incident
 // -> w) x p(w -> view) x T x G, G the clamp 1/max(d, R)^2 (with what the clamp lost against
-// the ball kernel) or the ball kernel. One workgroup per point, its 64 invocations taking
+// the ball kernel), the ball kernel, or the attenuated top hat. One workgroup per point, its 64 invocations taking
 // every 64th VPL of this dispatch's range of the point's list, then a tree reduction; each
 // dispatch adds its range into `out` (ranges are dispatched in turn so that a solve can be
 // cancelled between them). The CPU sums the VPLs in list order, so the sums differ in their
@@ -77,8 +77,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 near += 1.0;
             }
             let w = to / max(d, 1e-12);
-            // The ball kernel's phases smoothed over the cone of a ball of radius `cone`
-            // (vpl/gather.rs `Kernel::Ball`, `cone_mean_cosine`).
             // Inside the top hat's ball: its constant, the phases' mean over the ball's
             // directions (HG with g^2), no transmittance (vpl/gather.rs `Kernel::Hat`).
             if (p.list.z == 2u && d < radius) {
@@ -87,6 +85,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 iso += vpl.power.xyz * ((0.25 / PI) * (0.25 / PI)) * p.hat.xyz;
                 continue;
             }
+            // The ball kernel's and the hat's phases smoothed over the cone of a ball of radius
+            // `cone` (vpl/gather.rs `Kernel::Ball`, `cone_mean_cosine`).
             var g = g0;
             if (p.list.z >= 1u && cone > 0.0) {
                 g = g0 * cone_mean_cosine(d, cone);
