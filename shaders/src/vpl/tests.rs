@@ -34,6 +34,12 @@ fn fixture_scene(name: &str) -> Scene {
             Medium::new(grid, to_world, Vec3::splat(6.0), Vec3::splat(0.98), 0.6),
             Light::Point { position: Vec3::new(1.6, -0.8, 0.6), intensity: Vec3::splat(4.0), radius: 0.0 },
         ),
+        // Five times the plume's density: optical size over 2, so `near_field: auto` takes the
+        // hat (vpl/gather.rs `optical_size`).
+        "plume_dense" => (
+            Medium::new(grid, to_world, Vec3::splat(40.0), Vec3::splat(0.99), 0.9),
+            Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 },
+        ),
         _ => panic!("unknown case {name}"),
     };
     Scene { medium, lights: vec![light], camera: cam, solver: Default::default() }
@@ -95,18 +101,21 @@ fn gpu_gather_matches_cpu() {
     }
 }
 
-/// The whole solve through `solve` on the GPU against the CPU solver, default near field, on
-/// both scenes: the gather as above, the upsampling and single scattering each within 1e-5 of
-/// the CPU (their own tests). Measured on lavapipe: 3.9e-7 (plume), 1.9e-7 (plume_point)
+/// The whole solve through `solve` on the GPU against the CPU solver, default near field
+/// (`auto`: the ball on the plumes, the hat on the dense one), on each scene: the gather as
+/// above, the upsampling and single scattering each within 1e-5 of the CPU (their own tests).
+/// Measured on lavapipe: 3.9e-7 (plume), 1.9e-7 (plume_point), 4.0e-7 (plume_dense, the hat)
 /// relative RMSE on S; tolerance 1e-5. Also with `near_upsample: ratio`, whose correction runs
 /// on the CPU after either backend's upsampling (near_ratio.rs), on the same tolerance.
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_vpl_solve_matches_cpu() {
     let _ctx = gpu_or_skip();
-    for (name, near_upsample) in [("plume", "plain"), ("plume_point", "plain"), ("plume_point", "ratio")] {
+    for (name, near_upsample) in [("plume", "plain"), ("plume_point", "plain"), ("plume_point", "ratio"), ("plume_dense", "plain")] {
         let scene = fixture_scene(name);
-        let mut settings = serde_json::to_value(test_settings(NearField::Ball)).unwrap();
+        let auto = volscatter_core::solvers::vpl::Vpl::new(VplSettings::default()).unwrap().near_field_for(&scene.medium).unwrap();
+        assert_eq!(auto, if name == "plume_dense" { NearField::Hat } else { NearField::Ball }, "{name}: auto's near field");
+        let mut settings = serde_json::to_value(test_settings(NearField::Auto)).unwrap();
         settings["near_upsample"] = serde_json::Value::from(near_upsample);
         let settings = settings.as_object().unwrap();
         let (cpu, _) = crate::solve(DeviceChoice::Cpu, &scene, "vpl", settings, &NoProgress).unwrap();
