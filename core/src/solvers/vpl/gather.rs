@@ -174,7 +174,7 @@ fn connect_with(medium: &Medium, vpls: &[Vpl], x: Vec3, view: Vec3, kernel: Kern
         // no transmittance (the kernel doc).
         if let Kernel::Hat { inside, .. } = kernel {
             if d < radius {
-                let pg = hg(-v.incident.dot(view), medium.g * medium.g);
+                let pg = hg(-v.incident.dot(view), g * g);
                 sum += v.power * (ISO * pg) * inside;
                 iso += v.power * (ISO * ISO) * inside;
                 continue;
