@@ -1,7 +1,7 @@
 """Light propagation maps (`lpm`, paper 05, issue 19): CPU and GPU times of the paper's cases
 and a streamed solve under a memory budget; writes the "lpm" section of BENCHMARKS.md.
 
-    python3 scripts/bench_lpm.py [--quick] [--large N] [--before BIN]
+    python3 scripts/bench_lpm.py [--quick] [--large N] [--before BIN] [--paper-only]
 
 1. The paper's 64^3 (417 ms on a GTX 580) and 128^3 (2291 ms) cases: the procedural plume at
    64^3 / 128^3 voxels, a propagation grid of the same size, 25 directions per face, 3 orders
@@ -20,6 +20,9 @@ and a streamed solve under a memory budget; writes the "lpm" section of BENCHMAR
    process (/usr/bin/time -v), bytes of the scratch files, and the images against each other.
    Larger grids are extrapolated from these two sizes (the table says so): this machine has 2
    shared cores, and 25 directions x 3 orders at 128^3 already take minutes.
+
+`--paper-only`: item 1 alone, the out-of-core rows kept as BENCHMARKS.md has them (what a session
+with a real GPU reruns).
 
 3. `--region N`: a medium larger than memory (section "lpm-region"). A procedural cumulus of
    N^3 voxels (default 1024: 4 GiB dense) written as a VDB z-slab by z-slab (the example
@@ -142,10 +145,21 @@ def kept_paper_rows() -> list[str] | None:
     if "<!-- BEGIN lpm -->" not in text:
         return None
     body = text.split("<!-- BEGIN lpm -->", 1)[1].split("<!-- END lpm -->", 1)[0].strip("\n").splitlines()
-    cut = next((i for i, l in enumerate(body) if l.startswith(("Streaming:", "Out of core:"))), len(body))
+    cut = next((i for i, l in enumerate(body) if l.startswith(("Streaming:", "Out of core", "The out-of-core rows below"))), len(body))
     while cut > 0 and not body[cut - 1].strip():
         cut -= 1
     return body[:cut]
+
+
+def kept_out_of_core_rows() -> list[str] | None:
+    """The section's streaming part, as BENCHMARKS.md has it (`--paper-only`: the paper's cases
+    rerun, on a machine with a GPU, say, while the out-of-core rows stay)."""
+    text = (REPO_ROOT / "BENCHMARKS.md").read_text()
+    if "<!-- BEGIN lpm -->" not in text:
+        return None
+    body = text.split("<!-- BEGIN lpm -->", 1)[1].split("<!-- END lpm -->", 1)[0].strip("\n").splitlines()
+    cut = next((i for i, l in enumerate(body) if l.startswith(("Streaming:", "Out of core"))), None)
+    return None if cut is None else body[cut:]
 
 
 #: lpm's preview preset (registry.rs), the quality bench_solvers.py measures every solver at.
@@ -262,12 +276,46 @@ def region(n: int, grid: int, full_in_memory: bool) -> None:
     log("\n".join(lines))
 
 
+def out_of_core(work: Path, large: int, grid: int) -> list[str]:
+    """The streamed solve against the same solve in memory and at half the grid: the section's
+    out-of-core lines."""
+    sc = scene("cumulus", large, 0.6, 0.95)
+    base = {"grid_resolution": grid, "directions": 25, "max_orders": 3, "output_resolution": grid, "first_order": "boundary"}
+    # The in-memory per-cell arrays: density, sigma_t, J (one value a cell; density one
+    # float), U of two orders (6 storage bins a cell); RGB f32.
+    cells = grid**3
+    arrays = cells * (4 + 12 + 12 + 2 * 6 * 12)
+    # 1/8 of the arrays, or at least a slab of 4 layers (what a small grid's maps need:
+    # 12 bytes x map x (25 (layers + 1) + layers (2 x 6 + 2)), out_of_core.rs slab_bytes).
+    budget = max(arrays // 8, 12 * grid * grid * (25 * 5 + 4 * 14))
+    whole = solve(work, "large_whole", sc, base)
+    streamed = solve(work, "large_ooc", sc, {**base, "out_of_core": True, "memory_budget": budget})
+    half = solve(work, "large_half", sc, {**base, "grid_resolution": grid // 2})
+    agree = rel_rmse(streamed["exr"], whole["exr"])
+    against_half = rel_rmse(streamed["exr"], half["exr"])
+    whole_vs_half = rel_rmse(whole["exr"], half["exr"])
+    return [
+        f"Out of core ({os.cpu_count()} logical CPUs): procedural cumulus {large}^3 voxels on a {grid}^3 propagation grid, 25 x 6 directions, 3 orders, `first_order: boundary`; scratch files in the system temp dir.",
+        "",
+        "| run | propagation grid | memory_budget | lpm CPU (s) | wall (s) | peak RSS (MiB) | image vs in memory (rel. RMSE) | image vs half grid (rel. RMSE) |",
+        "|---|---|---|---|---|---|---|---|",
+        f"| in memory | {grid}^3 | 0 (per-cell arrays {arrays / 2**20:.0f} MiB, sweep buffers {25 * grid * grid * (grid + 1) * 12 / 2**20:.0f} MiB) | {whole['solver_s']:.2f} | {whole['wall_s']:.1f} | {whole['rss_mib']:.0f} | - | {whole_vs_half} |",
+        f"| out of core | {grid}^3 | {budget / 2**20:.0f} MiB (scratch files {(cells * (12 * 3 + 2 * 6 * 12)) / 2**20:.0f} MiB) | {streamed['solver_s']:.2f} | {streamed['wall_s']:.1f} | {streamed['rss_mib']:.0f} | {agree} | {against_half} |",
+        f"| in memory, half grid | {grid // 2}^3 | 0 | {half['solver_s']:.2f} | {half['wall_s']:.1f} | {half['rss_mib']:.0f} | - | - |",
+        "",
+        "The out-of-core J equals the in-memory one to the bit (tests: `lpm_out_of_core_equals_in_memory`), so its image against in memory is 0; against the half grid it shows what the finer grid changes.",
+        f"Peak RSS also holds what is not streamed: the procedural medium ({large}^3 voxels, sparse bricks), pop's density mip, the compositor's single-scattering grid and the image.",
+        f"Extrapolated (not measured): the sweep costs cells x 6 x 25 per order, so a 512^3 grid is {(512 // grid) ** 3}x the {grid}^3 time ({(512 // grid) ** 3 * streamed['solver_s'] / 60:.0f} min on this machine) with scratch files of {(512**3 * (12 * 3 + 2 * 6 * 12)) / 2**30:.1f} GiB and a slab of {(12 * 512 * 512 * (39 * 8 + 25)) / 2**20:.0f} MiB at 8 layers.",
+    ]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="64^3 only, small large case")
     ap.add_argument("--large", type=int, default=256, help="voxels a side of the out-of-core cumulus")
     ap.add_argument("--grid", type=int, default=128, help="propagation grid of the out-of-core case")
     ap.add_argument("--only-ooc", action="store_true", help="skip the paper's cases (keeps nothing of them: for a quick out-of-core row)")
+    ap.add_argument("--paper-only", action="store_true", help="only the paper's cases (CPU and GPU); the out-of-core rows stay as BENCHMARKS.md has them")
     ap.add_argument("--before", type=Path, help="another volscatter CLI: the paper's cases on the CPU before a change")
     ap.add_argument("--before-note", default="", help="what the --before build lacks, for the table's note")
     ap.add_argument("--accuracy", action="store_true", help="only the accuracy rows: delta_m on and off on the benchmark scenes")
@@ -293,23 +341,11 @@ def main() -> None:
                 b = solve(work, f"plume{n}_before", scene("plume", n, 0.6, 0.95), settings, binary=args.before)
                 r["before"] = f"{b['solver_s']:.2f} (image vs now: {rel_rmse(r['exr'], b['exr'])})"
             rows.append((n, paper_ms, r, g))
-        large = 96 if args.quick else args.large
-        grid = 32 if args.quick else args.grid
-        sc = scene("cumulus", large, 0.6, 0.95)
-        base = {"grid_resolution": grid, "directions": 25, "max_orders": 3, "output_resolution": grid, "first_order": "boundary"}
-        # The in-memory per-cell arrays: density, sigma_t, J (one value a cell; density one
-        # float), U of two orders (6 storage bins a cell); RGB f32.
-        cells = grid**3
-        arrays = cells * (4 + 12 + 12 + 2 * 6 * 12)
-        # 1/8 of the arrays, or at least a slab of 4 layers (what a small grid's maps need:
-        # 12 bytes x map x (25 (layers + 1) + layers (2 x 6 + 2)), out_of_core.rs slab_bytes).
-        budget = max(arrays // 8, 12 * grid * grid * (25 * 5 + 4 * 14))
-        whole = solve(work, "large_whole", sc, base)
-        streamed = solve(work, "large_ooc", sc, {**base, "out_of_core": True, "memory_budget": budget})
-        half = solve(work, "large_half", sc, {**base, "grid_resolution": grid // 2})
-        agree = rel_rmse(streamed["exr"], whole["exr"])
-        against_half = rel_rmse(streamed["exr"], half["exr"])
-        whole_vs_half = rel_rmse(whole["exr"], half["exr"])
+        kept_ooc = kept_out_of_core_rows() if args.paper_only else None
+        if args.paper_only and kept_ooc is None:
+            raise SystemExit("--paper-only: BENCHMARKS.md has no out-of-core rows to keep; run without it once")
+        if not args.paper_only:
+            ooc = out_of_core(work, 96 if args.quick else args.large, 32 if args.quick else args.grid)
     cpu = platform.processor() or platform.machine()
     kept = kept_paper_rows() if args.only_ooc else None
     lines = kept if kept else [
@@ -332,20 +368,10 @@ def main() -> None:
         "",
         f"GPU column: device `{gpu_dev}`" + (" -- lavapipe (software, for correctness only): not GPU speed." if soft else "."),
     ]
-    lines += [
-        "",
-        f"Out of core: procedural cumulus {large}^3 voxels on a {grid}^3 propagation grid, 25 x 6 directions, 3 orders, `first_order: boundary`; scratch files in the system temp dir.",
-        "",
-        "| run | propagation grid | memory_budget | lpm CPU (s) | wall (s) | peak RSS (MiB) | image vs in memory (rel. RMSE) | image vs half grid (rel. RMSE) |",
-        "|---|---|---|---|---|---|---|---|",
-        f"| in memory | {grid}^3 | 0 (per-cell arrays {arrays / 2**20:.0f} MiB, sweep buffers {25 * grid * grid * (grid + 1) * 12 / 2**20:.0f} MiB) | {whole['solver_s']:.2f} | {whole['wall_s']:.1f} | {whole['rss_mib']:.0f} | - | {whole_vs_half} |",
-        f"| out of core | {grid}^3 | {budget / 2**20:.0f} MiB (scratch files {(cells * (12 * 3 + 2 * 6 * 12)) / 2**20:.0f} MiB) | {streamed['solver_s']:.2f} | {streamed['wall_s']:.1f} | {streamed['rss_mib']:.0f} | {agree} | {against_half} |",
-        f"| in memory, half grid | {grid // 2}^3 | 0 | {half['solver_s']:.2f} | {half['wall_s']:.1f} | {half['rss_mib']:.0f} | - | - |",
-        "",
-        "The out-of-core J equals the in-memory one to the bit (tests: `lpm_out_of_core_equals_in_memory`), so its image against in memory is 0; against the half grid it shows what the finer grid changes.",
-        f"Peak RSS also holds what is not streamed: the procedural medium ({large}^3 voxels, sparse bricks), pop's density mip, the compositor's single-scattering grid and the image.",
-        f"Extrapolated (not measured): the sweep costs cells x 6 x 25 per order, so a 512^3 grid is {(512 // grid) ** 3}x the {grid}^3 time ({(512 // grid) ** 3 * streamed['solver_s'] / 60:.0f} min on this machine) with scratch files of {(512**3 * (12 * 3 + 2 * 6 * 12)) / 2**30:.1f} GiB and a slab of {(12 * 512 * 512 * (39 * 8 + 25)) / 2**20:.0f} MiB at 8 layers.",
-    ]
+    if kept_ooc is not None:
+        lines += ["", "The out-of-core rows below are kept from this script's previous full run, on that run's machine, not this one (`--paper-only` reran the paper's cases alone).", ""] + kept_ooc
+    else:
+        lines += ["", *ooc]
     write_section("lpm", "\n".join(lines))
     log("\n".join(lines))
 

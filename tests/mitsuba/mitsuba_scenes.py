@@ -157,16 +157,24 @@ def scene_json(spec: SceneSpec, raw_name: str, light_scale: float = 1.0) -> dict
 
 def read_exr_layers(path: Path) -> dict:
     """An EXR's RGB layers as float64 [height][width][3] arrays (via mitsuba.Bitmap), keyed by
-    layer name: "rgb" for R,G,B, and "single", "multiple", "background" for our AOVs."""
+    layer name: "rgb" for R,G,B, and "single", "multiple", "background" for our AOVs.
+    Without Mitsuba (a lent GPU machine, where only a small wheel travels), through the OpenEXR
+    package."""
     mi = import_mitsuba()
-    bmp = mi.Bitmap(str(path))
-    names = [f.name for f in bmp.struct_()]
-    data = np.asarray(bmp)
+    if mi is not None:
+        bmp = mi.Bitmap(str(path))
+        data = np.asarray(bmp)
+        channels = {f.name: data[..., i] for i, f in enumerate(bmp.struct_())}
+    else:
+        import OpenEXR
+
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            channels = {name: np.asarray(c.pixels) for name, c in f.channels().items()}
     layers = {}
-    for prefix in sorted({n.rsplit(".", 1)[0] if "." in n else "" for n in names}):
+    for prefix in sorted({n.rsplit(".", 1)[0] if "." in n else "" for n in channels}):
         chans = [f"{prefix}.{c}" if prefix else c for c in "RGB"]
-        if all(c in names for c in chans):
-            layers[prefix or "rgb"] = np.stack([data[..., names.index(c)] for c in chans], -1).astype(np.float64)
+        if all(c in channels for c in chans):
+            layers[prefix or "rgb"] = np.stack([channels[c] for c in chans], -1).astype(np.float64)
     return layers
 
 

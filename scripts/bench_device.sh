@@ -1,0 +1,145 @@
+#!/usr/bin/env bash
+# Every GPU benchmark of the project in one run, for a session lent a machine with a real GPU
+# (the tool library's `device`: an H100 with no Rust toolchain and no network, 15 minutes of
+# device time a session, start included). Two halves:
+#
+#   here:   bash scripts/bench_device.sh stage        # builds, then stages what travels:
+#                                                     #   .devbin/  stripped release binaries
+#                                                     #   .gl/      the Vulkan and GL loaders (.deb)
+#                                                     #   .whl/     OpenEXR for Python 3.12 (EXR diffs)
+#   there:  bash scripts/bench_device.sh run OUT [--quick]
+#           (device run: carry .devbin .gl .whl; OUT is $OUT)
+#
+# `run` puts scripts/device/cargo (runs the prebuilt binaries instead of building) first on
+# PATH and runs each GPU benchmark script as it is, most important first, each under its own
+# time limit, copying BENCHMARKS.md and the log to OUT after every step, so that a step cut off
+# loses only itself. It stops at once when the adapter wgpu finds is a software one. Then, here,
+# copy the GPU sections of OUT/BENCHMARKS.md into BENCHMARKS.md (`merge OUT/BENCHMARKS.md`).
+#
+# `--quick`: the scripts' small sizes, to try the whole run on lavapipe before spending device time.
+set -uo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+
+# The sections the GPU benchmarks write (benchmarks_md.py markers).
+GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm)
+
+stage() {
+    set -e
+    cargo build --release --workspace --all-targets --quiet
+    local lib
+    lib=$(cargo test --release -p volscatter-gpu --lib --no-run --message-format=json 2>/dev/null |
+        python3 -c 'import json,sys; print([j["executable"] for j in map(json.loads, sys.stdin) if j.get("executable")][-1])')
+    rm -rf .devbin && mkdir -p .devbin
+    cp target/release/volscatter target/release/examples/bench_pop target/release/examples/bench_vpl .devbin/
+    cp "$lib" .devbin/volscatter-gpu-lib
+    strip .devbin/volscatter .devbin/bench_pop .devbin/bench_vpl .devbin/volscatter-gpu-lib
+    # The one shared fixture a GPU test reads (solve_tests.rs: ../../shared from the crate).
+    mkdir -p .devbin/shared/fixtures/blender_noise_cube/volumes
+    cp ../shared/fixtures/blender_noise_cube/volumes/Volume.vdb .devbin/shared/fixtures/blender_noise_cube/volumes/
+    local o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+    mkdir -p .gl /tmp/amd64/partial .whl
+    # shellcheck disable=SC2086
+    apt-get $o update >/dev/null
+    # shellcheck disable=SC2086
+    (cd .gl && apt-get $o download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+    python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+        --platform manylinux_2_28_x86_64 -d .whl OpenEXR==3.5.3
+    for d in .devbin .gl .whl; do grep -qx "/$d/" .git/info/exclude 2>/dev/null || echo "/$d/" >>.git/info/exclude; done
+    du -sh .devbin .gl .whl
+}
+
+run() {
+    local out=$1 quick=${2:-}
+    mkdir -p "$out"
+    local log="$out/device.log"
+    exec > >(tee -a "$log") 2>&1
+    # The loaders (the image has the NVIDIA driver but not libvulkan), then OpenEXR.
+    for f in .gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done
+    ldconfig 2>/dev/null || true
+    local icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+    [ -e "$icd" ] && export VK_DRIVER_FILES=$icd
+    if compgen -G ".whl/*.whl" >/dev/null; then
+        python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl &&
+            export PYTHONPATH=/tmp/site
+    fi
+    # The tests find fixtures by the paths compiled in here (/work/main/shaders, /work/shared).
+    local built
+    built=$(dirname "$(grep -aoE -m1 '/[A-Za-z0-9_./-]*/shaders' .devbin/volscatter-gpu-lib | head -n 1)")
+    if [ "$built" != . ] && [ ! -e "$built" ]; then mkdir -p "$(dirname "$built")" && ln -s "$root" "$built"; fi
+    if [ "$built" != . ] && [ ! -e "$(dirname "$built")/shared" ]; then ln -s "$root/.devbin/shared" "$(dirname "$built")/shared"; fi
+    export PATH="$root/scripts/device:$PATH" VOLSCATTER_PREBUILT="$root/.devbin" VOLSCATTER_BIN="$root/.devbin/volscatter"
+    export PYTHONUNBUFFERED=1
+    date -u
+    nvidia-smi -L 2>/dev/null || echo "(no nvidia-smi)"
+    echo "CPUs: $(nproc)"
+    local info
+    info=$("$VOLSCATTER_BIN" gpu-info 2>&1) || { echo "gpu-info failed: $info"; exit 3; }
+    echo "gpu-info: $info"
+    if [ -z "$quick" ] && grep -qiE 'llvmpipe|lavapipe|software' <<<"$info"; then
+        echo "software adapter: not what a device run is for"; exit 3
+    fi
+
+    step() { # NAME SECONDS COMMAND...
+        local name=$1 limit=$2; shift 2
+        echo "=== $name (limit ${limit}s): $*"
+        local t0=$SECONDS
+        timeout --kill-after=5 "$limit" "$@"
+        echo "=== $name: exit $? after $((SECONDS - t0)) s"
+        cp BENCHMARKS.md "$out/BENCHMARKS.md"
+    }
+    if [ -n "$quick" ]; then
+        step vpl-example 120 bash -c '.devbin/bench_vpl --walks 512 --gathers 8 --output 32 --cases plume_point,plume_dense --near auto,compensate > "$0"' "$out/vpl_rows.jsonl"
+        step gpu-tests 600 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 1 vpl::tests solve::tests'
+        step vpl 30 python3 scripts/bench_vpl.py --gpu-only --gpu-from "$out/vpl_rows.jsonl"
+        step pop 120 python3 scripts/bench_gpu.py --sizes 64 --grids 16
+        step photon-grid 120 python3 scripts/bench_photon_grid.py --gpu --quick
+        step network 120 python3 scripts/bench_network.py --gpu-only --quick
+        step lpm 300 python3 scripts/bench_lpm.py --paper-only --quick
+    else
+        # vpl first (issue 16 asks for its H100 timings); its rows go to a file as they come, one
+        # scene at a time, so a cut-off run keeps the configurations it finished.
+        for case in plume plume_point plume_dense; do
+            step "vpl-example $case" 50 bash -c '.devbin/bench_vpl --walks 4096,32768 --gathers 16,24 --output 64 --cases "$1" --near auto,compensate --cpu-max-connections 2e8 >> "$0"' "$out/vpl_rows.jsonl" "$case"
+        done
+        step vpl 20 python3 scripts/bench_vpl.py --gpu-only --gpu-from "$out/vpl_rows.jsonl"
+        step pop 75 python3 scripts/bench_gpu.py --sizes 64,128,256 --grids 16,32,64,128
+        step photon-grid 60 python3 scripts/bench_photon_grid.py --gpu
+        step network 70 python3 scripts/bench_network.py --gpu-only
+        step lpm 75 python3 scripts/bench_lpm.py --paper-only
+        # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees).
+        step gpu-tests 120 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 4'
+    fi
+    date -u
+}
+
+# Here, after a device run: its GPU sections replace ours (the rest of its copy is ignored:
+# the CPU-only sections there were not rerun).
+merge() {
+    local theirs=$1
+    python3 - "$theirs" "${GPU_SECTIONS[@]}" <<'EOF'
+import sys
+from pathlib import Path
+sys.path.insert(0, "scripts")
+from benchmarks_md import write_section
+theirs = Path(sys.argv[1]).read_text()
+for name in sys.argv[2:]:
+    begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
+    if begin not in theirs:
+        print(f"{name}: not in {sys.argv[1]}"); continue
+    body = theirs.split(begin, 1)[1].split(end, 1)[0].strip("\n")
+    mine = Path("BENCHMARKS.md").read_text()
+    old = mine.split(begin, 1)[1].split(end, 1)[0].strip("\n") if begin in mine else None
+    if body == old:
+        print(f"{name}: unchanged"); continue
+    write_section(name, body + "\n")
+    print(f"{name}: replaced")
+EOF
+}
+
+case ${1:-} in
+    stage) stage ;;
+    run) shift; run "$@" ;;
+    merge) shift; merge "$@" ;;
+    *) sed -n '2,20p' "$0"; exit 2 ;;
+esac
