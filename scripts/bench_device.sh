@@ -7,7 +7,7 @@
 #                                                     #   .devbin/  stripped release binaries
 #                                                     #   .gl/      the Vulkan and GL loaders (.deb)
 #                                                     #   .whl/     OpenEXR for Python 3.12 (EXR diffs)
-#   there:  bash scripts/bench_device.sh run OUT [--quick]
+#   there:  bash scripts/bench_device.sh run OUT [--quick] [--only STEP,STEP]
 #           (device run: carry .devbin .gl .whl; OUT is $OUT)
 #
 # `run` puts scripts/device/cargo (runs the prebuilt binaries instead of building) first on
@@ -17,12 +17,13 @@
 # copy the GPU sections of OUT/BENCHMARKS.md into BENCHMARKS.md (`merge OUT/BENCHMARKS.md`).
 #
 # `--quick`: the scripts' small sizes, to try the whole run on lavapipe before spending device time.
+# `--only`: just the named steps (vpl, pop, photon-grid, network, lpm, local-lights, solvers, gpu-tests).
 set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
 # The sections the GPU benchmarks write (benchmarks_md.py markers).
-GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm)
+GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm solvers-gpu pop-local-lights)
 
 stage() {
     set -e
@@ -50,7 +51,15 @@ stage() {
 }
 
 run() {
-    local out=$1 quick=${2:-}
+    local out=$1 quick="" only=""
+    shift
+    while (($#)); do
+        case $1 in
+            --quick) quick=1; shift ;;
+            --only) only=",$2,"; shift 2 ;;
+            *) echo "unknown argument $1"; exit 2 ;;
+        esac
+    done
     mkdir -p "$out"
     local log="$out/device.log"
     exec > >(tee -a "$log") 2>&1
@@ -82,6 +91,7 @@ run() {
 
     step() { # NAME SECONDS COMMAND...
         local name=$1 limit=$2; shift 2
+        [[ -z $only || $only == *",${name%% *},"* ]] || return 0
         echo "=== $name (limit ${limit}s): $*"
         local t0=$SECONDS
         timeout --kill-after=5 "$limit" "$@"
@@ -100,15 +110,17 @@ run() {
         # vpl first (issue 16 asks for its H100 timings); its rows go to a file as they come, one
         # scene at a time, so a cut-off run keeps the configurations it finished.
         for case in plume plume_point plume_dense; do
-            step "vpl-example $case" 50 bash -c '.devbin/bench_vpl --walks 4096,32768 --gathers 16,24 --output 64 --cases "$1" --near auto,compensate --cpu-max-connections 2e8 >> "$0"' "$out/vpl_rows.jsonl" "$case"
+            step "vpl $case" 50 bash -c '.devbin/bench_vpl --walks 4096,32768 --gathers 16,24 --output 64 --cases "$1" --near auto,compensate --cpu-max-connections 2e8 >> "$0"' "$out/vpl_rows.jsonl" "$case"
         done
-        step vpl 20 python3 scripts/bench_vpl.py --gpu-only --gpu-from "$out/vpl_rows.jsonl"
+        [ -e "$out/vpl_rows.jsonl" ] && step vpl 20 python3 scripts/bench_vpl.py --gpu-only --gpu-from "$out/vpl_rows.jsonl"
         step pop 75 python3 scripts/bench_gpu.py --sizes 64,128,256 --grids 16,32,64,128
         step photon-grid 60 python3 scripts/bench_photon_grid.py --gpu
         step network 70 python3 scripts/bench_network.py --gpu-only
         step lpm 75 python3 scripts/bench_lpm.py --paper-only
+        step solvers 120 python3 scripts/bench_solvers_gpu.py --presets preview,final --repeat 2
+        step local-lights 120 python3 scripts/bench_local_lights.py --gpu
         # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees).
-        step gpu-tests 120 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 4'
+        step gpu-tests 120 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 4 --nocapture'
     fi
     date -u
 }

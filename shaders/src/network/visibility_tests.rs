@@ -38,8 +38,10 @@ pub(crate) fn spiral(d: usize) -> Vec<Vec3> {
 /// padding), in one chunk of directions and in several. The lists (order and upstream neighbours) must be identical: the keys are the
 /// CPU's bit for bit. The opacities come from the same march (same steps, same order of
 /// summation); they differ by the GPU's exp and density lookup rounding (measured on lavapipe:
-/// 1.8e-7 in every case, 3 ulp of an opacity near 1). Bound 1e-6 absolute on 1 - exp(-tau):
-/// room for a driver that fuses the march's multiply-adds (a few ulp more per step).
+/// 1.8e-7 in every case, 3 ulp of an opacity near 1; on an NVIDIA H100, Vulkan driver 580,
+/// up to 1.4e-6: its compiler fuses the march's multiply-adds and its exp differs by an ulp or
+/// two, which the march sums over its steps). Bound 5e-6 absolute on 1 - exp(-tau): still far
+/// below what a wrong neighbour or a missed segment changes (a whole cell's opacity, 1e-2 and up).
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_network_visibility_matches_cpu() {
@@ -70,7 +72,7 @@ fn gpu_network_visibility_matches_cpu() {
             }
             eprintln!("{name}, M {window}, {opacity:?}: {linked} links, largest opacity difference {worst:e}");
             assert!(linked > dirs.len() * p.len() / 2, "{name}, M {window}: only {linked} links: the test would not see wrong neighbours");
-            assert!(worst <= 1e-6, "{name}, M {window}, {opacity:?}: opacity differs by {worst}");
+            assert!(worst <= 5e-6, "{name}, M {window}, {opacity:?}: opacity differs by {worst}");
             assert!(matches!(visibility(&ctx, &input, &Cancelled), Err(Error::Cancelled)));
         }
     }
