@@ -169,8 +169,9 @@ def main() -> None:
         "is sharper than the medium-aligned merged grid can hold; and its baseline is itself noisy (a point light inside",
         "a medium gives the path tracer heavy-tailed NEE weights: the test fixture at 65536 spp still has 31% image noise),",
         "so that row overstates POP's error; the test compares averages over the scene's rotational symmetry instead.",
-        "GPU times are Mesa's llvmpipe (a CPU rasteriser), not a GPU. Tests and their measured errors:",
-        "core/src/solvers/pop/radial/tests.rs.",
+        *([] if not args.gpu else ["GPU times are Mesa's llvmpipe (a CPU rasteriser), not a GPU."] if any(
+            w in d.lower() for d in devices for w in ("llvmpipe", "lavapipe")) else ["GPU times: a hardware GPU, uploads and read-backs included."]),
+        "Tests and their measured errors: core/src/solvers/pop/radial/tests.rs.",
     ]
     write_section("pop-local-lights", "\n".join(lines))
     log("wrote BENCHMARKS.md section `pop-local-lights`")
