@@ -32,15 +32,54 @@ pub(crate) fn spiral(d: usize) -> Vec<Vec3> {
         .collect()
 }
 
+/// Per particle of one direction: whether its sort key can change with the rounding of its dot
+/// products. WGSL lets a compiler fuse `a.x * b.x + a.y * b.y + a.z * b.z` into multiply-adds
+/// (NVIDIA's does; lavapipe does not), which moves a dot product by a few ulp of its terms'
+/// magnitudes. A particle is ambiguous when that much moves it across a pixel edge of the
+/// window, or leaves its depth within that much of the particle beside it in its pixel's list.
+fn ambiguous_keys(p: &[Vec3], (u, v, w): (Vec3, Vec3, Vec3), centre: Vec3, radius: f32, m: u32) -> Vec<bool> {
+    // 8 ulp of the sum of the terms' magnitudes: a fused chain rounds twice less, each
+    // rounding half an ulp of a partial sum at most.
+    let slack = |a: Vec3, b: Vec3| 8.0 * f32::EPSILON * (a * b).abs().element_sum() + f32::MIN_POSITIVE;
+    let cell = |a: f32| (((a + radius) / (2.0 * radius) * m as f32).floor() as i64).clamp(0, m as i64 - 1);
+    let mut flag: Vec<bool> = p
+        .iter()
+        .map(|&x| {
+            let r = x - centre;
+            [u, v].iter().any(|&e| {
+                let (a, s) = (r.dot(e), slack(r, e));
+                cell(a - s) != cell(a + s)
+            })
+        })
+        .collect();
+    let mut keyed: Vec<(u64, u32, u32)> = p.iter().enumerate().map(|(i, &x)| visibility::sort_key(x, i as u32, (u, v, w), centre, radius, m)).collect();
+    keyed.sort_unstable();
+    for pair in keyed.windows(2) {
+        let (a, b) = (pair[0].2 as usize, pair[1].2 as usize);
+        if pair[0].0 == pair[1].0 && (p[b].dot(w) - p[a].dot(w)).abs() <= slack(p[a], w) + slack(p[b], w) {
+            flag[a] = true;
+            flag[b] = true;
+        }
+    }
+    flag
+}
+
 /// The GPU visibility network against core's `visibility::build`, on the fixture cube (g 0.7,
 /// a sun) and on the plume lit by a point light, with both opacity modes, at the solver's
 /// window (the paper's bound) and at a finer one, with N not a power of two (the sort's
-/// padding), in one chunk of directions and in several. The lists (order and upstream neighbours) must be identical: the keys are the
-/// CPU's bit for bit. The opacities come from the same march (same steps, same order of
+/// padding), in one chunk of directions and in several.
+///
+/// The lists (order and upstream neighbours) are the CPU's exactly where the GPU computes the
+/// keys' dot products as the CPU does (lavapipe: every particle of every case). A compiler that
+/// fuses them (an NVIDIA H100, Vulkan driver 580: one list differed, plume, M 30) may move a
+/// particle that sits within rounding of a pixel edge or of its neighbour's depth
+/// (`ambiguous_keys`): such a particle, and whoever has it as upstream neighbour on either side,
+/// is left out of the comparison; every other particle must keep its place in the order and its
+/// upstream neighbour, and the ambiguous ones must be rare (under 1%), or the test would see
+/// little. The opacities of equal links come from the same march (same steps, same order of
 /// summation); they differ by the GPU's exp and density lookup rounding (measured on lavapipe:
-/// 1.8e-7 in every case, 3 ulp of an opacity near 1; on an NVIDIA H100, Vulkan driver 580,
-/// up to 1.4e-6: its compiler fuses the march's multiply-adds and its exp differs by an ulp or
-/// two, which the march sums over its steps). Bound 5e-6 absolute on 1 - exp(-tau): still far
+/// 1.8e-7 in every case, 3 ulp of an opacity near 1; on the H100 up to 1.4e-6, the march's
+/// fused multiply-adds summed over its steps). Bound 5e-6 absolute on 1 - exp(-tau): still far
 /// below what a wrong neighbour or a missed segment changes (a whole cell's opacity, 1e-2 and up).
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
@@ -54,25 +93,46 @@ fn gpu_network_visibility_matches_cpu() {
         let sphere = BoundingSphere::of(&sc.medium);
         let paper = window_side(0, 64, sphere.radius, p.mean_sigma_t, p.len());
         for (window, opacity) in [(paper, Opacity::Boundary), (paper, Opacity::Segment), (24, Opacity::Boundary)] {
+            let what = format!("{name}, M {window}, {opacity:?}");
             let input = VisibilityInput { medium: &sc.medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window, opacity };
             let cpu = visibility::build(&sc.medium, &p, &dirs, sphere.center, sphere.radius, window, opacity, &NoProgress).unwrap();
             let gpu = visibility(&ctx, &input, &NoProgress).unwrap();
             // In chunks of 3 directions (the last one of 2): the same lists.
             let chunked = visibility_chunked(&ctx, &input, 3 * 1024, &NoProgress).unwrap();
-            assert!(chunked.iter().zip(&gpu).all(|(a, b)| a.order == b.order && a.up == b.up && a.alpha == b.alpha), "{name}: chunks changed the lists");
+            assert!(chunked.iter().zip(&gpu).all(|(a, b)| a.order == b.order && a.up == b.up && a.alpha == b.alpha), "{what}: chunks changed the lists");
             assert_eq!(gpu.len(), cpu.len());
-            let (mut worst, mut linked) = (0.0f32, 0usize);
+            let (mut worst, mut linked, mut ambiguous, mut differing) = (0.0f32, 0usize, 0usize, 0usize);
             for (d, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
-                assert_eq!(g.order, c.order, "{name}, M {window}, {opacity:?}: direction {d}: list order");
-                assert_eq!(g.up, c.up, "{name}, M {window}, {opacity:?}: direction {d}: upstream neighbours");
+                let w = dirs[d];
+                let (u, v) = volscatter_core::sampling::orthonormal_basis(w);
+                let flag = ambiguous_keys(&p.position, (u, v, w), sphere.center, sphere.radius, window);
+                ambiguous += flag.iter().filter(|&&f| f).count();
+                let mut sorted = g.order.clone();
+                sorted.sort_unstable();
+                assert!(sorted.iter().enumerate().all(|(i, &k)| k as usize == i), "{what}: direction {d}: the order is not a permutation");
+                if g.order != c.order || g.up != c.up {
+                    differing += 1;
+                }
+                let clear = |order: &[u32]| order.iter().copied().filter(|&k| !flag[k as usize]).collect::<Vec<_>>();
+                assert_eq!(clear(&g.order), clear(&c.order), "{what}: direction {d}: list order of the unambiguous particles");
+                let is_flagged = |k: u32| k != visibility::NONE && flag[k as usize];
                 linked += c.up.iter().filter(|&&u| u != visibility::NONE).count();
-                for (a, b) in g.alpha.iter().zip(&c.alpha) {
-                    worst = worst.max((*a - *b).abs().max_element());
+                for (i, (gu, cu)) in g.up.iter().zip(&c.up).enumerate() {
+                    if flag[i] || is_flagged(*gu) || is_flagged(*cu) {
+                        continue;
+                    }
+                    assert_eq!(gu, cu, "{what}: direction {d}: upstream neighbour of particle {i}");
+                }
+                for (i, (a, b)) in g.alpha.iter().zip(&c.alpha).enumerate() {
+                    if g.up[i] == c.up[i] {
+                        worst = worst.max((*a - *b).abs().max_element());
+                    }
                 }
             }
-            eprintln!("{name}, M {window}, {opacity:?}: {linked} links, largest opacity difference {worst:e}");
-            assert!(linked > dirs.len() * p.len() / 2, "{name}, M {window}: only {linked} links: the test would not see wrong neighbours");
-            assert!(worst <= 5e-6, "{name}, M {window}, {opacity:?}: opacity differs by {worst}");
+            eprintln!("{what}: {linked} links, {ambiguous} ambiguous keys, {differing} of {} directions' lists differ, largest opacity difference {worst:e}", dirs.len());
+            assert!(linked > dirs.len() * p.len() / 2, "{what}: only {linked} links: the test would not see wrong neighbours");
+            assert!(ambiguous * 100 < dirs.len() * p.len(), "{what}: {ambiguous} ambiguous keys: the comparison would leave out too much");
+            assert!(worst <= 5e-6, "{what}: opacity differs by {worst}");
             assert!(matches!(visibility(&ctx, &input, &Cancelled), Err(Error::Cancelled)));
         }
     }
