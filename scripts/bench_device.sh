@@ -119,8 +119,10 @@ run() {
         step lpm 75 python3 scripts/bench_lpm.py --paper-only
         step solvers 120 python3 scripts/bench_solvers_gpu.py --presets preview,final --repeat 2
         step local-lights 120 python3 scripts/bench_local_lights.py --gpu
-        # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees).
-        step gpu-tests 120 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 4 --nocapture'
+        # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees). One at a
+        # time: in one process (nextest gives each its own) a test that destroys the shared
+        # device would reopen it under another that checks it is never reopened.
+        step gpu-tests 150 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 1 --nocapture'
     fi
     date -u
 }

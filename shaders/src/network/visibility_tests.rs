@@ -8,6 +8,7 @@ use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::solvers::network::particles;
 use volscatter_core::solvers::network::visibility::{self, window_side};
 use volscatter_core::solvers::NoProgress;
+use volscatter_core::medium::optical_depth;
 use volscatter_core::translate::sampling::BoundingSphere;
 use volscatter_core::Scene;
 
@@ -77,10 +78,16 @@ fn ambiguous_keys(p: &[Vec3], (u, v, w): (Vec3, Vec3, Vec3), centre: Vec3, radiu
 /// is left out of the comparison; every other particle must keep its place in the order and its
 /// upstream neighbour, and the ambiguous ones must be rare (under 1%), or the test would see
 /// little. The opacities of equal links come from the same march (same steps, same order of
-/// summation); they differ by the GPU's exp and density lookup rounding (measured on lavapipe:
-/// 1.8e-7 in every case, 3 ulp of an opacity near 1; on the H100 up to 1.4e-6, the march's
-/// fused multiply-adds summed over its steps). Bound 5e-6 absolute on 1 - exp(-tau): still far
-/// below what a wrong neighbour or a missed segment changes (a whole cell's opacity, 1e-2 and up).
+/// summation); they differ by the GPU's exp and density lookup rounding: on lavapipe 1.8e-7 in
+/// every case (3 ulp of an opacity near 1). On the H100 the march's fused multiply-adds add up
+/// over its steps: 1.4e-6 on the cube, but 4.5e-5 and 1.2e-4 on the plume with
+/// `Opacity::Boundary`, where a link's optical depth is the difference of its two particles'
+/// depths to the boundary, each up to tens of mean free paths: their rounding, relative to
+/// those depths, is what the difference keeps. So the bound is 5e-6 plus 2^-15 (3e-5, some 250
+/// ulp) of the two depths (`Opacity::Boundary`; of the gap's own depth with `Segment`), still a
+/// fraction of what a wrong neighbour or a missed segment changes (a cell's optical depth).
+/// Measured, as a share of each link's bound: lavapipe at most 0.03, the H100 at most 0.23
+/// (plume, M 24, Boundary). Every case is measured and printed before any is asserted.
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_network_visibility_matches_cpu() {
@@ -88,6 +95,7 @@ fn gpu_network_visibility_matches_cpu() {
     let scenes: [(&str, Scene); 2] = [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())];
     // With the axis-aligned ones: +-z is where `orthonormal_basis` switches branch.
     let dirs: Vec<Vec3> = spiral(29).into_iter().chain([Vec3::Z, -Vec3::Z, Vec3::X]).collect();
+    let mut too_far = Vec::new();
     for (name, sc) in scenes {
         let p = particles::sample(&sc.medium, 1000, 3);
         let sphere = BoundingSphere::of(&sc.medium);
@@ -101,7 +109,8 @@ fn gpu_network_visibility_matches_cpu() {
             let chunked = visibility_chunked(&ctx, &input, 3 * 1024, &NoProgress).unwrap();
             assert!(chunked.iter().zip(&gpu).all(|(a, b)| a.order == b.order && a.up == b.up && a.alpha == b.alpha), "{what}: chunks changed the lists");
             assert_eq!(gpu.len(), cpu.len());
-            let (mut worst, mut linked, mut ambiguous, mut differing) = (0.0f32, 0usize, 0usize, 0usize);
+            let (mut worst, mut worst_ratio, mut deepest, mut linked, mut ambiguous, mut differing) = (0.0f32, 0.0f32, 0.0f32, 0usize, 0usize, 0usize);
+            let step = visibility::march_step(&sc.medium);
             for (d, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
                 let w = dirs[d];
                 let (u, v) = volscatter_core::sampling::orthonormal_basis(w);
@@ -123,19 +132,35 @@ fn gpu_network_visibility_matches_cpu() {
                     }
                     assert_eq!(gu, cu, "{what}: direction {d}: upstream neighbour of particle {i}");
                 }
+                let depth = |x: Vec3| optical_depth(&sc.medium, x, -w, f32::INFINITY, step, visibility::BOUNDARY_STEPS).max_element();
                 for (i, (a, b)) in g.alpha.iter().zip(&c.alpha).enumerate() {
-                    if g.up[i] == c.up[i] {
-                        worst = worst.max((*a - *b).abs().max_element());
+                    if g.up[i] != c.up[i] {
+                        continue;
                     }
+                    let diff = (*a - *b).abs().max_element();
+                    // The rays whose rounding the link's depth carries: Boundary, both
+                    // particles' to the boundary; Segment, the gap's (at most that of the
+                    // upstream particle's ray, which covers it).
+                    let rays = match (opacity, c.up[i]) {
+                        (Opacity::Boundary, u) if u != visibility::NONE => depth(p.position[i]) + depth(p.position[u as usize]),
+                        _ => depth(p.position[i]),
+                    };
+                    let bound = 5e-6 + rays * (1.0 / 32768.0);
+                    worst = worst.max(diff);
+                    deepest = deepest.max(rays);
+                    worst_ratio = worst_ratio.max(diff / bound);
                 }
             }
-            eprintln!("{what}: {linked} links, {ambiguous} ambiguous keys, {differing} of {} directions' lists differ, largest opacity difference {worst:e}", dirs.len());
+            eprintln!("{what}: {linked} links, {ambiguous} ambiguous keys, {differing} of {} directions' lists differ, largest opacity difference {worst:e} (at most {worst_ratio:.3} of a link's bound; rays' depths up to {deepest:.1})", dirs.len());
             assert!(linked > dirs.len() * p.len() / 2, "{what}: only {linked} links: the test would not see wrong neighbours");
             assert!(ambiguous * 100 < dirs.len() * p.len(), "{what}: {ambiguous} ambiguous keys: the comparison would leave out too much");
-            assert!(worst <= 5e-6, "{what}: opacity differs by {worst}");
+            if worst_ratio > 1.0 {
+                too_far.push(format!("{what}: an opacity differs by {worst_ratio} of its bound (largest difference {worst:e})"));
+            }
             assert!(matches!(visibility(&ctx, &input, &Cancelled), Err(Error::Cancelled)));
         }
     }
+    assert!(too_far.is_empty(), "{}", too_far.join("; "));
 }
 
 /// The sort alone on keys with many ties in the first words (the tie-break the lists rely on)
