@@ -196,7 +196,8 @@ def gpu_section(rows: list[dict]) -> str:
         "## vpl on the GPU (issue 16)",
         "",
         f"Written by `scripts/bench_vpl.py` on {datetime.date.today()}: GPU adapter {adapter};",
-        f"CPU {platform.processor() or platform.machine()}, {rows[0]['threads']} rayon threads (shared with other jobs).",
+        f"CPU {platform.processor() or platform.machine()}, {rows[0]['threads']} rayon threads"
+        + (" (shared with other jobs)." if software else " (the GPU machine's own cores)."),
         "The same solve (same walks, seed 1, 64-cell output) with the gather's connections, the",
         "upsampling and the single scattering on the GPU backend, and all on the CPU; the walks stay on the CPU in both",
         "(and the compensation's vertices: `near_field: compensate` connects them on the GPU).",
