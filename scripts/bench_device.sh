@@ -99,7 +99,7 @@ run() {
         cp BENCHMARKS.md "$out/BENCHMARKS.md"
     }
     if [ -n "$quick" ]; then
-        step vpl-example 120 bash -c '.devbin/bench_vpl --walks 512 --gathers 8 --output 32 --cases plume_point,plume_dense --near auto,compensate > "$0"' "$out/vpl_rows.jsonl"
+        step "vpl example" 120 bash -c '.devbin/bench_vpl --walks 512 --gathers 8 --output 32 --cases plume_point,plume_dense --near auto,compensate > "$0"' "$out/vpl_rows.jsonl"
         step gpu-tests 600 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 1 vpl::tests solve::tests'
         step vpl 30 python3 scripts/bench_vpl.py --gpu-only --gpu-from "$out/vpl_rows.jsonl"
         step pop 120 python3 scripts/bench_gpu.py --sizes 64 --grids 16
