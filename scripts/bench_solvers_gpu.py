@@ -5,7 +5,7 @@ and with `--device cpu`. Writes the "solvers-gpu" section of BENCHMARKS.md.
     python3 scripts/bench_solvers_gpu.py [--presets preview,final] [--repeat 2]
 
 Uses the `volscatter` CLI ($VOLSCATTER_BIN, default target/release/volscatter); numpy and an EXR
-reader (Mitsuba, or the OpenEXR package) for the GPU image against the CPU's. Times are the render
+reader (Mitsuba, or the OpenEXR package; bench_lpm.py's `rel_rmse`) for the GPU image against the CPU's. Times are the render
 report's: *solve* = every phase but loading, compositing and writing; *composite* = the ray-marched
 image (on the GPU with `--device gpu`); the fastest of `--repeat` runs (the first run of a process
 also compiles the kernels: each run is a new process, as a host's first frame is). On a software
@@ -27,6 +27,7 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT / "scripts"))
 from benchmarks_md import write_section  # noqa: E402
+from bench_lpm import rel_rmse  # noqa: E402  (two EXRs' relative RMSE, or why not)
 
 NOT_SOLVE = ("load scene", "composite", "write")
 
@@ -58,18 +59,6 @@ def render(work: Path, solver: str, settings: dict, device: str, tag: str) -> di
 def best(work: Path, solver: str, settings: dict, device: str, tag: str, repeat: int) -> dict:
     runs = [render(work, solver, settings, device, f"{tag}_{i}") for i in range(repeat)]
     return min(runs, key=lambda r: r["total"])
-
-
-def rel_rmse(a: Path, b: Path) -> str:
-    try:
-        import numpy as np
-
-        sys.path.insert(0, str(REPO_ROOT / "tests" / "mitsuba"))
-        from mitsuba_scenes import read_exr_layers
-        x, y = read_exr_layers(a)["rgb"], read_exr_layers(b)["rgb"]
-    except Exception as e:  # noqa: BLE001 -- no EXR reader: say so in the table
-        return f"skipped ({type(e).__name__})"
-    return f"{float(np.sqrt(np.mean((x - y) ** 2)) / max(float(np.sqrt(np.mean(y ** 2))), 1e-30)):.1e}"
 
 
 def adapter() -> tuple[str, bool]:

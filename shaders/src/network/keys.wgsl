@@ -7,7 +7,7 @@
 // Per (direction of the chunk, particle): optical depth to the boundary (RGB).
 @group(0) @binding(5) var<storage, read_write> to_boundary: array<vec4<f32>>;
 
-// visibility.rs `sort_key`'s `cell`: floor, then clamped to the window.
+// visibility.rs `window_cell`: floor, then clamped to the window.
 fn cell(a: f32) -> u32 {
     let radius = params.centre_radius.w;
     let m = params.counts.y;

@@ -42,14 +42,13 @@ fn ambiguous_keys(p: &[Vec3], (u, v, w): (Vec3, Vec3, Vec3), centre: Vec3, radiu
     // 8 ulp of the sum of the terms' magnitudes: a fused chain rounds twice less, each
     // rounding half an ulp of a partial sum at most.
     let slack = |a: Vec3, b: Vec3| 8.0 * f32::EPSILON * (a * b).abs().element_sum() + f32::MIN_POSITIVE;
-    let cell = |a: f32| (((a + radius) / (2.0 * radius) * m as f32).floor() as i64).clamp(0, m as i64 - 1);
     let mut flag: Vec<bool> = p
         .iter()
         .map(|&x| {
             let r = x - centre;
             [u, v].iter().any(|&e| {
                 let (a, s) = (r.dot(e), slack(r, e));
-                cell(a - s) != cell(a + s)
+                visibility::window_cell(a - s, radius, m) != visibility::window_cell(a + s, radius, m)
             })
         })
         .collect();

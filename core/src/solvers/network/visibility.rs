@@ -34,8 +34,13 @@ pub fn march_step(medium: &Medium) -> f32 {
 /// order (ties in pixel and depth broken by index, so the order is deterministic).
 pub fn sort_key(x: Vec3, index: u32, (u, v, w): (Vec3, Vec3, Vec3), centre: Vec3, radius: f32, m: u32) -> (u64, u32, u32) {
     let r = x - centre;
-    let cell = |a: f32| (((a + radius) / (2.0 * radius) * m as f32).floor() as i64).clamp(0, m as i64 - 1) as u64;
-    (cell(r.dot(u)) + m as u64 * cell(r.dot(v)), total_order_bits(x.dot(w)), index)
+    (window_cell(r.dot(u), radius, m) + m as u64 * window_cell(r.dot(v), radius, m), total_order_bits(x.dot(w)), index)
+}
+
+/// The window column of coordinate `a` (from the sphere's centre, along u or v) in an `m`-wide
+/// window over the sphere of `radius`: floor, clamped to the window.
+pub fn window_cell(a: f32, radius: f32, m: u32) -> u64 {
+    (((a + radius) / (2.0 * radius) * m as f32).floor() as i64).clamp(0, m as i64 - 1) as u64
 }
 
 /// f32 bits as a u32 whose unsigned order is `f32::total_cmp`'s.

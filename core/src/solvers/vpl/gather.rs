@@ -361,13 +361,7 @@ impl<'a> GatherPlan<'a> {
             return (rho, None);
         }
         let view = (y - self.camera).normalize_or(Vec3::Z);
-        let ball = ball_radius(medium, rho, self.r, self.mean_free_paths);
-        let kernel = match self.near_field {
-            NearField::Hat => hat(medium, rho, self.r),
-            // (`auto` is resolved before the gather, mod.rs; as `ball` should it get here.)
-            NearField::Ball | NearField::Auto => Kernel::Ball { radius: ball, cone: ball.min(self.cone) },
-            NearField::Clamp | NearField::Compensate => Kernel::Clamp(self.r),
-        };
+        let (kernel, ball) = kernel_for(self.near_field, medium, rho, self.r, self.mean_free_paths, self.cone);
         let point = GatherPoint { index: i + nx * (jj + ny * k), position: y, view, rho, kernel, ball, subset: subset_of(i, jj, k, self.subsets) };
         (rho, Some(point))
     }
@@ -477,6 +471,21 @@ pub fn gather(scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, pr
         stats.add(&plane.stats);
     }
     Ok(Gathered { merged: Merged { j, density }, stats, iso })
+}
+
+/// The kernel of `near_field` at a point of density `rho`, near-field radius `r`, and the ball
+/// radius (at most `mean_free_paths` there: `ball_radius`) that the ball kernel takes and the
+/// clamp's loss is measured against. `cone`: the ball kernel's phase-smoothing radius (0:
+/// none), at most its radius. One choice for the gather and the near refinement (refine.rs).
+pub fn kernel_for(near_field: NearField, medium: &Medium, rho: f32, r: f32, mean_free_paths: f32, cone: f32) -> (Kernel, f32) {
+    let ball = ball_radius(medium, rho, r, mean_free_paths);
+    let kernel = match near_field {
+        NearField::Hat => hat(medium, rho, r),
+        // (`auto` is resolved before the solve, mod.rs; as `ball` should it get here.)
+        NearField::Ball | NearField::Auto => Kernel::Ball { radius: ball, cone: ball.min(cone) },
+        NearField::Clamp | NearField::Compensate => Kernel::Clamp(r),
+    };
+    (kernel, ball)
 }
 
 /// `near_field: hat`'s kernel at a point of density `rho`, of radius `r`. Beyond the ball the

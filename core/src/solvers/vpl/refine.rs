@@ -28,7 +28,7 @@
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
-use super::gather::{ball_radius, connect, march_step, GatherStats, Kernel};
+use super::gather::{connect, kernel_for, march_step, GatherStats, Kernel};
 use super::march::Marcher;
 use super::settings::{NearField, VplSettings};
 use super::walks::{Vpl, Walks};
@@ -115,14 +115,7 @@ impl<'a> Near<'a> {
     /// The gather's kernel at a point of density `rho`, and the ball radius the clamp's loss is
     /// measured against.
     pub(super) fn kernel(&self, rho: f32) -> (Kernel, f32) {
-        let ball = ball_radius(self.march.medium(), rho, self.r, self.mean_free_paths);
-        let kernel = match self.near_field {
-            // (`auto` is resolved before the solve, mod.rs; as `ball` should it get here.)
-            NearField::Ball | NearField::Auto => Kernel::Ball { radius: ball, cone: 0.0 },
-            NearField::Hat => super::gather::hat(self.march.medium(), rho, self.r),
-            NearField::Clamp | NearField::Compensate => Kernel::Clamp(self.r),
-        };
-        (kernel, ball)
+        kernel_for(self.near_field, self.march.medium(), rho, self.r, self.mean_free_paths, 0.0)
     }
 
     /// J_near at `x` (density `rho` at the grid's footprint there): the VPLs within r_n,

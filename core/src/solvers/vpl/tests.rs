@@ -319,10 +319,15 @@ fn furnace_points(s: &VplSettings) -> Vec<f64> {
 /// One seed's noise (RMS over the points of two seeds' difference / sqrt 2) and the two
 /// seeds' mean's RMS error against the exact 1, on the white furnace box.
 fn furnace_noise_and_error(s: &VplSettings) -> (f64, f64) {
-    let (a, b) = (furnace_points(&VplSettings { seed: 1, ..s.clone() }), furnace_points(&VplSettings { seed: 2, ..s.clone() }));
+    noise_and_error(&furnace_points(&VplSettings { seed: 1, ..s.clone() }), &furnace_points(&VplSettings { seed: 2, ..s.clone() }))
+}
+
+/// Two seeds' S / sigma_s at the same points: one seed's noise (RMS of their difference /
+/// sqrt 2) and their mean's RMS error against the exact 1.
+fn noise_and_error(a: &[f64], b: &[f64]) -> (f64, f64) {
     let n = a.len() as f64;
-    let noise = (a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n / 2.0).sqrt();
-    let error = (a.iter().zip(&b).map(|(x, y)| (0.5 * (x + y) - 1.0).powi(2)).sum::<f64>() / n).sqrt();
+    let noise = (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n / 2.0).sqrt();
+    let error = (a.iter().zip(b).map(|(x, y)| (0.5 * (x + y) - 1.0).powi(2)).sum::<f64>() / n).sqrt();
     (noise, error)
 }
 
@@ -400,15 +405,13 @@ fn vpl_explore_furnace_convergence() {
                     let p = g.position(i, j, k);
                     let dens = sc.medium.density_world(p);
                     if dens > 0.99 && p.abs().max_element() < core {
-                        v.push(g.data[c].x / sc.medium.sigma_s(dens).x);
+                        v.push((g.data[c].x / sc.medium.sigma_s(dens).x) as f64);
                     }
                 }
                 v
             };
             let (a, b) = (r(1), r(2));
-            let n = a.len() as f64;
-            let noise = (a.iter().zip(&b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / n / 2.0).sqrt();
-            let bias = (a.iter().zip(&b).map(|(x, y)| (0.5 * (x + y) as f64 - 1.0).powi(2)).sum::<f64>() / n).sqrt();
+            let (noise, bias) = noise_and_error(&a, &b);
             eprintln!("    one seed's noise {noise:.4}, the two seeds' mean's error {bias:.4} ({} points)", a.len());
         }
     }
