@@ -6,7 +6,7 @@
 use super::gather::{self, Gathered};
 use super::settings::VplSettings;
 use super::walks::Walks;
-use crate::compositor::single_scattering_grid_cancellable;
+use crate::compositor::single_scattering_grid_dome_spaced;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::scene::Scene;
@@ -41,6 +41,6 @@ impl VplBackend for CpuBackend {
     }
 
     fn single_scattering(&self, scene: &Scene, s: &VplSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
-        single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
+        single_scattering_grid_dome_spaced(scene, s.output_resolution, s.dome_directions, s.dome_spacing, progress)
     }
 }

@@ -72,6 +72,7 @@ pub mod backend;
 pub mod compensate;
 pub mod depth_map;
 pub mod energy;
+pub mod far_field;
 pub mod gather;
 pub use crate::medium::dense_march as march;
 pub mod near_ratio;

@@ -290,11 +290,29 @@ pub struct VplSettings {
     /// cells): white box S / sigma_s 0.9723 -> 0.9722, white cloud 0.7681 -> 0.7689; the
     /// energy balance 1.0500 -> 1.0502 (over its bound of 0.048 with the march as well).
     pub transmittance: Transmittance,
+    /// The far VPLs as clusters (far_field.rs, a Barnes-Hut tree over the gather grid): a
+    /// point connects one by one only to the VPLs of the tree's nodes nearer than this many of
+    /// their sides, to each farther node once (its VPLs' power at their centroid, their lobes
+    /// as one HG lobe of the same mean cosine); 0 = every VPL one by one, the default. The CPU
+    /// gather only (the GPU connects every VPL, as it marches every connection). Measured
+    /// (vpl_bench_image, 2 cores, with this round's `dome_spacing` 2 and 8 x 8 maps): default
+    /// scene 256 x 256 at 65536 walks: 0 -> 2: gather ~0.3 -> 0.15 s, whole image 0.63-0.68 s,
+    /// image rel. RMSE 0.0438 -> 0.0434-0.0438 (distance 1.5: 0.0457, 1: 0.0474); plume_point
+    /// 128 x 128 at 65536 walks 0.387 -> 0.154 s (10.3M -> 0.87M connections), 0.0549 -> 0.0544,
+    /// at 262144 walks 0.18 s and 0.042. Not the default because of a flux bias on cube g 0.7
+    /// (8 seeds at 4096 walks, `vpl_eight_seeds_flux_cube_g07`, bound 2%): x1.016 -> x1.034 at
+    /// distance 2 (1.5 x1.047, 3 x1.027, 4 x1.023). Its gather's J_iso is unbiased (x1.0008,
+    /// after the transmittance's spread correction, far_field.rs) but J is 1.5% bright, and
+    /// neither the lobes' merging (each cluster's own g: x1.028), nor the 1/d^2 spread term,
+    /// nor the depth map (marched: the same) explains it: not understood.
+    pub cluster_distance: f32,
     /// `transmittance: map`: the map's side n (n x n directions, octahedral). Measured: the
     /// transmittance's mean absolute error against a fine march on the plume 0.0057 at n = 16,
     /// 0.0024 at 32 (the march's own 0.0006; depth_map.rs test); default scene 256 x 256, n =
     /// 16 -> 32: 16384 walks 1.07 -> 1.34 s, image 0.0869 -> 0.0869; 65536 walks 2.41 -> 2.58
-    /// s, 0.0439 -> 0.0440: 16 is enough there.
+    /// s, 0.0439 -> 0.0440: 16 is enough there. Default 8 since (65536 walks, `dome_spacing` 2):
+    /// default scene gather 0.25 -> 0.15 s, image 0.0444 -> 0.0438; plume_point 0.0547 at 8
+    /// and 16 alike, 7-10% faster.
     pub map_resolution: u32,
     /// Range sigma of the bilateral filter, a fraction of the largest density.
     pub range_sigma: f32,
@@ -303,6 +321,14 @@ pub struct VplSettings {
     pub spatial_sigma: f32,
     /// Dome directions of the exact single scattering (compositor::single_scattering_grid).
     pub dome_directions: u32,
+    /// The single scattering's dome part on a grid this many output cells apart, interpolated
+    /// trilinearly (compositor::single_scattering_grid_dome_spaced; 1: at every output point).
+    /// The CPU only (the GPU's grid takes the dome at every point), and only on grids of at
+    /// least 64 points (compositor::MIN_DOME_POINTS). Default 2, measured on the default scene
+    /// (256 x 256, 65536 walks, 2 cores): the single scattering 0.43 -> 0.10-0.16 s, image rel.
+    /// RMSE 0.0450 -> 0.0444; its grid within 0.012 rel. RMSE and +0.06% of the plain one
+    /// (compositor.rs `dome_spacing_interpolates_the_sky`).
+    pub dome_spacing: u32,
     /// Random seed: walk w uses stream w of this seed, so the same seed gives the same S and
     /// consecutive frames share their paths.
     pub seed: u64,
@@ -331,10 +357,12 @@ impl Default for VplSettings {
             near_radius: 1.5,
             normalize_energy: true,
             transmittance: Transmittance::Map,
-            map_resolution: 16,
+            map_resolution: 8,
+            cluster_distance: 0.0,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
+            dome_spacing: 2,
             seed: 1,
         }
     }
@@ -375,10 +403,16 @@ impl VplSettings {
         if !(self.near_radius.is_finite() && (0.5..=4.0).contains(&self.near_radius)) {
             return Err(Error::scene("solver.near_radius", format!("must be in [0.5, 4], got {}", self.near_radius)));
         }
+        if !(self.cluster_distance == 0.0 || (0.5..=16.0).contains(&self.cluster_distance)) {
+            return Err(Error::scene("solver.cluster_distance", format!("must be 0 (off) or in [0.5, 16], got {}", self.cluster_distance)));
+        }
         if !(2..=64).contains(&self.map_resolution) {
             return Err(Error::scene("solver.map_resolution", format!("must be in 2..=64, got {}", self.map_resolution)));
         }
         validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
+        if !(1..=8).contains(&self.dome_spacing) {
+            return Err(Error::scene("solver.dome_spacing", format!("must be in 1..=8, got {}", self.dome_spacing)));
+        }
         if !(1..=1024).contains(&self.dome_directions) {
             return Err(Error::scene("solver.dome_directions", format!("must be in 1..=1024, got {}", self.dome_directions)));
         }

@@ -811,7 +811,9 @@ fn converged_image(name: &str, sc: &Scene, spp: u32, dir: &std::path::Path) -> (
 /// per reference run at VPL_IMAGE_SPP and per vpl run (default settings but VPL_GATHER and VPL_WPS if set, walks from
 /// VPL_IMAGE_WALKS, `near_refine` from VPL_IMAGE_REFINE100 in hundredths, default 0, and
 /// `near_upsample` from VPL_NU, `transmittance` from VPL_TR and `map_resolution` from
-/// VPL_MAPN; time = solve and composite, as a host pays for an image): seconds, image
+/// VPL_MAPN, `cluster_distance` from VPL_CLUSTER100 in hundredths, `dome_spacing` from
+/// VPL_DOME_SPACING; time = solve and
+/// composite, as a host pays for an image): seconds, image
 /// rel. RMSE against the converged image raw and with the converged image's own noise taken
 /// out (sqrt(e^2 - n^2): the two are independent), and the image mean ratio.
 #[test]
@@ -851,7 +853,7 @@ fn vpl_bench_image() {
         // near_refine in hundredths of a gather cell (0: the default, off).
         for (walks, refine) in list("VPL_IMAGE_WALKS", "4096,16384").into_iter().flat_map(|w| list("VPL_IMAGE_REFINE100", "0").into_iter().map(move |r| (w, r))) {
             let d = VplSettings::default();
-            let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, ..d };
+            let s = VplSettings { walks, near_refine: refine as f32 / 100.0, near_upsample: env_near_upsample(), gather_resolution: env_u32("VPL_GATHER", d.gather_resolution), walks_per_subset: env_u32("VPL_WPS", d.walks_per_subset), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, cluster_distance: env_u32("VPL_CLUSTER100", (d.cluster_distance * 100.0) as u32) as f32 / 100.0, dome_spacing: env_u32("VPL_DOME_SPACING", d.dome_spacing), map_resolution: env_u32("VPL_MAPN", d.map_resolution), ..d };
             let s = env_transmittance(s);
             let s = match std::env::var("VPL_NEAR") {
                 Ok(n) => VplSettings { near_field: serde_json::from_value(serde_json::Value::from(n)).unwrap(), ..s },
@@ -861,12 +863,12 @@ fn vpl_bench_image() {
             let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
             let solve = t.elapsed().as_secs_f64();
             eprintln!("{name} {walks} walks: {} VPLs, {} connections; {:?}", rep.vpls, rep.gather.connections, out.timings);
-            let img = rgb(&composite(&sc, &out.scattering, &CompositeOptions { transparent: true, aovs: Aovs::NONE, ..Default::default() }).unwrap());
+            let img = rgb(&composite(&sc, &out.scattering, &CompositeOptions { transparent: true, aovs: Aovs::NONE, subpixels: env_u32("VPL_SUBPIX", 2), step_voxels: env_u32("VPL_STEP100", 50) as f32 / 100.0, ..Default::default() }).unwrap());
             let secs = t.elapsed().as_secs_f64();
             let (e, ec, ratio) = err(&img);
             println!(
-                "BENCH {{{head},\"solver\":\"vpl\",\"transmittance\":\"{:?}\",\"map_resolution\":{},\"near_upsample\":\"{:?}\",\"near_field\":\"{:?}\",\"fit\":\"{:?}\",\"near_refine\":{},\"walks\":{walks},\"gather\":{},\"seconds\":{secs:.4},\"solve_seconds\":{solve:.4},\"image_raw\":{e:.5},\"image\":{ec:.5},\"image_ratio\":{ratio:.5}}}",
-                s.transmittance, s.map_resolution, s.near_upsample, rep.near_field, s.upsample_fit, s.near_refine, s.gather_resolution
+                "BENCH {{{head},\"solver\":\"vpl\",\"transmittance\":\"{:?}\",\"map_resolution\":{},\"near_upsample\":\"{:?}\",\"near_field\":\"{:?}\",\"fit\":\"{:?}\",\"near_refine\":{},\"cluster_distance\":{},\"dome_spacing\":{},\"walks\":{walks},\"gather\":{},\"seconds\":{secs:.4},\"solve_seconds\":{solve:.4},\"image_raw\":{e:.5},\"image\":{ec:.5},\"image_ratio\":{ratio:.5}}}",
+                s.transmittance, s.map_resolution, s.near_upsample, rep.near_field, s.upsample_fit, s.near_refine, s.cluster_distance, s.dome_spacing, s.gather_resolution
             );
         }
     }
@@ -1100,3 +1102,4 @@ fn vpl_explore_white_cloud() {
         }
     }
 }
+
