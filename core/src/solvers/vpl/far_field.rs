@@ -1,5 +1,5 @@
 //! `cluster_distance` (settings.rs): the VPLs far from a gather point taken as clusters instead
-//! of one by one, a Barnes-Hut tree over the gather grid.
+//! of one by one, found through a pyramid over the gather grid.
 //!
 //! Why: the gather connects every point to every VPL, so its cost is points x VPLs and the
 //! walks that bring the noise down cost their VPLs' connections at all ~4000 points (default
@@ -10,22 +10,24 @@
 //! The tree: the gather grid's cells (one per point, the box of half a spacing around it), in
 //! base cells of a power of two of them (so that the base level has at most `MAX_BASE` cells a
 //! side), and a pyramid of 2 x 2 x 2 merges above them. Each node keeps its VPLs' power, their
-//! power-weighted centroid, mean incident direction and spread. A point opens a node whose
-//! box is nearer than `cluster_distance` x its side; every other node is one connection. An
-//! opened base cell's VPLs are connected one by one.
+//! power-weighted centroid, mean incident direction and spread. A point connects to a base
+//! cell nearer than `cluster_distance` of its sides one VPL at a time, to a farther one once;
+//! the levels above only skip what is empty (`MAX_CLUSTER_LEVEL`: why not larger clusters).
 //!
-//! A cluster as one connection (gather.rs `connect_clusters`): from its centroid, the sum of
-//! its VPLs' HG lobes as one HG lobe about their mean incident direction m with g |m|: the
-//! same energy and mean cosine as the sum (the first two terms of its Legendre expansion;
-//! only the sharper, higher terms are lost, as `phase_cone` loses them on purpose), always
-//! positive. 1/d^2 with its mean over the cluster's spread to second order: the Laplacian of
-//! 1/|y|^2 is 2/|y|^4, so the mean over VPLs spread with mean squared distance s^2 about the
-//! centroid is 1/d^2 (1 + s^2 / (3 d^2)) (isotropic spread). The transmittance is the
-//! centroid's (from the point's depth map, as every connection beyond a cell already is),
-//! with its mean over the spread along the line to second order, sigma the extinction at
-//! the centroid and v = s^2 / 3 the radial variance: e^-tau is convex (x (1 + sigma^2 v / 2))
-//! and the nearer VPLs of a cluster are both less attenuated and closer (x (1 + 2 sigma v /
-//! d)); without it the clusters' J_iso on cube g 0.7 (4096 walks, distance 2) was 0.6% low.
+//! A cluster as one connection (gather.rs `connect_clusters`): from its centroid; its VPLs'
+//! HG lobes as a share |m| of whole lobes about their mean incident direction m and the rest
+//! isotropic: the same energy and mean cosine as their sum, exact where they all arrive along
+//! one direction (the first collisions of a sun's walks) and right where the rest are spread
+//! evenly (measured better than one lobe of g |m|: `MAX_CLUSTER_LEVEL`). 1/d^2 with its mean
+//! over the cluster's spread to second order: the Laplacian of 1/|y|^2 is 2/|y|^4, so the mean
+//! over VPLs spread with mean squared distance s^2 about the centroid is 1/d^2 (1 + s^2 /
+//! (3 d^2)) (isotropic spread); both lobes are widened by that spread's angle (g times 1 - s^2
+//! / (3 d^2)). The transmittance is the centroid's (from the point's depth map, as every
+//! connection beyond a cell already is), with its mean over the spread along the line to
+//! second order, sigma the extinction at the centroid and v = s^2 / 3 the radial variance:
+//! e^-tau is convex (x (1 + sigma^2 v / 2)) and the nearer VPLs of a cluster are both less
+//! attenuated and closer (x (1 + 2 sigma v / d)); without it the clusters' J_iso on cube g 0.7
+//! (4096 walks, distance 2) was 0.6% low.
 
 use glam::{Affine3A, UVec3, Vec3};
 
@@ -36,6 +38,18 @@ use crate::medium::Medium;
 /// Largest side of the base level in base cells: base cells are merged gather cells where the
 /// gather is finer (bounds the tree's memory at ~64^3 x 8/7 nodes).
 pub const MAX_BASE: u32 = 64;
+
+/// The highest level of the tree whose nodes are taken as clusters: the base cells alone.
+/// Why: a larger node's VPLs mix first-order ones, all arriving along the light, with
+/// scattered ones, whose directions one lobe model cannot hold. Measured on cube g 0.7 (4096
+/// walks, 16-cell gather, distance 2, each far node against its own VPLs,
+/// gather.rs `vpl_explore_clusters_against_their_vpls`):
+/// with |m| whole lobes and the rest isotropic, base cells x1.005, the level above x0.928, the
+/// next x0.891; with one lobe of g |m| x1.036 / 1.053 / 1.057, with a blend of the two matched
+/// to the VPLs' second Legendre moment x1.030 / 1.018 / 0.979, with six bins of directions x1.014
+/// / 1.043 / 0.967. Clusters at every level made that cube's 8-seed flux x1.030-1.034 (bound
+/// 2%); at the base cells x1.018.
+pub const MAX_CLUSTER_LEVEL: u32 = 0;
 
 /// A node of the tree: what its VPLs are, seen from afar.
 #[derive(Clone, Copy, Debug, Default)]
@@ -197,7 +211,30 @@ impl FarField {
 
     /// Every VPL once, seen from world point `x`: the near ones' slices to `near`, the far
     /// clusters to `far`. `stack` is scratch space, reused from point to point.
-    pub fn visit(&self, x: Vec3, stack: &mut Vec<(u32, UVec3)>, mut near: impl FnMut(&[Vpl]), mut far: impl FnMut(&Cluster)) {
+    pub fn visit(&self, x: Vec3, stack: &mut Vec<(u32, UVec3)>, near: impl FnMut(&[Vpl]), mut far: impl FnMut(&Cluster)) {
+        self.visit_nodes(x, stack, near, |c, _, _| far(c))
+    }
+
+    /// The VPLs of node `cell` of level `level` (tests: a cluster against its own VPLs).
+    #[cfg(test)]
+    pub fn members(&self, level: u32, cell: UVec3) -> Vec<Vpl> {
+        let base_dims = self.levels[0].dims;
+        let lo = cell << level;
+        let hi = ((cell + UVec3::ONE) << level).min(base_dims);
+        let mut out = Vec::new();
+        for z in lo.z..hi.z {
+            for y in lo.y..hi.y {
+                for x in lo.x..hi.x {
+                    let i = cell_index(base_dims, UVec3::new(x, y, z));
+                    out.extend_from_slice(&self.vpls[self.start[i] as usize..self.start[i + 1] as usize]);
+                }
+            }
+        }
+        out
+    }
+
+    /// `visit`, the far nodes with their level and cell.
+    pub fn visit_nodes(&self, x: Vec3, stack: &mut Vec<(u32, UVec3)>, mut near: impl FnMut(&[Vpl]), mut far: impl FnMut(&Cluster, u32, UVec3)) {
         let q = self.world_to_index.transform_point3(x);
         stack.clear();
         let top = self.levels.len() as u32 - 1;
@@ -219,8 +256,10 @@ impl FarField {
             let side = (self.base << l) as f32;
             let lo = c.as_vec3() * side - 0.5;
             let gap = (lo - q).max(q - (lo + side)).max(Vec3::ZERO);
-            if gap.length() * self.min_spacing >= self.opening * side * self.max_spacing {
-                far(node);
+            // Only base cells are taken as clusters (`MAX_CLUSTER_LEVEL`); the levels above
+            // only skip what is empty.
+            if l <= MAX_CLUSTER_LEVEL && gap.length() * self.min_spacing >= self.opening * side * self.max_spacing {
+                far(node, l, c);
             } else if l == 0 {
                 let i = cell_index(level.dims, c);
                 near(&self.vpls[self.start[i] as usize..self.start[i + 1] as usize]);

@@ -163,8 +163,8 @@ fn mapped_depth<'m>(march: &'m Marcher, map: &'m DepthMap, exact: f32, step: f32
 }
 
 /// The light of far VPL clusters (far_field.rs) at `x`, as `connect_iso` gives a VPL's: each
-/// cluster one connection from its centroid, its VPLs' lobes as one HG lobe about their mean
-/// incident direction with g |m|, 1/d^2 with its mean over the cluster's spread (the module
+/// cluster one connection from its centroid, its VPLs' lobes as |m| whole lobes about their mean
+/// incident direction and the rest isotropic, 1/d^2 with its mean over the cluster's spread (the module
 /// doc of far_field.rs). Clusters are never within the near-field radius (they are at least
 /// `cluster_distance` cells away), so nothing is clamped: (sum, iso).
 #[inline(always)]
@@ -185,9 +185,12 @@ fn connect_clusters(medium: &Medium, clusters: &[Cluster], x: Vec3, view: Vec3, 
         // with that spread, whose mean cosine is 1 - s^2 / (3 d^2) to second order (lateral
         // variance 2 s^2 / 3 over d^2), so HG with g times it (as `cone_mean_cosine`).
         let spread = (1.0 - c.spread / (3.0 * d * d)).max(0.0);
+        let g = g * spread;
+        // The VPLs' lobes: a share |m| of whole lobes about the mean incident direction, the
+        // rest isotropic (far_field.rs).
         let m = c.mean_incident.length();
-        let p_vpl = if m > 1e-6 { hg(c.mean_incident.dot(w) / m, g * m * spread) } else { ISO };
-        let p_view = hg(-w.dot(view), g * spread);
+        let p_vpl = if m > 1e-6 { m * hg(c.mean_incident.dot(w) / m, g) + (1.0 - m) * ISO } else { ISO };
+        let p_view = hg(-w.dot(view), g);
         // The mean over the spread along the line (far_field.rs): e^-tau's convexity and the
         // nearer VPLs' being both closer and less attenuated, to second order.
         let v = c.spread / 3.0;
@@ -637,4 +640,49 @@ pub const HAT_ABOVE: f32 = 0.9;
 pub fn ball_radius(medium: &Medium, rho: f32, r: f32, mean_free_paths: f32) -> f32 {
     let sigma_t = medium.sigma_t(rho.max(0.0)).max_element();
     if mean_free_paths > 0.0 && sigma_t > 0.0 { r.min(mean_free_paths / sigma_t) } else { r }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solvers::NoProgress;
+
+    /// Exploration (not in CI): each far cluster's light against its own VPLs', summed over
+    /// the gather points, per tree level, on a fixture (VPL_CLUSTER_CASE, default cube_g07;
+    /// 4096 walks, the defaults): how far the cluster model is off (far_field.rs
+    /// `MAX_CLUSTER_LEVEL`).
+    #[test]
+    #[ignore]
+    fn vpl_explore_clusters_against_their_vpls() {
+        let sc = crate::solvers::testing::fixture_scene(&std::env::var("VPL_CLUSTER_CASE").unwrap_or("cube_g07".into()));
+        let s = VplSettings { walks: 4096, cluster_distance: 2.0, ..Default::default() };
+        let mip = MediumMip::new(&sc.medium, 0.5);
+        let w = super::super::walks::trace(&sc, &s, u32::MAX, &NoProgress).unwrap();
+        let plan = GatherPlan::new(&sc, &mip, &w, &s).unwrap();
+        let tree = &plan.far[0];
+        let mut map = DepthMap::new(plan.map_resolution);
+        let mut stack = Vec::new();
+        // Per level: the VPLs' light, the clusters'.
+        let mut sums = [[0f64; 2]; 16];
+        let [nx, ny, nz] = plan.grid.dims;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let (_, Some(p)) = plan.point(i, j, k) else { continue };
+                    map.build(plan.march(), p.position, plan.step, MAX_STEPS);
+                    let depth = mapped_depth(plan.march(), &map, plan.map_exact, plan.step);
+                    tree.visit_nodes(p.position, &mut stack, |_| {}, |c, l, cell| {
+                        let mut stats = GatherStats::default();
+                        let (cluster, _) = connect_clusters(plan.medium, std::slice::from_ref(c), p.position, p.view, p.kernel, &mut stats, &depth);
+                        let (vpls, _, _) = connect_with(plan.medium, &tree.members(l, cell), p.position, p.view, p.kernel, p.ball, &mut stats, &depth);
+                        sums[l as usize][0] += vpls.element_sum() as f64;
+                        sums[l as usize][1] += cluster.element_sum() as f64;
+                    });
+                }
+            }
+        }
+        for (l, [vpls, cluster]) in sums.iter().enumerate().filter(|(_, s)| s[0] > 0.0) {
+            eprintln!("level {l}: the VPLs' light {vpls:.4e}, the clusters' x{:.4}", cluster / vpls);
+        }
+    }
 }

@@ -290,21 +290,19 @@ pub struct VplSettings {
     /// cells): white box S / sigma_s 0.9723 -> 0.9722, white cloud 0.7681 -> 0.7689; the
     /// energy balance 1.0500 -> 1.0502 (over its bound of 0.048 with the march as well).
     pub transmittance: Transmittance,
-    /// The far VPLs as clusters (far_field.rs, a Barnes-Hut tree over the gather grid): a
-    /// point connects one by one only to the VPLs of the tree's nodes nearer than this many of
-    /// their sides, to each farther node once (its VPLs' power at their centroid, their lobes
-    /// as one HG lobe of the same mean cosine); 0 = every VPL one by one, the default. The CPU
-    /// gather only (the GPU connects every VPL, as it marches every connection). Measured
-    /// (vpl_bench_image, 2 cores, with this round's `dome_spacing` 2 and 8 x 8 maps): default
-    /// scene 256 x 256 at 65536 walks: 0 -> 2: gather ~0.3 -> 0.15 s, whole image 0.63-0.68 s,
-    /// image rel. RMSE 0.0438 -> 0.0434-0.0438 (distance 1.5: 0.0457, 1: 0.0474); plume_point
-    /// 128 x 128 at 65536 walks 0.387 -> 0.154 s (10.3M -> 0.87M connections), 0.0549 -> 0.0544,
-    /// at 262144 walks 0.18 s and 0.042. Not the default because of a flux bias on cube g 0.7
-    /// (8 seeds at 4096 walks, `vpl_eight_seeds_flux_cube_g07`, bound 2%): x1.016 -> x1.034 at
-    /// distance 2 (1.5 x1.047, 3 x1.027, 4 x1.023). Its gather's J_iso is unbiased (x1.0008,
-    /// after the transmittance's spread correction, far_field.rs) but J is 1.5% bright, and
-    /// neither the lobes' merging (each cluster's own g: x1.028), nor the 1/d^2 spread term,
-    /// nor the depth map (marched: the same) explains it: not understood.
+    /// The far VPLs as clusters (far_field.rs): a point connects one by one only to the VPLs
+    /// of the gather cells nearer than this many cells, to each farther cell's VPLs once (their
+    /// power at their centroid, their lobes as |m| whole lobes about their mean incident
+    /// direction m and the rest isotropic, 1/d^2 and the transmittance corrected for their
+    /// spread); 0 = every VPL one by one. The CPU gather only (the GPU connects every VPL, as
+    /// it marches every connection). Default 2, measured (BENCHMARKS.md vpl-image, 2 cores):
+    /// the default scene 256 x 256 reaches 5% image error in 0.65 s (65536 walks 0.68 s, image
+    /// 0.042, x0.998) against the path tracer's ~22 s, 34x (before, every VPL one by one: 1.9
+    /// s, 11x); the point light beside the plume at 128 x 128 in 0.15 s, 96x (26x). Distance 1
+    /// / 1.5 / 2 on the default scene at 65536 walks: image 0.047 / 0.046 / 0.044 (clusters
+    /// at every tree level). 8 seeds (`vpl_eight_seeds_flux_*`, 0 -> 2): cube g 0 x1.008, cube
+    /// g 0.7 x1.016 -> x1.018, dense cloud x1.001, plume x0.990, point x0.996, rect x0.997,
+    /// spot x0.992. Why cells and not larger nodes: far_field.rs `MAX_CLUSTER_LEVEL`.
     pub cluster_distance: f32,
     /// `transmittance: map`: the map's side n (n x n directions, octahedral). Measured: the
     /// transmittance's mean absolute error against a fine march on the plume 0.0057 at n = 16,
@@ -358,7 +356,7 @@ impl Default for VplSettings {
             normalize_energy: true,
             transmittance: Transmittance::Map,
             map_resolution: 8,
-            cluster_distance: 0.0,
+            cluster_distance: 2.0,
             range_sigma: 0.15,
             spatial_sigma: 0.8,
             dome_directions: 32,
