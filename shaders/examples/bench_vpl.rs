@@ -74,7 +74,7 @@ fn main() {
         for near in &nears {
             for &w in &walks {
                 for &g in &gathers {
-                    let mut s: VplSettings = serde_json::from_value(json!({"walks": w, "gather_resolution": g, "output_resolution": output, "near_field": near})).expect("settings");
+                    let mut s: VplSettings = serde_json::from_value(json!({"walks": w, "gather_resolution": g, "output_resolution": output, "near_field": near, "cluster_distance": 0})).expect("settings");
                     s.seed = 1;
                     let solver = Vpl::new(s).expect("settings");
                     let run = |backend: &dyn VplBackend| {

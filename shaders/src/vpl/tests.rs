@@ -45,11 +45,11 @@ fn fixture_scene(name: &str) -> Scene {
     Scene { medium, lights: vec![light], camera: cam, solver: Default::default() }
 }
 
-/// Small enough for lavapipe (each gather a few seconds there). `transmittance: march`: the
-/// GPU marches every connection whatever that setting says (gather.rs), so the CPU is compared
-/// on the same estimator.
+/// Small enough for lavapipe (each gather a few seconds there). `transmittance: march` and
+/// `cluster_distance: 0`: the GPU marches every connection to every VPL whatever those
+/// settings say (gather.rs), so the CPU is compared on the same estimator.
 fn test_settings(near_field: NearField) -> VplSettings {
-    VplSettings { walks: 512, gather_resolution: 10, output_resolution: 20, near_field, compensation_vertices: 2, compensation_walks: 64, transmittance: Transmittance::March, ..Default::default() }
+    VplSettings { walks: 512, gather_resolution: 10, output_resolution: 20, near_field, compensation_vertices: 2, compensation_walks: 64, transmittance: Transmittance::March, cluster_distance: 0.0, ..Default::default() }
 }
 
 /// The GPU gather against the CPU's (`gather::gather`) on the same walks: the plume lit by
