@@ -294,12 +294,17 @@ impl<'a> DirectLight<'a> {
 
     /// The dome's part of `inscattered`.
     pub fn dome_inscattered(&self, x: Vec3, view: Vec3) -> Vec3 {
+        self.one_dome(x, view) * self.domes() as f32
+    }
+
+    /// One dome light's in-scattered light: its directions summed.
+    fn one_dome(&self, x: Vec3, view: Vec3) -> Vec3 {
         let g = self.scene.medium.g;
         let mut sum = Vec3::ZERO;
         for &(w, weight) in &self.dome {
             sum += weight * hg(w.dot(view), g) * exp_neg(self.march.optical_depth(x, w, f32::INFINITY, self.step, 512), self.grey);
         }
-        sum * self.domes() as f32
+        sum
     }
 
     /// `inscattered`, with the dome's part only where `dome`.
@@ -314,11 +319,7 @@ impl<'a> DirectLight<'a> {
                     sum += *irradiance * hg(w.dot(view), g) * tr(w, f32::INFINITY);
                 }
                 Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
-                Light::Dome(_) if dome => {
-                    for &(w, weight) in &self.dome {
-                        sum += weight * hg(w.dot(view), g) * tr(w, f32::INFINITY);
-                    }
-                }
+                Light::Dome(_) if dome => sum += self.one_dome(x, view),
                 Light::Dome(_) => {}
             }
         }

@@ -181,14 +181,15 @@ impl FarField {
             })
             .collect();
         let mut dims_l = base_dims;
-        let cluster = |s: &Sums| {
+        // The extinction only where nodes are connected as clusters (`MAX_CLUSTER_LEVEL`).
+        let cluster = |s: &Sums, level: u32| {
             let mut c = s.cluster();
-            if let Some(m) = medium {
+            if let Some(m) = medium.filter(|_| level <= MAX_CLUSTER_LEVEL) {
                 c.extinction = m.sigma_t(m.density_world(c.centroid).max(0.0));
             }
             c
         };
-        let mut levels = vec![Level { dims: dims_l, nodes: sums.iter().map(cluster).collect() }];
+        let mut levels = vec![Level { dims: dims_l, nodes: sums.iter().map(|s| cluster(s, 0)).collect() }];
         while dims_l.max_element() > 1 {
             let up = (dims_l + UVec3::ONE) / 2;
             let mut next = vec![Sums::default(); (up.x * up.y * up.z) as usize];
@@ -200,7 +201,8 @@ impl FarField {
                     }
                 }
             }
-            levels.push(Level { dims: up, nodes: next.iter().map(cluster).collect() });
+            let level = levels.len() as u32;
+            levels.push(Level { dims: up, nodes: next.iter().map(|s| cluster(s, level)).collect() });
             sums = next;
             dims_l = up;
         }

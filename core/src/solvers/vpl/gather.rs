@@ -184,8 +184,8 @@ fn connect_clusters(medium: &Medium, clusters: &[Cluster], x: Vec3, view: Vec3, 
         // The directions from the cluster's VPLs to x spread about w: both lobes convolved
         // with that spread, whose mean cosine is 1 - s^2 / (3 d^2) to second order (lateral
         // variance 2 s^2 / 3 over d^2), so HG with g times it (as `cone_mean_cosine`).
-        let spread = (1.0 - c.spread / (3.0 * d * d)).max(0.0);
-        let g = g * spread;
+        let widening = (1.0 - c.spread / (3.0 * d * d)).max(0.0);
+        let g = g * widening;
         // The VPLs' lobes: a share |m| of whole lobes about the mean incident direction, the
         // rest isotropic (far_field.rs).
         let m = c.mean_incident.length();
@@ -434,25 +434,25 @@ impl<'a> GatherPlan<'a> {
         if let Some(map) = scratch.map.as_mut() {
             map.build(march, x, self.step, MAX_STEPS);
         }
+        let Scratch { map, stack, clusters } = scratch;
+        let map = map.as_ref();
+        // VPLs one by one: looked up in the map (where on) or marched.
+        let one_by_one = |vpls: &[Vpl], stats: &mut GatherStats| match map {
+            Some(map) => connect_iso_mapped(march, map, self.map_exact, vpls, x, view, kernel, ball, self.step, stats),
+            None => connect_iso(march, vpls, x, view, kernel, ball, self.step, stats),
+        };
         let Some(tree) = self.far.get(p.subset as usize) else {
-            return match scratch.map.as_ref() {
-                Some(map) => connect_iso_mapped(march, map, self.map_exact, &self.lists[p.subset as usize], x, view, kernel, ball, self.step, stats),
-                None => connect_iso(march, &self.lists[p.subset as usize], x, view, kernel, ball, self.step, stats),
-            };
+            return one_by_one(&self.lists[p.subset as usize], stats);
         };
         let (mut sum, mut lost, mut iso) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
-        let Scratch { map, stack, clusters } = scratch;
         clusters.clear();
         tree.visit(x, stack, |vpls| {
-            let (s, l, i) = match map.as_ref() {
-                Some(map) => connect_iso_mapped(march, map, self.map_exact, vpls, x, view, kernel, ball, self.step, stats),
-                None => connect_iso(march, vpls, x, view, kernel, ball, self.step, stats),
-            };
+            let (s, l, i) = one_by_one(vpls, stats);
             sum += s;
             lost += l;
             iso += i;
         }, |c| clusters.push(*c));
-        let (s, i) = match map.as_ref() {
+        let (s, i) = match map {
             Some(map) => connect_clusters(self.medium, clusters, x, view, kernel, stats, mapped_depth(march, map, self.map_exact, self.step)),
             None => connect_clusters(self.medium, clusters, x, view, kernel, stats, |from: Vec3, w: Vec3, d: f32| march.optical_depth(from, w, d, self.step, MAX_STEPS)),
         };

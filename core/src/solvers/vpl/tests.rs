@@ -812,7 +812,8 @@ fn converged_image(name: &str, sc: &Scene, spp: u32, dir: &std::path::Path) -> (
 /// VPL_IMAGE_WALKS, `near_refine` from VPL_IMAGE_REFINE100 in hundredths, default 0, and
 /// `near_upsample` from VPL_NU, `transmittance` from VPL_TR and `map_resolution` from
 /// VPL_MAPN, `cluster_distance` from VPL_CLUSTER100 in hundredths, `dome_spacing` from
-/// VPL_DOME_SPACING; time = solve and
+/// VPL_DOME_SPACING, the composite's subpixels from VPL_SUBPIX and step from VPL_STEP100 in
+/// hundredths of a voxel; time = solve and
 /// composite, as a host pays for an image): seconds, image
 /// rel. RMSE against the converged image raw and with the converged image's own noise taken
 /// out (sqrt(e^2 - n^2): the two are independent), and the image mean ratio.
