@@ -15,7 +15,8 @@ use std::time::Instant;
 
 use volscatter_core::scene::Light;
 use volscatter_core::solvers::session::Session;
-use volscatter_core::solvers::{by_name, NoProgress, SolveOutput};
+use volscatter_core::solvers::{by_name, SolveOutput};
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 
 fn arg(args: &[String], name: &str, default: f64) -> f64 {

@@ -8,19 +8,17 @@
 //! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
 
-use glam::{Affine3A, IVec3, UVec3, Vec3, Vec4};
+use glam::{Affine3A, IVec3, Vec3, Vec4};
 use rayon::prelude::*;
-use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::medium::dense_march::Marcher;
 use crate::medium::trilinear::{inside, trilinear_cell};
-use crate::medium::{ball_mean_inverse_square, near_field_radius, ray_box, Medium};
-use crate::phase::hg;
-use crate::scene::{Light, Scene};
-use crate::solvers::ScatteringGrid;
-use crate::translate::dome::dome_directions_of;
+use crate::medium::{ray_box, Medium};
+use crate::scene::Scene;
+use crate::stages::single_scattering::{dome_directions_for, exp_neg, is_grey, single_scattering_grid, DOME_DIRECTIONS};
+use crate::stages::ScatteringGrid;
 
 /// The AOV layers an image carries besides RGBA, in this order when present.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,289 +93,8 @@ pub struct CompositeOptions {
 
 impl Default for CompositeOptions {
     fn default() -> Self {
-        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: 32, aovs: Aovs::ALL }
+        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: DOME_DIRECTIONS, aovs: Aovs::ALL }
     }
-}
-
-/// Area lights enter the single-scattering grid as k x k VPLs (translate::area_vpls): at 8 x 8,
-/// a point one light-width away sees the VPL sum within about 1% of the exact integral, and
-/// the cost is that of 64 point lights.
-pub const AREA_VPLS_PER_SIDE: u32 = 8;
-
-/// Single scattering S1(x) = sigma_s(x) * sum over lights of p * L * T(x -> light), on a grid
-/// over the medium, with the view direction from the camera. Transmittance by deterministic
-/// ray marching (through one dense copy of the density per grid, medium::dense_march); the
-/// dome by a fixed importance-sampled set of directions.
-pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32) -> Result<ScatteringGrid> {
-    single_scattering_grid_cancellable(scene, max_dim, dome_directions, &crate::solvers::NoProgress)
-}
-
-/// `single_scattering_grid` that stops within a row of grid points (each a few shadow rays)
-/// once `progress` is cancelled, with `Error::Cancelled` (issue 22: a 1024^3 grid takes minutes).
-pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_directions: u32, progress: &dyn crate::solvers::Progress) -> Result<ScatteringGrid> {
-    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
-    single_scattering_onto(scene, &mut grid, dome_directions, progress)?;
-    Ok(grid)
-}
-
-/// `single_scattering_grid_cancellable` on a grid the caller has framed.
-pub(crate) fn single_scattering_onto(scene: &Scene, grid: &mut ScatteringGrid, dome_directions: u32, progress: &dyn crate::solvers::Progress) -> Result<()> {
-    single_scattering_onto_spaced(scene, grid, dome_directions, 1, progress)
-}
-
-/// `single_scattering_grid_cancellable` with the dome's part computed on a grid `dome_spacing`
-/// of its cells apart and blended trilinearly between as logarithms (`CoarseDome::at`; 1: at
-/// every point, as the plain one).
-/// Why: a dome costs `dome_directions` shadow rays a point where a sun costs one (the default
-/// scene's 64^3 grid: 33 rays a point, 0.44 s of a vpl render on 2 cores), and the light it
-/// brings, integrated over the sky, varies slowly in space: it is the sun's part that draws
-/// the sharp shadows. Measured: vpl's `dome_spacing` (settings.rs).
-pub fn single_scattering_grid_dome_spaced(scene: &Scene, max_dim: u32, dome_directions: u32, dome_spacing: u32, progress: &dyn crate::solvers::Progress) -> Result<ScatteringGrid> {
-    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
-    single_scattering_onto_spaced(scene, &mut grid, dome_directions, dome_spacing, progress)?;
-    Ok(grid)
-}
-
-/// The fewest coarse dome points along a grid's longest side: on coarser grids the dome is
-/// marched at every point. Why: the trilinear blend errs where the dome's light curves across
-/// a coarse cell, and a cell that is a large part of the medium is where it does: the white
-/// furnace box on a 12-point grid (spacing 2: 7 coarse points) came out 1.5% bright with the
-/// compensation (1.020 -> 1.035), where the default 64-point grid is within noise.
-pub const MIN_DOME_POINTS: u32 = 32;
-
-fn single_scattering_onto_spaced(scene: &Scene, grid: &mut ScatteringGrid, dome_directions: u32, dome_spacing: u32, progress: &dyn crate::solvers::Progress) -> Result<()> {
-    let medium = &scene.medium;
-    let direct = DirectLight::new(scene, shadow_step(medium, grid), dome_directions, near_field_radius(&grid.index_to_world));
-    let frame = grid.index_to_world;
-    let [nx, ny, _] = grid.dims;
-    // At most the spacing that leaves `MIN_DOME_POINTS` coarse points along the longest side.
-    let dome_spacing = dome_spacing.min(grid.dims.iter().max().copied().unwrap_or(1) / MIN_DOME_POINTS).max(1);
-    let coarse = if dome_spacing > 1 && direct.has_dome() { Some(CoarseDome::new(scene, &direct, grid, dome_spacing, progress)?) } else { None };
-    grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
-        for j in 0..ny {
-            if progress.cancelled() {
-                return;
-            }
-            for i in 0..nx {
-                let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
-                let dens = medium.density_world(x);
-                if dens <= 0.0 {
-                    continue;
-                }
-                let view = (x - scene.camera.position).normalize_or(Vec3::Z);
-                let dome = coarse.as_ref().and_then(|c| c.at(UVec3::new(i, j, k as u32)));
-                slab[(i + nx * j) as usize] = medium.sigma_s(dens) * match dome {
-                    Some(dome) => direct.inscattered_parts(x, view, false) + dome,
-                    None => direct.inscattered(x, view),
-                };
-            }
-        }
-    });
-    if progress.cancelled() {
-        return Err(Error::Cancelled);
-    }
-    Ok(())
-}
-
-/// The dome's in-scattered light (before sigma_s) on the points of a fine grid `spacing` of
-/// its cells apart where there is density, for the fine points between to interpolate. A
-/// fine point whose coarse cell has a corner without density marches its dome exactly: a
-/// coarse point outside the medium sees the whole sky, and blended into the points just
-/// inside a hard surface it made them too bright (the white furnace's box +4%; with the
-/// exact march there 0.996, measured).
-struct CoarseDome {
-    dims: UVec3,
-    spacing: u32,
-    /// None where the coarse point has no density (not computed).
-    values: Vec<Option<Vec3>>,
-}
-
-impl CoarseDome {
-    fn new(scene: &Scene, direct: &DirectLight, fine: &ScatteringGrid, spacing: u32, progress: &dyn crate::solvers::Progress) -> Result<Self> {
-        let dims = UVec3::from_array(fine.dims.map(|n| (n - 1).div_ceil(spacing) + 1));
-        let index_to_world = fine.index_to_world * Affine3A::from_scale(Vec3::splat(spacing as f32));
-        let mut values = vec![None; (dims.x * dims.y * dims.z) as usize];
-        values.par_chunks_mut((dims.x * dims.y) as usize).enumerate().for_each(|(k, slab)| {
-            for j in 0..dims.y {
-                if progress.cancelled() {
-                    return;
-                }
-                for i in 0..dims.x {
-                    let x = index_to_world.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
-                    if scene.medium.density_world(x) <= 0.0 {
-                        continue;
-                    }
-                    let view = (x - scene.camera.position).normalize_or(Vec3::Z);
-                    slab[(i + dims.x * j) as usize] = Some(direct.dome_inscattered(x, view));
-                }
-            }
-        });
-        if progress.cancelled() {
-            return Err(Error::Cancelled);
-        }
-        Ok(CoarseDome { dims, spacing, values })
-    }
-
-    /// The dome at fine point `p`, interpolated, where its coarse cell's eight corners have
-    /// density.
-    fn at(&self, p: UVec3) -> Option<Vec3> {
-        let c = (p / self.spacing).min(self.dims - UVec3::splat(2).min(self.dims));
-        let f = (p.as_vec3() - (c * self.spacing).as_vec3()) / self.spacing as f32;
-        let mut corners = [Vec3::ZERO; 8];
-        for (o, corner) in corners.iter_mut().enumerate() {
-            let o = o as u32;
-            let q = (c + UVec3::new(o & 1, (o >> 1) & 1, o >> 2)).min(self.dims - UVec3::ONE);
-            let v = self.values[(q.x + self.dims.x * (q.y + self.dims.y * q.z)) as usize]?;
-            // (A channel the sky does not light, or a point it does not reach: marched.)
-            if v.min_element() <= 0.0 {
-                return None;
-            }
-            // Blended as logarithms: the dome's light falls about exponentially into the
-            // medium, and a linear blend of a convex fall overshoots (+1.3% on the default
-            // scene's grid, dome_spacing_interpolates_the_sky).
-            *corner = Vec3::new(v.x.ln(), v.y.ln(), v.z.ln());
-        }
-        let lerp = |a: Vec3, b: Vec3, t: f32| a + (b - a) * t;
-        let x0 = [lerp(corners[0], corners[1], f.x), lerp(corners[2], corners[3], f.x), lerp(corners[4], corners[5], f.x), lerp(corners[6], corners[7], f.x)];
-        let y0 = [lerp(x0[0], x0[1], f.y), lerp(x0[2], x0[3], f.y)];
-        Some(lerp(y0[0], y0[1], f.z).exp())
-    }
-}
-
-/// The light arriving at a point straight from the scene's lights, scattered towards a viewer
-/// (before sigma_s): what `single_scattering_grid` stores at each grid point, at any point and
-/// for any view direction (vpl's bias compensation scatters it towards its gather points).
-pub struct DirectLight<'a> {
-    scene: &'a Scene,
-    /// The shadow rays' march: a dense copy of the density made once here, not per point
-    /// (optical_depth's sparse lookups were ~60% of a vpl render of the default scene), or
-    /// the caller's (`with_march`).
-    march: Arc<Marcher<'a>>,
-    /// The medium's extinction is the same in every channel: one exp per transmittance.
-    grey: bool,
-    /// Shadow rays' quadrature step (`shadow_step`).
-    step: f32,
-    dome: Vec<(Vec3, Vec3)>,
-    emitters: Vec<crate::translate::PointEmitter>,
-    /// Near-field radius of the local emitters (`emitter_single`).
-    near: f32,
-}
-
-impl<'a> DirectLight<'a> {
-    pub fn new(scene: &'a Scene, step: f32, dome_directions: u32, near: f32) -> Self {
-        Self::with_march(scene, step, dome_directions, near, Arc::new(Marcher::new(&scene.medium)))
-    }
-
-    /// `new` marching through `march` (of the scene's medium), for a caller that holds one
-    /// already: a second dense copy of the density would cost its memory again.
-    pub fn with_march(scene: &'a Scene, step: f32, dome_directions: u32, near: f32, march: Arc<Marcher<'a>>) -> Self {
-        let dome = dome_directions_of(scene, dome_directions);
-        let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
-        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, near }
-    }
-
-    /// p * L * T summed over the lights at `x`; `view` is the direction from the viewer to `x`
-    /// (the scattered light propagates along -view).
-    pub fn inscattered(&self, x: Vec3, view: Vec3) -> Vec3 {
-        self.inscattered_parts(x, view, true)
-    }
-
-    /// The number of dome lights (each adds the dome's directions once, as `inscattered` does).
-    fn domes(&self) -> usize {
-        self.scene.lights.iter().filter(|l| matches!(l, Light::Dome(_))).count()
-    }
-
-    /// Whether the scene has a dome (whose directions `dome_inscattered` sums).
-    pub fn has_dome(&self) -> bool {
-        self.domes() > 0
-    }
-
-    /// The dome's part of `inscattered`.
-    pub fn dome_inscattered(&self, x: Vec3, view: Vec3) -> Vec3 {
-        self.one_dome(x, view) * self.domes() as f32
-    }
-
-    /// One dome light's in-scattered light: its directions summed.
-    fn one_dome(&self, x: Vec3, view: Vec3) -> Vec3 {
-        let g = self.scene.medium.g;
-        let mut sum = Vec3::ZERO;
-        for &(w, weight) in &self.dome {
-            sum += weight * hg(w.dot(view), g) * exp_neg(self.march.optical_depth(x, w, f32::INFINITY, self.step, 512), self.grey);
-        }
-        sum
-    }
-
-    /// `inscattered`, with the dome's part only where `dome`.
-    pub fn inscattered_parts(&self, x: Vec3, view: Vec3, dome: bool) -> Vec3 {
-        let g = self.scene.medium.g;
-        let tr = |w: Vec3, t_max: f32| exp_neg(self.march.optical_depth(x, w, t_max, self.step, 512), self.grey);
-        let mut sum = Vec3::ZERO;
-        for light in &self.scene.lights {
-            match light {
-                Light::Distant { direction, irradiance, .. } => {
-                    let w = -*direction;
-                    sum += *irradiance * hg(w.dot(view), g) * tr(w, f32::INFINITY);
-                }
-                Light::Point { .. } | Light::Spot(_) | Light::Area(_) => {}
-                Light::Dome(_) if dome => sum += self.one_dome(x, view),
-                Light::Dome(_) => {}
-            }
-        }
-        for e in &self.emitters {
-            sum += emitter_single(e, x, view, g, self.near, &tr);
-        }
-        sum
-    }
-}
-
-/// Whether the medium's extinction per unit density is the same in every channel (then every
-/// optical depth is grey, and one exp serves the three channels, to the bit).
-pub(crate) fn is_grey(medium: &Medium) -> bool {
-    let k = medium.density_scale;
-    k.x == k.y && k.y == k.z
-}
-
-/// e^-tau per channel; `grey`: tau's channels are equal (`is_grey`), one exp for the three,
-/// and none for tau = 0 (e^-0 is 1 exactly: camera rays cross much empty space).
-#[inline]
-pub(crate) fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
-    if grey {
-        if tau.x == 0.0 {
-            return Vec3::ONE;
-        }
-        Vec3::splat((-tau.x).exp())
-    } else {
-        (-tau).exp()
-    }
-}
-
-/// The shadow rays' quadrature step for a single-scattering grid: its own spacing, at least
-/// one voxel. Transmittance finer than the grid's spacing is lost in its interpolation anyway;
-/// on the plume (64 voxels, a 48-point grid) this is 3/4 of the steps of a one-voxel step, and
-/// the single AOV moves by 0.05% (relative RMSE against a one-voxel step, 32 dome directions).
-pub fn shadow_step(medium: &Medium, grid: &ScatteringGrid) -> f32 {
-    crate::medium::min_spacing(&grid.index_to_world).max(medium.voxel_size_world().min_element())
-}
-
-/// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2
-/// replaced by its mean over a ball of radius sqrt(emitter radius^2 + near^2) (the emitter's
-/// own extent, translate::emission, convolved with the grid's cell: radii of convolved balls
-/// add roughly in squares). On the grid point itself the phase function's mean, 1/4 pi, is used.
-#[inline]
-fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &impl Fn(Vec3, f32) -> Vec3) -> Vec3 {
-    let to = e.position - x;
-    let dist = to.length();
-    let r = (e.radius * e.radius + near * near).sqrt();
-    if dist > 1e-6 {
-        let w = to / dist;
-        let intensity = e.intensity_towards(-w);
-        if intensity.max_element() > 0.0 {
-            return intensity * ball_mean_inverse_square(dist, r) * hg(w.dot(view), g) * tr(w, dist);
-        }
-    } else if e.profile == crate::translate::Profile::Isotropic && r > 0.0 {
-        return e.intensity * ball_mean_inverse_square(0.0, r) * (0.25 * std::f32::consts::FRAC_1_PI);
-    }
-    Vec3::ZERO
 }
 
 /// A scattering grid's lookups along camera rays: the ray is carried into the grid's index
@@ -486,40 +203,6 @@ pub fn single_for(scene: &Scene, opts: &CompositeOptions) -> Result<Option<Scatt
     Ok(Some(single))
 }
 
-/// How many of at most `max` directions the single-scattering grid gives the dome: all of them
-/// when the dome brings at least a third of the light that reaches the medium (unshadowed,
-/// phase averaged out), in proportion below that, at least 8. The directions' quadrature error
-/// is a fraction of the dome's part, so a dim dome needs fewer for the same error in the sum:
-/// measured against 64 directions (BENCHMARKS.md, composite section), the plume under sun and
-/// sky (dome share 0.35: 32 directions) is within 1.8%, the smoke under a point light and a dim
-/// sky (share 0.15: 15 directions) within 0.4%, at a half and a quarter of the cost.
-pub fn dome_directions_for(scene: &Scene, max: u32) -> u32 {
-    const PROBE: u32 = 64;
-    // Sum of the weights L / (pdf n) over n directions: the dome's integral of L over the sphere,
-    // which is what a distant light's irradiance E is to it.
-    let dome: f32 = dome_directions_of(scene, PROBE).iter().map(|(_, w)| w.element_sum() / 3.0).sum();
-    if dome <= 0.0 {
-        return max;
-    }
-    let (lo, hi) = scene.medium.world_bounds();
-    let centre = 0.5 * (lo + hi);
-    let mut others = 0.0;
-    for light in &scene.lights {
-        if let Light::Distant { irradiance, .. } = light {
-            others += irradiance.element_sum() / 3.0;
-        }
-    }
-    // The lights only: a glowing medium's VPLs would cost a second translation, and leaving
-    // them out errs towards more directions.
-    for e in crate::translate::local_emitters(&scene.lights, AREA_VPLS_PER_SIDE) {
-        let to = centre - e.position;
-        let d2 = to.length_squared().max(1e-12);
-        others += e.intensity_towards(to / d2.sqrt()).element_sum() / 3.0 / d2;
-    }
-    let share = dome / (dome + others);
-    ((max as f32 * 3.0 * share).ceil() as u32).clamp(8.min(max), max)
-}
-
 /// `composite` with the single-scattering grid given (`single_for`'s), so that a caller can
 /// time or place the two stages apart.
 pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Image> {
@@ -603,7 +286,7 @@ mod tests {
     use super::*;
     use crate::image::relative_rmse;
     use crate::solvers::reference::{Reference, ReferenceSettings};
-    use crate::solvers::{NoProgress, Timings};
+    use crate::stages::{NoProgress, Timings};
 
     /// The dome interpolated from every second point (`single_scattering_grid_dome_spaced`)
     /// against the dome at every point, on the default scene (sun and sky, 64^3 grid): the

@@ -41,7 +41,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
 use crate::medium::Medium;
-use crate::solvers::ScatteringGrid;
+use crate::stages::ScatteringGrid;
 
 /// Whether the grid's points are the medium's voxel centres (same spacing and axes, integer
 /// offset): what `ScatteringGrid::over_medium` gives when the medium has no more voxels than

@@ -9,10 +9,12 @@ pub mod io;
 pub mod lattice_product;
 pub mod medium;
 pub mod phase;
+pub mod pipeline;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod solvers;
+pub mod stages;
 pub mod translate;
 pub mod vdb;
 
@@ -20,6 +22,7 @@ pub use error::{Error, Result};
 pub use image::Image;
 pub use medium::Medium;
 pub use scene::Scene;
-pub use solvers::{Progress, ScatteringGrid, SolveOutput, Solver};
+pub use solvers::{SolveOutput, Solver};
+pub use stages::{Progress, ScatteringGrid};
 
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -130,7 +130,7 @@ impl Distribution2D {
 /// disc): density cos(theta) / pi over the hemisphere `normal` points to.
 #[inline]
 pub fn cosine_hemisphere(normal: Vec3, u: [f32; 2]) -> Vec3 {
-    let (x, y) = crate::scene::light::concentric_disk(u);
+    let (x, y) = concentric_disk(u);
     let z = (1.0 - x * x - y * y).max(0.0).sqrt();
     let (t, b) = orthonormal_basis(normal);
     (t * x + b * y + normal * z).normalize()
@@ -235,6 +235,17 @@ pub fn chi_square_quantile_999(dof: usize) -> f64 {
     let z = 3.090_232; // standard normal 99.9% quantile
     let a = 2.0 / (9.0 * k);
     k * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// Shirley-Chiu concentric map from the unit square to the unit disc.
+pub fn concentric_disk(u: [f32; 2]) -> (f32, f32) {
+    let (a, b) = (2.0 * u[0] - 1.0, 2.0 * u[1] - 1.0);
+    if a == 0.0 && b == 0.0 {
+        return (0.0, 0.0);
+    }
+    let q = std::f32::consts::FRAC_PI_4;
+    let (r, phi) = if a.abs() > b.abs() { (a, q * (b / a)) } else { (b, 2.0 * q - q * (a / b)) };
+    (r * phi.cos(), r * phi.sin())
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use volscatter_core::solvers::pop::backend::CpuBackend;
 use volscatter_core::solvers::pop::Pop;
-use volscatter_core::solvers::{NoProgress, Timings};
+use volscatter_core::stages::{NoProgress, Timings};
 use volscatter_core::Scene;
 use volscatter_gpu::pop::backend::GpuBackend;
 use volscatter_gpu::GpuContext;

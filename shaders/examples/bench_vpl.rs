@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::vpl::{CpuBackend, Vpl, VplBackend, VplSettings};
-use volscatter_core::solvers::{NoProgress, Timings};
+use volscatter_core::stages::{NoProgress, Timings};
 use volscatter_core::Scene;
 use volscatter_gpu::vpl::GpuBackend;
 use volscatter_gpu::GpuContext;

@@ -16,7 +16,8 @@ use volscatter_core::solvers::photon_grid::PhotonGrid;
 use volscatter_core::solvers::pop::reuse::PopReuse;
 use volscatter_core::solvers::pop::Pop;
 use volscatter_core::solvers::session::{Session, SessionState};
-use volscatter_core::solvers::{self, auto, registry, Progress, SolveOutput};
+use volscatter_core::solvers::{self, auto, registry, SolveOutput};
+use volscatter_core::stages::Progress;
 use volscatter_core::{Error, Result, Scene};
 
 /// Residual checks of the GPU propagation happen every this many iterations (one readback).

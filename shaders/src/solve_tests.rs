@@ -3,7 +3,7 @@
 
 use super::*;
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 
 fn pop_settings() -> serde_json::Map<String, serde_json::Value> {
     // Residual threshold 0: both run exactly max_iterations, so they are comparable.

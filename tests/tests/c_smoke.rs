@@ -10,7 +10,8 @@ use glam::{Affine3A, IVec3, Mat4, Vec3};
 use volscatter_core::compositor::{self, CompositeOptions};
 use volscatter_core::medium::{DensityGrid, GridLimits};
 use volscatter_core::scene::{self, json, Scene};
-use volscatter_core::solvers::{self, reference::Reference, NoProgress, Timings};
+use volscatter_core::solvers::{self, reference::Reference};
+use volscatter_core::stages::{NoProgress, Timings};
 use volscatter_core::{vdb, Medium};
 use volscatter_tests::cdylib::{cdylib, have_program, scratch_dir, workspace_root};
 

@@ -11,7 +11,6 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::image::Image;
-use crate::scene::LatLongMap;
 
 /// Largest environment map accepted: 16384 x 8192 RGBA f32 is 2 GiB.
 pub const MAX_EXR_PIXELS: u64 = 16384 * 8192;
@@ -69,9 +68,18 @@ const DOME_BYTES_PER_PIXEL: u64 = 36;
 /// working copies of it: three times its decoded size is what one block costs.
 const BLOCK_COPIES: u64 = 3;
 
+/// An RGB image as read, rows top to bottom, with what the reading changed.
+pub struct RgbPixels {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<Vec3>,
+    /// What the host should tell the user (the map was reduced, bad pixels were zeroed).
+    pub notes: Vec<String>,
+}
+
 /// Reads a lat-long environment map (the first part with R, G and B channels), box-filtered
 /// down to at most [`MAX_DOME_PIXELS`].
-pub fn read_latlong(path: &Path) -> Result<LatLongMap> {
+pub fn read_latlong(path: &Path) -> Result<RgbPixels> {
     read_latlong_at_most(path, MAX_DOME_PIXELS)
 }
 
@@ -87,7 +95,7 @@ fn reduction_factor(w: usize, h: usize, max_pixels: u64) -> usize {
 /// [`read_latlong`] with an explicit pixel limit. The file is decoded block by block (one tile or
 /// scanline group at a time), each block added into the reduced map, so memory is the reduced
 /// map plus one block, both checked against the memory budget before they are allocated.
-pub fn read_latlong_at_most(path: &Path, max_pixels: u64) -> Result<LatLongMap> {
+pub fn read_latlong_at_most(path: &Path, max_pixels: u64) -> Result<RgbPixels> {
     if !path.exists() {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "file not found")));
     }
@@ -96,8 +104,9 @@ pub fn read_latlong_at_most(path: &Path, max_pixels: u64) -> Result<LatLongMap> 
     let (ow, oh) = (w.div_ceil(factor), h.div_ceil(factor));
     let sums = std::panic::catch_unwind(|| decode_reduced(path, (w, h), factor))
         .map_err(|_| Error::format(path, "EXR decoding failed"))??;
+    let mut notes = Vec::new();
     if factor > 1 {
-        eprintln!("note: {}: dome map {w}x{h} read at {ow}x{oh} (box filter {factor}x{factor}); no solver uses finer lighting", path.display());
+        notes.push(format!("{}: dome map {w}x{h} read at {ow}x{oh} (box filter {factor}x{factor}); no solver uses finer lighting", path.display()));
     }
     let mut pixels = sums;
     let mut bad = 0usize;
@@ -115,9 +124,9 @@ pub fn read_latlong_at_most(path: &Path, max_pixels: u64) -> Result<LatLongMap> 
         }
     }
     if bad > 0 {
-        eprintln!("warning: {}: {bad} pixels were NaN, infinite or negative and were set to zero", path.display());
+        notes.push(format!("{}: {bad} pixels were NaN, infinite or negative and were set to zero", path.display()));
     }
-    Ok(LatLongMap::new(ow, oh, pixels))
+    Ok(RgbPixels { width: ow, height: oh, pixels, notes })
 }
 
 /// Which of R, G, B a channel name is: `R` or `<layer>.R`, any case.

@@ -8,6 +8,7 @@ pub mod cumulus;
 pub mod dense_march;
 pub mod emission;
 pub mod grid;
+pub mod key;
 pub mod majorant;
 pub mod optics;
 pub mod procedural;

@@ -15,6 +15,8 @@ pub struct LatLongMap {
     /// Rows top (v = 1) to bottom, RGB radiance.
     pub pixels: Vec<Vec3>,
     dist: Distribution2D,
+    /// What reading the file changed, for the host to tell the user (`Scene::notes`).
+    pub notes: Vec<String>,
 }
 
 impl LatLongMap {
@@ -33,7 +35,7 @@ impl LatLongMap {
             }
         }
         let dist = Distribution2D::new(&func, width, height);
-        LatLongMap { width, height, pixels, dist }
+        LatLongMap { width, height, pixels, dist, notes: Vec::new() }
     }
 
     pub fn direction_to_uv(d: Vec3) -> [f32; 2] {

@@ -92,23 +92,12 @@ impl AreaLight {
         let (a, b) = match self.shape {
             AreaShape::Rect { width, height } => ((u[0] - 0.5) * width, (u[1] - 0.5) * height),
             AreaShape::Disk { radius } => {
-                let (x, y) = concentric_disk(u);
+                let (x, y) = crate::sampling::concentric_disk(u);
                 (x * radius, y * radius)
             }
         };
         self.center + self.tangent * a + bitangent * b
     }
-}
-
-/// Shirley-Chiu concentric map from the unit square to the unit disc.
-pub fn concentric_disk(u: [f32; 2]) -> (f32, f32) {
-    let (a, b) = (2.0 * u[0] - 1.0, 2.0 * u[1] - 1.0);
-    if a == 0.0 && b == 0.0 {
-        return (0.0, 0.0);
-    }
-    let q = std::f32::consts::FRAC_PI_4;
-    let (r, phi) = if a.abs() > b.abs() { (a, q * (b / a)) } else { (b, 2.0 * q - q * (a / b)) };
-    (r * phi.cos(), r * phi.sin())
 }
 
 /// A unit tangent perpendicular to `normal`: `hint` made orthogonal, or any perpendicular when

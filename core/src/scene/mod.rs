@@ -111,6 +111,12 @@ impl Scene {
         Ok(Scene { medium, lights, camera, solver: j.solver })
     }
 
+    /// What loading the scene changed, for the host to tell the user (a dome map reduced, bad
+    /// pixels zeroed).
+    pub fn notes(&self) -> Vec<String> {
+        self.lights.iter().filter_map(|l| if let Light::Dome(env) = l { env.map.as_ref() } else { None }).flat_map(|m| m.notes.iter().cloned()).collect()
+    }
+
     pub fn solver_name(&self) -> Option<&str> {
         self.solver.get("name").and_then(|v| v.as_str())
     }
@@ -225,7 +231,12 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
                 return Err(Error::scene(format!("{field}.intensity"), format!("must be finite and >= 0, got {intensity}")));
             }
             let map = match texture {
-                Some(t) => Some(crate::io::exr::read_latlong(&scene_file(&format!("{field}.texture"), t, base_dir)?)?),
+                Some(t) => {
+                    let read = crate::io::exr::read_latlong(&scene_file(&format!("{field}.texture"), t, base_dir)?)?;
+                    let mut map = LatLongMap::new(read.width, read.height, read.pixels);
+                    map.notes = read.notes;
+                    Some(map)
+                }
                 None => None,
             };
             let colour = match color {

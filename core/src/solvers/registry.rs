@@ -12,7 +12,8 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use super::{auto, lpm, network, photon_grid, pop, reference, vpl, Solver};
+use super::{lpm, network, photon_grid, pop, reference, vpl, Solver};
+use crate::pipeline::auto;
 use crate::error::{Error, Result};
 
 /// A light type of the scene JSON (`lights[].type`, plus `emission` for an emissive medium),
@@ -176,6 +177,16 @@ impl Preset {
 /// Builds a CPU solver from a `solver` settings block.
 pub type CpuConstructor = fn(&Map<String, Value>) -> Result<Box<dyn Solver>>;
 
+/// What a registry name stands for.
+#[derive(Clone, Copy)]
+pub enum Make {
+    /// A solver, built from its settings (validated; unknown keys refused).
+    Solver(CpuConstructor),
+    /// A pick among the solvers per scene (`auto`, resolved by the pipeline); the function
+    /// validates its settings.
+    Picker(fn(&Map<String, Value>) -> Result<()>),
+}
+
 /// One solver.
 #[derive(Clone, Copy)]
 pub struct SolverEntry {
@@ -188,13 +199,33 @@ pub struct SolverEntry {
     pub defaults: fn() -> Value,
     pub lights: &'static [LightType],
     pub presets: &'static [Preset],
-    /// Builds the CPU solver from a `solver` settings block (validated; unknown keys refused).
-    pub cpu: CpuConstructor,
+    /// The solver (or the picker) this name builds.
+    pub make: Make,
     /// Whether volscatter-gpu has a backend for it (its dispatch table is tested against this).
     pub gpu: bool,
 }
 
 impl SolverEntry {
+    /// Checks `settings` as building would (unknown keys and values out of range refused).
+    pub fn validate(&self, settings: &Map<String, Value>) -> Result<()> {
+        match self.make {
+            Make::Solver(build) => build(settings).map(drop),
+            Make::Picker(validate) => validate(settings),
+        }
+    }
+
+    /// The solver with `settings`; a picker (`auto`) is refused: it names no solver until it
+    /// sees a scene (`pipeline::Session` resolves it).
+    pub fn build(&self, settings: &Map<String, Value>) -> Result<Box<dyn Solver>> {
+        match self.make {
+            Make::Solver(build) => build(settings),
+            Make::Picker(validate) => {
+                validate(settings)?;
+                Err(Error::InvalidArgument(format!("`{}` picks a solver for each scene: solve through the pipeline (pipeline::Session)", self.name)))
+            }
+        }
+    }
+
     pub fn handles(&self, light: LightType) -> bool {
         self.lights.contains(&light)
     }
@@ -270,7 +301,7 @@ const REFERENCE: SolverEntry = SolverEntry {
         Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "grid_spp": 64, "output_resolution": 128}"# },
         Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "grid_spp": 256, "output_resolution": 256}"# },
     ],
-    cpu: |m| Ok(Box::new(reference::Reference::from_settings(m)?)),
+    make: Make::Solver(|m| Ok(Box::new(reference::Reference::from_settings(m)?))),
     gpu: false,
 };
 
@@ -322,7 +353,7 @@ const POP: SolverEntry = SolverEntry {
         Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "max_iterations": 400, "output_resolution": 128}"# },
         Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "max_iterations": 1000, "output_resolution": 256}"# },
     ],
-    cpu: |m| Ok(Box::new(pop::Pop::from_settings(m)?)),
+    make: Make::Solver(|m| Ok(Box::new(pop::Pop::from_settings(m)?))),
     gpu: true,
 };
 
@@ -375,7 +406,7 @@ SettingSpec::float("near_refine", "radius in gather cells within which the VPLs 
         Preset { name: "preview", help: PREVIEW, settings_json: r#"{"walks": 4096, "gather_resolution": 16, "output_resolution": 64}"# },
         Preset { name: "final", help: FINAL, settings_json: r#"{"walks": 16384, "gather_resolution": 24, "output_resolution": 128}"# },
     ],
-    cpu: |m| Ok(Box::new(vpl::Vpl::from_settings(m)?)),
+    make: Make::Solver(|m| Ok(Box::new(vpl::Vpl::from_settings(m)?))),
     gpu: true,
 };
 
@@ -438,7 +469,7 @@ const PHOTON_GRID: SolverEntry = SolverEntry {
         Preset { name: "preview", help: PREVIEW, settings_json: r#"{"photons": 262144, "cache_resolution": 24, "output_resolution": 64}"# },
         Preset { name: "final", help: FINAL, settings_json: r#"{"photons": 2097152, "cache_resolution": 48, "output_resolution": 128}"# },
     ],
-    cpu: |m| Ok(Box::new(photon_grid::PhotonGrid::from_settings(m)?)),
+    make: Make::Solver(|m| Ok(Box::new(photon_grid::PhotonGrid::from_settings(m)?))),
     gpu: true,
 };
 
@@ -472,7 +503,7 @@ const NETWORK: SolverEntry = SolverEntry {
         Preset { name: "preview", help: PREVIEW, settings_json: r#"{"particles": 2048, "directions": 64, "output_resolution": 64}"# },
         Preset { name: "final", help: FINAL, settings_json: r#"{"particles": 8192, "directions": 128, "output_resolution": 128}"# },
     ],
-    cpu: |m| Ok(Box::new(network::Network::from_settings(m)?)),
+    make: Make::Solver(|m| Ok(Box::new(network::Network::from_settings(m)?))),
     gpu: true,
 };
 
@@ -509,7 +540,7 @@ const LPM: SolverEntry = SolverEntry {
         Preset { name: "preview", help: PREVIEW, settings_json: r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"# },
         Preset { name: "final", help: FINAL, settings_json: r#"{"grid_resolution": 64, "directions": 49, "output_resolution": 128}"# },
     ],
-    cpu: |m| Ok(Box::new(lpm::Lpm::from_settings(m)?)),
+    make: Make::Solver(|m| Ok(Box::new(lpm::Lpm::from_settings(m)?))),
     gpu: true,
 };
 
@@ -530,14 +561,14 @@ const AUTO: SolverEntry = SolverEntry {
         Preset { name: "preview", help: "target image error 0.25 (the default)", settings_json: r#"{"target_error": 0.25}"# },
         Preset { name: "final", help: "target image error 0.1", settings_json: r#"{"target_error": 0.1}"# },
     ],
-    cpu: |m| Ok(Box::new(auto::Auto::from_settings(m)?)),
+    make: Make::Picker(auto::validate),
     // Resolved to the chosen solver before the device dispatch (volscatter-gpu solve.rs), so
     // the chosen solver's GPU backend runs where it has one.
     gpu: false,
 };
 
 /// `auto`'s help, with the numbers of the committed measurements.
-const AUTO_HELP: &str = "picks the solver and its quality for the scene (optical depth, albedo, g, light types, size) and a target image error (default 0.25) or a time budget, from a model fitted to measurements (core/src/solvers/auto/measurements.json, written by scripts/bench_solvers.py: 5 Blender scenes, 69 runs), and says what it picked and why (--report `auto`, vs_result_choice). On every measured scene it reaches each measured error within 1.25x at under 2x the cheapest measured cost; for a scene left out of the fit, 38 of 69 picks were within 2x the target (five scenes are few). A light type no measured scene has (a local light outside the medium) runs pop preview";
+const AUTO_HELP: &str = "picks the solver and its quality for the scene (optical depth, albedo, g, light types, size) and a target image error (default 0.25) or a time budget, from a model fitted to measurements (core/src/pipeline/auto/measurements.json, written by scripts/bench_solvers.py: 5 Blender scenes, 69 runs), and says what it picked and why (--report `auto`, vs_result_choice). On every measured scene it reaches each measured error within 1.25x at under 2x the cheapest measured cost; for a scene left out of the fit, 38 of 69 picks were within 2x the target (five scenes are few). A light type no measured scene has (a local light outside the medium) runs pop preview";
 
 /// Every solver, in menu order. The hosts default to `auto` (by name: it comes last so that the
 /// others keep the positions hosts and files already store).
@@ -554,6 +585,16 @@ const fn names<const N: usize>() -> [&'static str; N] {
         i += 1;
     }
     out
+}
+
+/// Builds solver `name` with `settings` (unknown names refused with the list of known ones).
+pub fn build(name: &str, settings: &Map<String, Value>) -> Result<Box<dyn Solver>> {
+    get(name)?.build(settings)
+}
+
+/// The settings of solver `name`'s preset `quality` (empty when either is unknown).
+pub fn preset_settings(name: &str, quality: &str) -> Map<String, Value> {
+    get(name).ok().and_then(|e| e.preset(quality)).map(|p| p.settings()).unwrap_or_default()
 }
 
 /// The entry of solver `name`, or an error listing the known ones.

@@ -15,7 +15,7 @@ fn defaults_of(entry: &SolverEntry) -> Map<String, Value> {
 fn accepts(entry: &SolverEntry, key: &str, value: Value) -> bool {
     let mut m = defaults_of(entry);
     m.insert(key.into(), value.clone());
-    match (entry.cpu)(&m) {
+    match entry.validate(&m) {
         Ok(_) => true,
         Err(Error::Scene { field, .. }) => {
             // A refusal must name the setting it refuses, not another one.
@@ -54,7 +54,7 @@ fn settings_tables_name_every_field_of_their_struct_with_its_type() {
             assert!(!s.help.is_empty() && !s.help.contains('\n'), "{}.{}: help must be one line", entry.name, s.name);
         }
         // The defaults themselves build a solver.
-        (entry.cpu)(&defaults).unwrap_or_else(|e| panic!("{}: defaults refused: {e}", entry.name));
+        entry.validate(&defaults).unwrap_or_else(|e| panic!("{}: defaults refused: {e}", entry.name));
     }
 }
 
@@ -119,7 +119,7 @@ fn presets_build_their_solver_and_name_only_its_settings() {
         for p in entry.presets {
             let parsed: Value = serde_json::from_str(p.settings_json).unwrap_or_else(|e| panic!("{}/{}: {e}", entry.name, p.name));
             assert!(parsed.is_object() && !p.settings().is_empty(), "{}/{}: not a settings object", entry.name, p.name);
-            (entry.cpu)(&p.settings()).unwrap_or_else(|e| panic!("{}/{}: refused: {e}", entry.name, p.name));
+            entry.validate(&p.settings()).unwrap_or_else(|e| panic!("{}/{}: refused: {e}", entry.name, p.name));
         }
     }
     // The hosts offer one Quality menu for every solver: the same preset names everywhere.

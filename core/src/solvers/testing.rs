@@ -14,7 +14,7 @@ use crate::image::{relative_rmse, Image};
 use crate::medium::{DensityGrid, GridLimits, Medium};
 use crate::scene::Scene;
 use crate::solvers::reference::{Reference, ReferenceSettings};
-use crate::solvers::{NoProgress, ScatteringGrid, Timings};
+use crate::stages::{NoProgress, ScatteringGrid, Timings};
 
 /// Resolution (largest dimension) of the fixtures' scattering grids, on which every solver's
 /// grid is compared: coarse, so that the reference converges per grid point in minutes.
@@ -82,7 +82,7 @@ pub(crate) fn fixture_scene(name: &str) -> Scene {
 /// A host that has cancelled: every progress callback answers stop.
 pub(crate) struct Cancelled;
 
-impl crate::solvers::Progress for Cancelled {
+impl crate::stages::Progress for Cancelled {
     fn update(&self, _: &str, _: f32) -> bool {
         false
     }

@@ -211,7 +211,7 @@ mod tests {
         use crate::compositor::{composite, CompositeOptions};
         use crate::image::relative_rmse;
         use crate::solvers::reference::{Reference, ReferenceSettings};
-        use crate::solvers::{NoProgress, ScatteringGrid, Timings};
+        use crate::stages::{NoProgress, ScatteringGrid, Timings};
         let mut scene = crate::scene::Scene::default_scene();
         let c = scene.camera.clone();
         scene.camera = crate::scene::Camera::look_at(c.position, c.position + c.forward, c.up, c.fov_deg, 32, 32);

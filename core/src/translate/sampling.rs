@@ -45,7 +45,8 @@ use super::Profile;
 use crate::medium::Medium;
 use crate::rng::Rng;
 use crate::sampling::{cosine_hemisphere, orthonormal_basis, uniform_cone, uniform_sphere, DiscreteDistribution};
-use crate::scene::light::{concentric_disk, AreaLight, Spot};
+use crate::sampling::concentric_disk;
+use crate::scene::light::{AreaLight, Spot};
 use crate::scene::{Environment, Light, Scene};
 
 /// One ray leaving a light.

@@ -401,8 +401,8 @@ fn blender_vdb_scene_renders_with_the_reference_solver() {
     let (lo, hi) = scene.medium.world_bounds();
     assert!(lo.cmpgt(Vec3::splat(-1.2)).all() && hi.cmplt(Vec3::splat(1.2)).all(), "{lo} {hi}");
     let solver = crate::solvers::reference::Reference::from_settings(&scene.solver).unwrap();
-    let mut timings = crate::solvers::Timings::default();
-    let img = solver.render_image(&scene, &crate::solvers::NoProgress, &mut timings).unwrap();
+    let mut timings = crate::stages::Timings::default();
+    let img = solver.render_image(&scene, &crate::stages::NoProgress, &mut timings).unwrap();
     let s = img.stats();
     assert_eq!(s.non_finite_pixels, 0);
     assert!(s.mean_alpha > 0.1 && s.mean_alpha < 1.0, "{s:?}");

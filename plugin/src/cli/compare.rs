@@ -13,7 +13,8 @@ use std::time::Instant;
 use super::progress::StderrProgress;
 use volscatter_core::compositor::{self, CompositeOptions};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::{reference::Reference, registry, ScatteringGrid, Timings};
+use volscatter_core::solvers::{reference::Reference, registry};
+use volscatter_core::stages::{ScatteringGrid, Timings};
 use volscatter_core::{Error, Image, Result, Scene};
 
 #[derive(Args)]

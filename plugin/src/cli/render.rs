@@ -7,7 +7,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::progress::StderrProgress;
-use volscatter_core::solvers::{reference::Reference, registry, Timings};
+use volscatter_core::solvers::{reference::Reference, registry};
+use volscatter_core::stages::Timings;
 use volscatter_core::{compositor, io, Error, Result, Scene};
 
 #[derive(Args)]

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use exr::prelude::*;
-use volscatter_core::solvers::ScatteringGrid;
+use volscatter_core::stages::ScatteringGrid;
 
 use super::status::{FfiError, FfiResult, VsStatus};
 

@@ -5,7 +5,8 @@ use std::ffi::{c_char, CString};
 use std::sync::Arc;
 
 use volscatter_core::compositor::{self, Aovs, CompositeOptions};
-use volscatter_core::solvers::{ScatteringGrid, SolveOutput, Timings};
+use volscatter_core::solvers::{SolveOutput};
+use volscatter_core::stages::{ScatteringGrid, Timings};
 use volscatter_core::{vdb, Scene};
 use volscatter_gpu::{DeviceChoice, DeviceUsed};
 

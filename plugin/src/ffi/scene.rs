@@ -10,7 +10,8 @@ use glam::{Affine3A, IVec3, Mat4, Vec3, Vec4};
 use volscatter_core::medium::{DensityGrid, GridLimits};
 use volscatter_core::scene::json::{CameraJson, LightJson, Rgb};
 use volscatter_core::scene::{self, Camera};
-use volscatter_core::solvers::{self, reference::Reference, Timings};
+use volscatter_core::solvers::{self, reference::Reference};
+use volscatter_core::stages::Timings;
 use volscatter_core::{Medium, Scene};
 
 use super::guard::{self, clear_out, finite_arg, floats_arg, in_slice, input_file_arg, on_handle, opt_str_arg, path_arg, str_arg, write_out};

@@ -65,7 +65,7 @@ pub fn composite(ctx: &GpuContext, scene: &Scene, s: &ScatteringGrid, opts: &Com
 /// The single-scattering grid the AOVs of `opts` need, or None (not computed) when none does:
 /// the GPU twin of `compositor::single_for`.
 pub fn single_for(ctx: &GpuContext, scene: &Scene, opts: &CompositeOptions) -> Result<Option<ScatteringGrid>, GpuError> {
-    let dome_directions = volscatter_core::compositor::dome_directions_for(scene, opts.dome_directions);
+    let dome_directions = volscatter_core::stages::single_scattering::dome_directions_for(scene, opts.dome_directions);
     if !opts.aovs.needs_single() {
         return Ok(None);
     }

@@ -1,5 +1,5 @@
 //! The compositor's single-scattering grid on the GPU (`single.wgsl`): same inputs, steps and
-//! output as `volscatter_core::compositor::single_scattering_grid`.
+//! output as `volscatter_core::stages::single_scattering::single_scattering_grid`.
 
 use bytemuck::{Pod, Zeroable};
 use std::mem::{offset_of, size_of};
@@ -7,7 +7,7 @@ use std::mem::{offset_of, size_of};
 use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
 use glam::Vec3;
-use volscatter_core::compositor::AREA_VPLS_PER_SIDE;
+use volscatter_core::stages::single_scattering::AREA_VPLS_PER_SIDE;
 use volscatter_core::translate::dome::dome_directions_of;
 use volscatter_core::translate::{scene_emitters, PointEmitter, Profile};
 use volscatter_core::scene::Light;
@@ -111,7 +111,7 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         bounds_lo: lo.extend(0.0).to_array(),
         bounds_hi: hi.extend(0.0).to_array(),
         cam_pos: scene.camera.position.extend(0.0).to_array(),
-        misc: [medium.g, volscatter_core::compositor::shadow_step(medium, &grid), volscatter_core::medium::near_field_radius(&grid.index_to_world), 0.0],
+        misc: [medium.g, volscatter_core::stages::single_scattering::shadow_step(medium, &grid), volscatter_core::medium::near_field_radius(&grid.index_to_world), 0.0],
     };
     let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
     let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;

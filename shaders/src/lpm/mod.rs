@@ -18,7 +18,7 @@ use crate::pop::light::read_rgb;
 use volscatter_core::solvers::lpm::directions::FACES;
 use volscatter_core::solvers::lpm::propagate::FaceFrame;
 use volscatter_core::solvers::lpm::stream::{SweepBackend, SweepSetup, SweepStats, Sweeper};
-use volscatter_core::solvers::Progress;
+use volscatter_core::stages::Progress;
 use volscatter_core::{Error, Result};
 
 pub const PROPAGATE_WGSL: &str = crate::wgsl::kernel_wgsl!(["lpm"], "lpm/propagate.wgsl");

@@ -4,7 +4,7 @@ use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{procedural, GridLimits};
 use volscatter_core::scene::{Camera, Light, Scene};
 use volscatter_core::solvers::lpm::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Medium;
 
 #[test]

@@ -16,7 +16,8 @@ use volscatter_core::medium::{cumulus, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Environment, Light};
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
 use volscatter_core::solvers::network::{particles, Network, NetworkSettings};
-use volscatter_core::solvers::{NoProgress, SolveOutput};
+use volscatter_core::solvers::{SolveOutput};
+use volscatter_core::stages::NoProgress;
 use volscatter_core::translate::sampling::BoundingSphere;
 use volscatter_core::Scene;
 

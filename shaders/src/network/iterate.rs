@@ -16,7 +16,7 @@ use crate::upload::rgb_as_vec4;
 use volscatter_core::solvers::network::backend::IterationInput;
 use volscatter_core::solvers::network::iterate::Iterated;
 use volscatter_core::solvers::network::visibility::NONE;
-use volscatter_core::solvers::Progress;
+use volscatter_core::stages::Progress;
 
 pub const SOURCE_WGSL: &str = crate::wgsl::kernel_wgsl!(["network"], "network/source.wgsl");
 pub const SWEEP_WGSL: &str = crate::wgsl::kernel_wgsl!(["network"], "network/sweep.wgsl");

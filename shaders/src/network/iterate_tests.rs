@@ -12,7 +12,8 @@ use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend, Spl
 use volscatter_core::solvers::network::visibility::DirectionLinks;
 use volscatter_core::solvers::network::{Network, NetworkReport, NetworkSettings, Start};
 use volscatter_core::solvers::session::SessionState;
-use volscatter_core::solvers::{NoProgress, ScatteringGrid, SolveOutput};
+use volscatter_core::solvers::{SolveOutput};
+use volscatter_core::stages::{NoProgress, ScatteringGrid};
 use volscatter_core::translate::sampling::BoundingSphere;
 use volscatter_core::Scene;
 

@@ -19,7 +19,7 @@ use crate::GpuContext;
 use volscatter_core::solvers::network::backend::{IterationInput, NetworkBackend, SplatInput, VisibilityInput};
 use volscatter_core::solvers::network::visibility::DirectionLinks;
 use volscatter_core::solvers::network::iterate::Iterated;
-use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::Result;
 
 /// Iterations recorded between two readbacks of the convergence flag (and looks at

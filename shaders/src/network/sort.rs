@@ -6,7 +6,7 @@ use bytemuck::{Pod, Zeroable};
 use std::mem::size_of;
 
 use crate::context::GpuContext;
-use volscatter_core::solvers::Progress;
+use volscatter_core::stages::Progress;
 use volscatter_core::Error;
 
 pub const WGSL: &str = include_str!("sort.wgsl");

@@ -15,7 +15,7 @@ use super::sort::{self, groups_for};
 use crate::context::GpuContext;
 use volscatter_core::solvers::network::backend::SplatInput;
 use volscatter_core::solvers::network::splat::{self, Footprint};
-use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::Error;
 
 pub const BIN_WGSL: &str = crate::wgsl::kernel_wgsl!(["network_splat"], "network/bin.wgsl");

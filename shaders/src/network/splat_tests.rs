@@ -7,7 +7,7 @@ use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
 use volscatter_core::solvers::network::particles;
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 
 #[test]

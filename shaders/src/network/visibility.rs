@@ -21,7 +21,7 @@ use volscatter_core::sampling::orthonormal_basis;
 use volscatter_core::solvers::network::backend::VisibilityInput;
 use volscatter_core::solvers::network::settings::Opacity;
 use volscatter_core::solvers::network::visibility::{march_step, DirectionLinks};
-use volscatter_core::solvers::Progress;
+use volscatter_core::stages::Progress;
 use volscatter_core::Error;
 
 pub const KEYS_WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box", "optics", "network_visibility"], "network/keys.wgsl");

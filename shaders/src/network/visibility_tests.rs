@@ -7,7 +7,7 @@ use crate::network::splat::tests::Cancelled;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::solvers::network::particles;
 use volscatter_core::solvers::network::visibility::{self, window_side};
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 use volscatter_core::medium::optical_depth;
 use volscatter_core::translate::sampling::BoundingSphere;
 use volscatter_core::Scene;

@@ -15,7 +15,7 @@ use volscatter_core::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::photon_grid::backend::{CpuBackend, PhotonBackend};
 use volscatter_core::solvers::photon_grid::{PhotonGrid, PhotonGridSettings, Upsampling};
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 
 /// The cumulus of core's photon_grid/bench.rs `paper_cumulus`: sigma_t 25, albedo 0.99, g 0.9,

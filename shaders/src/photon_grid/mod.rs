@@ -38,7 +38,7 @@ use volscatter_core::solvers::photon_grid::PhotonGridSettings;
 use volscatter_core::solvers::photon_grid::fixed::{fix_units, FixedCell, FixedTallies};
 use volscatter_core::solvers::photon_grid::ring::Generation;
 use volscatter_core::solvers::photon_grid::trace::EnergyReport;
-use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result, Scene};
 
 pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box"], "photon_grid/trace.wgsl");

@@ -20,7 +20,7 @@ use volscatter_core::medium::Medium;
 use volscatter_core::solvers::photon_grid::cache::Tallies;
 use volscatter_core::solvers::photon_grid::upsample::Upsampler;
 use volscatter_core::solvers::photon_grid::{PhotonGridSettings, Upsampling};
-use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result};
 
 pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "hg"], "photon_grid/reconstruct.wgsl");

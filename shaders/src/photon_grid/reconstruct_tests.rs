@@ -5,7 +5,7 @@ use std::sync::Mutex;
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::photon_grid::backend::CpuBackend;
 use volscatter_core::solvers::photon_grid::{PhotonGrid, SingleScattering, Upsampling};
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 
 #[test]
 fn wgsl_validates_and_params_layout_matches() {

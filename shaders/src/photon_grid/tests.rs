@@ -6,7 +6,8 @@ use volscatter_core::scene::Light;
 use volscatter_core::solvers::photon_grid::backend::CpuBackend;
 use volscatter_core::solvers::photon_grid::{PhotonGrid, PhotonGridReport, PhotonGridSettings, SingleScattering};
 use volscatter_core::solvers::session::SessionState;
-use volscatter_core::solvers::{NoProgress, SolveOutput};
+use volscatter_core::solvers::{SolveOutput};
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 
 #[test]
@@ -127,7 +128,7 @@ fn gpu_tracing_is_exact_run_to_run_and_through_the_ring() {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_tracing_stops_on_cancel() {
     struct Cancelled;
-    impl volscatter_core::solvers::Progress for Cancelled {
+    impl volscatter_core::stages::Progress for Cancelled {
         fn update(&self, _: &str, _: f32) -> bool {
             true
         }

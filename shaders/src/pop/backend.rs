@@ -16,11 +16,11 @@ use volscatter_core::medium::Medium;
 use volscatter_core::solvers::pop::backend::{PopBackend, SweepSums};
 use volscatter_core::solvers::pop::init::Initial;
 use volscatter_core::solvers::pop::light_grid::LightGrid;
-use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::solvers::pop::radial::{self, init::RadialInitial, propagate::RadialPropagation, RadialLight};
 use volscatter_core::solvers::pop::propagate::{Propagation, RunOptions};
 use volscatter_core::solvers::pop::{PopSettings, PropagationStats};
-use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result};
 
 /// A GPU failure as a solver error (`Error::Device`); `solve` falls back to the CPU on it

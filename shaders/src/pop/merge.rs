@@ -11,8 +11,8 @@ use crate::pop::mip::{GpuMip, MipParams};
 use crate::upload::{affine_rows, rgb_as_vec4};
 use volscatter_core::medium::Medium;
 use volscatter_core::solvers::pop::light_grid::LightGrid;
-use volscatter_core::solvers::pop::merge::{footprint, Merged};
-use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::stages::upsample::{footprint, Merged};
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::ScatteringGrid;
 
 pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip", "j_grid"], "pop/merge.wgsl");

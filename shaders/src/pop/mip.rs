@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use std::mem::size_of;
 
 use crate::context::{GpuContext, GpuError};
-use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::stages::mip::MediumMip;
 
 const BRICK: i32 = 8;
 const BRICK_CELLS: usize = 512;

@@ -109,9 +109,9 @@ mod tests {
     use super::*;
     use crate::test_support::{gpu_or_skip, naga_struct_size};
     use volscatter_core::image::relative_rmse;
-    use volscatter_core::solvers::pop::mip::MediumMip;
+    use volscatter_core::stages::mip::MediumMip;
     use volscatter_core::solvers::pop::radial::{grid::RadialGrid, init, propagate};
-    use volscatter_core::solvers::NoProgress;
+    use volscatter_core::stages::NoProgress;
     use volscatter_core::Scene;
 
     /// The whole pipeline through `volscatter_gpu::solve` (the CLI's and the C ABI's entry

@@ -3,7 +3,7 @@ use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::pop::propagate::RunOptions;
 use volscatter_core::solvers::pop::{accumulate, init, light_grid::LightGrid, mip::MediumMip};
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 
 #[test]

@@ -1,5 +1,5 @@
 //! Joint bilateral upsampling on the GPU (`upsample.wgsl`): same inputs and output as
-//! `volscatter_core::solvers::pop::upsample::upsample`, reading the merged grid where the merge
+//! `volscatter_core::stages::upsample::upsample`, reading the merged grid where the merge
 //! left it; the scattering grid S is the one thing a GPU solve reads back.
 
 use bytemuck::{Pod, Zeroable};
@@ -11,8 +11,8 @@ use crate::pop::merge::GpuMerged;
 use crate::pop::mip::{GpuMip, MipParams};
 use crate::upload::affine_rows;
 use volscatter_core::medium::Medium;
-use volscatter_core::solvers::pop::merge::footprint;
-use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::stages::upsample::footprint;
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::solvers::pop::PopSettings;
 use volscatter_core::ScatteringGrid;
 

@@ -3,8 +3,8 @@ use crate::pop::merge::GpuMerged;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use glam::Vec3;
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::pop::merge::Merged;
-use volscatter_core::solvers::pop::upsample as cpu_upsample;
+use volscatter_core::stages::upsample::Merged;
+use volscatter_core::stages::upsample as cpu_upsample;
 use volscatter_core::Scene;
 
 #[test]
@@ -25,7 +25,7 @@ fn gpu_upsample_matches_cpu() {
     let mip = MediumMip::new(medium, 1.0);
     let gmip = GpuMip::upload(&ctx, &mip).unwrap();
     let mut j = ScatteringGrid::over_medium(medium, 20).unwrap();
-    let fp = volscatter_core::solvers::pop::merge::footprint(medium, &j);
+    let fp = volscatter_core::stages::upsample::footprint(medium, &j);
     let [nx, ny, _] = j.dims;
     let mut density = Vec::with_capacity(j.len());
     for (c, v) in j.data.iter_mut().enumerate() {

@@ -22,13 +22,13 @@ use std::mem::{offset_of, size_of};
 use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
 use volscatter_core::medium::Medium;
-use volscatter_core::solvers::pop::merge::Merged;
-use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::stages::upsample::Merged;
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::solvers::vpl::compensate::{Compensation, Vertex};
 use volscatter_core::solvers::vpl::gather::{GatherPlan, GatherPoint, Gathered, Kernel};
 use volscatter_core::solvers::vpl::{GatherStats, VplSettings};
 use volscatter_core::solvers::vpl::walks::Walks;
-use volscatter_core::solvers::Progress;
+use volscatter_core::stages::Progress;
 use volscatter_core::{Error, Result, Scene};
 
 pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "density", "ray_box", "hg", "optics"], "vpl/gather.wgsl");

@@ -10,13 +10,13 @@ use crate::context::GpuContext;
 use crate::pop::merge::GpuMerged;
 use crate::pop::mip::GpuMip;
 use volscatter_core::medium::Medium;
-use volscatter_core::solvers::pop::merge::Merged;
-use volscatter_core::solvers::pop::mip::MediumMip;
+use volscatter_core::stages::upsample::Merged;
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::solvers::pop::PopSettings;
 use volscatter_core::solvers::vpl::walks::Walks;
 use volscatter_core::solvers::vpl::gather::Gathered;
 use volscatter_core::solvers::vpl::{VplBackend, VplSettings};
-use volscatter_core::solvers::{Progress, ScatteringGrid};
+use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result, Scene};
 
 pub struct GpuBackend<'a> {

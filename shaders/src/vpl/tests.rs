@@ -8,7 +8,7 @@ use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{procedural, GridLimits};
 use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::vpl::{gather as cpu_gather, walks, NearField, Transmittance};
-use volscatter_core::solvers::NoProgress;
+use volscatter_core::stages::NoProgress;
 use volscatter_core::Medium;
 
 #[test]
@@ -76,9 +76,9 @@ fn gpu_gather_matches_cpu() {
         let scene = fixture_scene(name);
         let s = VplSettings { walks_per_subset: per_subset, compensation_depth: depth, ..test_settings(near_field) };
         let w = walks::trace(&scene, &s, u32::MAX, &NoProgress).unwrap();
-        let out = volscatter_core::solvers::ScatteringGrid::over_medium(&scene.medium, s.output_resolution).unwrap();
-        let g = volscatter_core::solvers::ScatteringGrid::over_medium(&scene.medium, s.gather_resolution).unwrap();
-        let fp = volscatter_core::solvers::pop::merge::footprint(&scene.medium, &out).min(volscatter_core::solvers::pop::merge::footprint(&scene.medium, &g));
+        let out = volscatter_core::stages::ScatteringGrid::over_medium(&scene.medium, s.output_resolution).unwrap();
+        let g = volscatter_core::stages::ScatteringGrid::over_medium(&scene.medium, s.gather_resolution).unwrap();
+        let fp = volscatter_core::stages::upsample::footprint(&scene.medium, &out).min(volscatter_core::stages::upsample::footprint(&scene.medium, &g));
         let mip = MediumMip::new(&scene.medium, fp);
         let cpu_all = cpu_gather::gather(&scene, &mip, &w, &s, &NoProgress).unwrap();
         let gpu_all = gather::gather(&ctx, &scene, &mip, &w, &s, &NoProgress).unwrap();

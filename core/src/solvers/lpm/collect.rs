@@ -17,7 +17,7 @@ use super::directions::Directions;
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::propagate::FaceFrame;
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 /// What collect adds to, and where the viewer is.
 pub struct Targets<'a> {

@@ -7,8 +7,8 @@ use glam::{Affine3A, IVec3, Vec3};
 
 use crate::error::Result;
 use crate::medium::Medium;
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::ScatteringGrid;
+use crate::stages::mip::MediumMip;
+use crate::stages::ScatteringGrid;
 
 pub struct LpmGrid {
     pub dims: [usize; 3],

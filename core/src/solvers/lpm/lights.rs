@@ -28,7 +28,7 @@ use super::phase_table::PhaseTable;
 use super::settings::FirstOrder;
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 /// Boundary radiance of each propagation direction for the first propagation.
 pub fn boundary(scene: &Scene, dirs: &Directions, mode: FirstOrder) -> Vec<Vec3> {
@@ -99,7 +99,7 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
     } else {
         Vec::new()
     };
-    let emitters = crate::translate::local_emitters(&scene.lights, crate::compositor::AREA_VPLS_PER_SIDE);
+    let emitters = crate::translate::local_emitters(&scene.lights, crate::stages::single_scattering::AREA_VPLS_PER_SIDE);
     if suns.is_empty() && emitters.is_empty() {
         return;
     }

@@ -47,12 +47,12 @@ pub use settings::{FirstOrder, LpmSettings};
 
 use glam::Vec3;
 
-use super::pop::merge::{footprint, Merged};
-use super::pop::mip::MediumMip;
-use super::pop::upsample::upsample;
-use super::pop::PopSettings;
-use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
-use crate::compositor::single_scattering_grid_cancellable;
+use crate::stages::upsample::{footprint, Merged};
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::upsample;
+use super::{parse_settings, SolveCtx, SolveOutput, Solver};
+use crate::stages::{Progress, Timings};
+use crate::stages::single_scattering::single_scattering_grid_cancellable;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use directions::{Directions, FACES};
@@ -66,6 +66,8 @@ pub struct Lpm {
     /// Where S also goes as a VDB (`scattering_r/_g/_b`): out of core written plane by plane
     /// as it is upsampled, in memory written whole.
     s_vdb: Option<std::path::PathBuf>,
+    /// Test and benchmark knobs (`with_overrides`).
+    overrides: Overrides,
 }
 
 /// What a solve did, for tests and benchmarks.
@@ -81,7 +83,7 @@ pub struct LpmReport {
     /// Bytes of the per-cell arrays (density, sigma_t, two U, J).
     pub cell_bytes: u64,
     /// J (in-scattered radiance per unit sigma_s, orders two and up) on the cell centres.
-    pub j: Option<super::ScatteringGrid>,
+    pub j: Option<crate::stages::ScatteringGrid>,
     /// J of each order (when asked for: `keep_orders`).
     pub j_per_order: Vec<Vec<Vec3>>,
 }
@@ -104,7 +106,7 @@ fn max_abs(v: &[Vec3]) -> f32 {
 impl Lpm {
     pub fn new(settings: LpmSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(Lpm { settings, scratch_dir: None, s_vdb: None })
+        Ok(Lpm { settings, scratch_dir: None, s_vdb: None, overrides: Overrides::default() })
     }
 
     /// The directory of `out_of_core`'s scratch files (default: `std::env::temp_dir()`).
@@ -127,12 +129,14 @@ impl Lpm {
         &self.settings
     }
 
-    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides) -> Result<(SolveOutput, LpmReport)> {
-        self.solve_with(scene, progress, ov, &stream::CpuSweeps)
+    /// This solver with the test and benchmark knobs `ov`.
+    pub fn with_overrides(mut self, ov: Overrides) -> Self {
+        self.overrides = ov;
+        self
     }
 
-    /// `solve_detailed` with the sweeps (propagate and collect, every order) on `backend`.
-    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, ov: Overrides, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
+    fn run(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
+        let ov = self.overrides;
         let s = &self.settings;
         if s.out_of_core {
             // The CPU's: the GPU's sweeps keep their arrays on the device.
@@ -255,7 +259,7 @@ impl Lpm {
             return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
         }
         let merged = Merged { j: j_grid, density: grid.density.clone() };
-        let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
+        let pop_like = s.upsampling();
         let mut scattering = timings.time("lpm upsample", || upsample(medium, &mip, &merged, &pop_like))?;
         debug_assert_eq!(scattering.dims, single.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {
@@ -274,8 +278,8 @@ impl Lpm {
 
 /// The output grid (its frame) and S's exact single scattering on it (the empty grid when
 /// only J is asked for).
-fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Overrides, timings: &mut Timings) -> Result<(super::ScatteringGrid, super::ScatteringGrid)> {
-    let out_probe = super::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
+fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Overrides, timings: &mut Timings) -> Result<(crate::stages::ScatteringGrid, crate::stages::ScatteringGrid)> {
+    let out_probe = crate::stages::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
     let single = if ov.j_only {
         out_probe.clone()
     } else {
@@ -294,7 +298,19 @@ impl Solver for Lpm {
         "lpm"
     }
 
-    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-        Ok(self.solve_detailed(scene, progress, Overrides::default())?.0)
+    /// S with what the solve did (`LpmReport`) attached; the sweeps (propagate and collect,
+    /// every order) on the device's `SweepBackend` when the context carries one (out of core:
+    /// on the CPU).
+    fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
+        let backend: &dyn stream::SweepBackend = ctx.backend::<dyn stream::SweepBackend>().unwrap_or(&stream::CpuSweeps);
+        let (out, report) = self.run(scene, ctx.progress(), backend)?;
+        Ok(out.with_report(report))
+    }
+}
+
+impl LpmSettings {
+    /// The settings of the shared upsampling stage (stages/upsample.rs).
+    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
+        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
     }
 }

@@ -54,11 +54,11 @@ use super::stream::{propagate_slab, SweepStats};
 use super::{lights, FirstOrder, Lpm, LpmReport, Overrides};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
-use crate::solvers::pop::merge::footprint;
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::pop::upsample::{upsample_plane, CoarseWindow};
-use crate::solvers::pop::PopSettings;
-use crate::solvers::{Progress, ScatteringGrid, SolveOutput, Timings};
+use crate::stages::upsample::footprint;
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::{upsample_plane, CoarseWindow, Upsampling};
+use crate::solvers::SolveOutput;
+use crate::stages::{Progress, ScatteringGrid, Timings};
 use crate::vdb::RgbVdbStream;
 
 const VEC3: u64 = std::mem::size_of::<Vec3>() as u64;
@@ -369,7 +369,7 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
         report.j = Some(frame.as_scattering_grid(whole(&stores.j)?));
         return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
     }
-    let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
+    let pop_like = s.upsampling();
     // Created before the solve: a path that cannot be written fails now, not after it.
     let vdb = match lpm.s_vdb.as_deref() {
         Some(p) => Some(RgbVdbStream::create(p, "scattering", out_probe.dims, out_probe.index_to_world, &Default::default())?),
@@ -402,7 +402,7 @@ fn upsample_streamed(
     mip: &MediumMip,
     stores: &Stores,
     geometry: ([usize; 3], Vec3, f32),
-    settings: &PopSettings,
+    settings: &Upsampling,
     single: &ScatteringGrid,
     progress: &dyn Progress,
 ) -> Result<ScatteringGrid> {

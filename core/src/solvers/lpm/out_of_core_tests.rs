@@ -12,7 +12,7 @@ use super::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
 use crate::medium::{Emission, EmissionLaw, EmissionTerm};
 use crate::scene::{Light, Scene};
 use crate::solvers::testing::fixture_scene as case;
-use crate::solvers::{NoProgress, Progress, ScatteringGrid};
+use crate::stages::{NoProgress, Progress, ScatteringGrid};
 
 /// A fresh scratch directory of its own per test, so that "no file left" is checkable while
 /// other tests run.

@@ -118,7 +118,7 @@ pub fn propagate(
     w0: usize,
     w1: usize,
     t: &mut [Vec3],
-    progress: &dyn crate::solvers::Progress,
+    progress: &dyn crate::stages::Progress,
 ) {
     let (nu, nv) = (ff.nu, ff.nv);
     let dl = grid.h * (1.0 + dir.a * dir.a + dir.b * dir.b).sqrt();

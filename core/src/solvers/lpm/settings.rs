@@ -129,7 +129,7 @@ impl LpmSettings {
         if !(1..=100_000).contains(&self.max_orders) {
             return bad("max_orders must be in [1, 100000]");
         }
-        super::super::pop::settings::validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
+        self.upsampling().validate()?;
         if !(1..=1024).contains(&self.dome_directions) {
             return bad("dome_directions must be in [1, 1024]");
         }

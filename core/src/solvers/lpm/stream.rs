@@ -19,7 +19,7 @@ use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::propagate::{propagate, FaceFrame};
 use crate::error::{Error, Result};
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 /// Bytes of the propagation's working buffers for a face whose map has `map_len` cells, `p`
 /// directions and slabs of `layers` layers: the maps and the slab's T.

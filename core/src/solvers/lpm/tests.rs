@@ -6,7 +6,7 @@ use glam::Vec3;
 use super::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
 use crate::scene::{Camera, Environment, Light, Scene};
 use crate::solvers::testing::{errors_against_fixture, homogeneous_box, s_over_sigma_s};
-use crate::solvers::{NoProgress, ScatteringGrid};
+use crate::stages::{NoProgress, ScatteringGrid};
 
 /// The fixtures' scenes (as vpl/tests.rs).
 use crate::solvers::testing::fixture_scene as case;

@@ -14,7 +14,7 @@ use super::splat;
 use super::visibility::{self, DirectionLinks};
 use crate::error::{Error, Result};
 use crate::medium::Medium;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::{Progress, ScatteringGrid};
 
 /// What the visibility network is built from (visibility.rs `build`).
 pub struct VisibilityInput<'a> {

@@ -11,7 +11,7 @@ use super::tests::{cube_scene, plume_scene};
 use super::*;
 use crate::scene::{Camera, Environment, Light};
 use crate::solvers::testing::{cloud::cloud_scene, errors_against_fixture};
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 use crate::translate::sampling::BoundingSphere;
 
 fn emit(name: &str, v: serde_json::Value) {

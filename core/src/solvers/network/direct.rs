@@ -10,12 +10,12 @@ use super::directions::phase_row;
 use super::particles::Particles;
 use crate::medium::{ball_mean_inverse_square, optical_depth, Medium};
 use crate::scene::{Light, Scene};
-use crate::solvers::Progress;
+use crate::stages::Progress;
 use crate::translate::dome::dome_directions_of;
 use crate::translate::scene_emitters;
 
 /// Area lights as k x k point emitters, the compositor's count (compositor::AREA_VPLS_PER_SIDE).
-const AREA_VPLS: u32 = crate::compositor::AREA_VPLS_PER_SIDE;
+const AREA_VPLS: u32 = crate::stages::single_scattering::AREA_VPLS_PER_SIDE;
 
 /// Per particle and direction (row-major, N x D): the radiance scattered once into `dirs[i]`,
 /// a x sum over lights of W x (the light's HG weights over the D directions, normalised) x D /

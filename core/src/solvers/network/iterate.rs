@@ -31,7 +31,7 @@ pub struct Iterated {
 /// Stops before the next iteration once `progress` is cancelled (an iteration is well under
 /// 100 ms at the largest settings on one core); the caller then discards the result.
 #[allow(clippy::too_many_arguments)]
-pub fn iterate(links: &[DirectionLinks], phase: &[f32], first: &[Vec3], albedo: Vec3, max_iterations: u32, threshold: f32, start: Option<Vec<Vec3>>, progress: &dyn crate::solvers::Progress) -> Iterated {
+pub fn iterate(links: &[DirectionLinks], phase: &[f32], first: &[Vec3], albedo: Vec3, max_iterations: u32, threshold: f32, start: Option<Vec<Vec3>>, progress: &dyn crate::stages::Progress) -> Iterated {
     let d = links.len();
     let n = first.len() / d.max(1);
     let mut radiance = start.filter(|s| s.len() == n * d).unwrap_or_else(|| vec![Vec3::ZERO; n * d]);

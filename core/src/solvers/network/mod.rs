@@ -44,9 +44,9 @@ pub use settings::NetworkSettings;
 use crate::lattice_product::finished;
 use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput, VisibilityInput};
 
-use super::pop::reuse::MediumKey;
-use super::session::SessionState;
-use super::{parse_settings, Progress, SolveOutput, Solver, Timings};
+use crate::medium::key::MediumKey;
+use super::{parse_settings, SolveCtx, SolveOutput, Solver};
+use crate::stages::{Progress, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::translate::sampling::BoundingSphere;
@@ -106,35 +106,17 @@ impl Network {
         Network::new(parse_settings(map)?)
     }
 
-    /// Solves and returns what the iteration did along with S and the timings.
-    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, NetworkReport)> {
-        self.solve_keeping(scene, progress, &CpuBackend, &mut KeptNetwork(None))
-    }
-
-    /// A solve with the iteration and the splat on `backend`; with `state`, one frame of a
-    /// session (as `solve_in_session_detailed`: the network and I are kept on the host, so
-    /// a camera move costs only the backend's splat).
-    pub fn solve_on(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, state: Option<&mut SessionState>) -> Result<(SolveOutput, NetworkReport)> {
-        match state {
-            Some(state) => self.solve_keeping(scene, progress, backend, state.kept(KeptNetwork::default)),
-            None => self.solve_keeping(scene, progress, backend, &mut KeptNetwork(None)),
-        }
-    }
-
-    /// One frame of a session with its report: the network (particles, visibility links,
-    /// phase matrix) is kept while the medium is the same (exact key: every voxel's bits,
-    /// transform and material); I is kept as is when the direct light is bit-identical too
-    /// (a camera move: S is exactly the one-off solve's), else iterated from the previous I.
-    pub fn solve_in_session_detailed(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<(SolveOutput, NetworkReport)> {
-        self.solve_keeping(scene, progress, &CpuBackend, state.kept(KeptNetwork::default))
-    }
-
+    /// The solve with the network kept in `kept` (a one-off solve passes an empty one): the
+    /// network (particles, visibility links, phase matrix) is kept while the medium is the same
+    /// (exact key: every voxel's bits, transform and material); I is kept as is when the direct
+    /// light is bit-identical too (a camera move: S is exactly the one-off solve's), else
+    /// iterated from the previous I.
     fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, kept: &mut KeptNetwork) -> Result<(SolveOutput, NetworkReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut scattering = timings.time("network single scattering", || {
-            crate::compositor::single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
+            crate::stages::single_scattering::single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
         })?;
         let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
@@ -216,11 +198,18 @@ impl Solver for Network {
         "network"
     }
 
-    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-        Ok(self.solve_detailed(scene, progress)?.0)
-    }
-
-    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
-        Ok(self.solve_in_session_detailed(scene, progress, state)?.0)
+    /// S with what the iteration did (`NetworkReport`) attached; the iteration and the splat on
+    /// the device's `NetworkBackend` when the context carries one. The network and I are kept
+    /// on the host in a session, so a camera move costs only the splat.
+    fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
+        let backend: &dyn NetworkBackend = ctx.backend::<dyn NetworkBackend>().unwrap_or(&CpuBackend);
+        let progress = ctx.progress();
+        let mut one_off = KeptNetwork(None);
+        let kept = match ctx.session() {
+            Some(state) => state.kept(KeptNetwork::default),
+            None => &mut one_off,
+        };
+        let (out, report) = self.solve_keeping(scene, progress, backend, kept)?;
+        Ok(out.with_report(report))
     }
 }

@@ -7,7 +7,7 @@ use glam::Vec3;
 use crate::medium::Medium;
 use crate::rng::Rng;
 use crate::sampling::Distribution1D;
-use crate::solvers::ScatteringGrid;
+use crate::stages::ScatteringGrid;
 
 /// Cells per side of the lattice the particles are drawn from: fine enough that a particle
 /// sits in density of its own scale, coarse enough to build in milliseconds.

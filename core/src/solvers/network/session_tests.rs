@@ -7,7 +7,7 @@ use super::tests::{cube_scene, small};
 use super::*;
 use crate::scene::{Camera, Environment, Light};
 use crate::solvers::testing::{errors_against_fixture, homogeneous_box, s_over_sigma_s};
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 fn rel_diff(a: &[Vec3], b: &[Vec3]) -> f64 {
     let (mut num, mut den) = (0.0f64, 0.0f64);

@@ -12,7 +12,7 @@ use glam::Vec3;
 use super::directions::phase_row;
 use super::particles::Particles;
 use crate::medium::Medium;
-use crate::solvers::ScatteringGrid;
+use crate::stages::ScatteringGrid;
 
 /// The kernel is cut at 3 sigma, and at this many grid cells either side (a particle alone in
 /// thin medium has a large ball; beyond this its light is left to nearer particles).

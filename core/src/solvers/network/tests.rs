@@ -7,7 +7,7 @@ use super::*;
 use crate::medium::Medium;
 use crate::scene::{Camera, Light};
 use crate::solvers::testing::{against_single_scattering, errors_against_fixture, homogeneous_box, Errors};
-use crate::solvers::{NoProgress, ScatteringGrid};
+use crate::stages::{NoProgress, ScatteringGrid};
 
 /// The shared fixtures' cube scene (pop/tests.rs `case`): a 1 m cube of 16^3 voxels, sigma_s
 /// 4 m^-1, albedo 1, under a sun travelling down, sideways and towards the camera.

@@ -13,7 +13,7 @@ use super::particles::Particles;
 use super::settings::Opacity;
 use crate::medium::{optical_depth, Medium};
 use crate::sampling::orthonormal_basis;
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 /// No upstream particle: the column starts at the medium's boundary.
 pub const NONE: u32 = u32::MAX;

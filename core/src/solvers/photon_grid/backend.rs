@@ -15,11 +15,11 @@ use super::reconstruct::scattering_towards;
 use super::ring::{self, Generation};
 use super::settings::PhotonGridSettings;
 use super::trace::Tracer;
-use crate::compositor::single_scattering_grid_cancellable;
+use crate::stages::single_scattering::single_scattering_grid_cancellable;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::scene::Scene;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::{Progress, ScatteringGrid};
 use crate::translate::LightSampler;
 
 /// What tracing a generation needs: the tracer (media, majorants, settings, lobe split,

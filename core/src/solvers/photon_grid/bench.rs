@@ -12,7 +12,7 @@ use super::*;
 use crate::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
 use crate::scene::Light;
 use crate::solvers::testing::errors_against_fixture;
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 fn emit(name: &str, v: serde_json::Value) {
     println!("BENCH_JSON {}", json!({"bench": name, "data": v}));
@@ -150,7 +150,7 @@ fn bench_photon_grid_cloud_aim() {
     for spp in [256u32, 1024, 4096] {
         let t = Instant::now();
         let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
-        let img = r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap();
+        let img = r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap();
         let secs = t.elapsed().as_secs_f64();
         let e = Errors::between(&rgb(&img), &[], &[], &fx.image(), &[], None);
         rows.push(json!({"method": "reference", "spp": spp, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio}));

@@ -29,7 +29,7 @@ use super::fixed::{unfix, unfix3, FixedTallies};
 
 use crate::error::Result;
 use crate::medium::Medium;
-use crate::solvers::ScatteringGrid;
+use crate::stages::ScatteringGrid;
 
 /// One cell's tallies (f32 within a batch; batches are summed in fixed point, fixed.rs).
 #[derive(Clone, Copy, Debug, Default)]

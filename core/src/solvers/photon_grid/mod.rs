@@ -40,12 +40,14 @@ pub use reconstruct::Lobe;
 pub use settings::{Angular, PhotonGridSettings, Similarity, SingleScattering, Upsampling};
 pub use trace::EnergyReport;
 
-use crate::compositor::{dome_directions_for, CompositeOptions};
+use crate::stages::single_scattering::DOME_DIRECTIONS;
+use crate::stages::single_scattering::dome_directions_for;
 use crate::error::{Error, Result};
 use crate::medium::MajorantGrid;
 use crate::scene::Scene;
 use crate::solvers::session::SessionState;
-use crate::solvers::{parse_settings, Progress, SolveOutput, Solver, Timings};
+use crate::solvers::{parse_settings, SolveCtx, SolveOutput, Solver};
+use crate::stages::{Progress, Timings};
 use backend::{CpuBackend, PhotonBackend, TraceJob};
 use ring::{Generation, KeptRing, Ring};
 use crate::translate::LightSampler;
@@ -61,6 +63,8 @@ const SPLIT_ORDER: u32 = 2;
 
 pub struct PhotonGrid {
     settings: PhotonGridSettings,
+    /// The first photon generation a one-off solve traces (`from_generation`).
+    first: u64,
 }
 
 /// What a solve measured besides S.
@@ -75,7 +79,7 @@ pub struct PhotonGridReport {
 impl PhotonGrid {
     pub fn new(settings: PhotonGridSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(PhotonGrid { settings })
+        Ok(PhotonGrid { settings, first: 0 })
     }
 
     pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
@@ -134,7 +138,7 @@ impl PhotonGrid {
         let out = PhotonGridSettings { output_resolution: res, ..self.settings.clone() };
         let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &out, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
-            let dirs = dome_directions_for(scene, CompositeOptions::default().dome_directions);
+            let dirs = dome_directions_for(scene, DOME_DIRECTIONS);
             let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;
             // Same medium, same max_dim (`output_dim`): the same frame. Checked, not assumed: a
             // backend that sized its grid from `output_resolution` alone would pair the wrong points.
@@ -149,19 +153,14 @@ impl PhotonGrid {
         Ok((SolveOutput::new(crate::lattice_product::finished(medium, s), timings), PhotonGridReport { energy: ring.energy(), generations: ring.generations() }))
     }
 
-    /// Solves and returns the energy report with S and the timings.
-    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
-        self.solve_generations(scene, 0, progress)
+    /// This solver with one-off solves tracing generations first..first + m: what a session's
+    /// ring holds m frames after the scene last changed (0, the default: the first frame's).
+    pub fn from_generation(mut self, first: u64) -> Self {
+        self.first = first;
+        self
     }
 
-    /// The one-off solve from generations first..first + m (`solve_detailed` is first 0): what
-    /// a session's ring holds m frames after the scene last changed.
-    pub fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress) -> Result<(SolveOutput, PhotonGridReport)> {
-        self.solve_generations_with(scene, first, progress, &CpuBackend)
-    }
-
-    /// `solve_generations` with its tracing on `backend`.
-    pub fn solve_generations_with(&self, scene: &Scene, first: u64, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
+    fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
             return Err(Error::Cancelled);
@@ -170,17 +169,12 @@ impl PhotonGrid {
         self.finish(scene, &ring, timings, progress, backend)
     }
 
-    /// One frame of a session (`Solver::solve_in_session`) with its report: the first frame
-    /// (or one after the settings changed) fills the ring, each later one traces a single
-    /// new generation into it (ring.rs). With one generation, the one-off solve.
-    pub fn solve_in_session_detailed(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<(SolveOutput, PhotonGridReport)> {
-        self.solve_in_session_with(scene, progress, state, &CpuBackend)
-    }
-
-    /// `solve_in_session_detailed` with its tracing on `backend`.
-    pub fn solve_in_session_with(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
+    /// One frame of a session: the first frame (or one after the settings changed) fills the
+    /// ring, each later one traces a single new generation into it (ring.rs). With one
+    /// generation, the one-off solve.
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
         if self.settings.generations == 1 {
-            return self.solve_generations_with(scene, 0, progress, backend);
+            return self.solve_generations(scene, self.first, progress, backend);
         }
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
@@ -211,7 +205,7 @@ impl PhotonGrid {
         if self.settings.angular == Angular::Camera {
             return Err(Error::InvalidArgument("photon-grid: angular = camera keeps S towards the camera, not the view-independent lobes".into()));
         }
-        let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::solvers::NoProgress, &CpuBackend)?;
+        let ring = self.fresh_ring(scene, 0, &mut Timings::default(), &crate::stages::NoProgress, &CpuBackend)?;
         let first = cache::Tallies::from_fixed(&scene.medium, ring.cache(), &ring.total()[0]);
         Ok(points.iter().map(|&p| reconstruct::lobe_at(&scene.medium, &first, p, self.settings.upsampling)).collect())
     }
@@ -221,10 +215,15 @@ impl Solver for PhotonGrid {
     fn name(&self) -> &'static str {
         "photon-grid"
     }
-    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-        self.solve_detailed(scene, progress).map(|(out, _)| out)
-    }
-    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
-        self.solve_in_session_detailed(scene, progress, state).map(|(out, _)| out)
+    /// S with the energy report (`PhotonGridReport`) attached; the tracing on the device's
+    /// `PhotonBackend` when the context carries one; in a session, the ring of partial caches.
+    fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
+        let backend: &dyn PhotonBackend = ctx.backend::<dyn PhotonBackend>().unwrap_or(&CpuBackend);
+        let progress = ctx.progress();
+        let (out, report) = match ctx.session() {
+            Some(state) => self.solve_in_session(scene, progress, state, backend)?,
+            None => self.solve_generations(scene, self.first, progress, backend)?,
+        };
+        Ok(out.with_report(report))
     }
 }

@@ -12,7 +12,7 @@ use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
 use crate::scene::Light;
 use crate::solvers::testing::errors_against_fixture;
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 /// A sun straight down onto the 1 m cube (sigma_t 4, albedo 1e-4: only unscattered light in
 /// the first lobe, photons carrying single scattering): the first lobe's fluence in each cell

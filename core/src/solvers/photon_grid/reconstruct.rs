@@ -22,7 +22,7 @@ use super::upsample::Upsampler;
 use crate::error::{Error, Result};
 use crate::medium::Medium;
 use crate::phase::hg;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::{Progress, ScatteringGrid};
 
 /// The view-independent form at a point: fluence (W/m^2, RGB), lobe anisotropy g' and
 /// dominant direction of travel (zero when the light there has no preferred direction).

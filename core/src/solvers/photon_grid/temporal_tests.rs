@@ -6,7 +6,7 @@ use glam::{Quat, Vec3};
 use super::tests::case;
 use super::*;
 use crate::scene::Light;
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 /// sqrt(sum |a - b|^2 / sum |b|^2) over all cells and channels.
 fn rel_diff(a: &[glam::Vec3], b: &[glam::Vec3]) -> f64 {
@@ -106,7 +106,7 @@ fn moving_sun_stays_within_one_and_a_half_percent_of_a_fresh_solve() {
     let m = 4u32;
     let pg = PhotonGrid::new(settings(m, 1 << 16)).unwrap();
     let mut state = SessionState::new();
-    let image = |sc: &Scene, s: &crate::solvers::ScatteringGrid| crate::solvers::testing::SolverOutput::of(sc, s).image;
+    let image = |sc: &Scene, s: &crate::stages::ScatteringGrid| crate::solvers::testing::SolverOutput::of(sc, s).image;
     let (mut diff2, mut noise2) = (0.0f64, 0.0f64);
     let frames = 10u64;
     for f in 0..frames {

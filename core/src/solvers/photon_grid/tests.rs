@@ -3,11 +3,12 @@
 use glam::Vec3;
 
 use super::*;
-use crate::compositor::{dome_directions_for, single_scattering_grid, CompositeOptions};
+use crate::compositor::{CompositeOptions};
+use crate::stages::single_scattering::{dome_directions_for, single_scattering_grid};
 use crate::medium::{procedural, GridLimits, Medium};
 use crate::scene::{Camera, Light};
 use crate::solvers::testing::{against_single_scattering, cloud::cloud_scene, env_u32, errors_against_fixture, homogeneous_box, Errors};
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 /// The fixtures' scenes (pop/tests.rs `case`, which wrote them): a 1 m cube of 16^3 voxels,
 /// sigma_t 4, albedo 1, at g 0 / 0.7 / 0.9, and the procedural plume (g 0.9, albedo 0.99), lit
@@ -269,7 +270,7 @@ fn output_grid_sits_on_the_voxels() {
     let sc = case("cloud");
     let dim = PhotonGridSettings::default().output_dim(&sc.medium);
     assert_eq!(dim, 66);
-    let grid = crate::solvers::ScatteringGrid::over_medium(&sc.medium, dim).unwrap();
+    let grid = crate::stages::ScatteringGrid::over_medium(&sc.medium, dim).unwrap();
     let to_voxel = sc.medium.index_to_world.inverse() * grid.index_to_world;
     let [nx, ny, nz] = grid.dims;
     for (i, j, k) in [(0, 0, 0), (nx - 1, ny - 1, nz - 1), (nx / 2, ny / 3, nz / 5)] {
@@ -494,7 +495,7 @@ fn floor_anatomy() {
         eprintln!("{row:2} {cells}");
     }
     // The grid against the fixture's by optical depth towards the sun.
-    let frame = crate::solvers::ScatteringGrid::over_medium(&sc.medium, FIXTURE_GRID).unwrap();
+    let frame = crate::stages::ScatteringGrid::over_medium(&sc.medium, FIXTURE_GRID).unwrap();
     let grid = crate::solvers::testing::resample(&out, &frame);
     let fg = fx.grid();
     let to_sun = crate::solvers::testing::cloud::to_sun();

@@ -92,7 +92,7 @@ pub struct Tracer<'a> {
     pub split_order: u32,
     /// Read every `CANCEL_STRIDE` photons: once cancelled the batches stop early and the
     /// caller discards their tallies.
-    pub progress: &'a dyn crate::solvers::Progress,
+    pub progress: &'a dyn crate::stages::Progress,
     /// `Angular::Camera` (settings.rs): deposits weighted by the exact phase function towards
     /// this camera position, with no direction, so the cache holds S itself per cell (no lobe
     /// model, only the spatial binning). None: the lobes.

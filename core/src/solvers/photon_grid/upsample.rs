@@ -172,7 +172,7 @@ mod tests {
     use super::*;
     use crate::medium::{procedural, GridLimits};
     use crate::rng::Rng;
-    use crate::solvers::ScatteringGrid;
+    use crate::stages::ScatteringGrid;
 
     /// The plume (16^3) with its density times `k` and `density_scale` over `k`: the same
     /// medium in other density units.

@@ -9,15 +9,16 @@ use std::any::Any;
 use glam::Vec3;
 
 use super::light_grid::LightGrid;
-use super::merge::Merged;
-use super::mip::MediumMip;
+use crate::stages::upsample::Merged;
+use crate::stages::mip::MediumMip;
 use super::propagate::{Propagation, PropagationStats, RunOptions};
 use super::settings::PopSettings;
 use super::radial::{self, init::RadialInitial, propagate::RadialPropagation, RadialLight};
-use super::{accumulate, init, merge, upsample};
+use super::{accumulate, init, merge};
+use crate::stages::upsample;
 use crate::error::Result;
 use crate::medium::Medium;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::{Progress, ScatteringGrid};
 
 /// The sums of a transmittance sweep that the energy report needs (see `init::Initial`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -121,7 +122,7 @@ impl PopBackend for CpuBackend {
     }
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
-        upsample::upsample(medium, mip, merged, settings)
+        upsample::upsample(medium, mip, merged, &settings.upsampling())
     }
 
     fn keep_light(&self, light: &CpuLight) -> Option<Box<dyn Any + Send>> {

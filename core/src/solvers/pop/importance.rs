@@ -27,13 +27,13 @@ use rayon::prelude::*;
 
 use super::init;
 use super::light_grid::LightGrid;
-use super::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 use super::propagate::Propagation;
 use super::accumulate;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::scene::{Camera, LatLongMap};
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 use crate::translate::dome::DirectionalMap;
 
 /// The paper's resolutions (Sec. 5.2: 16^3 and 32 x 16).

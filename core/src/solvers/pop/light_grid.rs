@@ -5,7 +5,7 @@
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use rayon::prelude::*;
 
-use super::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 use crate::error::{Error, Result};
 use crate::medium::optics::box_corners;
 use crate::medium::{trilinear, Medium};

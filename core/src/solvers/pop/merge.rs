@@ -5,24 +5,11 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::light_grid::LightGrid;
-use super::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 use crate::error::Result;
 use crate::medium::Medium;
-use crate::solvers::ScatteringGrid;
-
-pub struct Merged {
-    /// J (in-scattered radiance per unit sigma_s) at the merged grid points.
-    pub j: ScatteringGrid,
-    /// Mean density around each point, over one merged cell.
-    pub density: Vec<f32>,
-}
-
-/// Footprint of a grid's cell in medium voxels.
-pub fn footprint(medium: &Medium, grid: &ScatteringGrid) -> f32 {
-    let m = grid.index_to_world.matrix3;
-    let spacing = m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length());
-    spacing / medium.voxel_size_world().max_element()
-}
+use crate::stages::upsample::{footprint, Merged};
+use crate::stages::ScatteringGrid;
 
 /// `lights`: each light's grid and its accumulation J, summed in this order.
 pub fn merge(medium: &Medium, mip: &MediumMip, lights: &[(&LightGrid, &[Vec3])], resolution: u32) -> Result<Merged> {

@@ -51,24 +51,23 @@ pub mod importance;
 pub mod init;
 pub mod light_grid;
 pub mod merge;
-pub mod mip;
 pub mod propagate;
 pub mod radial;
 pub mod residuum;
 pub mod reuse;
 pub mod settings;
-pub mod upsample;
 
 use glam::Vec3;
 
-use super::session::SessionState;
-use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
+use super::{parse_settings, SolveCtx, SolveOutput, Solver};
+use crate::stages::{Progress, ScatteringGrid, Timings};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
 use crate::translate::{distant_ordinate, dome};
 use backend::PopBackend;
 use light_grid::LightGrid;
-use mip::MediumMip;
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::footprint;
 pub use propagate::PropagationStats;
 pub use settings::PopSettings;
 
@@ -158,26 +157,10 @@ impl Pop {
         Pop::new(parse_settings(map)?)
     }
 
-    /// Solves and returns the per-light energy report along with S and the timings.
-    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress) -> Result<(SolveOutput, PopReport)> {
-        self.solve_with(scene, progress, &backend::CpuBackend)
-    }
-
-    /// As `solve_detailed`, with the stages that touch every cell (sweep, propagation, merge,
-    /// upsampling) run by `backend`: `backend::CpuBackend`, or the GPU port (volscatter-gpu).
-    pub fn solve_with<B: PopBackend>(&self, scene: &Scene, progress: &dyn Progress, backend: &B) -> Result<(SolveOutput, PopReport)> {
-        self.solve_reusing(scene, progress, backend, None)
-    }
-
-    /// As `solve_with`, one frame of a session: the light-independent stages come from
-    /// `reuse` when the medium (and camera) they were made for did not change (reuse.rs).
-    pub fn solve_reusing<B: PopBackend>(
-        &self,
-        scene: &Scene,
-        progress: &dyn Progress,
-        backend: &B,
-        mut reuse: Option<&mut reuse::PopReuse>,
-    ) -> Result<(SolveOutput, PopReport)> {
+    /// The solve on `backend` (the CPU's, or a device's through `PopDevice`), one frame of a
+    /// session when `reuse` is given: the light-independent stages then come from it when the
+    /// medium (and camera) they were made for did not change (reuse.rs).
+    fn run<B: PopBackend>(&self, scene: &Scene, progress: &dyn Progress, backend: &B, mut reuse: Option<&mut reuse::PopReuse>) -> Result<(SolveOutput, PopReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
         let mut timings = Timings::default();
@@ -188,9 +171,9 @@ impl Pop {
         let merge_probe = ScatteringGrid::over_medium(medium, s.merge_resolution())?;
         let (wlo, whi) = medium.world_bounds();
         let cell_guess = (whi - wlo).max_element() / s.grid_resolution as f32 / medium.voxel_size_world().max_element();
-        let min_fp = merge::footprint(medium, &out_probe).min(merge::footprint(medium, &merge_probe)).min(cell_guess);
+        let min_fp = footprint(medium, &out_probe).min(footprint(medium, &merge_probe)).min(cell_guess);
         // In a session, the medium's key decides what may be reused (one pass over its voxels).
-        let key = reuse.is_some().then(|| timings.time("pop medium key", || reuse::MediumKey::of(medium)));
+        let key = reuse.is_some().then(|| timings.time("pop medium key", || crate::medium::key::MediumKey::of(medium)));
         let mip = timings.time("pop mip", || match (reuse.as_deref_mut(), &key) {
             (Some(r), Some(k)) => r.mip(k, medium, min_fp),
             _ => std::sync::Arc::new(MediumMip::new(medium, min_fp)),
@@ -225,9 +208,6 @@ impl Pop {
                     "pop: lights[{i}] is a dome and dome_ordinates = 0: its light is left out of the scattering (the compositor still shows it behind the medium)"
                 )),
             }
-        }
-        for w in &report.warnings {
-            eprintln!("warning: {w}");
         }
         let mut local = radial::sources(&scene.lights, s.area_vpls);
         local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
@@ -373,18 +353,41 @@ fn merge_timings(t: Timings) -> Timings {
     Timings(out)
 }
 
+/// A `PopBackend` as a device's entry in a `SolveCtx` carries it: the backend's associated
+/// types make `PopBackend` itself unfit for a trait object, so a device hands this instead
+/// (every `PopBackend` is one).
+pub trait PopDevice: Sync {
+    fn solve(&self, pop: &Pop, scene: &Scene, progress: &dyn Progress, reuse: Option<&mut reuse::PopReuse>) -> Result<(SolveOutput, PopReport)>;
+}
+
+impl<B: PopBackend> PopDevice for B {
+    fn solve(&self, pop: &Pop, scene: &Scene, progress: &dyn Progress, reuse: Option<&mut reuse::PopReuse>) -> Result<(SolveOutput, PopReport)> {
+        pop.run(scene, progress, self, reuse)
+    }
+}
+
 impl Solver for Pop {
     fn name(&self) -> &'static str {
         "pop"
     }
-    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-        self.solve_detailed(scene, progress).map(|(out, _)| out)
-    }
-    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState) -> Result<SolveOutput> {
-        let reuse = state.kept(reuse::PopReuse::default);
-        self.solve_reusing(scene, progress, &backend::CpuBackend, Some(reuse)).map(|(out, _)| out)
+    /// S with the per-light energy report (`PopReport`) attached; on the device's backend when
+    /// the context carries one, reusing the session's kept stages when it is a session.
+    fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
+        let device: &dyn PopDevice = ctx.backend::<dyn PopDevice>().unwrap_or(&backend::CpuBackend);
+        let progress = ctx.progress();
+        let reuse = ctx.session().map(|state| state.kept(reuse::PopReuse::default));
+        let (mut out, report) = device.solve(self, scene, progress, reuse)?;
+        out.notes.extend(report.warnings.iter().cloned());
+        Ok(out.with_report(report))
     }
 }
 
 #[cfg(test)]
 pub(crate) mod tests;
+
+impl PopSettings {
+    /// The settings of the shared upsampling stage (stages/upsample.rs).
+    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
+        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+    }
+}

@@ -41,7 +41,7 @@ use super::init::Initial;
 use super::light_grid::LightGrid;
 use crate::error::{Error, Result};
 use crate::phase::{hg, hg_cone_fraction};
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 const COS_45: f32 = std::f32::consts::FRAC_1_SQRT_2;
 

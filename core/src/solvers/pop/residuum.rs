@@ -34,7 +34,7 @@
 use glam::{IVec3, Vec3};
 
 use super::light_grid::LightGrid;
-use super::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 use crate::error::Result;
 use crate::medium::Medium;
 

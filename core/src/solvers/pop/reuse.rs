@@ -25,53 +25,12 @@ use std::any::Any;
 use super::backend::PopBackend;
 use super::dome::DirectionalMap;
 use super::light_grid::LightGrid;
-use super::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 use super::residuum::Residuum;
 use super::settings::PopSettings;
 use super::LightReport;
-use crate::medium::{DensityGrid, Medium};
-
-/// A hash of every value a density grid stores (layout, bricks, tiles), FNV-1a over 32-bit
-/// words with a final mix: equal grids give equal keys; different grids collide with
-/// probability about 2^-64.
-pub fn grid_fingerprint(grid: &DensityGrid) -> u64 {
-    let (brick_min, brick_dims, table, bricks, constants) = grid.storage();
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    let mut word = |w: u32| h = (h ^ w as u64).wrapping_mul(0x0000_0100_0000_01b3);
-    for v in brick_min.to_array().into_iter().chain(brick_dims.to_array()) {
-        word(v as u32);
-    }
-    let (lo, hi) = grid.bbox();
-    for v in lo.to_array().into_iter().chain(hi.to_array()) {
-        word(v as u32);
-    }
-    table.iter().for_each(|&t| word(t));
-    bricks.iter().flatten().for_each(|v| word(v.to_bits()));
-    constants.iter().for_each(|v| word(v.to_bits()));
-    // splitmix64's finaliser: FNV's low bits alone mix poorly.
-    h ^= h >> 30;
-    h = h.wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    h ^= h >> 27;
-    h = h.wrapping_mul(0x94d0_49bb_1331_11eb);
-    h ^ (h >> 31)
-}
-
-/// Everything about a medium that POP's light-independent stages read, as exact bits.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct MediumKey {
-    grid: u64,
-    /// index_to_world (12 floats), density_scale, albedo, g.
-    params: Vec<u32>,
-}
-
-impl MediumKey {
-    pub fn of(medium: &Medium) -> Self {
-        let m = medium.index_to_world;
-        let floats = m.matrix3.to_cols_array().into_iter().chain(m.translation.to_array());
-        let floats = floats.chain(medium.density_scale.to_array()).chain(medium.albedo.to_array()).chain([medium.g]);
-        MediumKey { grid: grid_fingerprint(&medium.grid), params: floats.map(f32::to_bits).collect() }
-    }
-}
+use crate::medium::key::MediumKey;
+use crate::medium::Medium;
 
 /// How often each kept stage was reused and recomputed over a session.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -216,7 +175,8 @@ mod tests {
     use super::*;
     use crate::scene::Scene;
     use crate::solvers::session::SessionState;
-    use crate::solvers::{NoProgress, Solver};
+    use crate::solvers::{Solver};
+use crate::stages::NoProgress;
 
     #[test]
     fn fingerprint_tells_grids_apart() {
@@ -226,8 +186,8 @@ mod tests {
         b.g = 0.5;
         assert_ne!(MediumKey::of(&a), MediumKey::of(&b), "the material is part of the key");
         let one = |v: f32| DensityGrid::from_dense(glam::IVec3::ZERO, glam::IVec3::splat(4), &[v; 64], Default::default()).unwrap();
-        assert_eq!(grid_fingerprint(&one(1.0)), grid_fingerprint(&one(1.0)));
-        assert_ne!(grid_fingerprint(&one(1.0)), grid_fingerprint(&one(1.0 + f32::EPSILON)), "one ulp of density changes the key");
+        assert_eq!(crate::medium::key::grid_fingerprint(&one(1.0)), crate::medium::key::grid_fingerprint(&one(1.0)));
+        assert_ne!(crate::medium::key::grid_fingerprint(&one(1.0)), crate::medium::key::grid_fingerprint(&one(1.0 + f32::EPSILON)), "one ulp of density changes the key");
         let mut shifted = a.clone();
         shifted.index_to_world.translation.x += 1e-3;
         assert_ne!(MediumKey::of(&a), MediumKey::of(&shifted), "the transform is part of the key");

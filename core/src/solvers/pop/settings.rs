@@ -149,7 +149,7 @@ impl PopSettings {
         if self.merge_resolution != 0 && !(2..=1024).contains(&self.merge_resolution) {
             return Err(Error::scene("solver.merge_resolution", format!("must be 0 or in 2..=1024, got {}", self.merge_resolution)));
         }
-        validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
+        self.upsampling().validate()?;
         if self.dome_ordinates > 1024 {
             return Err(Error::scene("solver.dome_ordinates", format!("must be in 0..=1024, got {}", self.dome_ordinates)));
         }
@@ -194,19 +194,4 @@ impl PopSettings {
     pub fn merge_resolution(&self) -> u32 {
         if self.merge_resolution == 0 { (2 * self.grid_resolution).min(1024) } else { self.merge_resolution }
     }
-}
-
-/// The checks of the joint bilateral upsampling's settings (`upsample.rs`), shared by every
-/// solver that upsamples through it (pop, vpl): the same limits and messages for all.
-pub(crate) fn validate_upsampling(output_resolution: u32, range_sigma: f32, spatial_sigma: f32) -> Result<()> {
-    if !(2..=1024).contains(&output_resolution) {
-        return Err(Error::scene("solver.output_resolution", format!("must be in 2..=1024, got {output_resolution}")));
-    }
-    if !(range_sigma.is_finite() && range_sigma > 0.0) {
-        return Err(Error::scene("solver.range_sigma", format!("must be > 0, got {range_sigma}")));
-    }
-    if !(spatial_sigma.is_finite() && spatial_sigma > 0.0 && spatial_sigma <= 4.0) {
-        return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {spatial_sigma}")));
-    }
-    Ok(())
 }

@@ -7,7 +7,7 @@ use crate::medium::{procedural, GridLimits, Medium};
 use crate::scene::Camera;
 use crate::solvers::reference::{Reference, ReferenceSettings};
 use crate::solvers::testing::{against_single_scattering, env_u32, homogeneous_box, load_fixture, mean, regenerate_selected, rgb, s_over_sigma_s, selected, Errors, SolverOutput, FIXTURE_GRID};
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 use glam::Affine3A;
 use crate::scene::Light;
 
@@ -74,7 +74,7 @@ fn pop_vs_fixture_scene(name: &str, sc: &Scene, settings: &PopSettings) -> (Erro
     let errors = Errors::against(&pop, &fx);
     if std::env::var("POP_ROWS").is_ok() {
         let [nx, ny, nz] = pop.frame.dims;
-        let s1 = crate::compositor::single_scattering_grid(sc, FIXTURE_GRID, 64).unwrap();
+        let s1 = crate::stages::single_scattering::single_scattering_grid(sc, FIXTURE_GRID, 64).unwrap();
         for (n, v) in [("pop grid", &pop.grid), ("ref grid", &fx.grid()), ("single", &s1.data)] {
             for (lab, jj) in [("y=front", 1u32), ("y=mid", ny / 2), ("y=back", ny - 2)] {
                 let col: Vec<String> = (0..nz).rev().map(|k| format!("{:.3}", v[(nx / 2 + nx * (jj + ny * k)) as usize].x)).collect();

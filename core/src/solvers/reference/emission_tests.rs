@@ -4,7 +4,7 @@ use crate::solvers::testing::homogeneous_box;
 use super::*;
 use crate::medium::{Emission, EmissionLaw, EmissionTerm, Medium};
 use crate::scene::Camera;
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 /// `medium` emitting `e` (W/m^3/sr) per unit of its own density grid.
 fn emitting(mut medium: Medium, e: Vec3) -> Medium {

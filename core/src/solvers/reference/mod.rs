@@ -18,7 +18,8 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
+use super::{parse_settings, SolveCtx, SolveOutput, Solver};
+use crate::stages::{Progress, ScatteringGrid, Timings};
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::rng::Rng;
@@ -108,9 +109,9 @@ impl Reference {
     }
 
     /// Path-traces the image directly (RGBA + AOVs `single`, `multiple`, `background`).
-    pub fn render_image(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    fn image(&self, scene: &Scene, progress: &dyn Progress, transparent: bool, timings: &mut Timings) -> Result<Image> {
         let s = &self.settings;
-        super::guard::check_scene(scene)?;
+        let transparent = transparent || s.transparent;
         Image::check_budget(scene.camera.width, scene.camera.height, "reference image")?;
         crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
@@ -148,7 +149,7 @@ impl Reference {
                         }
                         let inv = 1.0 / s.spp as f32;
                         let alpha = 1.0 - (transmittance * inv).dot(Vec3::splat(1.0 / 3.0));
-                        let rgb = (acc.single + acc.multiple + if s.transparent { Vec3::ZERO } else { acc.background }) * inv;
+                        let rgb = (acc.single + acc.multiple + if transparent { Vec3::ZERO } else { acc.background }) * inv;
                         row[x] = rgb.extend(alpha.clamp(0.0, 1.0));
                         row1[x] = acc.single * inv;
                         row_m[x] = acc.multiple * inv;
@@ -166,15 +167,13 @@ impl Reference {
         let mut img = Image::new(cam.width, cam.height);
         img.rgba = rgba;
         img.aovs = vec![("single".into(), single), ("multiple".into(), multiple), ("background".into(), background)];
-        super::guard::check_finite(scene, "image", img.rgba.iter().map(|p| p.truncate()).chain(img.aovs.iter().flat_map(|a| a.1.iter().copied())))?;
         Ok(img)
     }
 
     /// Estimates S at every grid point: sigma_s(x) times the phase-weighted incident radiance
     /// towards the camera, with `grid_spp` paths per point.
-    pub fn scattering_grid(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
+    fn scattering_grid(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
         let s = &self.settings;
-        super::guard::check_scene(scene)?;
         let mut grid = ScatteringGrid::over_medium(&scene.medium, s.grid_resolution)?;
         crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;
         let tracer = timings.time("majorant grid", || Tracer::new(scene, s));
@@ -226,7 +225,7 @@ impl Reference {
 impl Reference {
     /// The grid hosts get (on_voxels.rs): L traced on the `grid_resolution` grid at the points
     /// some voxel with density interpolates from, S = sigma_s x L on the medium's voxels.
-    pub fn scattering_on_voxels(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
+    fn scattering_on_voxels(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
         let s = &self.settings;
         let medium = &scene.medium;
         let (out, density) = timings.time("output grid", || on_voxels::output_frame(medium, s.output_resolution))?;
@@ -279,7 +278,8 @@ impl Solver for Reference {
     /// With `output_resolution`, S on the medium's voxels (`scattering_on_voxels`), the grid a
     /// host renders next to the medium's own extinction; without, the point estimate on the
     /// `grid_resolution` grid (`scattering_grid`, what the solver fixtures store).
-    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
+    fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
+        let progress = ctx.progress();
         let mut timings = Timings::default();
         let scattering = if self.settings.output_resolution == 0 {
             self.scattering_grid(scene, progress, &mut timings)?
@@ -288,6 +288,10 @@ impl Solver for Reference {
             crate::lattice_product::finished(&scene.medium, self.scattering_on_voxels(scene, progress, &mut timings)?)
         };
         Ok(SolveOutput::new(scattering, timings))
+    }
+
+    fn render_image(&self, scene: &Scene, ctx: &mut SolveCtx, transparent: bool, timings: &mut Timings) -> Option<Result<Image>> {
+        Some(self.image(scene, ctx.progress(), transparent, timings))
     }
 }
 

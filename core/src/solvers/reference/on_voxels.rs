@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::medium::Medium;
-use crate::solvers::ScatteringGrid;
+use crate::stages::ScatteringGrid;
 
 /// The output frame (the medium's voxels, up to `output_resolution` per side) and each
 /// output point's density.

@@ -7,7 +7,7 @@ use crate::scene::{Camera, Environment, Light};
 // Re-exported for the compositor's tests, which import it from here.
 pub(crate) use crate::solvers::testing::homogeneous_box;
 use crate::solvers::testing::s_over_sigma_s;
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 fn scene_with(medium: Medium, lights: Vec<Light>, size: u32) -> Scene {
     Scene {

@@ -71,7 +71,7 @@ pub(crate) fn optical_depth(medium: &Medium, a: Vec3, b: Vec3) -> f32 {
 #[ignore]
 fn cloud_rate() {
     use crate::solvers::reference::{Reference, ReferenceSettings};
-    use crate::solvers::{NoProgress, Timings};
+    use crate::stages::{NoProgress, Timings};
     let sc = cloud_scene();
     let (spp, grid_spp) = (env_u32("CLOUD_SPP", 8), env_u32("CLOUD_GRID_SPP", 8));
     let half = |seed: u64| {
@@ -173,7 +173,8 @@ fn cloud_fixture_is_converged_and_lit_from_above() {
 #[test]
 fn pop_on_dense_cloud() {
     use crate::solvers::pop::{Pop, PopSettings};
-    use crate::solvers::{NoProgress, Solver};
+    use crate::solvers::{Solver};
+use crate::stages::NoProgress;
     let sc = cloud_scene();
     for (label, settings) in [("grid 16", PopSettings { grid_resolution: 16, output_resolution: 32, ..Default::default() }), ("defaults", PopSettings::default())] {
         let t = std::time::Instant::now();

@@ -9,7 +9,7 @@ use super::{homogeneous_box, mean, rgb, s_over_sigma_s};
 use crate::compositor::{composite, CompositeOptions};
 use crate::medium::Medium;
 use crate::scene::{Camera, Environment, Light, Scene};
-use crate::solvers::{NoProgress, ScatteringGrid};
+use crate::stages::{NoProgress, ScatteringGrid};
 
 /// The solvers these checks run over. The only line that names where the list lives: with the
 /// solver registry (solvers/registry.rs) it becomes the registry's names. `auto` is left out:

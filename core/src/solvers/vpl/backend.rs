@@ -6,15 +6,15 @@
 use super::gather::{self, Gathered};
 use super::settings::VplSettings;
 use super::walks::Walks;
-use crate::compositor::single_scattering_grid_dome_spaced;
+use crate::stages::single_scattering::single_scattering_grid_dome_spaced;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::scene::Scene;
-use crate::solvers::pop::merge::Merged;
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::pop::settings::PopSettings;
-use crate::solvers::pop::upsample;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::upsample::Merged;
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::Upsampling;
+use crate::stages::upsample;
+use crate::stages::{Progress, ScatteringGrid};
 
 pub trait VplBackend: Sync {
     /// gather.rs: J on the gather grid with its density guide, J_iso, and the near field's
@@ -22,7 +22,7 @@ pub trait VplBackend: Sync {
     fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered>;
 
     /// pop's upsample.rs: the multiple scattering S on the output grid.
-    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid>;
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &Upsampling) -> Result<ScatteringGrid>;
 
     /// The compositor's single-scattering grid on the output frame.
     fn single_scattering(&self, scene: &Scene, s: &VplSettings, progress: &dyn Progress) -> Result<ScatteringGrid>;
@@ -36,7 +36,7 @@ impl VplBackend for CpuBackend {
         gather::gather(scene, mip, walks, s, progress)
     }
 
-    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &Upsampling) -> Result<ScatteringGrid> {
         upsample::upsample(medium, mip, merged, settings)
     }
 

@@ -39,12 +39,12 @@ use super::gather::{connect, subset_lists, GatherStats, Kernel};
 use super::march::Marcher;
 use super::settings::VplSettings;
 use super::walks::{Vpl, Walks};
-use crate::compositor::DirectLight;
+use crate::stages::single_scattering::DirectLight;
 use crate::medium::{optical_depth, Medium};
 use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
 use crate::scene::Scene;
-use crate::solvers::pop::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 
 /// Share of the compensation's distances drawn from the locally homogeneous exponential (the
 /// rest uniform on [0, R]).

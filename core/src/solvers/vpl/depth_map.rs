@@ -18,7 +18,7 @@
 use glam::{Vec2, Vec3};
 
 use super::march::Marcher;
-use crate::solvers::pop::radial::octahedral::wrap;
+use crate::stages::octahedral::wrap;
 
 /// Point of the unit square for a unit direction: the plain octahedral map (not pop's
 /// equal-area one: no atan per lookup, which was 8% of a render's time; its cells differ in

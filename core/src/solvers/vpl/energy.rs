@@ -22,7 +22,7 @@
 use glam::Vec3;
 
 use super::walks::Walks;
-use crate::solvers::ScatteringGrid;
+use crate::stages::ScatteringGrid;
 
 /// The powers compared and the factor applied (W, RGB), reported by the solve.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]

@@ -27,13 +27,13 @@ use super::depth_map::DepthMap;
 use super::far_field::{Cluster, FarField};
 use super::march::Marcher;
 use crate::medium::{ball_mean_inverse_square, min_spacing, near_field_radius, Medium};
-use crate::compositor::{exp_neg, is_grey};
+use crate::stages::single_scattering::{exp_neg, is_grey};
 use crate::phase::hg;
-use crate::solvers::pop::merge::{footprint, Merged};
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::ScatteringGrid;
+use crate::stages::upsample::{footprint, Merged};
+use crate::stages::mip::MediumMip;
+use crate::stages::ScatteringGrid;
 use crate::error::{Error, Result};
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 /// Energy bookkeeping of the near field: the connections made, and the near field's energy
 /// (sums over the gather points of sigma_s x J, channels added, per unit volume: comparable
@@ -645,7 +645,7 @@ pub fn ball_radius(medium: &Medium, rho: f32, r: f32, mean_free_paths: f32) -> f
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solvers::NoProgress;
+    use crate::stages::NoProgress;
 
     /// Exploration (not in CI): each far cluster's light against its own VPLs', summed over
     /// the gather points, per tree level, on a fixture (VPL_CLUSTER_CASE, default cube_g07;

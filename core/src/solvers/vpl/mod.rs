@@ -82,10 +82,10 @@ pub mod upsample;
 pub mod walks;
 
 
-use super::pop;
-use super::pop::mip::MediumMip;
-use super::pop::settings::PopSettings;
-use super::{parse_settings, Progress, ScatteringGrid, SolveOutput, Solver, Timings};
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::Merged;
+use super::{parse_settings, SolveCtx, SolveOutput, Solver};
+use crate::stages::{Progress, ScatteringGrid, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
@@ -94,6 +94,8 @@ pub use settings::{NearField, NearUpsample, Transmittance, UpsampleFit, VplSetti
 
 pub struct Vpl {
     pub settings: VplSettings,
+    /// Only the first VPLs of each walk are kept (`with_max_orders`).
+    max_orders: u32,
 }
 
 /// What a solve did: VPLs left, their power, walks cut, the near field's share.
@@ -114,21 +116,22 @@ pub struct VplReport {
 impl Vpl {
     pub fn new(settings: VplSettings) -> Result<Self> {
         settings.validate()?;
-        Ok(Vpl { settings })
+        Ok(Vpl { settings, max_orders: u32::MAX })
     }
 
     pub fn from_settings(map: &serde_json::Map<String, serde_json::Value>) -> Result<Self> {
         Vpl::new(parse_settings(map)?)
     }
 
-    /// Solves; `max_orders` keeps only the first VPLs of each walk (u32::MAX: all), so that 1
-    /// gives single + double scattering.
-    pub fn solve_detailed(&self, scene: &Scene, progress: &dyn Progress, max_orders: u32) -> Result<(SolveOutput, VplReport)> {
-        self.solve_with(scene, progress, max_orders, &CpuBackend)
+    /// This solver keeping only the first `max_orders` VPLs of each walk (u32::MAX, the
+    /// default: all), so that 1 gives single + double scattering.
+    pub fn with_max_orders(mut self, max_orders: u32) -> Self {
+        self.max_orders = max_orders;
+        self
     }
 
-    /// `solve_detailed` with the gather, upsampling and single scattering on `backend`.
-    pub fn solve_with(&self, scene: &Scene, progress: &dyn Progress, max_orders: u32, backend: &dyn VplBackend) -> Result<(SolveOutput, VplReport)> {
+    fn run(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn VplBackend) -> Result<(SolveOutput, VplReport)> {
+        let max_orders = self.max_orders;
         let medium = &scene.medium;
         let s = &VplSettings { near_field: self.near_field_for(medium)?, ..self.settings.clone() };
         let mut timings = Timings::default();
@@ -139,17 +142,17 @@ impl Vpl {
         if progress.cancelled() {
             return Err(Error::Cancelled);
         }
-        let out_probe = super::ScatteringGrid::over_medium(medium, s.output_resolution)?;
-        let gather_probe = super::ScatteringGrid::over_medium(medium, s.gather_resolution)?;
-        let min_fp = super::pop::merge::footprint(medium, &out_probe).min(super::pop::merge::footprint(medium, &gather_probe));
+        let out_probe = crate::stages::ScatteringGrid::over_medium(medium, s.output_resolution)?;
+        let gather_probe = crate::stages::ScatteringGrid::over_medium(medium, s.gather_resolution)?;
+        let min_fp = crate::stages::upsample::footprint(medium, &out_probe).min(crate::stages::upsample::footprint(medium, &gather_probe));
         let mip = timings.time("vpl mip", || MediumMip::new(medium, min_fp));
         if !progress.update("vpl gather", 0.0) {
             return Err(Error::Cancelled);
         }
         let gathered = timings.time("vpl gather", || backend.gather(scene, &mip, &walks, s, progress))?;
         let (merged, gstats) = (&gathered.merged, gathered.stats);
-        let pop_like = PopSettings { output_resolution: s.output_resolution, upsample: s.upsample, range_sigma: s.range_sigma, spatial_sigma: s.spatial_sigma, ..Default::default() };
-        let upsample = |merged: &pop::merge::Merged| match (s.upsample, s.upsample_fit) {
+        let pop_like = s.upsampling();
+        let upsample = |merged: &Merged| match (s.upsample, s.upsample_fit) {
             // The linear fit on the CPU for both backends (vpl/upsample.rs).
             (true, UpsampleFit::Linear) => upsample::upsample_linear(medium, &mip, merged, &pop_like, progress),
             _ => backend.upsample(medium, &mip, merged, &pop_like),
@@ -170,7 +173,7 @@ impl Vpl {
         let energy = if s.normalize_energy && !matches!(s.near_field, NearField::Compensate | NearField::Hat) && s.near_refine == 0.0 && !ratio && max_orders == u32::MAX {
             let iso = timings.time("vpl energy", || {
                 let j = ScatteringGrid { dims: merged.j.dims, index_to_world: merged.j.index_to_world, data: gathered.iso };
-                let mut iso = upsample(&pop::merge::Merged { j, density: merged.density.clone() })?;
+                let mut iso = upsample(&Merged { j, density: merged.density.clone() })?;
                 // Its power as the host will render it: the same node values as S's (below).
                 crate::lattice_product::finish(medium, &mut iso);
                 Ok::<_, Error>(iso)
@@ -208,10 +211,21 @@ impl Solver for Vpl {
     fn name(&self) -> &'static str {
         "vpl"
     }
-    fn solve(&self, scene: &Scene, progress: &dyn Progress) -> Result<SolveOutput> {
-        self.solve_detailed(scene, progress, u32::MAX).map(|(out, _)| out)
+    /// S with what the solve did (`VplReport`) attached; the gather, upsampling and single
+    /// scattering on the device's `VplBackend` when the context carries one.
+    fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
+        let backend: &dyn VplBackend = ctx.backend::<dyn VplBackend>().unwrap_or(&CpuBackend);
+        let (out, report) = self.run(scene, ctx.progress(), backend)?;
+        Ok(out.with_report(report))
     }
 }
 
 #[cfg(test)]
 mod tests;
+
+impl VplSettings {
+    /// The settings of the shared upsampling stage (stages/upsample.rs).
+    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
+        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+    }
+}

@@ -44,11 +44,11 @@ use super::walks::Walks;
 use crate::error::{Error, Result};
 use crate::medium::{ball_mean_inverse_square, near_field_radius, Medium};
 use crate::scene::Scene;
-use crate::solvers::pop::merge::{footprint, Merged};
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::pop::settings::PopSettings;
-use crate::solvers::pop::upsample::Bilateral;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::upsample::{footprint, Merged};
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::Upsampling;
+use crate::stages::upsample::Bilateral;
+use crate::stages::{Progress, ScatteringGrid};
 
 /// The density's near-field integral D, summed over the output grid's own points. Measured on
 /// plume_point (4096 walks, 16-cell gather, 8 seeds): a lattice refined twice (the density at
@@ -201,7 +201,7 @@ pub fn upsample(
     walks: &Walks,
     merged: &Merged,
     settings: &VplSettings,
-    pop_like: &PopSettings,
+    pop_like: &Upsampling,
     progress: &dyn Progress,
     upsample: impl Fn(&Merged) -> Result<ScatteringGrid>,
 ) -> Result<ScatteringGrid> {

@@ -35,9 +35,9 @@ use super::walks::{Vpl, Walks};
 use crate::error::{Error, Result};
 use crate::medium::{near_field_radius, Medium};
 use crate::scene::Scene;
-use crate::solvers::pop::merge::{footprint, Merged};
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::upsample::{footprint, Merged};
+use crate::stages::mip::MediumMip;
+use crate::stages::{Progress, ScatteringGrid};
 
 /// The VPLs binned in cubes of side `cell` (world units), for the ones within `cell` of a point.
 struct VplHash<'v> {

@@ -3,7 +3,6 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::solvers::pop::settings::validate_upsampling;
 
 /// How the 1/d^2 of a VPL's connection is kept finite near the VPL (paper Sec. 4.3).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -407,7 +406,7 @@ impl VplSettings {
         if !(2..=64).contains(&self.map_resolution) {
             return Err(Error::scene("solver.map_resolution", format!("must be in 2..=64, got {}", self.map_resolution)));
         }
-        validate_upsampling(self.output_resolution, self.range_sigma, self.spatial_sigma)?;
+        self.upsampling().validate()?;
         if !(1..=8).contains(&self.dome_spacing) {
             return Err(Error::scene("solver.dome_spacing", format!("must be in 1..=8, got {}", self.dome_spacing)));
         }

@@ -3,10 +3,11 @@
 use glam::Vec3;
 
 use super::{NearField, Vpl, VplSettings};
-use crate::compositor::single_scattering_grid;
+use crate::stages::single_scattering::single_scattering_grid;
 use crate::scene::Scene;
 use crate::solvers::testing::errors_against_fixture;
-use crate::solvers::{NoProgress, Solver};
+use crate::solvers::{Solver};
+use crate::stages::NoProgress;
 
 /// The fixtures' scenes: pop's (cubes, plume) and its radial tests' (local lights).
 use crate::solvers::testing::fixture_scene as case;
@@ -202,7 +203,7 @@ fn vpl_power_is_a_over_one_minus_a_around_a_point_light() {
         solver: Default::default(),
     };
     let s = VplSettings { walks: 4096, gather_resolution: 2, output_resolution: 2, ..Default::default() };
-    let walks = super::walks::trace(&sc, &s, u32::MAX, &crate::solvers::NoProgress).unwrap();
+    let walks = super::walks::trace(&sc, &s, u32::MAX, &crate::stages::NoProgress).unwrap();
     let light_power = 4.0 * std::f32::consts::PI;
     let ratio = walks.total_power().x / light_power;
     let expected = a / (1.0 - a);
@@ -469,7 +470,7 @@ fn vpl_double_scattering_matches_reference_order_two() {
     let (out, _) = Vpl::new(VplSettings { near_field: NearField::Ball, ..test_settings() }).unwrap().solve_detailed(&sc, &NoProgress, 1).unwrap();
     let ours = SolverOutput::of(&sc, &out.scattering);
     let r = Reference::new(ReferenceSettings { spp: 64, max_depth: 2, transparent: true, ..Default::default() }).unwrap();
-    let img = r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap();
+    let img = r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap();
     let theirs = img.aov("multiple").unwrap();
     let ratio = mean(&ours.multiple) / mean(theirs);
     let err = crate::image::relative_rmse(&ours.multiple, theirs);
@@ -496,7 +497,7 @@ fn vpl_bench() {
             let spp: u32 = spp.parse().unwrap();
             let t = std::time::Instant::now();
             let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
-            let img = r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap();
+            let img = r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap();
             let secs = t.elapsed().as_secs_f64();
             let fx = load_fixture(&name);
             let image = rgb(&img);
@@ -793,7 +794,7 @@ fn converged_image(name: &str, sc: &Scene, spp: u32, dir: &std::path::Path) -> (
     }
     let half = |seed: u64| {
         let r = Reference::new(ReferenceSettings { spp: spp / 2, seed, transparent: true, ..Default::default() }).unwrap();
-        rgb(&r.render_image(sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap())
+        rgb(&r.render_image(sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap())
     };
     let (a, b) = (half(101), half(102));
     let noise = 0.5 * crate::image::relative_rmse(&a, &b);
@@ -846,7 +847,7 @@ fn vpl_bench_image() {
         for spp in list("VPL_IMAGE_SPP", "16,64") {
             let t = std::time::Instant::now();
             let r = Reference::new(ReferenceSettings { spp, seed: 7, transparent: true, ..Default::default() }).unwrap();
-            let img = rgb(&r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap());
+            let img = rgb(&r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap());
             let secs = t.elapsed().as_secs_f64();
             let (e, ec, ratio) = err(&img);
             println!("BENCH {{{head},\"solver\":\"reference\",\"spp\":{spp},\"seconds\":{secs:.4},\"image_raw\":{e:.5},\"image\":{ec:.5},\"image_ratio\":{ratio:.5}}}");
@@ -940,13 +941,13 @@ fn vpl_near_ratio_stage_cancels() {
     let sc = case("plume_point");
     let s = VplSettings { walks: 256, near_field: NearField::Ball, near_upsample: super::NearUpsample::Ratio, ..test_settings() };
     let walks = super::walks::trace(&sc, &s, u32::MAX, &NoProgress).unwrap();
-    let out = crate::solvers::ScatteringGrid::over_medium(&sc.medium, s.output_resolution).unwrap();
-    let gather = crate::solvers::ScatteringGrid::over_medium(&sc.medium, s.gather_resolution).unwrap();
-    let fp = crate::solvers::pop::merge::footprint(&sc.medium, &out).min(crate::solvers::pop::merge::footprint(&sc.medium, &gather));
-    let mip = crate::solvers::pop::mip::MediumMip::new(&sc.medium, fp);
+    let out = crate::stages::ScatteringGrid::over_medium(&sc.medium, s.output_resolution).unwrap();
+    let gather = crate::stages::ScatteringGrid::over_medium(&sc.medium, s.gather_resolution).unwrap();
+    let fp = crate::stages::upsample::footprint(&sc.medium, &out).min(crate::stages::upsample::footprint(&sc.medium, &gather));
+    let mip = crate::stages::mip::MediumMip::new(&sc.medium, fp);
     let merged = super::gather::gather(&sc, &mip, &walks, &s, &NoProgress).unwrap().merged;
-    let pop_like = crate::solvers::pop::settings::PopSettings { output_resolution: s.output_resolution, ..Default::default() };
-    let plain = |m: &crate::solvers::pop::merge::Merged| crate::solvers::pop::upsample::upsample(&sc.medium, &mip, m, &pop_like);
+    let pop_like = crate::stages::upsample::Upsampling { output_resolution: s.output_resolution, ..crate::solvers::pop::PopSettings::default().upsampling() };
+    let plain = |m: &crate::stages::upsample::Merged| crate::stages::upsample::upsample(&sc.medium, &mip, m, &pop_like);
     let r = super::near_ratio::upsample(&sc, &mip, &walks, &merged, &s, &pop_like, &Cancelled, plain);
     assert!(matches!(r, Err(crate::error::Error::Cancelled)), "{:?}", r.map(|g| g.dims));
 }
@@ -972,7 +973,7 @@ fn vpl_explore_single_scattering() {
     for name in cases.split(',') {
         let sc = case(name);
         let r = Reference::new(ReferenceSettings { spp: env_u32("VPL_SPP", 16384), seed: 3, transparent: true, max_depth: 1, ..Default::default() }).unwrap();
-        let truth = rgb(&r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap());
+        let truth = rgb(&r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap());
         for res in [32u32, 64, 65, 128] {
             let single = if res <= 64 {
                 single_scattering_grid(&sc, res, 32).unwrap()
@@ -983,10 +984,10 @@ fn vpl_explore_single_scattering() {
                 g
             } else {
                 // Twice the voxel lattice (over_medium never goes finer than it).
-                let g = crate::solvers::ScatteringGrid::over_medium(&sc.medium, 64).unwrap();
+                let g = crate::stages::ScatteringGrid::over_medium(&sc.medium, 64).unwrap();
                 let dims = g.dims.map(|d| 2 * d - 1);
-                let mut fine = crate::solvers::ScatteringGrid { dims, index_to_world: g.index_to_world * glam::Affine3A::from_scale(Vec3::splat(0.5)), data: vec![Vec3::ZERO; (dims[0] * dims[1] * dims[2]) as usize] };
-                crate::compositor::single_scattering_onto(&sc, &mut fine, 32, &NoProgress).unwrap();
+                let mut fine = crate::stages::ScatteringGrid { dims, index_to_world: g.index_to_world * glam::Affine3A::from_scale(Vec3::splat(0.5)), data: vec![Vec3::ZERO; (dims[0] * dims[1] * dims[2]) as usize] };
+                crate::stages::single_scattering::single_scattering_onto(&sc, &mut fine, 32, &NoProgress).unwrap();
                 fine
             };
             for (step_voxels, subpixels) in [(0.5f32, 2u32), (0.125, 2), (0.5, 6)] {
@@ -1012,7 +1013,7 @@ fn vpl_explore_multiple_share() {
         let sc = case(name);
         let fx = load_fixture(name).image();
         let r = Reference::new(ReferenceSettings { spp: env_u32("VPL_SPP", 8192), seed: 3, transparent: true, max_depth: 1, ..Default::default() }).unwrap();
-        let single_ref = rgb(&r.render_image(&sc, &NoProgress, &mut crate::solvers::Timings::default()).unwrap());
+        let single_ref = rgb(&r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap());
         let multiple_ref: Vec<Vec3> = fx.iter().zip(&single_ref).map(|(a, b)| *a - *b).collect();
         eprintln!("{name}: reference single share {:.3}", mean(&single_ref) / mean(&fx));
         for &gather_resolution in &gathers {

@@ -25,11 +25,11 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::medium::Medium;
-use crate::solvers::pop::merge::{footprint, Merged};
-use crate::solvers::pop::mip::MediumMip;
-use crate::solvers::pop::settings::PopSettings;
-use crate::solvers::pop::upsample::{fill_plane, Bilateral};
-use crate::solvers::{Progress, ScatteringGrid};
+use crate::stages::upsample::{footprint, Merged};
+use crate::stages::mip::MediumMip;
+use crate::stages::upsample::Upsampling;
+use crate::stages::upsample::{fill_plane, Bilateral};
+use crate::stages::{Progress, ScatteringGrid};
 
 /// Ridge added to the weighted covariance of the offsets (coarse cells squared). Measured on
 /// cube_g0's 8 seeds (1024 walks): 0.02 x1.013, 0.1 x1.028, 0.3 x1.046 (the gradient shrunk
@@ -38,7 +38,7 @@ const RIDGE: f32 = 0.02;
 
 /// S on the output grid with J upsampled by the local linear fit (module doc). Ends with
 /// `Error::Cancelled` within a slab of output points once `progress` is cancelled.
-pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
+pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &Upsampling, progress: &dyn Progress) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution)?;
     let [nx, ny, _] = out.dims;
     let coarse = &merged.j;
@@ -84,7 +84,7 @@ pub fn upsample_linear(medium: &Medium, mip: &MediumMip, merged: &Merged, settin
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solvers::NoProgress;
+    use crate::stages::NoProgress;
 
     /// A J linear in space is reproduced wherever the weights fall, the surface included, up to
     /// the ridge's shrinking of the gradient: on a homogeneous box with J = a + b . (coarse
@@ -104,7 +104,7 @@ mod tests {
                 }
             }
         }
-        let settings = PopSettings { output_resolution: 18, ..Default::default() };
+        let settings = crate::solvers::pop::PopSettings { output_resolution: 18, ..Default::default() }.upsampling();
         let mip = MediumMip::new(&medium, 1.0);
         let fp = footprint(&medium, &j);
         let density = (0..j.len())
@@ -134,7 +134,7 @@ mod tests {
         worst
         };
         let fit = worst(&upsample_linear(&medium, &mip, &merged, &settings, &NoProgress).unwrap());
-        let mean = worst(&crate::solvers::pop::upsample::upsample(&medium, &mip, &merged, &settings).unwrap());
+        let mean = worst(&crate::stages::upsample::upsample(&medium, &mip, &merged, &settings).unwrap());
         eprintln!("linear J: worst relative error of the fit {fit:.5}, of the weighted mean {mean:.5}");
         assert!(fit < 0.05, "fit: worst relative error {fit}");
         assert!(mean > 5.0 * fit, "the weighted mean should be off at the surface: {mean} vs the fit's {fit}");

@@ -16,7 +16,7 @@ use crate::phase::HenyeyGreenstein;
 use crate::rng::Rng;
 use crate::error::Result;
 use crate::scene::Scene;
-use crate::solvers::Progress;
+use crate::stages::Progress;
 use crate::translate::LightSampler;
 
 /// One virtual point light.

@@ -13,11 +13,11 @@
 use glam::{IVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
-use super::octahedral::{self, Columns};
+use crate::stages::octahedral::{self, Columns};
 use crate::error::{Error, Result};
 use crate::medium::trilinear::trilinear;
 use crate::medium::Medium;
-use crate::solvers::pop::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 
 pub struct RadialGrid {
     pub centre: Vec3,

@@ -18,7 +18,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::grid::RadialGrid;
-use super::octahedral::square_to_sphere;
+use crate::stages::octahedral::square_to_sphere;
 use crate::medium::Medium;
 use crate::translate::Profile;
 

@@ -30,7 +30,6 @@
 
 pub mod grid;
 pub mod init;
-pub mod octahedral;
 pub mod propagate;
 
 use glam::Vec3;
@@ -38,9 +37,9 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::scene::{Light, Scene};
-use crate::solvers::pop::mip::MediumMip;
+use crate::stages::mip::MediumMip;
 use crate::solvers::pop::{PopSettings, PropagationStats};
-use crate::solvers::{Progress, ScatteringGrid, Timings};
+use crate::stages::{Progress, ScatteringGrid, Timings};
 use crate::translate;
 use grid::RadialGrid;
 use init::Emitter;

@@ -33,7 +33,7 @@ use crate::error::{Error, Result};
 use crate::phase::hg;
 use crate::solvers::pop::propagate::{clamp_a, lobe_fractions, path_factor, per_channel, Emit};
 use crate::solvers::pop::PropagationStats;
-use crate::solvers::Progress;
+use crate::stages::Progress;
 
 
 /// Per cell: cosine between the radial direction and the direction to the camera.

@@ -7,7 +7,8 @@ use crate::scene::light::{AreaLight, AreaShape, Spot};
 use crate::scene::{Camera, Light, Scene};
 use crate::solvers::pop::{Pop, PopReport, PopSettings};
 use crate::solvers::testing::{against_single_scattering, env_u32, load_fixture, regenerate_selected, selected, Errors, SolverOutput};
-use crate::solvers::{NoProgress, ScatteringGrid, Solver};
+use crate::solvers::{Solver};
+use crate::stages::{NoProgress, ScatteringGrid};
 
 /// A uniform sphere of radius `radius` (density 1 inside, antialiased over one voxel) on an
 /// `n`^3 grid, centred at the origin, with sigma_s = `sigma_s`, albedo 1.

@@ -19,7 +19,8 @@ use crate::solvers::pop::{Pop, PopSettings};
 use crate::solvers::reference::{ReferenceSettings, Tracer};
 use crate::solvers::testing::cloud::{cloud_scene, to_sun};
 use crate::solvers::testing::{env_u32, errors_against_fixture};
-use crate::solvers::{parse_settings, NoProgress, Solver};
+use crate::solvers::{parse_settings, Solver};
+use crate::stages::NoProgress;
 
 /// The two lines: (label, start, end), sampled at `POINTS` points.
 fn lines() -> Vec<(&'static str, Vec3, Vec3)> {

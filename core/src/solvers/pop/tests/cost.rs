@@ -11,7 +11,7 @@ use glam::{Affine3A, IVec3, Vec3};
 use super::scene;
 use crate::medium::{DensityGrid, GridLimits, Medium};
 use crate::solvers::pop::{Pop, PopSettings};
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 fn blob(d: IVec3, sigma_t: f32) -> Medium {
     let c = (d - IVec3::ONE).as_vec3() * 0.5;

@@ -7,7 +7,8 @@ use super::{pop_vs_fixture, test_settings, CASES};
 use crate::solvers::pop::{Pop, PopSettings};
 use crate::solvers::testing::cloud::cloud_scene;
 use crate::solvers::testing::errors_against_fixture;
-use crate::solvers::{NoProgress, Solver};
+use crate::solvers::{Solver};
+use crate::stages::NoProgress;
 
 pub(super) fn with_env(base: PopSettings) -> PopSettings {
     let mut v = serde_json::to_value(base).unwrap();

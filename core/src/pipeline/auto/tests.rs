@@ -10,7 +10,7 @@ use super::pick::{pick, FALLBACK};
 use super::*;
 use crate::solvers::session::Session;
 use crate::solvers::testing::fixture_scene;
-use crate::solvers::NoProgress;
+use crate::stages::NoProgress;
 
 /// The pick's measured error may exceed the target by this factor: the model predicts the
 /// error from measurements that are themselves noisy (the reference's own noise, and the
@@ -54,7 +54,7 @@ fn target_rows(m: &Measurements, model: &Model, scene: &str, f: &Features) -> Ve
         .into_iter()
         .map(|t| {
             let cheapest = cpu_runs(m, scene).filter(|r| r.image_error <= t).map(|r| r.seconds).fold(f64::INFINITY, f64::min);
-            let c = pick(model, f, t, 0.0);
+            let c = pick(model, f, t, 0.0, registry::preset_settings);
             let got = run_of(m, scene, &c).map(|r| (r.image_error, r.seconds));
             (t, got, cheapest, format!("{} {}", c.solver, c.quality))
         })
@@ -90,7 +90,7 @@ fn picks_within_a_budget_are_the_most_accurate_measured_within_it() {
         budgets.sort_by(f64::total_cmp);
         for b in budgets {
             let best = cpu_runs(&m, scene).filter(|r| r.seconds <= b).map(|r| r.image_error).fold(f64::INFINITY, f64::min);
-            let c = pick(model, f, 0.1, b);
+            let c = pick(model, f, 0.1, b, registry::preset_settings);
             match run_of(&m, scene, &c) {
                 Some(r) if r.seconds <= b * COST_FACTOR && r.image_error <= best * ERROR_MARGIN => {}
                 Some(r) => failures.push(format!(
@@ -139,14 +139,14 @@ fn unmeasured_light_types_fall_back_to_the_default_with_the_reason() {
     let mut f = model.scenes[0].1.clone();
     assert!(!model.scenes.iter().any(|(_, s)| s.lights.local_outside), "the measurements have a local light outside the medium now: pick another unmeasured case");
     f.lights.local_outside = true;
-    let c = pick(model, &f, 0.1, 0.0);
+    let c = pick(model, &f, 0.1, 0.0, registry::preset_settings);
     assert!(c.fallback && (c.solver.as_str(), c.quality.as_str()) == FALLBACK, "{c:?}");
     assert!(c.why.contains("local light outside") && c.predicted_error.is_none(), "{}", c.why);
     // Settings of the fallback are its registry preset, which builds.
     crate::solvers::by_name(&c.solver, &c.settings).unwrap();
     // No measurements at all: the same default.
     let empty = Model { scenes: vec![], configs: vec![] };
-    let c = pick(&empty, &features_of(model, &model.scenes[0].0), 0.1, 0.0);
+    let c = pick(&empty, &features_of(model, &model.scenes[0].0), 0.1, 0.0, registry::preset_settings);
     assert!(c.fallback && c.why.contains("no measurements"), "{c:?}");
 }
 
@@ -161,7 +161,7 @@ fn bad_settings_are_clear_errors() {
         let s = bad(k, v.clone());
         let Err(e) = Auto::from_settings(&s) else { panic!("{k} = {v} accepted") };
         assert!(matches!(&e, Error::Scene { field, .. } if field == &format!("solver.{k}")), "{k} = {v}: {e}");
-        assert!(choose(&fixture_scene("cube_g0"), &s).is_err(), "{k} = {v}: choose accepted it");
+        assert!(choose(&fixture_scene("cube_g0"), &s, registry::preset_settings).is_err(), "{k} = {v}: choose accepted it");
     }
     assert!(Auto::from_settings(&bad("target", json!(0.1))).is_err(), "unknown key accepted");
 }

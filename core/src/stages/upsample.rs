@@ -11,12 +11,58 @@
 use glam::{Affine3A, IVec3, Vec3};
 use rayon::prelude::*;
 
-use super::merge::{footprint, Merged};
 use super::mip::MediumMip;
-use super::settings::PopSettings;
-use crate::error::Result;
+use super::ScatteringGrid;
+use crate::error::{Error, Result};
 use crate::medium::Medium;
-use crate::solvers::ScatteringGrid;
+
+/// The upsampling's settings, as every solver that upsamples through it declares them
+/// (pop, vpl, lpm: the same names, limits and messages for all).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Upsampling {
+    /// The output grid's longest side in points (`ScatteringGrid::over_medium`).
+    pub output_resolution: u32,
+    /// Joint bilateral (true) or plain trilinear (false) interpolation of J.
+    pub upsample: bool,
+    /// The range Gaussian's width, as a fraction of the largest coarse density.
+    pub range_sigma: f32,
+    /// The spatial Gaussian's width, in coarse cells.
+    pub spatial_sigma: f32,
+}
+
+impl Upsampling {
+    /// The checks every solver's `validate()` runs on these settings.
+    pub fn validate(&self) -> Result<()> {
+        let Upsampling { output_resolution, range_sigma, spatial_sigma, .. } = *self;
+        if !(2..=1024).contains(&output_resolution) {
+            return Err(Error::scene("solver.output_resolution", format!("must be in 2..=1024, got {output_resolution}")));
+        }
+        if !(range_sigma.is_finite() && range_sigma > 0.0) {
+            return Err(Error::scene("solver.range_sigma", format!("must be > 0, got {range_sigma}")));
+        }
+        if !(spatial_sigma.is_finite() && spatial_sigma > 0.0 && spatial_sigma <= 4.0) {
+            return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {spatial_sigma}")));
+        }
+        Ok(())
+    }
+}
+
+/// A solver's coarse solution, ready to upsample: J (in-scattered radiance per unit sigma_s)
+/// on a coarse grid over the medium, with the density prefiltered to the same cells (the guide).
+
+pub struct Merged {
+    /// J (in-scattered radiance per unit sigma_s) at the merged grid points.
+    pub j: ScatteringGrid,
+    /// Mean density around each point, over one merged cell.
+    pub density: Vec<f32>,
+}
+
+/// Footprint of a grid's cell in medium voxels.
+pub fn footprint(medium: &Medium, grid: &ScatteringGrid) -> f32 {
+    let m = grid.index_to_world.matrix3;
+    let spacing = m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length());
+    spacing / medium.voxel_size_world().max_element()
+}
 
 /// The joint bilateral filter's neighbourhood of an output point: the coarse points around it
 /// and their weights (spatial Gaussian in coarse cells, range Gaussian on the density guide).
@@ -35,12 +81,12 @@ pub struct Bilateral<'m> {
 }
 
 impl<'m> Bilateral<'m> {
-    pub fn new(merged: &'m Merged, settings: &PopSettings) -> Self {
+    pub fn new(merged: &'m Merged, settings: &Upsampling) -> Self {
         let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
         Self::over(&merged.j, &merged.density, merged.j.index_to_world.inverse(), max_density, settings)
     }
 
-    fn over(coarse: &ScatteringGrid, density: &'m [f32], to_coarse: Affine3A, max_density: f32, settings: &PopSettings) -> Self {
+    fn over(coarse: &ScatteringGrid, density: &'m [f32], to_coarse: Affine3A, max_density: f32, settings: &Upsampling) -> Self {
         Bilateral {
             density,
             to_coarse,
@@ -75,7 +121,7 @@ impl<'m> Bilateral<'m> {
     }
 }
 
-pub fn upsample(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
+pub fn upsample(medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &Upsampling) -> Result<ScatteringGrid> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution)?;
     let max_density = merged.density.iter().fold(0.0f32, |m, &v| m.max(v)).max(1e-12);
     let window = CoarseWindow { j: &merged.j, density: &merged.density, z0: 0, to_coarse: merged.j.index_to_world.inverse(), max_density };
@@ -101,7 +147,7 @@ pub struct CoarseWindow<'a> {
 /// Output plane `k` of the grid (dims, index-to-world, footprint) into `slab`: the same
 /// values whatever window holds the coarse planes it reads (a shift by the integer z0 is
 /// exact in f32).
-pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, settings: &PopSettings, out: ([u32; 3], glam::Affine3A, f32), k: usize, slab: &mut [Vec3]) {
+pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, settings: &Upsampling, out: ([u32; 3], glam::Affine3A, f32), k: usize, slab: &mut [Vec3]) {
     let coarse = win.j;
     let filter = Bilateral::over(coarse, win.density, win.to_coarse, win.max_density, settings);
     let shift = Vec3::new(0.0, 0.0, win.z0 as f32);

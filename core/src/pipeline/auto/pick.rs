@@ -6,7 +6,6 @@ use serde_json::{Map, Value};
 
 use super::features::Features;
 use super::model::{Model, Prediction};
-use crate::solvers::registry;
 
 /// What `auto` ran, and why; carried by `SolveOutput::choice` to the CLI's `--report` (`auto`)
 /// and the C ABI (`vs_result_choice`).
@@ -36,7 +35,8 @@ pub const FALLBACK: (&str, &str) = ("pop", "preview");
 /// The configuration to run on a scene of features `f`: with `time_budget` > 0, the lowest
 /// predicted error among those predicted within the budget (the cheapest when none is); else
 /// the cheapest predicted to reach `target_error` (the most accurate when none is).
-pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64) -> Choice {
+/// `preset` gives a solver's quality preset (the fall-back's settings).
+pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64, preset: fn(&str, &str) -> Map<String, Value>) -> Choice {
     let missing: Vec<&str> = f
         .lights
         .named()
@@ -57,7 +57,7 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64) ->
         } else {
             format!("no measured scene has a {} light", missing.join(" or "))
         };
-        return fallback(f, target_error, time_budget, &reason);
+        return fallback(f, target_error, time_budget, &reason, preset);
     }
     let by_seconds = |a: &&(usize, Prediction), b: &&(usize, Prediction)| a.1.seconds.total_cmp(&b.1.seconds);
     let by_error = |a: &&(usize, Prediction), b: &&(usize, Prediction)| a.1.error.total_cmp(&b.1.error).then(a.1.seconds.total_cmp(&b.1.seconds));
@@ -103,9 +103,9 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64) ->
     }
 }
 
-fn fallback(f: &Features, target_error: f64, time_budget: f64, reason: &str) -> Choice {
+fn fallback(f: &Features, target_error: f64, time_budget: f64, reason: &str, preset: fn(&str, &str) -> Map<String, Value>) -> Choice {
     let (solver, quality) = FALLBACK;
-    let settings = registry::get(solver).ok().and_then(|e| e.preset(quality)).map(|p| p.settings()).unwrap_or_default();
+    let settings = preset(solver, quality);
     Choice {
         solver: solver.into(),
         quality: quality.into(),

@@ -14,7 +14,7 @@ use crate::solvers::registry::SOLVERS;
 use crate::solvers::testing::{fixture_scene, load_fixture, selected, Errors, SolverOutput};
 
 fn here(file: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("src/solvers/auto").join(file)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("src/pipeline/auto").join(file)
 }
 
 /// The fixtures measured for the provisional file: distant light on cubes of g 0 / 0.7 / 0.9
@@ -33,7 +33,7 @@ const CANCEL_AFTER_SECONDS: f64 = 12.0;
 
 /// Cancels a solve once its time is up.
 struct TimeLimit(Instant);
-impl crate::solvers::Progress for TimeLimit {
+impl crate::stages::Progress for TimeLimit {
     fn update(&self, _: &str, _: f32) -> bool {
         !self.cancelled()
     }

@@ -1,0 +1,77 @@
+//! The scattering grid S every solver returns (DESIGN.md "What a solver returns").
+
+use glam::{Affine3A, IVec3, Vec3};
+
+use crate::error::{Error, Result};
+use crate::medium::Medium;
+
+/// Largest scattering grid a solver may allocate (512^3 points, 1.5 GiB of RGB floats).
+pub const MAX_SCATTERING_GRID_POINTS: u64 = 1 << 27;
+
+/// A dense RGB grid with its own index-to-world map (voxel centres at integer indices),
+/// x fastest. Trilinear between voxel centres, zero outside.
+#[derive(Clone, Debug)]
+pub struct ScatteringGrid {
+    pub dims: [u32; 3],
+    pub index_to_world: Affine3A,
+    pub data: Vec<Vec3>,
+}
+
+impl ScatteringGrid {
+    /// An all-zero grid covering the medium's bounds: on the medium's own voxel grid when its
+    /// extent fits in `max_dim` per axis, else on cells of k x k x k voxels.
+    pub fn over_medium(medium: &Medium, max_dim: u32) -> Result<Self> {
+        let (lo, hi) = medium.grid.bbox();
+        if medium.grid.is_empty() {
+            return Ok(ScatteringGrid { dims: [1, 1, 1], index_to_world: medium.index_to_world, data: vec![Vec3::ZERO] });
+        }
+        // Include the one-voxel trilinear ramp around the stored voxels.
+        let lo = lo - IVec3::ONE;
+        let hi = hi + IVec3::ONE;
+        let extent = (hi - lo + IVec3::ONE).as_vec3();
+        let k = (extent.max_element() / max_dim.max(2) as f32).max(1.0);
+        let dims = (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2));
+        let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
+        // Checked before allocating (an allocation failure aborts the host): 2^27 points is
+        // 1.5 GiB of RGB, a 512^3 grid, beyond anything a preview needs.
+        if count > MAX_SCATTERING_GRID_POINTS {
+            return Err(Error::TooLarge(format!(
+                "scattering grid {}x{}x{} = {count} points is over the limit of {MAX_SCATTERING_GRID_POINTS}",
+                dims.x, dims.y, dims.z
+            )));
+        }
+        crate::budget::check_elements::<Vec3>(&format!("scattering grid of {}x{}x{} points", dims.x, dims.y, dims.z), count)?;
+        // Grid point i sits at medium index lo + i * step, spanning [lo, hi] exactly.
+        let step = (hi - lo).as_vec3() / (dims.as_vec3() - Vec3::ONE);
+        let index_to_world = medium.index_to_world * Affine3A::from_translation(lo.as_vec3()) * Affine3A::from_scale(step);
+        Ok(ScatteringGrid { dims: dims.to_array(), index_to_world, data: vec![Vec3::ZERO; count as usize] })
+    }
+
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    #[inline]
+    pub fn index(&self, i: u32, j: u32, k: u32) -> usize {
+        (i as usize) + self.dims[0] as usize * (j as usize + self.dims[1] as usize * k as usize)
+    }
+
+    /// World position of grid point (i, j, k).
+    pub fn position(&self, i: u32, j: u32, k: u32) -> Vec3 {
+        self.index_to_world.transform_point3(Vec3::new(i as f32, j as f32, k as f32))
+    }
+
+    /// Trilinear lookup at continuous grid-index coordinates; zero outside [0, dims - 1] (and
+    /// for NaN).
+    #[inline]
+    pub fn sample_index(&self, p: Vec3) -> Vec3 {
+        let d = IVec3::new(self.dims[0] as i32, self.dims[1] as i32, self.dims[2] as i32);
+        if !crate::medium::trilinear::inside(p, Vec3::ZERO, (d - IVec3::ONE).as_vec3()) {
+            return Vec3::ZERO;
+        }
+        crate::medium::trilinear::dense_inside(p, d, &self.data)
+    }
+}
