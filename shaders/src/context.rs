@@ -126,7 +126,7 @@ impl GpuContext {
     /// then belongs to the one running caller, so an error is never blamed on another thread's
     /// work (one GPU runs one solve at a time anyway). Errors left over from a failed caller
     /// are dropped before the next one starts.
-    pub fn with_shared<T>(f: impl FnOnce(&GpuContext) -> T) -> Result<T, GpuError> {
+    pub fn with_shared<T>(f: impl FnOnce(&Arc<GpuContext>) -> T) -> Result<T, GpuError> {
         // A caller that panicked (wgpu panics are caught further up) leaves the lock
         // poisoned: the context may be in any state, so it is dropped and reopened.
         let mut slot = SHARED.lock().unwrap_or_else(|poisoned| {

@@ -1,78 +1,34 @@
 //! `--device gpu|cpu|auto`: which processor runs a solver or the compositor.
 
-use std::str::FromStr;
+//! `--device gpu|cpu|auto` on the GPU side: whether a choice accepts the adapter, and running
+//! a job on the process's GPU context (the pipeline's device step, core pipeline/device.rs,
+//! decides what runs where; this is how a job gets onto the GPU).
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum DeviceChoice {
-    Cpu,
-    /// Any adapter, software ones (lavapipe) included; failures are errors.
-    Gpu,
-    /// A hardware GPU adapter when one works, else the CPU (with a message). Never a software
-    /// adapter: the CPU solvers beat it.
-    #[default]
-    Auto,
-}
+pub use volscatter_core::pipeline::{Attempt, DeviceChoice, DeviceUsed};
 
-impl DeviceChoice {
-    /// Whether this choice runs on the adapter described by `info`: `Gpu` on any, `Auto` on a
-    /// hardware one only, `Cpu` on none.
-    pub fn accepts(self, info: &wgpu::AdapterInfo) -> bool {
-        match self {
-            DeviceChoice::Cpu => false,
-            DeviceChoice::Gpu => true,
-            DeviceChoice::Auto => !crate::context::is_software_adapter(info),
-        }
+/// Whether `choice` runs on the adapter described by `info`: `Gpu` on any, `Auto` on a
+/// hardware one only, `Cpu` on none.
+pub fn accepts(choice: DeviceChoice, info: &wgpu::AdapterInfo) -> bool {
+    match choice {
+        DeviceChoice::Cpu => false,
+        DeviceChoice::Gpu => true,
+        DeviceChoice::Auto => !crate::context::is_software_adapter(info),
     }
-}
-
-impl FromStr for DeviceChoice {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "cpu" => Ok(DeviceChoice::Cpu),
-            "gpu" => Ok(DeviceChoice::Gpu),
-            "auto" => Ok(DeviceChoice::Auto),
-            other => Err(format!("unknown device `{other}` (cpu, gpu, auto)")),
-        }
-    }
-}
-
-/// What actually ran, for reports.
-#[derive(Clone, Debug, PartialEq)]
-pub enum DeviceUsed {
-    Cpu,
-    Gpu(String),
-}
-
-impl std::fmt::Display for DeviceUsed {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            DeviceUsed::Cpu => write!(f, "cpu"),
-            DeviceUsed::Gpu(name) => write!(f, "gpu: {name}"),
-        }
-    }
-}
-
-/// What `try_gpu` did.
-pub(crate) enum Attempt<T> {
-    Ran(T, DeviceUsed),
-    /// Not run on the GPU, for the reason given (empty: the CPU was asked for).
-    Declined(String),
 }
 
 /// Runs `gpu` on the process's GPU context (`GpuContext::with_shared`) when `choice` accepts
-/// its adapter (`DeviceChoice::accepts`). A panic inside wgpu is caught and becomes an error;
+/// its adapter (`accepts`). A panic inside wgpu is caught and becomes an error;
 /// a GPU failure becomes `E` through `From<GpuError>`.
 pub(crate) fn try_gpu<T, E: From<crate::GpuError>>(
     choice: DeviceChoice,
-    gpu: impl FnOnce(&crate::GpuContext) -> Result<T, E>,
+    gpu: impl FnOnce(&std::sync::Arc<crate::GpuContext>) -> Result<T, E>,
 ) -> Result<Attempt<T>, E> {
     if choice == DeviceChoice::Cpu {
         return Ok(Attempt::Declined(String::new()));
     }
     crate::GpuContext::with_shared(|ctx| {
         let name = ctx.describe();
-        if !choice.accepts(&ctx.info) {
+        if !accepts(choice, &ctx.info) {
             return Ok(Attempt::Declined(format!("{name} is a software adapter, slower than the CPU solvers (--device gpu uses it)")));
         }
         std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| gpu(ctx)))
@@ -81,30 +37,6 @@ pub(crate) fn try_gpu<T, E: From<crate::GpuError>>(
     })
     .map_err(E::from)
     .and_then(|r| r)
-}
-
-/// Runs `gpu` on the process's GPU context according to `choice` (see `try_gpu`); with `Auto`,
-/// a software adapter or any GPU failure (no adapter, out of memory, device lost, too large)
-/// runs `cpu` instead, with a message on stderr. With `Gpu`, failures are errors.
-pub fn run_on<T>(
-    choice: DeviceChoice,
-    gpu: impl FnOnce(&crate::GpuContext) -> Result<T, crate::GpuError>,
-    cpu: impl FnOnce() -> T,
-) -> Result<(T, DeviceUsed), crate::GpuError> {
-    match try_gpu(choice, gpu) {
-        Ok(Attempt::Ran(out, used)) => Ok((out, used)),
-        Ok(Attempt::Declined(why)) => {
-            if !why.is_empty() {
-                eprintln!("note: running on the CPU: {why}");
-            }
-            Ok((cpu(), DeviceUsed::Cpu))
-        }
-        Err(e) if choice == DeviceChoice::Auto => {
-            eprintln!("note: running on the CPU ({e})");
-            Ok((cpu(), DeviceUsed::Cpu))
-        }
-        Err(e) => Err(e),
-    }
 }
 
 #[cfg(test)]
@@ -136,14 +68,14 @@ mod tests {
         let intel = adapter("Intel(R) Arc(tm) Graphics (MTL)", IntegratedGpu, "Intel open-source Mesa driver");
         for sw in [&lavapipe, &lavapipe_as_other, &swiftshader, &warp] {
             assert!(crate::context::is_software_adapter(sw), "{}", sw.name);
-            assert!(!DeviceChoice::Auto.accepts(sw), "auto took {}", sw.name);
-            assert!(DeviceChoice::Gpu.accepts(sw), "gpu refused {}", sw.name);
-            assert!(!DeviceChoice::Cpu.accepts(sw));
+            assert!(!accepts(DeviceChoice::Auto, sw), "auto took {}", sw.name);
+            assert!(accepts(DeviceChoice::Gpu, sw), "gpu refused {}", sw.name);
+            assert!(!accepts(DeviceChoice::Cpu, sw));
         }
         for hw in [&nvidia, &intel] {
             assert!(!crate::context::is_software_adapter(hw), "{}", hw.name);
-            assert!(DeviceChoice::Auto.accepts(hw) && DeviceChoice::Gpu.accepts(hw), "{}", hw.name);
-            assert!(!DeviceChoice::Cpu.accepts(hw));
+            assert!(accepts(DeviceChoice::Auto, hw) && accepts(DeviceChoice::Gpu, hw), "{}", hw.name);
+            assert!(!accepts(DeviceChoice::Cpu, hw));
         }
     }
 

@@ -10,6 +10,7 @@
 //! caught with error scopes, and a lost device or out-of-memory becomes a `GpuError`, on which
 //! callers fall back to the CPU.
 
+pub mod backends;
 pub mod composite;
 pub mod context;
 pub mod device;
@@ -17,7 +18,6 @@ pub mod lpm;
 pub mod network;
 pub mod photon_grid;
 pub mod pop;
-pub mod solve;
 pub mod upload;
 pub mod vpl;
 mod wgsl;
@@ -26,5 +26,5 @@ mod wgsl;
 mod test_support;
 
 pub use context::{GpuContext, GpuError};
-pub use device::{run_on, DeviceChoice, DeviceUsed};
-pub use solve::{solve, solve_session};
+pub use backends::{devices, Gpu, GPU};
+pub use device::{DeviceChoice, DeviceUsed};

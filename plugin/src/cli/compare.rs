@@ -11,9 +11,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::progress::StderrProgress;
-use volscatter_core::compositor::{self, CompositeOptions};
+use volscatter_core::compositor::CompositeOptions;
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::{reference::Reference, registry};
+use volscatter_core::pipeline::{self, DeviceUsed};
+use volscatter_core::solvers::registry;
 use volscatter_core::stages::{ScatteringGrid, Timings};
 use volscatter_core::{Error, Image, Result, Scene};
 
@@ -155,49 +156,31 @@ pub fn run(args: CompareArgs) -> Result<()> {
             settings.insert("spp".into(), json!(spp));
             settings.insert("seed".into(), json!(1000 + index as u64));
         }
-        let mut phases = Timings::default();
-        let mut device = volscatter_gpu::DeviceUsed::Cpu;
-        let (image, grid, image_seconds, grid_seconds) = if sweep_spp.is_some() {
-            let r = Reference::from_settings(&settings)?;
-            let t = Instant::now();
-            let image = r.render_image(&scene, &progress, &mut phases)?;
-            (image, None, t.elapsed().as_secs_f64(), 0.0)
-        } else if name == "reference" {
-            let r = Reference::from_settings(&settings)?;
-            let t = Instant::now();
-            let image = r.render_image(&scene, &progress, &mut phases)?;
-            let image_seconds = t.elapsed().as_secs_f64();
-            let (grid, grid_seconds) = if args.no_grid {
-                (None, 0.0)
-            } else {
-                let mut gs = r.settings.clone();
-                gs.grid_resolution = args.grid_resolution;
-                gs.grid_spp = args.grid_spp;
+        // Every run through the pipeline: the reference renders its image, the others solve and
+        // composite (CompositeOptions::default: every AOV, as the reference's image has).
+        let devices = volscatter_gpu::devices(args.device);
+        let mut session = pipeline::Session::new(solver_name, &settings, devices)?;
+        let t = Instant::now();
+        let rendered = pipeline::render(&mut session, &scene, &CompositeOptions::default(), &progress)?;
+        let image_seconds = t.elapsed().as_secs_f64();
+        let mut phases = rendered.timings;
+        let composite_seconds: f64 = phases.0.iter().filter(|(k, _)| k == "composite").map(|(_, v)| v).sum();
+        let device = rendered.solved.as_ref().map(|s| s.device.clone()).unwrap_or(DeviceUsed::Cpu);
+        let image = rendered.image;
+        let (grid, grid_seconds) = match rendered.solved {
+            Some(solved) => (Some(solved.output.scattering), image_seconds - composite_seconds),
+            // The reference's S, as a point estimate on the comparison grid (output_resolution 0).
+            None if name == "reference" && !args.no_grid => {
+                let mut gs = settings.clone();
+                gs.insert("grid_resolution".into(), json!(args.grid_resolution));
+                gs.insert("grid_spp".into(), json!(args.grid_spp));
+                gs.insert("output_resolution".into(), json!(0));
                 let t = Instant::now();
-                let g = Reference::new(gs)?.scattering_grid(&scene, &progress, &mut phases)?;
-                (Some(g), t.elapsed().as_secs_f64())
-            };
-            (image, grid, image_seconds, grid_seconds)
-        } else {
-            let t = Instant::now();
-            let (out, used) = volscatter_gpu::solve(args.device, &scene, solver_name, &settings, &progress)?;
-            device = used;
-            let grid_seconds = t.elapsed().as_secs_f64();
-            phases.0.extend(out.timings.0);
-            let t = Instant::now();
-            let opts = CompositeOptions::default();
-            let (image, _) = phases
-                .time("composite", || {
-                    volscatter_gpu::run_on(
-                        args.device,
-                        |ctx| volscatter_gpu::composite::composite(ctx, &scene, &out.scattering, &opts).map(Ok),
-                        || compositor::composite(&scene, &out.scattering, &opts),
-                    )
-                })
-                .map_err(Error::from)?;
-            let image = image?;
-            let composite_seconds = t.elapsed().as_secs_f64();
-            (image, Some(out.scattering), grid_seconds + composite_seconds, grid_seconds)
+                let solved = pipeline::solve(&scene, "reference", &gs, devices, &progress)?;
+                phases.0.extend(solved.output.timings.0);
+                (Some(solved.output.scattering), t.elapsed().as_secs_f64())
+            }
+            None => (None, 0.0),
         };
         progress.finish();
         if let Some(dir) = &args.out_dir {

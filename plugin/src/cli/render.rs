@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::progress::StderrProgress;
-use volscatter_core::solvers::{reference::Reference, registry};
+use volscatter_core::pipeline::{self, DeviceUsed};
 use volscatter_core::stages::Timings;
 use volscatter_core::{compositor, io, Error, Result, Scene};
 
@@ -74,9 +74,6 @@ pub fn solver_settings(scene: &Scene, name: &str, args: &RenderArgs) -> Result<s
     if let Some(seed) = args.seed {
         map.insert("seed".into(), json!(seed));
     }
-    if args.transparent && name == "reference" {
-        map.insert("transparent".into(), json!(true));
-    }
     for kv in &args.settings {
         let (k, v) = kv
             .split_once('=')
@@ -102,69 +99,35 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => Ok(Scene::default_scene()),
     })?;
     let name = args.solver.clone().or_else(|| scene.solver_name().map(String::from)).unwrap_or_else(|| "reference".into());
-    // Unknown names are refused before anything runs, with the registry's list.
-    registry::get(&name)?;
     let settings = solver_settings(&scene, &name, &args)?;
     let aovs = compositor::Aovs::parse(&args.aovs)?;
-    let progress = StderrProgress::new(args.quiet);
-    let mut device_used = volscatter_gpu::DeviceUsed::Cpu;
-    let mut solve_device = volscatter_gpu::DeviceUsed::Cpu;
-    let mut choice = None;
-    if name == "reference" && args.out_vdb.is_some() {
+    // Unknown names and bad settings are refused here, before anything runs.
+    let mut session = pipeline::Session::new(&name, &settings, volscatter_gpu::devices(args.device))?;
+    if args.out_vdb.is_some() && session.solver().is_some_and(|s| s.name() == "reference") {
         return Err(Error::InvalidArgument("--out-vdb: `reference` renders an image, not a scattering grid; pick a scattering solver".into()));
     }
-    let image = if name == "reference" {
-        let r = Reference::from_settings(&settings)?;
-        let mut img = r.render_image(&scene, &progress, &mut timings)?;
-        progress.finish();
-        // The path tracer's layers cost nothing extra; the EXR still holds only those asked
-        // for, so that its layers do not depend on the solver.
-        img.aovs.retain(|(layer, _)| aovs.contains(layer));
-        img
-    } else {
-        let (out, solved_on) = volscatter_gpu::solve(args.device, &scene, &name, &settings, &progress)?;
-        solve_device = solved_on;
-        progress.finish();
-        if let (Some(c), false) = (&out.choice, args.quiet) {
+    let progress = StderrProgress::new(args.quiet);
+    let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
+    let rendered = pipeline::render(&mut session, &scene, &opts, &progress)?;
+    progress.finish();
+    if !args.quiet {
+        for note in &rendered.notes {
+            eprintln!("note: {note}");
+        }
+        if let Some(c) = rendered.solved.as_ref().and_then(|s| s.choice.as_ref()) {
             eprintln!("auto picked {} {}: {}", c.solver, c.quality, c.why);
         }
-        choice = out.choice;
-        timings.0.extend(out.timings.0);
-        if let Some(path) = &args.out_vdb {
-            ensure_parent(path)?;
-            let s = &out.scattering;
-            timings.time("write S (VDB)", || volscatter_core::vdb::write_rgb_grids(path, "scattering", s.dims, &s.data, s.index_to_world, &Default::default()))?;
-        }
-        let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
-        // Timed apart from the march (phase "composite: single-scattering AOV", included in
-        // "composite", present only when an AOV needs it): the part an image without those
-        // AOVs skips.
-        let start_composite = Instant::now();
-        let single = if opts.aovs.needs_single() {
-            let (single, _) = timings
-                .time("composite: single-scattering AOV", || {
-                    volscatter_gpu::run_on(
-                        args.device,
-                        |ctx| volscatter_gpu::composite::single_for(ctx, &scene, &opts).map(Ok),
-                        || compositor::single_for(&scene, &opts),
-                    )
-                })
-                .map_err(Error::from)?;
-            single?
-        } else {
-            None
-        };
-        let (img, used_march) = volscatter_gpu::run_on(
-            args.device,
-            |ctx| volscatter_gpu::composite::composite_with_single(ctx, &scene, &out.scattering, single.as_ref(), &opts).map(Ok),
-            || compositor::composite_with_single(&scene, &out.scattering, single.as_ref(), &opts),
-        )
-        .map_err(Error::from)?;
-        timings.0.push(("composite".into(), start_composite.elapsed().as_secs_f64()));
-        // Both stages ask for the same device; under auto a fall-back is noted on stderr.
-        device_used = used_march;
-        img?
-    };
+    }
+    timings.0.extend(rendered.timings.0.iter().cloned());
+    if let (Some(path), Some(solved)) = (&args.out_vdb, &rendered.solved) {
+        ensure_parent(path)?;
+        let s = &solved.output.scattering;
+        timings.time("write S (VDB)", || volscatter_core::vdb::write_rgb_grids(path, "scattering", s.dims, &s.data, s.index_to_world, &Default::default()))?;
+    }
+    let image = rendered.image;
+    let solve_device = rendered.solved.as_ref().map(|s| s.device.clone()).unwrap_or(DeviceUsed::Cpu);
+    let device_used = rendered.device;
+    let choice = rendered.solved.and_then(|s| s.choice);
     ensure_parent(&args.out)?;
     timings.time("write", || -> Result<()> {
         io::exr::write_image(&args.out, &image)?;

@@ -4,8 +4,8 @@
 use std::ffi::{c_char, CString};
 use std::sync::Arc;
 
-use volscatter_core::compositor::{self, Aovs, CompositeOptions};
-use volscatter_core::solvers::{SolveOutput};
+use volscatter_core::compositor::{Aovs, CompositeOptions};
+use volscatter_core::pipeline::{self, Solved};
 use volscatter_core::stages::{ScatteringGrid, Timings};
 use volscatter_core::{vdb, Scene};
 use volscatter_gpu::{DeviceChoice, DeviceUsed};
@@ -72,10 +72,13 @@ pub(crate) struct ResultState {
     /// What the `auto` solver picked and why, as JSON (`vs_result_choice`); None from the
     /// other solvers.
     pub choice: Option<CString>,
+    /// What the host should tell the user, one note a line (`vs_result_notes`).
+    pub notes: CString,
 }
 
 impl ResultState {
-    pub fn new(output: SolveOutput, scene: Arc<Scene>, device: DeviceChoice, used: DeviceUsed) -> FfiResult<Self> {
+    pub fn new(solved: Solved, scene: Arc<Scene>, device: DeviceChoice) -> FfiResult<Self> {
+        let Solved { output, choice, device: used, notes } = solved;
         let g = &output.scattering;
         let count = g.dims.iter().map(|&d| d as u64).product::<u64>();
         if count != g.data.len() as u64 {
@@ -86,8 +89,9 @@ impl ResultState {
         }
         // serde_json escapes control characters, so the JSON has no interior NUL; were it to,
         // the choice is dropped rather than the result.
-        let choice = output.choice.as_ref().and_then(|c| serde_json::to_string(c).ok()).and_then(|j| CString::new(j).ok());
-        Ok(ResultState { grid: output.scattering, scene, device, used, timings: output.timings, choice })
+        let choice = choice.as_ref().and_then(|c| serde_json::to_string(c).ok()).and_then(|j| CString::new(j).ok());
+        let notes = CString::new(notes.join("\n").replace('\0', " ")).unwrap_or_default();
+        Ok(ResultState { grid: output.scattering, scene, device, used, timings: output.timings, choice, notes })
     }
     fn float_count(&self) -> usize {
         self.grid.data.len() * 3
@@ -159,6 +163,20 @@ pub unsafe extern "C" fn vs_result_device(result: *const VsResult, out: *mut u32
 pub unsafe extern "C" fn vs_result_choice(result: *const VsResult) -> *const c_char {
     guard::value(std::ptr::null(), || match RESULTS.get(result) {
         Ok(h) => lock(&h.state).choice.as_ref().map_or(std::ptr::null(), |c| c.as_ptr()),
+        Err(_) => std::ptr::null(),
+    })
+}
+
+/// What the solve's pipeline has to tell the user (a fall-back from the GPU to the CPU, a light
+/// a solver left out, a dome map read at a lower resolution), one note a line, UTF-8; "" when
+/// there is nothing to say. Owned by the result: valid until it is destroyed. NULL for a NULL
+/// or dead handle.
+///
+/// Thread safety: any thread.
+#[no_mangle]
+pub unsafe extern "C" fn vs_result_notes(result: *const VsResult) -> *const c_char {
+    guard::value(std::ptr::null(), || match RESULTS.get(result) {
+        Ok(h) => lock(&h.state).notes.as_ptr(),
         Err(_) => std::ptr::null(),
     })
 }
@@ -281,12 +299,6 @@ unsafe fn composite_into(r: &ResultState, flags: u32, aovs: u32, subpixels: u32,
         }
         opts.step_voxels = step;
     }
-    let (image, _used) = volscatter_gpu::run_on(
-        r.device,
-        |ctx| volscatter_gpu::composite::composite(ctx, &r.scene, &r.grid, &opts).map(Ok),
-        || compositor::composite(&r.scene, &r.grid, &opts),
-    )
-    .map_err(|e| FfiError::from(volscatter_core::Error::from(e)))?;
-    let image = image?;
+    let image = pipeline::composite(&r.scene, &r.grid, &opts, volscatter_gpu::devices(r.device))?.image;
     write_out(out, IMAGES.insert(ImageState::new(image)?)?, "out")
 }

@@ -10,8 +10,9 @@ use glam::{Affine3A, IVec3, Mat4, Vec3, Vec4};
 use volscatter_core::medium::{DensityGrid, GridLimits};
 use volscatter_core::scene::json::{CameraJson, LightJson, Rgb};
 use volscatter_core::scene::{self, Camera};
-use volscatter_core::solvers::{self, reference::Reference};
-use volscatter_core::stages::Timings;
+use volscatter_core::compositor::CompositeOptions;
+use volscatter_core::pipeline;
+use volscatter_core::solvers::registry;
 use volscatter_core::{Medium, Scene};
 
 use super::guard::{self, clear_out, finite_arg, floats_arg, in_slice, input_file_arg, on_handle, opt_str_arg, path_arg, str_arg, write_out};
@@ -307,7 +308,7 @@ unsafe fn lpm_settings_arg(p: *const c_char) -> FfiResult<volscatter_core::solve
     let serde_json::Value::Object(map) = value else {
         return Err(FfiError::invalid("settings_json must be a JSON object of lpm settings"));
     };
-    Ok(solvers::parse_settings(&map)?)
+    Ok(volscatter_core::solvers::parse_settings(&map)?)
 }
 
 /// Sets the medium's density from the caller's dense buffer: `len` floats, x fastest then y
@@ -626,7 +627,7 @@ pub unsafe extern "C" fn vs_scene_set_solver(scene: *mut VsScene, name: *const c
             }
         };
         settings.insert("name".into(), serde_json::Value::String(name.to_string()));
-        solvers::by_name(name, &settings)?;
+        registry::get(name)?.validate(&settings)?;
         st.edit().solver = settings;
         Ok(())
     })
@@ -650,14 +651,14 @@ pub unsafe extern "C" fn vs_scene_solve(scene: *mut VsScene, progress: VsProgres
             let st = lock(&h.state);
             (st.snapshot()?, st.device)
         };
-        let name = snapshot.solver_name().unwrap_or("reference").to_string();
         let progress = CProgress::new(progress, user);
         // A GPU failure is `Error::Device`, hence VS_STATUS_DEVICE (under AUTO it ran on the CPU).
-        let (output, used) = progress.with_heartbeat(|| volscatter_gpu::solve(device, &snapshot, &name, &snapshot.solver, &progress))?;
+        let mut session = pipeline::Session::for_scene(&snapshot, volscatter_gpu::devices(device))?;
+        let solved = progress.with_heartbeat(|| session.solve(&snapshot, &progress))?;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
-        let state = ResultState::new(output, snapshot, device, used)?;
+        let state = ResultState::new(solved, snapshot, device)?;
         write_out(out, RESULTS.insert(state)?, "out")
     })
 }
@@ -678,10 +679,10 @@ pub unsafe extern "C" fn vs_scene_render_reference(scene: *mut VsScene, progress
             None | Some("reference") => snapshot.solver.clone(),
             Some(_) => Default::default(),
         };
-        let reference = Reference::from_settings(&settings)?;
+        let mut session = pipeline::Session::new("reference", &settings, pipeline::Devices::cpu())?;
         let progress = CProgress::new(progress, user);
-        let mut timings = Timings::default();
-        let image = progress.with_heartbeat(|| reference.render_image(&snapshot, &progress, &mut timings))?;
+        let opts = CompositeOptions::default();
+        let image = progress.with_heartbeat(|| pipeline::render(&mut session, &snapshot, &opts, &progress))?.image;
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }

@@ -4,7 +4,7 @@
 
 use std::ffi::{c_char, c_void};
 
-use volscatter_core::solvers::session::Session;
+use volscatter_core::pipeline::Session;
 use volscatter_gpu::DeviceChoice;
 
 use super::guard::{self, clear_out, on_handle, write_out};
@@ -45,7 +45,7 @@ pub unsafe extern "C" fn vs_session_new(scene: *const VsScene, out: *mut *mut Vs
             let st = lock(&h.state);
             (st.scene.clone(), st.device)
         };
-        let session = Session::for_scene(&scene)?;
+        let session = Session::for_scene(&scene, volscatter_gpu::devices(device))?;
         write_out(out, SESSIONS.insert(SessionState { session, device })?, "out")
     })
 }
@@ -96,11 +96,11 @@ pub unsafe extern "C" fn vs_session_solve(
         let progress = CProgress::new(progress, user);
         let mut st = lock(&h.state);
         let device = st.device;
-        let (output, used) = progress.with_heartbeat(|| volscatter_gpu::solve_session(device, &mut st.session, &snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
+        let solved = progress.with_heartbeat(|| st.session.solve(&snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
-        let state = ResultState::new(output, snapshot, device, used)?;
+        let state = ResultState::new(solved, snapshot, device)?;
         write_out(out, RESULTS.insert(state)?, "out")
     })
 }

@@ -8,6 +8,7 @@
 //! within the adapter's largest storage binding: the slab thickness is the CPU's plan (from
 //! `memory_budget`) or less where the adapter needs it.
 
+use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -50,19 +51,19 @@ pub struct GpuDir {
 const _: () = assert!(size_of::<GpuDir>() == 32);
 
 /// The GPU backend of lpm's sweeps on `ctx`.
-pub struct GpuSweeps<'c> {
-    ctx: &'c GpuContext,
+pub struct GpuSweeps {
+    ctx: Arc<GpuContext>,
 }
 
-impl<'c> GpuSweeps<'c> {
-    pub fn new(ctx: &'c GpuContext) -> Self {
-        GpuSweeps { ctx }
+impl GpuSweeps {
+    pub fn new(ctx: &Arc<GpuContext>) -> Self {
+        GpuSweeps { ctx: ctx.clone() }
     }
 }
 
-impl SweepBackend for GpuSweeps<'_> {
+impl SweepBackend for GpuSweeps {
     fn start<'a>(&'a self, setup: SweepSetup<'a>, progress: &dyn Progress) -> Result<Box<dyn Sweeper + 'a>> {
-        Ok(Box::new(GpuSweeper::new(self.ctx, setup, progress)?))
+        Ok(Box::new(GpuSweeper::new(&self.ctx, setup, progress)?))
     }
 }
 
@@ -188,7 +189,7 @@ fn slab_cells(grid_dims: [usize; 3], ff: &FaceFrame, w0: usize, w1: usize, z: us
 
 impl Sweeper for GpuSweeper<'_> {
     fn sweep(&mut self, u_prev: &[Vec3], boundary: &[Vec3], u_cur: &mut [Vec3], mut j: Option<&mut [Vec3]>, stats: &mut SweepStats, progress: &dyn Progress) -> Result<()> {
-        let ctx = self.ctx;
+        let ctx = &*self.ctx;
         let SweepSetup { grid, dirs, table, albedo, .. } = self.setup;
         let (p, m, n) = (dirs.per_face(), table.m, table.n);
         let stride = grid.dims.iter().copied().max().unwrap_or(1) as u32;

@@ -13,6 +13,7 @@ pub mod visibility;
 #[cfg(test)]
 mod bench;
 
+use std::sync::Arc;
 use glam::Vec3;
 
 use crate::GpuContext;
@@ -27,27 +28,27 @@ use volscatter_core::Result;
 /// wastes little; 4 keeps a batch under ~50 ms on lavapipe at the default N 2048 x D 64.
 pub const CHECK_EVERY: u32 = 4;
 
-pub struct GpuBackend<'c> {
-    ctx: &'c GpuContext,
+pub struct GpuBackend {
+    ctx: Arc<GpuContext>,
     check_every: u32,
 }
 
-impl<'c> GpuBackend<'c> {
-    pub fn new(ctx: &'c GpuContext, check_every: u32) -> Self {
-        GpuBackend { ctx, check_every }
+impl GpuBackend {
+    pub fn new(ctx: &Arc<GpuContext>, check_every: u32) -> Self {
+        GpuBackend { ctx: ctx.clone(), check_every }
     }
 }
 
-impl NetworkBackend for GpuBackend<'_> {
+impl NetworkBackend for GpuBackend {
     fn visibility(&self, input: &VisibilityInput, progress: &dyn Progress) -> Result<Vec<DirectionLinks>> {
-        visibility::visibility(self.ctx, input, progress)
+        visibility::visibility(&self.ctx, input, progress)
     }
 
     fn iterate(&self, input: &IterationInput, start: Option<Vec<Vec3>>, progress: &dyn Progress) -> Result<Iterated> {
-        Ok(iterate::iterate(self.ctx, input, start, self.check_every, progress)?)
+        Ok(iterate::iterate(&self.ctx, input, start, self.check_every, progress)?)
     }
 
     fn splat(&self, grid: &mut ScatteringGrid, input: &SplatInput, progress: &dyn Progress) -> Result<()> {
-        splat::splat(self.ctx, grid, input, progress)
+        splat::splat(&self.ctx, grid, input, progress)
     }
 }

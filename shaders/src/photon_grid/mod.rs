@@ -23,6 +23,7 @@
 
 pub mod reconstruct;
 
+use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -96,17 +97,17 @@ const FRACTION_BITS: i32 = 32;
 const ORDER_SHIFT: i32 = 8;
 
 /// The GPU tracer.
-pub struct GpuPhotonBackend<'c> {
-    ctx: &'c GpuContext,
+pub struct GpuPhotonBackend {
+    ctx: Arc<GpuContext>,
     /// Whether each workgroup pre-sums its photons' deposits in workgroup memory (trace.wgsl):
     /// on by default; off gives the same sums bit for bit, all atomics in device memory (for
     /// the test that shows it and for timing the two).
     pub presum: bool,
 }
 
-impl<'c> GpuPhotonBackend<'c> {
-    pub fn new(ctx: &'c GpuContext) -> Self {
-        GpuPhotonBackend { ctx, presum: true }
+impl GpuPhotonBackend {
+    pub fn new(ctx: &Arc<GpuContext>) -> Self {
+        GpuPhotonBackend { ctx: ctx.clone(), presum: true }
     }
 }
 
@@ -125,9 +126,9 @@ fn word_pair(w: &[u32], i: usize) -> i64 {
     ((w[i + 1] as u64) << 32 | w[i] as u64) as i64
 }
 
-impl PhotonBackend for GpuPhotonBackend<'_> {
+impl PhotonBackend for GpuPhotonBackend {
     fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>> {
-        let ctx = self.ctx;
+        let ctx = &*self.ctx;
         let tracer = job.tracer;
         let s = tracer.settings;
         let medium = tracer.medium;
@@ -271,13 +272,13 @@ impl PhotonBackend for GpuPhotonBackend<'_> {
         if progress.cancelled() {
             return Err(Error::Cancelled);
         }
-        Ok(crate::composite::single::single_scattering_grid(self.ctx, scene, resolution, dome_directions)?)
+        Ok(crate::composite::single::single_scattering_grid(&self.ctx, scene, resolution, dome_directions)?)
     }
 
     /// reconstruct.wgsl: both upsamplings, equal to the CPU's within f32 rounding
     /// (reconstruct_tests.rs).
     fn reconstruct(&self, medium: &Medium, tallies: &[Tallies], camera: Vec3, settings: &PhotonGridSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
-        reconstruct::scattering_towards(self.ctx, medium, tallies, camera, settings, progress)
+        reconstruct::scattering_towards(&self.ctx, medium, tallies, camera, settings, progress)
     }
 }
 

@@ -30,8 +30,8 @@ pub fn gpu_error(e: GpuError) -> Error {
 }
 
 /// One per solve (as `Pop::solve_with` is called): it holds that solve's density mip.
-pub struct GpuBackend<'a> {
-    ctx: &'a GpuContext,
+pub struct GpuBackend {
+    ctx: Arc<GpuContext>,
     /// Residual checks of the propagation every this many iterations (one small readback).
     check_every: u32,
     /// The density mip of this solve, uploaded by the first stage that reads it and dropped by
@@ -43,9 +43,9 @@ pub struct GpuBackend<'a> {
     mip_upload_s: Mutex<f64>,
 }
 
-impl<'a> GpuBackend<'a> {
-    pub fn new(ctx: &'a GpuContext, check_every: u32) -> Self {
-        GpuBackend { ctx, check_every, mip: Mutex::new(None), propagation_times: Mutex::new(Vec::new()), mip_upload_s: Mutex::new(0.0) }
+impl GpuBackend {
+    pub fn new(ctx: &Arc<GpuContext>, check_every: u32) -> Self {
+        GpuBackend { ctx: ctx.clone(), check_every, mip: Mutex::new(None), propagation_times: Mutex::new(Vec::new()), mip_upload_s: Mutex::new(0.0) }
     }
 
     /// Upload / iterations / readback times of every propagation so far, in light order.
@@ -67,7 +67,7 @@ impl<'a> GpuBackend<'a> {
             }
         }
         let t = std::time::Instant::now();
-        let m = Arc::new(GpuMip::upload(self.ctx, mip).map_err(gpu_error)?);
+        let m = Arc::new(GpuMip::upload(&self.ctx, mip).map_err(gpu_error)?);
         if let Ok(mut s) = self.mip_upload_s.lock() {
             *s += t.elapsed().as_secs_f64();
         }
@@ -76,18 +76,18 @@ impl<'a> GpuBackend<'a> {
     }
 }
 
-impl PopBackend for GpuBackend<'_> {
+impl PopBackend for GpuBackend {
     type Light = GpuLight;
     type Merged = GpuMerged;
 
     fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(GpuLight, SweepSums)> {
-        let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
-        let sums = init::sweep(self.ctx, &mut light, grid.h, fluence, a0, g).map_err(gpu_error)?;
+        let mut light = GpuLight::upload(&self.ctx, grid, mu).map_err(gpu_error)?;
+        let sums = init::sweep(&self.ctx, &mut light, grid.h, fluence, a0, g).map_err(gpu_error)?;
         Ok((light, sums))
     }
 
     fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, mu: &[f32]) -> Result<GpuLight> {
-        let mut light = GpuLight::upload(self.ctx, grid, mu).map_err(gpu_error)?;
+        let mut light = GpuLight::upload(&self.ctx, grid, mu).map_err(gpu_error)?;
         self.ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&packets)));
         light.injected = packets.iter().copied().sum();
         Ok(light)
@@ -97,7 +97,7 @@ impl PopBackend for GpuBackend<'_> {
         if opts.vacuum_escape || opts.moment_anisotropy {
             return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
         }
-        let (stats, times) = propagate_resident(self.ctx, light, prop, a_scattered, self.check_every, opts.keep_remaining).map_err(gpu_error)?;
+        let (stats, times) = propagate_resident(&self.ctx, light, prop, a_scattered, self.check_every, opts.keep_remaining).map_err(gpu_error)?;
         if let Ok(mut t) = self.propagation_times.lock() {
             t.push(times);
         }
@@ -110,11 +110,11 @@ impl PopBackend for GpuBackend<'_> {
     fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, GpuLight)], resolution: u32) -> Result<GpuMerged> {
         let gmip = self.mip(mip)?;
         let views: Vec<(&LightGrid, &wgpu::Buffer)> = lights.iter().map(|(g, l)| (g, &l.j)).collect();
-        merge::merge(self.ctx, &gmip, medium, mip, &views, resolution).map_err(gpu_error)
+        merge::merge(&self.ctx, &gmip, medium, mip, &views, resolution).map_err(gpu_error)
     }
 
     fn propagate_radial(&self, prop: &RadialPropagation, init: &RadialInitial, j: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
-        let (stats, _times) = crate::pop::radial::propagate_radial(self.ctx, prop, init, j, self.check_every).map_err(gpu_error)?;
+        let (stats, _times) = crate::pop::radial::propagate_radial(&self.ctx, prop, init, j, self.check_every).map_err(gpu_error)?;
         if !progress.update("pop radial propagation", 1.0) {
             return Err(Error::Cancelled);
         }
@@ -132,7 +132,7 @@ impl PopBackend for GpuBackend<'_> {
             return Ok(());
         }
         let mut j = merged.grid.clone();
-        j.data = crate::pop::light::read_rgb(self.ctx, &merged.j, merged.grid.dims.iter().map(|&d| d as u64).product()).map_err(gpu_error)?;
+        j.data = crate::pop::light::read_rgb(&self.ctx, &merged.j, merged.grid.dims.iter().map(|&d| d as u64).product()).map_err(gpu_error)?;
         radial::add_to_merged(&mut j, lights);
         self.ctx.queue.write_buffer(&merged.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j.data)));
         Ok(())
@@ -140,7 +140,7 @@ impl PopBackend for GpuBackend<'_> {
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &GpuMerged, settings: &PopSettings) -> Result<ScatteringGrid> {
         let gmip = self.mip(mip)?;
-        let out = upsample::upsample(self.ctx, &gmip, medium, mip, merged, settings).map_err(gpu_error);
+        let out = upsample::upsample(&self.ctx, &gmip, medium, mip, merged, &settings.upsampling()).map_err(gpu_error);
         // The solve's last stage: free the mip (and never serve it to a later solve).
         if let Ok(mut slot) = self.mip.lock() {
             *slot = None;
@@ -149,12 +149,12 @@ impl PopBackend for GpuBackend<'_> {
     }
 }
 
-impl GpuBackend<'_> {
+impl GpuBackend {
     /// Options the GPU port lacks (`vacuum_escape`, `moment_anisotropy`): this light's propagation runs on the CPU,
     /// its packets and J crossing the bus both ways.
     fn propagate_on_cpu(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
-        let packets = light.read_packets(self.ctx).map_err(gpu_error)?;
-        let mut j = light.read_j(self.ctx).map_err(gpu_error)?;
+        let packets = light.read_packets(&self.ctx).map_err(gpu_error)?;
+        let mut j = light.read_j(&self.ctx).map_err(gpu_error)?;
         let initial = Initial { direct: Vec::new(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
         let stats = prop.run_with(opts, &initial, a_scattered, &mut j, progress)?;
         self.ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j)));

@@ -13,7 +13,7 @@ use crate::upload::affine_rows;
 use volscatter_core::medium::Medium;
 use volscatter_core::stages::upsample::footprint;
 use volscatter_core::stages::mip::MediumMip;
-use volscatter_core::solvers::pop::PopSettings;
+use volscatter_core::stages::upsample::Upsampling;
 use volscatter_core::ScatteringGrid;
 
 pub const WGSL: &str = crate::wgsl::kernel_wgsl!(["affine", "trilinear", "mip", "j_grid"], "pop/upsample.wgsl");
@@ -43,7 +43,7 @@ pub fn upsample(
     medium: &Medium,
     mip: &MediumMip,
     merged: &GpuMerged,
-    settings: &PopSettings,
+    settings: &Upsampling,
 ) -> Result<ScatteringGrid, GpuError> {
     let mut out = ScatteringGrid::over_medium(medium, settings.output_resolution).map_err(|e| GpuError::TooLarge(e.to_string()))?;
     let n = out.data.len() as u64;

@@ -6,38 +6,39 @@
 
 pub mod gather;
 
+use std::sync::Arc;
 use crate::context::GpuContext;
 use crate::pop::merge::GpuMerged;
 use crate::pop::mip::GpuMip;
 use volscatter_core::medium::Medium;
 use volscatter_core::stages::upsample::Merged;
 use volscatter_core::stages::mip::MediumMip;
-use volscatter_core::solvers::pop::PopSettings;
+use volscatter_core::stages::upsample::Upsampling;
 use volscatter_core::solvers::vpl::walks::Walks;
 use volscatter_core::solvers::vpl::gather::Gathered;
 use volscatter_core::solvers::vpl::{VplBackend, VplSettings};
 use volscatter_core::stages::{Progress, ScatteringGrid};
 use volscatter_core::{Error, Result, Scene};
 
-pub struct GpuBackend<'a> {
-    ctx: &'a GpuContext,
+pub struct GpuBackend {
+    ctx: Arc<GpuContext>,
 }
 
-impl<'a> GpuBackend<'a> {
-    pub fn new(ctx: &'a GpuContext) -> Self {
-        GpuBackend { ctx }
+impl GpuBackend {
+    pub fn new(ctx: &Arc<GpuContext>) -> Self {
+        GpuBackend { ctx: ctx.clone() }
     }
 }
 
-impl VplBackend for GpuBackend<'_> {
+impl VplBackend for GpuBackend {
     fn gather(&self, scene: &Scene, mip: &MediumMip, walks: &Walks, s: &VplSettings, progress: &dyn Progress) -> Result<Gathered> {
-        gather::gather(self.ctx, scene, mip, walks, s, progress)
+        gather::gather(&self.ctx, scene, mip, walks, s, progress)
     }
 
-    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &PopSettings) -> Result<ScatteringGrid> {
-        let gmip = GpuMip::upload(self.ctx, mip)?;
-        let gmerged = GpuMerged::upload(self.ctx, merged)?;
-        Ok(crate::pop::upsample::upsample(self.ctx, &gmip, medium, mip, &gmerged, settings)?)
+    fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &Merged, settings: &Upsampling) -> Result<ScatteringGrid> {
+        let gmip = GpuMip::upload(&self.ctx, mip)?;
+        let gmerged = GpuMerged::upload(&self.ctx, merged)?;
+        Ok(crate::pop::upsample::upsample(&self.ctx, &gmip, medium, mip, &gmerged, settings)?)
     }
 
     fn single_scattering(&self, scene: &Scene, s: &VplSettings, progress: &dyn Progress) -> Result<ScatteringGrid> {
@@ -45,7 +46,7 @@ impl VplBackend for GpuBackend<'_> {
         if progress.cancelled() {
             return Err(Error::Cancelled);
         }
-        Ok(crate::composite::single::single_scattering_grid(self.ctx, scene, s.output_resolution, s.dome_directions)?)
+        Ok(crate::composite::single::single_scattering_grid(&self.ctx, scene, s.output_resolution, s.dome_directions)?)
     }
 }
 

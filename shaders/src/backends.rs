@@ -1,0 +1,82 @@
+//! The GPU as the pipeline's accelerator (core pipeline/device.rs): the table of GPU backends,
+//! keyed by registry name, and the composite. What each backend runs on the GPU:
+//! - `pop`: the sweep, propagation, merge and upsampling (its kept stages stay in the session);
+//! - `photon-grid`: photon tracing, reconstruction and exact single scattering (the rays'
+//!   drawing, the ring and the cells' mass on the CPU: photon_grid/mod.rs says why);
+//! - `network`: the visibility network (binning, sorting, opacities), the iteration and the
+//!   splat's accumulation (the network and its radiance kept on the host in a session);
+//! - `lpm`: the sweeps (propagate and collect, every order);
+//! - `vpl`: the gather's connections, upsampling and single scattering (the walks and the
+//!   compensation on the CPU).
+
+use std::any::Any;
+use std::sync::Arc;
+
+use crate::device::{try_gpu, Attempt, DeviceChoice};
+use crate::GpuContext;
+use volscatter_core::compositor::CompositeOptions;
+use volscatter_core::image::Image;
+use volscatter_core::pipeline::{Accelerator, Devices};
+use volscatter_core::solvers::lpm::stream::SweepBackend;
+use volscatter_core::solvers::network::backend::NetworkBackend;
+use volscatter_core::solvers::photon_grid::backend::PhotonBackend;
+use volscatter_core::solvers::pop::PopDevice;
+use volscatter_core::solvers::vpl::backend::VplBackend;
+use volscatter_core::solvers::SolveOutput;
+use volscatter_core::stages::ScatteringGrid;
+use volscatter_core::{Result, Scene};
+
+/// Residual checks of the GPU propagation happen every this many iterations (one readback).
+const CHECK_EVERY: u32 = 8;
+
+/// Builds a solver's GPU backend as the `Any` its `Solver::solve` downcasts (a boxed trait
+/// object of the solver's backend trait).
+type MakeBackend = fn(&Arc<GpuContext>) -> Box<dyn Any>;
+
+/// Every GPU backend, by registry name: a solver's registry entry has `gpu` set exactly when it
+/// is here (tested).
+pub const GPU_BACKENDS: &[(&str, MakeBackend)] = &[
+    ("pop", |c| Box::new(Box::new(crate::pop::backend::GpuBackend::new(c, CHECK_EVERY)) as Box<dyn PopDevice>)),
+    ("photon-grid", |c| Box::new(Box::new(crate::photon_grid::GpuPhotonBackend::new(c)) as Box<dyn PhotonBackend>)),
+    ("network", |c| Box::new(Box::new(crate::network::GpuBackend::new(c, crate::network::CHECK_EVERY)) as Box<dyn NetworkBackend>)),
+    ("lpm", |c| Box::new(Box::new(crate::lpm::GpuSweeps::new(c)) as Box<dyn SweepBackend>)),
+    ("vpl", |c| Box::new(Box::new(crate::vpl::GpuBackend::new(c)) as Box<dyn VplBackend>)),
+];
+
+fn backend_for(name: &str) -> Option<MakeBackend> {
+    GPU_BACKENDS.iter().find(|(n, _)| *n == name).map(|(_, make)| *make)
+}
+
+/// The process's GPU (its context opened on first use, `GpuContext::with_shared`).
+pub struct Gpu;
+
+/// The GPU accelerator every host links in.
+pub static GPU: Gpu = Gpu;
+
+/// `choice` among the CPU and the GPU: what the CLI and the C ABI hand the pipeline.
+pub fn devices(choice: DeviceChoice) -> Devices {
+    Devices::new(choice, &GPU)
+}
+
+impl Accelerator for Gpu {
+    fn has_backend(&self, name: &str) -> bool {
+        backend_for(name).is_some()
+    }
+
+    fn solve(&self, choice: DeviceChoice, name: &str, job: &mut dyn FnMut(&dyn Any) -> Result<SolveOutput>) -> Result<Attempt<SolveOutput>> {
+        let Some(make) = backend_for(name) else { return Ok(Attempt::Declined(format!("`{name}` has no GPU backend"))) };
+        try_gpu(choice, |ctx| job(make(ctx).as_ref()))
+    }
+
+    fn single_for(&self, choice: DeviceChoice, scene: &Scene, opts: &CompositeOptions) -> Result<Attempt<Option<ScatteringGrid>>> {
+        try_gpu(choice, |ctx| crate::composite::single_for(ctx, scene, opts).map_err(Into::into))
+    }
+
+    fn composite(&self, choice: DeviceChoice, scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Attempt<Image>> {
+        try_gpu(choice, |ctx| crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into))
+    }
+}
+
+#[cfg(test)]
+#[path = "backends_tests.rs"]
+mod tests;
