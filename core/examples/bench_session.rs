@@ -57,10 +57,10 @@ fn main() {
         let (mut ph_one, mut ph_sess) = (BTreeMap::new(), BTreeMap::new());
         for scene in &scenes {
             let t = Instant::now();
-            let one = by_name("pop", &settings).and_then(|s| s.solve(scene, &NoProgress)).expect("one-off solve");
+            let one = by_name("pop", &settings).and_then(|s| s.solve(scene, &mut SolveCtx::new(&NoProgress))).expect("one-off solve");
             t_one += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            let kept = session.solve(scene, &NoProgress).expect("session solve");
+            let kept = session.solve(scene, &mut SolveCtx::new(&NoProgress)).expect("session solve");
             t_sess += t.elapsed().as_secs_f64();
             identical &= one.scattering.data == kept.scattering.data;
             add_phases(&mut ph_one, &one);

@@ -284,6 +284,10 @@ pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::Light;
+    use crate::solvers::SolveCtx;
+    use crate::solvers::Solver;
+    use crate::stages::single_scattering::single_scattering_grid_dome_spaced;
     use crate::image::relative_rmse;
     use crate::solvers::reference::{Reference, ReferenceSettings};
     use crate::stages::{NoProgress, Timings};
@@ -328,7 +332,7 @@ mod tests {
             Light::Area(AreaLight { center: Vec3::new(1.3, 0.0, 0.2), normal: -Vec3::X, tangent: Vec3::Y, shape: AreaShape::Rect { width: 0.8, height: 0.5 }, radiance: Vec3::new(1.0, 2.0, 3.0) }),
         ];
         let r = Reference::new(ReferenceSettings { spp: 256, ..Default::default() }).unwrap();
-        let img = r.render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
+        let img = r.render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
         let zero = ScatteringGrid::over_medium(&scene.medium, 8).unwrap();
         let comp = composite(&scene, &zero, &CompositeOptions::default()).unwrap();
         let e1 = relative_rmse(comp.aov("single").unwrap(), img.aov("single").unwrap());
@@ -406,7 +410,7 @@ mod tests {
         let scene = small_default_scene(32);
         let r = Reference::new(ReferenceSettings { spp: 256, grid_resolution: 32, grid_spp: 64, ..Default::default() }).unwrap();
         let mut t = Timings::default();
-        let img = r.render_image(&scene, &NoProgress, &mut t).unwrap();
+        let img = r.render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut t).expect("the reference renders images").unwrap();
         let grid = r.scattering_grid(&scene, &NoProgress, &mut t).unwrap();
         let comp = composite(&scene, &grid, &CompositeOptions::default()).unwrap();
         let a: Vec<Vec3> = comp.rgba.iter().map(|p| p.truncate()).collect();

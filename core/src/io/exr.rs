@@ -69,6 +69,7 @@ const DOME_BYTES_PER_PIXEL: u64 = 36;
 const BLOCK_COPIES: u64 = 3;
 
 /// An RGB image as read, rows top to bottom, with what the reading changed.
+#[derive(Debug)]
 pub struct RgbPixels {
     pub width: usize,
     pub height: usize,

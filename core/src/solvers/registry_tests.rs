@@ -136,7 +136,7 @@ fn names_lookup_and_json_form() {
     assert_eq!(get("pop").unwrap().name, "pop");
     let e = get("pops").err().expect("unknown name accepted").to_string();
     assert!(e.contains("pops") && e.contains("reference, pop"), "{e}");
-    assert!(super::super::by_name("nope", &Map::new()).is_err());
+    assert!(super::build("nope", &Map::new()).is_err());
     let j = to_json();
     assert_eq!(j["format"], 1);
     let pop = j["solvers"].as_array().unwrap().iter().find(|s| s["name"] == "pop").expect("pop listed");

@@ -7,6 +7,8 @@
 pub(crate) mod cloud;
 mod furnace;
 
+use crate::solvers::SolveCtx;
+use crate::solvers::Solver;
 use glam::{Affine3A, IVec3, Vec3};
 
 use crate::compositor::{composite, CompositeOptions};
@@ -109,7 +111,7 @@ pub(crate) fn regenerate_fixture(name: &str, sc: &Scene, spp: u32, grid_spp: u32
     let half = |seed: u64| {
         let r = Reference::new(ReferenceSettings { spp: spp / 2, seed, grid_resolution: FIXTURE_GRID, grid_spp: grid_spp / 2, transparent: true, ..Default::default() })
             .unwrap();
-        let img = r.render_image(sc, &NoProgress, &mut Timings::default()).unwrap();
+        let img = r.render_image(sc, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
         let grid = r.scattering_grid(sc, &NoProgress, &mut Timings::default()).unwrap();
         (img, grid)
     };

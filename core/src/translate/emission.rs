@@ -148,6 +148,8 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::solvers::SolveCtx;
+    use crate::solvers::Solver;
     use crate::medium::{Emission, EmissionLaw, EmissionTerm};
 
     fn plume_with_emission(law: EmissionLaw) -> Medium {
@@ -218,7 +220,7 @@ mod tests {
         scene.lights.clear();
         scene.medium = plume_with_emission(EmissionLaw::Linear { color: Vec3::new(3.0, 1.5, 0.5) });
         scene.medium.emission.as_mut().unwrap().vpl_count = 1024;
-        let render = |seed| Reference::new(ReferenceSettings { spp: 256, seed, ..Default::default() }).unwrap().render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
+        let render = |seed| Reference::new(ReferenceSettings { spp: 256, seed, ..Default::default() }).unwrap().render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
         let (img, img2) = (render(0), render(1));
         let zero = ScatteringGrid::over_medium(&scene.medium, 8).unwrap();
         let comp = composite(&scene, &zero, &CompositeOptions::default()).unwrap();

@@ -2,6 +2,8 @@
 //! which are OpenVDB's own), writer round trips, and hostile input: truncation, mutation,
 //! lying sizes. Every hostile case runs under `catch_unwind` to prove it cannot panic.
 
+use crate::solvers::SolveCtx;
+use crate::solvers::Solver;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 
@@ -402,7 +404,7 @@ fn blender_vdb_scene_renders_with_the_reference_solver() {
     assert!(lo.cmpgt(Vec3::splat(-1.2)).all() && hi.cmplt(Vec3::splat(1.2)).all(), "{lo} {hi}");
     let solver = crate::solvers::reference::Reference::from_settings(&scene.solver).unwrap();
     let mut timings = crate::stages::Timings::default();
-    let img = solver.render_image(&scene, &crate::stages::NoProgress, &mut timings).unwrap();
+    let img = solver.render_image(&scene, &mut SolveCtx::new(&crate::stages::NoProgress), false, &mut timings).expect("the reference renders images").unwrap();
     let s = img.stats();
     assert_eq!(s.non_finite_pixels, 0);
     assert!(s.mean_alpha > 0.1 && s.mean_alpha < 1.0, "{s:?}");

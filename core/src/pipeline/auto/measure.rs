@@ -2,6 +2,7 @@
 //! solver at its registry presets, until scripts/bench_solvers.py's file replaces them) and the
 //! measured scenes' features, which the model needs whichever file it is.
 
+use crate::solvers::SolveCtx;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -81,7 +82,7 @@ fn regenerate_auto_measurements() {
                 }
                 let settings = preset.settings();
                 let t = Instant::now();
-                let out = (entry.cpu)(&settings).and_then(|s| s.solve(&sc, &TimeLimit(t)));
+                let out = entry.build(&settings).and_then(|s| s.solve(&sc, &mut SolveCtx::new(&TimeLimit(t))));
                 let solve = t.elapsed().as_secs_f64();
                 let out = match out {
                     Ok(o) => o,

@@ -3,12 +3,14 @@
 //! MEASURED error and cost are close to the best measured choice; leave-one-scene-out is
 //! reported; unmeasured light types fall back to the stated default; bad settings are errors.
 
+use crate::solvers::SolveCtx;
+use crate::solvers::registry;
 use serde_json::{json, Map, Value};
 
 use super::model::{Measurements, Model, Run};
 use super::pick::{pick, FALLBACK};
 use super::*;
-use crate::solvers::session::Session;
+use crate::pipeline::{Devices, Session};
 use crate::solvers::testing::fixture_scene;
 use crate::stages::NoProgress;
 
@@ -143,7 +145,7 @@ fn unmeasured_light_types_fall_back_to_the_default_with_the_reason() {
     assert!(c.fallback && (c.solver.as_str(), c.quality.as_str()) == FALLBACK, "{c:?}");
     assert!(c.why.contains("local light outside") && c.predicted_error.is_none(), "{}", c.why);
     // Settings of the fallback are its registry preset, which builds.
-    crate::solvers::by_name(&c.solver, &c.settings).unwrap();
+    crate::solvers::registry::build(&c.solver, &c.settings).unwrap();
     // No measurements at all: the same default.
     let empty = Model { scenes: vec![], configs: vec![] };
     let c = pick(&empty, &features_of(model, &model.scenes[0].0), 0.1, 0.0, registry::preset_settings);
@@ -159,11 +161,11 @@ fn bad_settings_are_clear_errors() {
     };
     for (k, v) in [("target_error", json!(-0.1)), ("target_error", json!(0.0)), ("time_budget", json!(-1.0)), ("target_error", Value::from(f64::NAN))] {
         let s = bad(k, v.clone());
-        let Err(e) = Auto::from_settings(&s) else { panic!("{k} = {v} accepted") };
+        let Err(e) = validate(&s) else { panic!("{k} = {v} accepted") };
         assert!(matches!(&e, Error::Scene { field, .. } if field == &format!("solver.{k}")), "{k} = {v}: {e}");
         assert!(choose(&fixture_scene("cube_g0"), &s, registry::preset_settings).is_err(), "{k} = {v}: choose accepted it");
     }
-    assert!(Auto::from_settings(&bad("target", json!(0.1))).is_err(), "unknown key accepted");
+    assert!(validate(&bad("target", json!(0.1))).is_err(), "unknown key accepted");
 }
 
 /// `auto` runs exactly the solver and settings it says it picked, alone and in a session.
@@ -171,17 +173,17 @@ fn bad_settings_are_clear_errors() {
 fn runs_what_it_says_it_picked() {
     let sc = fixture_scene("cube_g0");
     let settings = json!({"target_error": 0.3}).as_object().unwrap().clone();
-    let out = Auto::from_settings(&settings).unwrap().solve(&sc, &NoProgress).unwrap();
-    let c = out.choice.clone().expect("auto gave no choice");
+    let solved = crate::pipeline::solve(&sc, NAME, &settings, Devices::cpu(), &NoProgress).unwrap();
+    let (out, c) = (solved.output, solved.choice.expect("auto gave no choice"));
     assert!(!c.fallback && c.predicted_error.is_some_and(|e| e <= 0.3), "{c:?}");
     let names_a_scene = model().scenes.iter().any(|(name, _)| c.why.contains(name.as_str()));
     assert!(c.why.contains("optical depth") && names_a_scene, "the sentence names no feature or measured scene: {}", c.why);
-    let direct = crate::solvers::by_name(&c.solver, &c.settings).unwrap().solve(&sc, &NoProgress).unwrap();
+    let direct = crate::solvers::registry::build(&c.solver, &c.settings).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
     assert_eq!(out.scattering.dims, direct.scattering.dims);
     // Deterministic solvers (fixed seeds): the same grid, to rounding of parallel sums.
     let diff = crate::image::relative_rmse(&out.scattering.data, &direct.scattering.data);
     assert!(diff < 1e-5, "auto's grid differs from {} {}'s by {diff}", c.solver, c.quality);
-    let mut session = Session::new(NAME, &settings).unwrap();
+    let mut session = Session::new(NAME, &settings, Devices::cpu()).unwrap();
     for _ in 0..2 {
         let o = session.solve(&sc, &NoProgress).unwrap();
         assert_eq!(o.choice.as_ref().map(|c| &c.solver), Some(&c.solver));

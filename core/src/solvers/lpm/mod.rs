@@ -59,6 +59,7 @@ use directions::{Directions, FACES};
 use grid::LpmGrid;
 use phase_table::PhaseTable;
 
+#[derive(Clone)]
 pub struct Lpm {
     settings: LpmSettings,
     /// Where `out_of_core` puts its scratch files (None: the system temp dir).
@@ -130,9 +131,8 @@ impl Lpm {
     }
 
     /// This solver with the test and benchmark knobs `ov`.
-    pub fn with_overrides(mut self, ov: Overrides) -> Self {
-        self.overrides = ov;
-        self
+    pub fn with_overrides(&self, ov: Overrides) -> Self {
+        Lpm { overrides: ov, ..self.clone() }
     }
 
     fn run(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {

@@ -2,6 +2,9 @@
 //! growing with the map, not the volume), its refusals, and its scratch files (gone after a
 //! success, an error and a cancel).
 
+use crate::solvers::SolveCtx;
+use crate::solvers::SolveOutput;
+use crate::solvers::Solver;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -32,7 +35,7 @@ fn solve(sc: &Scene, s: LpmSettings, ov: Overrides, dir: Option<&PathBuf>, progr
     if let Some(d) = dir {
         lpm = lpm.with_scratch_dir(d);
     }
-    lpm.solve_detailed(sc, progress, ov).map(|(o, r)| (o.scattering, r))
+    lpm.with_overrides(ov).solve(sc, &mut SolveCtx::new(progress)).map(SolveOutput::split::<LpmReport>).map(|(o, r)| (o.scattering, r))
 }
 
 fn worst_relative(a: &[Vec3], b: &[Vec3]) -> f32 {
@@ -68,7 +71,7 @@ fn lpm_out_of_core_equals_in_memory() {
     let vdb_dir = scratch("equal-vdb");
     let vdb = vdb_dir.join("S.vdb");
     let lpm = Lpm::new(ooc).unwrap().with_scratch_dir(&dir).with_s_vdb(&vdb);
-    let s_ooc = lpm.solve_detailed(&sc, &NoProgress, Overrides { layers: Some(5), ..Default::default() }).unwrap().0.scattering;
+    let s_ooc = lpm.with_overrides(Overrides { layers: Some(5), ..Default::default() }).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<LpmReport>).unwrap().0.scattering;
     let worst = worst_relative(&s_ooc.data, &s_mem.data);
     eprintln!("out of core S vs in memory: worst relative {worst:e}");
     assert!(worst <= 1e-6, "S: {worst}");

@@ -1,6 +1,9 @@
 //! lpm against the white furnace, exact single scattering, the converged reference fixtures,
 //! and itself (streamed against in-memory, convergence in directions, resolution, orders).
 
+use crate::solvers::SolveCtx;
+use crate::solvers::SolveOutput;
+use crate::solvers::Solver;
 use glam::Vec3;
 
 use super::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
@@ -12,7 +15,7 @@ use crate::stages::{NoProgress, ScatteringGrid};
 use crate::solvers::testing::fixture_scene as case;
 
 fn run(sc: &Scene, s: LpmSettings, ov: Overrides) -> (ScatteringGrid, LpmReport) {
-    let (out, rep) = Lpm::new(s).unwrap().solve_detailed(sc, &NoProgress, ov).unwrap();
+    let (out, rep) = Lpm::new(s).unwrap().with_overrides(ov).solve(sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<LpmReport>).unwrap();
     (out.scattering, rep)
 }
 

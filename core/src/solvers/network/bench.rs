@@ -3,6 +3,7 @@
 //! section. `cargo test --release -p volscatter-core --lib -- --ignored network::bench
 //! --nocapture --test-threads 1`
 
+use crate::solvers::session::SessionState;
 use glam::{Quat, Vec3};
 use serde_json::json;
 use std::time::Instant;
@@ -31,7 +32,7 @@ fn bench_network_error_vs_time() {
         for n in [1024u32, 2048, 4096] {
             let s = NetworkSettings { particles: n, output_resolution: 32, ..Default::default() };
             let t = Instant::now();
-            let (out, rep) = Network::new(s).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+            let (out, rep) = Network::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
             let secs = t.elapsed().as_secs_f64();
             let e = errors_against_fixture(name, &sc, &out.scattering);
             rows.push(json!({"scene": name, "particles": n, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio, "grid": e.grid, "window": rep.window, "iterations": rep.residuals.len()}));
@@ -69,12 +70,12 @@ fn bench_network_paper_cloud() {
         let s = NetworkSettings { particles: n, directions: 128, output_resolution: 32, ..Default::default() };
         let net = Network::new(s).unwrap();
         let t = Instant::now();
-        let (out, rep) = net.solve_detailed(&sc, &NoProgress).unwrap();
+        let (out, rep) = net.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
         let total = t.elapsed().as_secs_f64();
         let iterate = phase(&out, "network iterate");
         let mut state = SessionState::new();
         state.begin_frame();
-        net.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
+        net.solve(&sc, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).map(SolveOutput::split::<NetworkReport>).unwrap();
         let (mut orbit, mut full) = (Vec::new(), Vec::new());
         for f in 1..=6 {
             let mut moved = sc.clone();
@@ -82,11 +83,11 @@ fn bench_network_paper_cloud() {
             moved.camera = Camera::look_at(pos, Vec3::new(0.0, 0.0, 0.1), Vec3::Z, 21.0, sc.camera.width, sc.camera.height);
             state.begin_frame();
             let t = Instant::now();
-            let (_, r) = net.solve_in_session_detailed(&moved, &NoProgress, &mut state).unwrap();
+            let (_, r) = net.solve(&moved, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).map(SolveOutput::split::<NetworkReport>).unwrap();
             orbit.push(t.elapsed().as_secs_f64());
             assert_eq!(r.start, Start::Kept);
             let t = Instant::now();
-            net.solve_detailed(&moved, &NoProgress).unwrap();
+            net.solve(&moved, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
             full.push(t.elapsed().as_secs_f64());
         }
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;

@@ -59,9 +59,10 @@ pub struct Network {
 }
 
 /// How a solve came by its network radiance I[particle, direction].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Start {
     /// Iterated from zero (a one-off solve, or the medium changed).
+    #[default]
     Cold,
     /// Iterated from the previous frame's I (same medium, other lights): the same fixed point
     /// to the residual threshold, in fewer iterations when the light changed little.
@@ -72,7 +73,7 @@ pub enum Start {
 }
 
 /// What a solve measured, for tests and benchmarks.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct NetworkReport {
     pub window: u32,
     /// Residual after each iteration (empty when I was kept).

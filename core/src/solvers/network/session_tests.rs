@@ -1,6 +1,7 @@
 //! `network` in a session (kept network and radiance), the phase normalisation's effect on the
 //! white furnace, and the error against N and D (paper Fig. 7).
 
+use crate::solvers::session::SessionState;
 use glam::{Quat, Vec3};
 
 use super::tests::{cube_scene, small};
@@ -20,7 +21,7 @@ fn rel_diff(a: &[Vec3], b: &[Vec3]) -> f64 {
 
 fn frame(net: &Network, sc: &Scene, state: &mut SessionState) -> (SolveOutput, NetworkReport) {
     state.begin_frame();
-    net.solve_in_session_detailed(sc, &NoProgress, state).unwrap()
+    net.solve(sc, &mut SolveCtx::new(&NoProgress).in_session(state)).map(SolveOutput::split::<NetworkReport>).unwrap()
 }
 
 /// A camera orbiting a still medium under still lights: the session keeps I and only
@@ -34,7 +35,7 @@ fn network_camera_move_in_a_session_equals_a_full_solve() {
         let pos = Quat::from_rotation_z(angle.to_radians()) * sc.camera.position;
         sc.camera = Camera::look_at(pos, Vec3::ZERO, Vec3::Z, 22.0, 16, 16);
         let (out, rep) = frame(&net, &sc, &mut state);
-        let (full, full_rep) = net.solve_detailed(&sc, &NoProgress).unwrap();
+        let (full, full_rep) = net.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
         assert_eq!(rep.start, if f == 0 { Start::Cold } else { Start::Kept }, "frame {f}");
         assert!(rep.residuals.is_empty() || f == 0);
         assert_eq!(full_rep.start, Start::Cold);
@@ -63,7 +64,7 @@ fn network_warm_start_from_another_light_converges_to_the_same_answer() {
         let mut state = SessionState::new();
         frame(&net, &turned(0.0), &mut state);
         let (warm, rep) = frame(&net, &turned(deg), &mut state);
-        let (cold, cold_rep) = net.solve_detailed(&turned(deg), &NoProgress).unwrap();
+        let (cold, cold_rep) = net.solve(&turned(deg), &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
         let d = rel_diff(&warm.scattering.data, &cold.scattering.data);
         eprintln!("sun turned {deg} deg: warm start {} iterations, cold {}: S differ by {d:.2e}", rep.residuals.len(), cold_rep.residuals.len());
         assert_eq!(rep.start, Start::Warm);
@@ -92,7 +93,7 @@ fn network_white_furnace_fails_without_row_normalisation() {
     let mut deviation = [0.0f64; 2];
     for (k, normalise) in [true, false].into_iter().enumerate() {
         let net = Network { normalise_phase: normalise, ..Network::new(s.clone()).unwrap() };
-        let (out, rep) = net.solve_detailed(&sc, &NoProgress).unwrap();
+        let (out, rep) = net.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
         let ratios = s_over_sigma_s(&out.scattering, &sc.medium, 0.99);
         let m = ratios.iter().map(|&r| r as f64).sum::<f64>() / ratios.len() as f64;
         eprintln!("furnace box g 0.9, rows normalised {normalise}: S / sigma_s {m:.4} ({} iterations)", rep.residuals.len());
@@ -116,7 +117,7 @@ fn network_error_depends_on_n_more_than_on_d() {
     let err = |particles: u32, directions: u32| {
         let s = NetworkSettings { particles, directions, window: 16, output_resolution: 16, ..Default::default() };
         let t = std::time::Instant::now();
-        let (out, rep) = Network::new(s).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+        let (out, rep) = Network::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
         let e = errors_against_fixture("cube_g0", &sc, &out.scattering);
         eprintln!("N {particles} D {directions}: {e}; M {} {:.2} s", rep.window, t.elapsed().as_secs_f64());
         e.image

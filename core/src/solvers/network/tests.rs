@@ -25,7 +25,7 @@ pub(super) fn small() -> NetworkSettings {
 }
 
 fn solve(sc: &Scene, s: NetworkSettings) -> (ScatteringGrid, NetworkReport) {
-    let (out, rep) = Network::new(s).unwrap().solve_detailed(sc, &NoProgress).unwrap();
+    let (out, rep) = Network::new(s).unwrap().solve(sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
     (out.scattering, rep)
 }
 
@@ -210,7 +210,7 @@ fn network_cloud_vs_fixture() {
         particles: crate::solvers::testing::env_u32("NET_PARTICLES", 2048),
         ..Default::default()
     };
-    let (out, rep) = Network::new(s).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (out, rep) = Network::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
     let e = errors_against_fixture("cloud", &sc, &out.scattering);
     eprintln!(
         "network cloud: image {:.3} (x{:.3}) grid {:.3} (x{:.3}) M {} iterations {} {:.1}s {:?}",

@@ -28,7 +28,7 @@ fn bench_photon_grid_error_vs_time() {
         for p in [14u32, 16, 18] {
             let pg = PhotonGrid::new(PhotonGridSettings { photons: 1 << p, ..Default::default() }).unwrap();
             let t = Instant::now();
-            let out = pg.solve(&sc, &NoProgress).unwrap();
+            let out = pg.solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
             let secs = t.elapsed().as_secs_f64();
             let e = errors_against_fixture(name, &sc, &out.scattering);
             rows.push(json!({"scene": name, "photons": 1u64 << p, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio, "grid": e.grid}));
@@ -62,7 +62,7 @@ fn bench_photon_grid_fig12() {
         let mut state = SessionState::new();
         state.begin_frame();
         let t = Instant::now();
-        let (one, _) = pg.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
+        let (one, _) = pg.solve(&sc, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).map(SolveOutput::split::<PhotonGridReport>).unwrap();
         let full = t.elapsed().as_secs_f64();
         let trace_full = one.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum::<f64>();
         let mut frame = Vec::new();
@@ -70,7 +70,7 @@ fn bench_photon_grid_fig12() {
         for _ in 0..3 {
             state.begin_frame();
             let t = Instant::now();
-            let (out, _) = pg.solve_in_session_detailed(&sc, &NoProgress, &mut state).unwrap();
+            let (out, _) = pg.solve(&sc, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).map(SolveOutput::split::<PhotonGridReport>).unwrap();
             frame.push(t.elapsed().as_secs_f64());
             trace.push(out.timings.0.iter().filter(|(k, _)| k == "trace").map(|(_, v)| *v).sum::<f64>());
         }
@@ -119,7 +119,7 @@ fn bench_photon_grid_flicker() {
             let pg = PhotonGrid::new(s).unwrap();
             state.begin_frame();
             let t = Instant::now();
-            let (out, _) = pg.solve_in_session_detailed(&scene(f), &NoProgress, &mut state).unwrap();
+            let (out, _) = pg.solve(&scene(f), &mut SolveCtx::new(&NoProgress).in_session(&mut state)).map(SolveOutput::split::<PhotonGridReport>).unwrap();
             if f > 0 {
                 secs.push(t.elapsed().as_secs_f64());
             }
@@ -150,7 +150,7 @@ fn bench_photon_grid_cloud_aim() {
     for spp in [256u32, 1024, 4096] {
         let t = Instant::now();
         let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
-        let img = r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap();
+        let img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap();
         let secs = t.elapsed().as_secs_f64();
         let e = Errors::between(&rgb(&img), &[], &[], &fx.image(), &[], None);
         rows.push(json!({"method": "reference", "spp": spp, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio}));
@@ -161,7 +161,7 @@ fn bench_photon_grid_cloud_aim() {
         for p in (from..=to).step_by(2) {
             let pg = PhotonGrid::new(PhotonGridSettings { photons: 1 << p, ..s.clone() }).unwrap();
             let t = Instant::now();
-            let out = pg.solve(&sc, &NoProgress).unwrap();
+            let out = pg.solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
             let secs = t.elapsed().as_secs_f64();
             let e = errors_against_fixture("cloud", &sc, &out.scattering);
             rows.push(json!({"method": format!("photon-grid {label}"), "photons": 1u64 << p, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio, "grid": e.grid}));

@@ -61,6 +61,7 @@ use crate::translate::LightSampler;
 /// scattered light is the medium's HG(g) about the sun, what follows is the diffuse part.
 const SPLIT_ORDER: u32 = 2;
 
+#[derive(Clone)]
 pub struct PhotonGrid {
     settings: PhotonGridSettings,
     /// The first photon generation a one-off solve traces (`from_generation`).
@@ -155,9 +156,8 @@ impl PhotonGrid {
 
     /// This solver with one-off solves tracing generations first..first + m: what a session's
     /// ring holds m frames after the scene last changed (0, the default: the first frame's).
-    pub fn from_generation(mut self, first: u64) -> Self {
-        self.first = first;
-        self
+    pub fn from_generation(&self, first: u64) -> Self {
+        PhotonGrid { first, settings: self.settings.clone() }
     }
 
     fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {

@@ -107,8 +107,8 @@ fn noise_falls_as_inverse_square_root_of_photons() {
     let mut ys = Vec::new();
     for p in [12u32, 14, 16, 18] {
         let s = |seed| PhotonGridSettings { photons: 1 << p, seed, cache_resolution: 16, output_resolution: 24, ..Default::default() };
-        let a = PhotonGrid::new(s(1)).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
-        let b = PhotonGrid::new(s(2)).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
+        let a = PhotonGrid::new(s(1)).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
+        let b = PhotonGrid::new(s(2)).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
         let (mut num, mut den) = (0.0f64, 0.0f64);
         for (x, y) in a.data.iter().zip(&b.data) {
             num += (*x - *y).as_dvec3().length_squared();

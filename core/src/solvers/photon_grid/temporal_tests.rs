@@ -35,7 +35,7 @@ fn turned(name: &str, degrees: f32) -> Scene {
 
 fn session_frame(pg: &PhotonGrid, sc: &Scene, state: &mut SessionState) -> (SolveOutput, PhotonGridReport) {
     state.begin_frame();
-    pg.solve_in_session_detailed(sc, &NoProgress, state).unwrap()
+    pg.solve(sc, &mut SolveCtx::new(&NoProgress).in_session(state)).map(SolveOutput::split::<PhotonGridReport>).unwrap()
 }
 
 /// m frames after a light step the ring holds only generations traced under the new light, and
@@ -48,7 +48,7 @@ fn ring_after_light_step_equals_fresh_solve() {
     let (before, after) = (turned("cube_g07", 0.0), turned("cube_g07", 40.0));
     let mut state = SessionState::new();
     let (first, rep) = session_frame(&pg, &before, &mut state);
-    assert_eq!(first.scattering.data, pg.solve_detailed(&before, &NoProgress).unwrap().0.scattering.data, "frame 0 is the one-off solve");
+    assert_eq!(first.scattering.data, pg.solve(&before, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0.scattering.data, "frame 0 is the one-off solve");
     assert_eq!(rep.generations, vec![0, 1, 2, 3]);
     for _ in 1..3 {
         session_frame(&pg, &before, &mut state);
@@ -57,7 +57,7 @@ fn ring_after_light_step_equals_fresh_solve() {
     let mut last = None;
     for f in 3..3 + m as u64 {
         let (out, rep) = session_frame(&pg, &after, &mut state);
-        let fresh = pg.solve_generations(&after, f, &NoProgress).unwrap().0;
+        let fresh = pg.from_generation(f).solve(&after, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0;
         assert_eq!(rep.generations, (f..f + m as u64).collect::<Vec<_>>());
         let exact = out.scattering.data == fresh.scattering.data;
         assert_eq!(exact, f == 3 + m as u64 - 1, "frame {f}: equal to the fresh solve only once every generation is new");
@@ -86,7 +86,7 @@ fn static_scene_flicker_is_the_rings_predicted_noise() {
     };
     let frame_pairs: Vec<_> = frames.windows(2).map(|w| (&w[1], &w[0])).collect();
     // Independent one-off solves: disjoint generation sets.
-    let solves: Vec<Vec<Vec3>> = (0..7u64).map(|k| pg.solve_generations(&sc, 100 + k * m as u64, &NoProgress).unwrap().0.scattering.data).collect();
+    let solves: Vec<Vec<Vec3>> = (0..7u64).map(|k| pg.from_generation(100 + k * m as u64).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0.scattering.data).collect();
     let solve_pairs: Vec<_> = solves.windows(2).map(|w| (&w[1], &w[0])).collect();
     let (flicker, noise) = (ms(&frame_pairs), ms(&solve_pairs));
     let ratio = flicker / noise;
@@ -112,8 +112,8 @@ fn moving_sun_stays_within_one_and_a_half_percent_of_a_fresh_solve() {
     for f in 0..frames {
         let sc = turned("cube_g07", 0.5 * f as f32);
         let (out, _) = session_frame(&pg, &sc, &mut state);
-        let fresh = image(&sc, &pg.solve_generations(&sc, 1000 + f * m as u64, &NoProgress).unwrap().0.scattering);
-        let other = image(&sc, &pg.solve_generations(&sc, 2000 + f * m as u64, &NoProgress).unwrap().0.scattering);
+        let fresh = image(&sc, &pg.from_generation(1000 + f * m as u64).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0.scattering);
+        let other = image(&sc, &pg.from_generation(2000 + f * m as u64).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0.scattering);
         diff2 += rel_diff(&image(&sc, &out.scattering), &fresh).powi(2);
         noise2 += rel_diff(&other, &fresh).powi(2);
     }
@@ -137,8 +137,8 @@ fn ring_follows_a_medium_whose_bounds_change() {
         sc.medium = crate::solvers::testing::homogeneous_box(16 + f as i32, 1.0 / 16.0, 4.0, 1.0, 0.7);
         let (out, rep) = session_frame(&pg, &sc, &mut state);
         assert_eq!(rep.generations, (f..f + m as u64).collect::<Vec<_>>(), "one new generation per frame");
-        let fresh = pg.solve_generations(&sc, f, &NoProgress).unwrap().0.scattering.data;
-        let other = pg.solve_generations(&sc, 1000, &NoProgress).unwrap().0.scattering.data;
+        let fresh = pg.from_generation(f).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0.scattering.data;
+        let other = pg.from_generation(1000).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap().0.scattering.data;
         let (d, noise) = (rel_diff(&out.scattering.data, &fresh), rel_diff(&other, &fresh));
         eprintln!("growing box frame {f}: ring vs fresh {d:.4}, noise between solves {noise:.4}");
         // Lag of at most 3 voxels of growth (of 16-21) plus noise: bounded by twice the noise

@@ -35,7 +35,7 @@ pub(super) fn case(name: &str) -> Scene {
 }
 
 fn solve(sc: &Scene, s: PhotonGridSettings) -> (SolveOutput, PhotonGridReport) {
-    PhotonGrid::new(s).unwrap().solve_detailed(sc, &NoProgress).unwrap()
+    PhotonGrid::new(s).unwrap().solve(sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap()
 }
 
 fn against(name: &str, s: PhotonGridSettings) -> (Errors, PhotonGridReport, f64) {
@@ -255,11 +255,12 @@ fn camera_weights_trace_on_the_cpu_whatever_the_backend() {
     let sc = case("cube_g07");
     let s = PhotonGridSettings { photons: 1 << 12, angular: Angular::Camera, ..Default::default() };
     let pg = PhotonGrid::new(s.clone()).unwrap();
-    let a = pg.solve_generations_with(&sc, 0, &NoProgress, &NoTracing).unwrap().0.scattering.data;
-    let b = pg.solve_generations_with(&sc, 0, &NoProgress, &super::backend::CpuBackend).unwrap().0.scattering.data;
+    let (no_tracing, cpu): (Box<dyn PhotonBackend>, Box<dyn PhotonBackend>) = (Box::new(NoTracing), Box::new(super::backend::CpuBackend));
+    let a = pg.solve(&sc, &mut SolveCtx::new(&NoProgress).on(&no_tracing)).unwrap().scattering.data;
+    let b = pg.solve(&sc, &mut SolveCtx::new(&NoProgress).on(&cpu)).unwrap().scattering.data;
     assert_eq!(a, b);
     let lobes = PhotonGrid::new(PhotonGridSettings { angular: Angular::Lobes, ..s }).unwrap();
-    assert!(lobes.solve_generations_with(&sc, 0, &NoProgress, &NoTracing).is_err());
+    assert!(lobes.solve(&sc, &mut SolveCtx::new(&NoProgress).on(&no_tracing)).is_err());
 }
 
 /// A medium of at most `output_resolution` voxels a side is returned on its own voxels:
@@ -347,7 +348,7 @@ fn bias_sources() {
             let s = if *oracle { PhotonGridSettings { angular: Angular::Camera, ..s.clone() } } else { s.clone() };
             let pg = PhotonGrid::new(s).unwrap();
             let t = std::time::Instant::now();
-            let (out, rep) = pg.solve_detailed(&sc, &NoProgress).unwrap();
+            let (out, rep) = pg.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap();
             let secs = t.elapsed().as_secs_f64();
             print(name, what, &errors_against_fixture(name, &sc, &out.scattering), &rep, secs);
         }
@@ -381,7 +382,7 @@ fn error_by_brightness() {
     let s = PhotonGridSettings { photons: env_u32("PG_PHOTONS", 1 << 20), cache_resolution: env_u32("PG_CACHE", 24), angular, ..Default::default() };
     let pg = PhotonGrid::new(s).unwrap();
     let t = std::time::Instant::now();
-    let out = SolverOutput::of(&sc, &pg.solve(&sc, &NoProgress).unwrap().scattering);
+    let out = SolverOutput::of(&sc, &pg.solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering);
     eprintln!("{name}: {} ({:.1} s)", crate::solvers::testing::Errors::against(&out, &fx), t.elapsed().as_secs_f64());
     for (what, mine, reference) in [("image", out.image.clone(), fx.image()), ("multiple", out.multiple.clone(), fx.multiple().unwrap_or_default())] {
         if reference.is_empty() {
@@ -446,7 +447,7 @@ fn floor_anatomy() {
     }
     let pg = PhotonGrid::new(s).unwrap();
     let t = std::time::Instant::now();
-    let (out, rep) = pg.solve_detailed(&sc, &NoProgress).unwrap();
+    let (out, rep) = pg.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PhotonGridReport>).unwrap();
     print("cloud", "floor", &errors_against_fixture("cloud", &sc, &out.scattering), &rep, t.elapsed().as_secs_f64());
     let out = out.scattering;
     let opts = CompositeOptions { transparent: true, ..Default::default() };

@@ -173,6 +173,8 @@ impl PopReuse {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::medium::DensityGrid;
+    use crate::solvers::SolveCtx;
     use crate::scene::Scene;
     use crate::solvers::session::SessionState;
     use crate::solvers::{Solver};
@@ -210,20 +212,20 @@ use crate::stages::NoProgress;
             if let crate::scene::Light::Distant { direction, .. } = &mut scene.lights[0] {
                 *direction = glam::Quat::from_rotation_z(0.2 * f as f32) * *direction;
             }
-            pop.solve_in_session(&scene, &NoProgress, &mut state).unwrap();
+            pop.solve(&scene, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).unwrap();
         }
         let counts = state.kept(PopReuse::default).counts;
         // 4 dome ordinates solved once and reused twice; the sun solved every frame.
         let want = ReuseCounts { mip_reused: 2, mip_built: 1, importance_reused: 2, importance_built: 1, lights_reused: 8, lights_solved: 7 };
         assert_eq!(counts, want);
         scene.camera.position.z += 0.5;
-        pop.solve_in_session(&scene, &NoProgress, &mut state).unwrap();
+        pop.solve(&scene, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).unwrap();
         let c = state.kept(PopReuse::default).counts;
         assert_eq!((c.mip_reused, c.importance_built), (3, 2), "a moved camera keeps the mip, rebuilds the importance");
         assert_eq!((c.lights_reused, c.lights_solved), (8, 12), "and solves every light again");
         let (lo, _) = scene.medium.grid.bbox();
         scene.medium.grid = DensityGrid::from_dense(lo, glam::IVec3::splat(8), &[0.5; 512], Default::default()).unwrap();
-        pop.solve_in_session(&scene, &NoProgress, &mut state).unwrap();
+        pop.solve(&scene, &mut SolveCtx::new(&NoProgress).in_session(&mut state)).unwrap();
         let c = state.kept(PopReuse::default).counts;
         assert_eq!((c.mip_built, c.importance_built), (2, 3), "new voxels rebuild both");
     }

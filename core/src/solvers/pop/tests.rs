@@ -69,7 +69,7 @@ fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
 /// POP on scene `sc` against the reference fixture `name`.
 fn pop_vs_fixture_scene(name: &str, sc: &Scene, settings: &PopSettings) -> (Errors, PopReport) {
     let fx = load_fixture(name);
-    let (out, report) = Pop::new(settings.clone()).unwrap().solve_detailed(sc, &NoProgress).unwrap();
+    let (out, report) = Pop::new(settings.clone()).unwrap().solve(sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     let pop = SolverOutput::of(sc, &out.scattering);
     let errors = Errors::against(&pop, &fx);
     if std::env::var("POP_ROWS").is_ok() {
@@ -148,7 +148,7 @@ fn single_scattering_matches_compositor() {
         let mut sc = case("cube_g0");
         sc.medium.albedo = Vec3::splat(0.02);
         sc.medium.g = g;
-        let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
+        let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
         let (e, ratio) = against_single_scattering(&sc, &out.scattering);
         eprintln!("g {g}: POP vs compositor single scattering {e:.4}, mean x{ratio:.4}");
         assert!(e < 0.1, "g {g}: {e}");
@@ -192,7 +192,7 @@ fn fixtures_match_current_reference() {
     let sc = case("cube_g07");
     let fx = load_fixture("cube_g07");
     let r = Reference::new(ReferenceSettings { spp: 256, seed: 9, transparent: true, ..Default::default() }).unwrap();
-    let img = r.render_image(&sc, &NoProgress, &mut Timings::default()).unwrap();
+    let img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
     let m = mean(&rgb(&img)) / mean(&fx.image());
     assert!((m - 1.0).abs() < 0.05, "reference mean / fixture mean = {m}");
 }
@@ -204,12 +204,12 @@ fn fixtures_match_current_reference() {
 fn transmittance_only_matches_reference() {
     let sigma_t = 2.0;
     let mut sc = scene(cube(16, sigma_t, 0.0, 0.5), 16, 4.0, 22.0);
-    let (out, rep) = Pop::new(test_settings()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (out, rep) = Pop::new(test_settings()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     assert!(out.scattering.data.iter().all(|v| *v == Vec3::ZERO));
     assert_eq!(rep.lights[0].propagation.injected, [0.0; 3]);
     let img = composite(&sc, &out.scattering, &CompositeOptions { transparent: true, subpixels: 8, ..Default::default() }).unwrap();
     let r = Reference::new(ReferenceSettings { spp: 256, transparent: true, ..Default::default() }).unwrap();
-    let ref_img = r.render_image(&sc, &NoProgress, &mut Timings::default()).unwrap();
+    let ref_img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
     assert!(img.rgba.iter().all(|p| p.truncate() == Vec3::ZERO));
     // Mean alpha (coverage-independent), and alpha of the pixels well inside the cube's
     // silhouette (edge pixels differ by how each samples the pixel: random vs 8x8 stratified).
@@ -264,12 +264,12 @@ fn energy_is_conserved() {
     for (albedo, g) in [(1.0f32, 0.0f32), (1.0, 0.9), (0.6, 0.7)] {
         let sc = scene(cube(16, 4.0, albedo, g), 8, 4.0, 22.0);
         let settings = PopSettings { grid_resolution: 12, residual_threshold: 1e-6, max_iterations: 20_000, ..Default::default() };
-        let with_residuum = Pop::new(settings.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap().1;
+        let with_residuum = Pop::new(settings.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap().1;
         let balance = with_residuum.energy_balance()[0];
         eprintln!("albedo {albedo} g {g}, with the residuum: balance {balance:.7}");
         assert!((balance - 1.0).abs() < 1e-4, "albedo {albedo} g {g}, with the residuum: energy balance {balance}");
         let settings = PopSettings { isotropic_residuum: false, ..settings };
-        let (_, rep) = Pop::new(settings).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+        let (_, rep) = Pop::new(settings).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
         let l = &rep.lights[0];
         let balance = l.energy_balance()[0];
         eprintln!("albedo {albedo} g {g}: balance {balance:.7}, {} iterations, residual {:.2e}", l.propagation.iterations, l.propagation.residual[0] / l.propagation.injected[0]);
@@ -293,12 +293,12 @@ fn rgb_channels_are_independent() {
     let mut sc = scene(cube(8, 1.0, 0.9, 0.6), 8, 4.0, 22.0);
     sc.medium.density_scale = Vec3::new(1.0, 3.0, 6.0);
     sc.medium.albedo = Vec3::new(0.9, 0.5, 0.99);
-    let rgb = Pop::new(settings.clone()).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
+    let rgb = Pop::new(settings.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
     for c in 0..3 {
         let mut grey = sc.clone();
         grey.medium.density_scale = Vec3::splat(sc.medium.density_scale[c]);
         grey.medium.albedo = Vec3::splat(sc.medium.albedo[c]);
-        let g = Pop::new(settings.clone()).unwrap().solve(&grey, &NoProgress).unwrap().scattering;
+        let g = Pop::new(settings.clone()).unwrap().solve(&grey, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
         for (a, b) in rgb.data.iter().zip(&g.data) {
             // Not bit-identical: the RGB solve iterates until *every* channel's residual is
             // below the threshold (1e-3), the grey one until its own is.
@@ -330,7 +330,7 @@ fn settings_parse_and_reject() {
         assert!(e.contains(field), "{bad}: {e}");
     }
     // Through the registry, as the CLI builds it.
-    assert!(crate::solvers::by_name("pop", &map(serde_json::json!({"iterations": 3}))).is_err());
+    assert!(crate::solvers::registry::build("pop", &map(serde_json::json!({"iterations": 3}))).is_err());
 }
 
 /// Cancelling through `Progress` stops the solve with `Error::Cancelled`.
@@ -344,7 +344,7 @@ fn cancellation_stops_the_solve() {
     }
     let sc = scene(cube(8, 4.0, 1.0, 0.0), 8, 4.0, 22.0);
     for after in [0u32, 1, 5] {
-        let r = Pop::new(test_settings()).unwrap().solve(&sc, &CancelAfter(std::sync::atomic::AtomicU32::new(after)));
+        let r = Pop::new(test_settings()).unwrap().solve(&sc, &mut SolveCtx::new(&CancelAfter(std::sync::atomic::AtomicU32::new(after))));
         assert!(matches!(r, Err(Error::Cancelled)), "after {after}: {:?}", r.err());
     }
 }
@@ -357,17 +357,17 @@ fn unsupported_lights_warn_or_fail() {
     sc.lights.push(Light::Point { position: Vec3::new(2.0, 0.0, 0.0), intensity: Vec3::ONE, radius: 0.0 });
     sc.lights.push(Light::Dome(crate::scene::Environment { color: Vec3::splat(0.1), map: None }));
     let no_dome = PopSettings { dome_ordinates: 0, ..test_settings() };
-    let (_, rep) = Pop::new(no_dome.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (_, rep) = Pop::new(no_dome.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     // The point light has a radial grid (radial/); the dome without ordinates is reported.
     assert_eq!(rep.warnings.len(), 1);
     assert!(rep.warnings[0].contains("lights[2]") && rep.warnings[0].contains("dome"));
     assert_eq!(rep.radial.len(), 1);
     // With ordinates the dome is handled: one report per ordinate after the sun.
-    let (_, rep) = Pop::new(PopSettings { dome_ordinates: 6, ..test_settings() }).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (_, rep) = Pop::new(PopSettings { dome_ordinates: 6, ..test_settings() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     assert_eq!(rep.warnings.len(), 0);
     assert_eq!(rep.lights.len(), 7);
     sc.lights.drain(0..2);
-    let e = Pop::new(no_dome).unwrap().solve(&sc, &NoProgress).err().unwrap().to_string();
+    let e = Pop::new(no_dome).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).err().unwrap().to_string();
     assert!(e.contains("no light pop can propagate"), "{e}");
 }
 
@@ -389,7 +389,7 @@ fn dome_ordinates_carry_the_dome() {
     for (n, mean_m, lo_m, hi_m) in [(6u32, 0.925f32, 0.662f32, 1.174f32), (16, 0.935, 0.701, 1.104), (64, 0.960, 0.723, 1.181)] {
         let out = Pop::new(PopSettings { grid_resolution: 12, dome_ordinates: n, dome_grid_resolution: 12, ..Default::default() })
             .unwrap()
-            .solve(&sc, &NoProgress)
+            .solve(&sc, &mut SolveCtx::new(&NoProgress))
             .unwrap()
             .scattering;
         let ratios = s_over_sigma_s(&out, &sc.medium, 0.99);

@@ -84,10 +84,10 @@ fn thin_emitting_box_matches_mean_chord() {
 fn camera_does_not_see_emission_directly() {
     let r = Reference::new(ReferenceSettings { spp: 8, ..Default::default() }).unwrap();
     let black = scene_of(emitting(homogeneous_box(8, 0.1, 5.0, 0.0, 0.0), Vec3::splat(10.0)), 8);
-    let img = r.render_image(&black, &NoProgress, &mut Timings::default()).unwrap();
+    let img = r.render_image(&black, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
     assert!(img.rgba.iter().all(|p| p.truncate() == Vec3::ZERO));
     assert!(img.rgba[4 * 8 + 4].w > 0.9);
     let lit = scene_of(emitting(homogeneous_box(8, 0.1, 5.0, 0.8, 0.0), Vec3::splat(10.0)), 8);
-    let img = r.render_image(&lit, &NoProgress, &mut Timings::default()).unwrap();
+    let img = r.render_image(&lit, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
     assert!(img.aov("single").unwrap()[4 * 8 + 4].x > 0.1);
 }

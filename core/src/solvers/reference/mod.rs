@@ -172,7 +172,9 @@ impl Reference {
 
     /// Estimates S at every grid point: sigma_s(x) times the phase-weighted incident radiance
     /// towards the camera, with `grid_spp` paths per point.
-    fn scattering_grid(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
+    /// S point-estimated on the `grid_resolution` grid (what `solve` returns with
+    /// `output_resolution` 0); the fixtures' and the compositor tests' ground truth.
+    pub(crate) fn scattering_grid(&self, scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<ScatteringGrid> {
         let s = &self.settings;
         let mut grid = ScatteringGrid::over_medium(&scene.medium, s.grid_resolution)?;
         crate::budget::check_elements::<f32>("reference majorant grid (solver.majorant_resolution)", (s.majorant_resolution as u64).pow(3))?;

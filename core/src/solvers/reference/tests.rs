@@ -53,7 +53,7 @@ fn white_furnace_conserves_energy() {
         let env = Environment { color: Vec3::ONE, map: None };
         let scene = scene_with(medium, vec![Light::Dome(env)], 16);
         let r = Reference::new(ReferenceSettings { spp: 64, ..Default::default() }).unwrap();
-        let img = r.render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
+        let img = r.render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
         let lum: Vec<f64> = img.rgba.iter().map(|p| p.x as f64).collect();
         let mean = lum.iter().sum::<f64>() / lum.len() as f64;
         let var = lum.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (lum.len() - 1) as f64;
@@ -156,8 +156,8 @@ fn same_seed_same_image() {
     let mut scene = scene;
     scene.camera = Camera::look_at(scene.camera.position, Vec3::ZERO, Vec3::Z, 39.6, 12, 12);
     let r = Reference::new(ReferenceSettings { spp: 2, ..Default::default() }).unwrap();
-    let a = r.render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
-    let b = r.render_image(&scene, &NoProgress, &mut Timings::default()).unwrap();
+    let a = r.render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
+    let b = r.render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut Timings::default()).expect("the reference renders images").unwrap();
     assert_eq!(a.rgba, b.rgba);
 }
 
@@ -255,15 +255,15 @@ fn grid_on_voxels_keeps_the_light() {
     let flux = |im: &crate::image::Image| im.rgba.iter().map(|p| p.truncate().dot(Vec3::ONE) as f64).sum::<f64>();
     let mut t = Timings::default();
     let truth = flux(&Reference::new(ReferenceSettings { spp: 256, transparent: true, ..Default::default() }).unwrap()
-        .render_image(&scene, &NoProgress, &mut t)
+        .render_image(&scene, &mut SolveCtx::new(&NoProgress), false, &mut t).expect("the reference renders images")
         .unwrap());
     for grid_resolution in [12, 32] {
         let settings = ReferenceSettings { grid_resolution, grid_spp: 32, transparent: true, output_resolution: 128, ..Default::default() };
         let r = Reference::new(settings.clone()).unwrap();
-        let on_voxels = r.solve(&scene, &NoProgress).unwrap().scattering;
+        let on_voxels = r.solve(&scene, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
         assert!(on_voxels.dims.iter().max().unwrap() > &40, "output not on the voxels: {:?}", on_voxels.dims);
         let ratio = flux(&crate::compositor::composite(&scene, &on_voxels, &opts).unwrap()) / truth;
-        let point = Reference::new(ReferenceSettings { output_resolution: 0, ..settings }).unwrap().solve(&scene, &NoProgress).unwrap().scattering;
+        let point = Reference::new(ReferenceSettings { output_resolution: 0, ..settings }).unwrap().solve(&scene, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
         assert!(point.dims.iter().all(|&d| d <= grid_resolution), "output_resolution 0: the path grid {:?}", point.dims);
         let point_ratio = flux(&crate::compositor::composite(&scene, &point, &opts).unwrap()) / truth;
         eprintln!("{grid_resolution} cells: flux over the path-traced image's: on voxels {ratio:.4}, point estimate {point_ratio:.4}");

@@ -3,6 +3,7 @@
 //! Each solver states its own tolerance in `expectation`, with the reason; a solver added to
 //! the list without one fails here, by name.
 
+use crate::solvers::SolveCtx;
 use glam::Vec3;
 
 use super::{homogeneous_box, mean, rgb, s_over_sigma_s};
@@ -16,7 +17,7 @@ use crate::stages::{NoProgress, ScatteringGrid};
 /// it runs one of the others at a measured preset (auto/tests.rs checks that it does), each
 /// checked here with its own bounds.
 fn solver_names() -> Vec<&'static str> {
-    crate::solvers::SOLVER_NAMES.iter().copied().filter(|n| *n != crate::solvers::auto::NAME).collect()
+    crate::solvers::registry::SOLVER_NAMES.iter().copied().filter(|n| *n != crate::pipeline::auto::NAME).collect()
 }
 
 /// How a solver is run by these checks (its `solver` settings block: small and fast) and the
@@ -131,8 +132,8 @@ fn expectation(name: &str) -> Expectation {
 
 fn solve(name: &str, sc: &Scene) -> ScatteringGrid {
     let settings = expectation(name).settings;
-    let solver = crate::solvers::by_name(name, settings.as_object().unwrap()).unwrap();
-    solver.solve(sc, &NoProgress).unwrap().scattering
+    let solver = crate::solvers::registry::build(name, settings.as_object().unwrap()).unwrap();
+    solver.solve(sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering
 }
 
 /// White furnace: a non-absorbing medium under a uniform dome of radiance 1. The radiance is 1

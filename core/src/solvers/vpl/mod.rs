@@ -125,9 +125,8 @@ impl Vpl {
 
     /// This solver keeping only the first `max_orders` VPLs of each walk (u32::MAX, the
     /// default: all), so that 1 gives single + double scattering.
-    pub fn with_max_orders(mut self, max_orders: u32) -> Self {
-        self.max_orders = max_orders;
-        self
+    pub fn with_max_orders(&self, max_orders: u32) -> Self {
+        Vpl { max_orders, settings: self.settings.clone() }
     }
 
     fn run(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn VplBackend) -> Result<(SolveOutput, VplReport)> {

@@ -1,5 +1,8 @@
 //! vpl against exact single scattering, the converged reference fixtures, and itself (seed).
 
+use crate::solvers::SolveCtx;
+use crate::solvers::SolveOutput;
+use crate::solvers::vpl::VplReport;
 use glam::Vec3;
 
 use super::{NearField, Vpl, VplSettings};
@@ -24,7 +27,7 @@ fn vpl_albedo_zero_is_single_scattering() {
     let mut sc = case("cube_g07");
     sc.medium.albedo = Vec3::ZERO;
     let s = test_settings();
-    let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+    let (out, rep) = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
     let single = single_scattering_grid(&sc, s.output_resolution, s.dome_directions).unwrap();
     assert_eq!(out.scattering.dims, single.dims);
     assert_eq!(rep.vpl_power, [0.0; 3]);
@@ -37,9 +40,9 @@ fn vpl_albedo_zero_is_single_scattering() {
 fn vpl_same_seed_same_result() {
     let sc = case("cube_g0");
     let s = VplSettings { walks: 128, walks_per_subset: 16, gather_resolution: 8, output_resolution: 12, ..Default::default() };
-    let a = Vpl::new(s.clone()).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
-    let b = Vpl::new(s.clone()).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
-    let c = Vpl::new(VplSettings { seed: 2, ..s }).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
+    let a = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
+    let b = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
+    let c = Vpl::new(VplSettings { seed: 2, ..s }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
     assert!(a.data == b.data);
     assert!(a.data != c.data);
 }
@@ -47,7 +50,7 @@ fn vpl_same_seed_same_result() {
 fn check_case(name: &str, near_field: NearField, max_image: f64, max_grid: f64) {
     let sc = case(name);
     let t = std::time::Instant::now();
-    let (out, rep) = Vpl::new(VplSettings { near_field, ..test_settings() }).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+    let (out, rep) = Vpl::new(VplSettings { near_field, ..test_settings() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
     let e = errors_against_fixture(name, &sc, &out.scattering);
     eprintln!(
         "vpl {name} {near_field:?}: {e}; {} VPLs, {:.1}% near connections, {:.1} s",
@@ -181,7 +184,7 @@ fn vpl_explore() {
     };
     let sc = case(&name);
     let t = std::time::Instant::now();
-    let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+    let (out, rep) = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
     let e = errors_against_fixture(&name, &sc, &out.scattering);
     eprintln!("{name} {:?} walks {} gather {}: {e}; {:?}; {} vpls, {} cut, {:.2} s", s.near_field, s.walks, s.gather_resolution, rep.gather, rep.vpls, rep.walks_cut, t.elapsed().as_secs_f64());
     eprintln!("timings {:?}", out.timings.0);
@@ -226,7 +229,7 @@ fn furnace_box() -> Scene {
 
 /// Mean S / sigma_s over the interior of `sc` (density above 0.99 of its peak), and the report.
 fn furnace_ratio(sc: &Scene, s: VplSettings) -> (f64, super::VplReport) {
-    let (out, rep) = Vpl::new(s).unwrap().solve_detailed(sc, &NoProgress, u32::MAX).unwrap();
+    let (out, rep) = Vpl::new(s).unwrap().solve(sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
     let ratios = crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99);
     assert!(ratios.len() > 8);
     (ratios.iter().map(|&r| r as f64).sum::<f64>() / ratios.len() as f64, rep)
@@ -299,7 +302,7 @@ fn furnace_error(s: &VplSettings, seeds: u64) -> (f64, f64) {
     let sc = furnace_box();
     let (mut sq, mut sum, mut n) = (0.0f64, 0.0f64, 0usize);
     for seed in 1..=seeds {
-        let out = Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(&sc, &NoProgress).unwrap();
+        let out = Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
         for r in crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99) {
             sq += (r as f64 - 1.0).powi(2);
             sum += r as f64;
@@ -313,7 +316,7 @@ fn furnace_error(s: &VplSettings, seeds: u64) -> (f64, f64) {
 /// in grid order, for `s` (its seed included).
 fn furnace_points(s: &VplSettings) -> Vec<f64> {
     let sc = furnace_box();
-    let out = Vpl::new(s.clone()).unwrap().solve(&sc, &NoProgress).unwrap();
+    let out = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
     crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99).into_iter().map(|r| r as f64).collect()
 }
 
@@ -399,7 +402,7 @@ fn vpl_explore_furnace_convergence() {
             let sc = furnace_box();
             let core = env_u32("VPL_CORE1000", 1000) as f32 / 1000.0;
             let r = |seed| {
-                let g = Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
+                let g = Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
                 let mut v = Vec::new();
                 for c in 0..g.len() {
                     let (i, j, k) = (c as u32 % g.dims[0], (c as u32 / g.dims[0]) % g.dims[1], c as u32 / (g.dims[0] * g.dims[1]));
@@ -432,7 +435,7 @@ fn vpl_explore_furnace_convergence() {
 fn vpl_light_moved_one_degree_changes_s_little() {
     let sc = case("cube_g0");
     let s = VplSettings { walks: 1024, gather_resolution: 8, output_resolution: 12, near_field: NearField::Compensate, ..Default::default() };
-    let solve = |sc: &Scene, seed: u64| Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(sc, &NoProgress).unwrap().scattering.data;
+    let solve = |sc: &Scene, seed: u64| Vpl::new(VplSettings { seed, ..s.clone() }).unwrap().solve(sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering.data;
     let a = solve(&sc, 1);
     let mut moved = sc.clone();
     let turn = glam::Quat::from_rotation_z(1f32.to_radians());
@@ -467,10 +470,10 @@ fn vpl_double_scattering_matches_reference_order_two() {
     let sc = case("cube_g0");
     // The ball kernel: the compensation's recursion adds orders of its own (its vertices
     // connect to the VPLs and recurse), which max_orders does not cut.
-    let (out, _) = Vpl::new(VplSettings { near_field: NearField::Ball, ..test_settings() }).unwrap().solve_detailed(&sc, &NoProgress, 1).unwrap();
+    let (out, _) = Vpl::new(VplSettings { near_field: NearField::Ball, ..test_settings() }).unwrap().with_max_orders(1).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
     let ours = SolverOutput::of(&sc, &out.scattering);
     let r = Reference::new(ReferenceSettings { spp: 64, max_depth: 2, transparent: true, ..Default::default() }).unwrap();
-    let img = r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap();
+    let img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap();
     let theirs = img.aov("multiple").unwrap();
     let ratio = mean(&ours.multiple) / mean(theirs);
     let err = crate::image::relative_rmse(&ours.multiple, theirs);
@@ -497,7 +500,7 @@ fn vpl_bench() {
             let spp: u32 = spp.parse().unwrap();
             let t = std::time::Instant::now();
             let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
-            let img = r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap();
+            let img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap();
             let secs = t.elapsed().as_secs_f64();
             let fx = load_fixture(&name);
             let image = rgb(&img);
@@ -509,7 +512,7 @@ fn vpl_bench() {
             for (nf, label) in [(NearField::Clamp, "clamp"), (NearField::Ball, "ball"), (NearField::Hat, "hat"), (NearField::Compensate, "compensate")] {
                 let s = VplSettings { walks, near_field: nf, ..test_settings() };
                 let t = std::time::Instant::now();
-                let (out, _) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+                let (out, _) = Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
                 let secs = t.elapsed().as_secs_f64();
                 let e = errors_against_fixture(&name, &sc, &out.scattering);
                 println!(
@@ -550,7 +553,7 @@ fn eight_seeds_flux(name: &str, walks: u32) {
     let ratios: Vec<f64> = (1..=8u64)
         .map(|seed| {
             let s = VplSettings { walks, seed, ..Default::default() };
-            let out = Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
+            let out = Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
             errors_against_fixture(name, &sc, &out.scattering).image_ratio
         })
         .collect();
@@ -595,15 +598,15 @@ eight_seeds_within_two_percent! {
 fn vpl_energy_normalization_agrees_where_unbiased_and_lifts_the_point_light() {
     for seed in 1..=2u64 {
         let sc = case("cube_g0");
-        let (_, rep) = Vpl::new(VplSettings { seed, ..Default::default() }).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+        let (_, rep) = Vpl::new(VplSettings { seed, ..Default::default() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
         let check = rep.energy.expect("on by default");
         eprintln!("cube_g0 seed {seed}: {check:?}");
         assert!((check.factor[0] - 1.0).abs() < 0.03, "cube_g0 seed {seed}: factor {:?}", check.factor);
     }
     let sc = case("plume_point");
     let s = VplSettings::default();
-    let (on, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
-    let off = Vpl::new(VplSettings { normalize_energy: false, ..s.clone() }).unwrap().solve(&sc, &NoProgress).unwrap();
+    let (on, rep) = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
+    let off = Vpl::new(VplSettings { normalize_energy: false, ..s.clone() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
     let f = Vec3::from(rep.energy.expect("on by default").factor);
     eprintln!("plume_point: {:?}", rep.energy);
     assert!(f.x > 1.02, "plume_point: factor {f}");
@@ -756,7 +759,7 @@ fn vpl_explore_seeds() {
         let upsample_fit = if std::env::var("VPL_FIT").as_deref() == Ok("linear") { super::UpsampleFit::Linear } else { super::UpsampleFit::Mean };
         let s = VplSettings { walks, seed, near_field, upsample, upsample_fit, gather_resolution: env_u32("VPL_GATHER", 12), output_resolution: env_u32("VPL_OUT", 24), mean_free_paths: env_u32("VPL_MFP100", 25) as f32 / 100.0, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, near_refine: env_u32("VPL_REFINE100", 0) as f32 / 100.0, near_upsample: env_near_upsample(), near_radius: env_u32("VPL_RN100", 150) as f32 / 100.0, walks_per_subset: env_u32("VPL_WPS", 0), normalize_energy: env_u32("VPL_ENERGY", 1) != 0, phase_cone: env_u32("VPL_CONE100", 25) as f32 / 100.0, ..Default::default() };
         let s = env_transmittance(s);
-        let (out, rep) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+        let (out, rep) = Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
         let e = errors_against_fixture(&name, &sc, &out.scattering);
         let factor = rep.energy.map_or(f32::NAN, |c| c.factor[0]);
         eprintln!("{name} seed {seed}: {e}, energy factor {factor:.4} ({:.2} s)", t.elapsed().as_secs_f64());
@@ -794,7 +797,7 @@ fn converged_image(name: &str, sc: &Scene, spp: u32, dir: &std::path::Path) -> (
     }
     let half = |seed: u64| {
         let r = Reference::new(ReferenceSettings { spp: spp / 2, seed, transparent: true, ..Default::default() }).unwrap();
-        rgb(&r.render_image(sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap())
+        rgb(&r.render_image(sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap())
     };
     let (a, b) = (half(101), half(102));
     let noise = 0.5 * crate::image::relative_rmse(&a, &b);
@@ -847,7 +850,7 @@ fn vpl_bench_image() {
         for spp in list("VPL_IMAGE_SPP", "16,64") {
             let t = std::time::Instant::now();
             let r = Reference::new(ReferenceSettings { spp, seed: 7, transparent: true, ..Default::default() }).unwrap();
-            let img = rgb(&r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap());
+            let img = rgb(&r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap());
             let secs = t.elapsed().as_secs_f64();
             let (e, ec, ratio) = err(&img);
             println!("BENCH {{{head},\"solver\":\"reference\",\"spp\":{spp},\"seconds\":{secs:.4},\"image_raw\":{e:.5},\"image\":{ec:.5},\"image_ratio\":{ratio:.5}}}");
@@ -862,7 +865,7 @@ fn vpl_bench_image() {
                 Err(_) => s,
             };
             let t = std::time::Instant::now();
-            let (out, rep) = Vpl::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+            let (out, rep) = Vpl::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
             let solve = t.elapsed().as_secs_f64();
             eprintln!("{name} {walks} walks: {} VPLs, {} connections; {:?}", rep.vpls, rep.gather.connections, out.timings);
             let img = rgb(&composite(&sc, &out.scattering, &CompositeOptions { transparent: true, aovs: Aovs::NONE, subpixels: env_u32("VPL_SUBPIX", 2), step_voxels: env_u32("VPL_STEP100", 50) as f32 / 100.0, ..Default::default() }).unwrap());
@@ -898,7 +901,7 @@ fn vpl_near_refine_restores_the_plume_point_flux() {
         (1..=4u64)
             .map(|seed| {
                 let s = VplSettings { walks: 32768, seed, near_field: NearField::Ball, near_refine, normalize_energy, ..test_settings() };
-                errors_against_fixture(name, &sc, &Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap().scattering).image_ratio
+                errors_against_fixture(name, &sc, &Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering).image_ratio
             })
             .sum::<f64>()
             / 4.0
@@ -924,7 +927,7 @@ fn vpl_near_ratio_raises_the_plume_point_flux() {
     let run = |near_upsample| {
         // Without normalize_energy, which the ratio stage skips: the same estimate both ways.
         let s = VplSettings { near_field: NearField::Ball, near_upsample, normalize_energy: false, ..test_settings() };
-        errors_against_fixture(name, &sc, &Vpl::new(s).unwrap().solve(&sc, &NoProgress).unwrap().scattering)
+        errors_against_fixture(name, &sc, &Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering)
     };
     let (plain, ratio) = (run(super::NearUpsample::Plain), run(super::NearUpsample::Ratio));
     eprintln!("{name}: plain {plain}; ratio {ratio}");
@@ -973,7 +976,7 @@ fn vpl_explore_single_scattering() {
     for name in cases.split(',') {
         let sc = case(name);
         let r = Reference::new(ReferenceSettings { spp: env_u32("VPL_SPP", 16384), seed: 3, transparent: true, max_depth: 1, ..Default::default() }).unwrap();
-        let truth = rgb(&r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap());
+        let truth = rgb(&r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap());
         for res in [32u32, 64, 65, 128] {
             let single = if res <= 64 {
                 single_scattering_grid(&sc, res, 32).unwrap()
@@ -1013,7 +1016,7 @@ fn vpl_explore_multiple_share() {
         let sc = case(name);
         let fx = load_fixture(name).image();
         let r = Reference::new(ReferenceSettings { spp: env_u32("VPL_SPP", 8192), seed: 3, transparent: true, max_depth: 1, ..Default::default() }).unwrap();
-        let single_ref = rgb(&r.render_image(&sc, &NoProgress, &mut crate::stages::Timings::default()).unwrap());
+        let single_ref = rgb(&r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap());
         let multiple_ref: Vec<Vec3> = fx.iter().zip(&single_ref).map(|(a, b)| *a - *b).collect();
         eprintln!("{name}: reference single share {:.3}", mean(&single_ref) / mean(&fx));
         for &gather_resolution in &gathers {
@@ -1022,7 +1025,7 @@ fn vpl_explore_multiple_share() {
             for seed in 1..=seeds as u64 {
                 let s = VplSettings { walks: env_u32("VPL_WALKS", 32768), seed, gather_resolution, clamp_radius: env_u32("VPL_R100", 100) as f32 / 100.0, near_refine: env_u32("VPL_REFINE100", 0) as f32 / 100.0, ..Default::default() };
                 let t = std::time::Instant::now();
-                let (out, rep) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+                let (out, rep) = Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
                 if seed == 1 {
                     eprintln!("{name} gather {gather_resolution}: {} VPLs, {} connections, {:.2} s", rep.vpls, rep.gather.connections, t.elapsed().as_secs_f64());
                 }
@@ -1069,7 +1072,7 @@ fn vpl_auto_near_field_takes_the_hat_on_the_dense_clouds_only() {
     assert_eq!(Vpl::new(VplSettings { near_field: NearField::Clamp, ..s.clone() }).unwrap().near_field_for(&case("cloud").medium).unwrap(), NearField::Clamp);
     // And the solve runs what it resolved, and says so.
     for (name, want) in [("cloud", NearField::Hat), ("cube_g0", NearField::Ball)] {
-        let (_, rep) = Vpl::new(VplSettings { walks: 256, ..s.clone() }).unwrap().solve_detailed(&case(name), &NoProgress, u32::MAX).unwrap();
+        let (_, rep) = Vpl::new(VplSettings { walks: 256, ..s.clone() }).unwrap().solve(&case(name), &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
         assert_eq!(rep.near_field, want, "{name}");
         assert_eq!(rep.energy.is_some(), want == NearField::Ball, "{name}: normalize_energy runs with the ball only");
     }
@@ -1097,7 +1100,7 @@ fn vpl_explore_white_cloud() {
     for nf in [NearField::Ball, NearField::Hat, NearField::Compensate] {
         for &walks in &list {
             let s = VplSettings { walks, near_field: nf, gather_resolution: env_u32("VPL_GATHER", 10), output_resolution: env_u32("VPL_OUT", 12), max_vertices: env_u32("VPL_MAXV", 4096), ..Default::default() };
-            let (out, rep) = Vpl::new(s).unwrap().solve_detailed(&sc, &NoProgress, u32::MAX).unwrap();
+            let (out, rep) = Vpl::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
             let r = crate::solvers::testing::s_over_sigma_s(&out.scattering, &sc.medium, 0.99);
             let m = r.iter().map(|&x| x as f64).sum::<f64>() / r.len() as f64;
             eprintln!("{nf:?} {walks} walks: S / sigma_s {m:.4} over {} points; {} VPLs, {} walks cut, energy {:?}", r.len(), rep.vpls, rep.walks_cut, rep.energy.map(|e| e.factor));

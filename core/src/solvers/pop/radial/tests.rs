@@ -1,5 +1,7 @@
 //! Radial grids against the reference path tracer, and energy checks.
 
+use crate::solvers::SolveCtx;
+use crate::solvers::SolveOutput;
 use glam::{Affine3A, IVec3, Vec3};
 
 use crate::medium::{procedural, DensityGrid, GridLimits, Medium};
@@ -84,7 +86,7 @@ fn test_settings() -> PopSettings {
 fn pop_vs_fixture(name: &str, settings: &PopSettings) -> (Errors, PopReport) {
     let sc = case(name);
     let fx = load_fixture(name);
-    let (out, report) = Pop::new(settings.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (out, report) = Pop::new(settings.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     let SolverOutput { image: rgb, multiple, frame, grid: pop_grid } = SolverOutput::of(&sc, &out.scattering);
     assert_eq!(frame.dims, fx.grid_dims);
     let (mut ref_img, mut ref_grid) = (fx.image(), fx.grid());
@@ -237,7 +239,7 @@ fn area_light_vpls_carry_its_power_and_report_the_clamp() {
         _ => unreachable!(),
     };
     let s = PopSettings { area_vpls: 2, ..test_settings() };
-    let (_, rep) = Pop::new(s.clone()).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (_, rep) = Pop::new(s.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     assert_eq!(rep.radial.len(), 4);
     let total: Vec3 = rep.radial.iter().map(|r| Vec3::from(r.entering)).sum();
     assert!((total - power).abs().max_element() < 1e-3 * power.max_element(), "{total} vs {power}");
@@ -246,7 +248,7 @@ fn area_light_vpls_carry_its_power_and_report_the_clamp() {
     if let Light::Area(a) = &mut sc.lights[0] {
         a.center = Vec3::new(0.0, 0.0, 0.2);
     }
-    let (_, rep) = Pop::new(s).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+    let (_, rep) = Pop::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     let clamped: f32 = rep.radial.iter().map(|r| r.clamped[1]).sum();
     eprintln!("clamped single scattering: {clamped:.4} W of {:.3} W emitted", power.y);
     assert!(clamped > 0.0 && clamped < 0.5 * power.y, "{clamped}");
@@ -263,7 +265,7 @@ fn light_leaving_the_sphere_is_the_lights_power() {
         sc.medium.g = g;
         let s = PopSettings { residual_threshold: 1e-4, max_iterations: 50_000, ..test_settings() };
         let t = std::time::Instant::now();
-        let (_, rep) = Pop::new(s).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+        let (_, rep) = Pop::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
         let r = &rep.radial[0];
         let power = 4.0 * std::f32::consts::PI;
         let left: Vec<f32> = (0..3).map(|c| (r.transmitted[c] + r.propagation.escaped[c]) / power).collect();
@@ -297,7 +299,7 @@ fn single_scattering_matches_compositor() {
     for name in ["plume_point", "plume_spot", "plume_rect"] {
         let mut sc = case(name);
         sc.medium.albedo = Vec3::splat(0.02);
-        let out = Pop::new(PopSettings { grid_resolution: 32, radial_resolution: 48, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
+        let out = Pop::new(PopSettings { grid_resolution: 32, radial_resolution: 48, ..Default::default() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
         let (e, ratio) = against_single_scattering(&sc, &out.scattering);
         eprintln!("{name}: POP vs compositor single scattering {e:.4}, mean x{ratio:.4}");
         assert!(e < 0.08, "{name}: {e}");
@@ -321,7 +323,7 @@ fn emission_matches_compositor_single_scattering() {
     let m = &sc.medium;
     let term = EmissionTerm::new(m.grid.clone(), m.index_to_world, EmissionLaw::Linear { color: Vec3::new(3.0, 2.0, 1.0) });
     sc.medium.emission = Some(Emission { terms: vec![term], vpl_count: 128 });
-    let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &NoProgress).unwrap();
+    let out = Pop::new(PopSettings { grid_resolution: 32, ..Default::default() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
     let (e, ratio) = against_single_scattering(&sc, &out.scattering);
     eprintln!("emission: POP vs compositor single scattering {e:.4}, mean x{ratio:.4}");
     assert!((1.2..1.8).contains(&ratio), "mean x{ratio}");

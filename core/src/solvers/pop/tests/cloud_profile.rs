@@ -10,6 +10,7 @@
 //! `key=value,key=value` (JSON values). The reference's profiles are cached in the system
 //! temporary directory per (depth, paths).
 
+use crate::solvers::SolveCtx;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -73,7 +74,7 @@ fn cloud_profile() {
     let spp = env_u32("PROFILE_SPP", 4096);
     let depths: Vec<u32> = std::env::var("PROFILE_DEPTHS").unwrap_or("1,4,16,1000".into()).split(',').map(|d| d.parse().unwrap()).collect();
     let settings = pop_settings();
-    let out = Pop::new(settings.clone()).unwrap().solve(&sc, &NoProgress).unwrap();
+    let out = Pop::new(settings.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
     let e = errors_against_fixture("cloud", &sc, &out.scattering);
     eprintln!("pop {settings:?}\n  image {:.4} (x{:.3}) grid {:.4} (x{:.3}) multiple {:.4} (x{:.3})", e.image, e.image_ratio, e.grid, e.grid_ratio, e.multiple.unwrap(), e.multiple_ratio.unwrap());
     let to_index = out.scattering.index_to_world.inverse();
@@ -115,7 +116,7 @@ fn pop_on_dense_cloud_against_reference() {
         ("defaults", PopSettings::default(), 0.51, 1.11, (0.62, 0.68)),
         ("moment_anisotropy", PopSettings { moment_anisotropy: true, ..Default::default() }, 0.26, 1.07, (0.95, 1.05)),
     ] {
-        let out = Pop::new(settings).unwrap().solve(&sc, &NoProgress).unwrap();
+        let out = Pop::new(settings).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
         let e = errors_against_fixture("cloud", &sc, &out.scattering);
         eprintln!("pop {label} on the dense cloud: image {:.4} (flux x{:.3}), grid {:.4} (x{:.3})", e.image, e.image_ratio, e.grid, e.grid_ratio);
         assert!(e.image <= max_image, "{label}: image rel. RMSE {} > {max_image}", e.image);

@@ -6,6 +6,10 @@
 //! volscatter-core pop_cost_by_volume --run-ignored only --no-capture`; `POP_COST_SIZES` as
 //! `16x16x16,22x22x40,...`.
 
+use crate::solvers::pop::PopReport;
+use crate::solvers::SolveCtx;
+use crate::solvers::SolveOutput;
+use crate::solvers::Solver;
 use glam::{Affine3A, IVec3, Vec3};
 
 use super::scene;
@@ -64,9 +68,9 @@ fn pop_cost_by_volume() {
                 sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.05), map: None }));
             }
             let pop = Pop::new(super::sweep::with_env(PopSettings::default())).unwrap();
-            let _ = pop.solve_detailed(&sc, &NoProgress).unwrap(); // warm-up (rayon pool, caches)
+            let _ = pop.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap(); // warm-up (rayon pool, caches)
             let t = std::time::Instant::now();
-            let (out, rep) = pop.solve_detailed(&sc, &NoProgress).unwrap();
+            let (out, rep) = pop.solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
             let total = t.elapsed().as_secs_f64();
             let phases: Vec<String> = out.timings.0.iter().map(|(n, t)| format!("{} {:.3}", n.trim_start_matches("pop "), t)).collect();
             let iters: Vec<u32> = rep.lights.iter().map(|l| l.propagation.iterations).collect();

@@ -98,7 +98,7 @@ fn white_dome_energy_balances() {
     let sc = dome_scene(plume(24, 8.0, 1.0, 0.9), Environment { color: Vec3::ONE, map: None });
     for residuum in [true, false] {
         let st = PopSettings { residual_threshold: 1e-6, max_iterations: 20_000, isotropic_residuum: residuum, ..dome_settings(16) };
-        let (_, rep) = Pop::new(st).unwrap().solve_detailed(&sc, &NoProgress).unwrap();
+        let (_, rep) = Pop::new(st).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
         let balance = rep.energy_balance()[0];
         let absorbed: f32 = rep.lights.iter().map(|l| l.propagation.absorbed[0] + l.absorbed_direct[0]).sum::<f32>()
             + rep.residuum.as_ref().map_or(0.0, |r| r.propagation.absorbed[0]);
@@ -137,8 +137,8 @@ fn moved_camera_picks_neighbouring_ordinates() {
     let worst = a.iter().zip(&b).map(|(x, y)| x.direction.dot(y.direction).clamp(-1.0, 1.0).acos().to_degrees()).fold(0.0f32, f32::max);
     let change = |imp: bool| {
         let st = PopSettings { dome_importance: imp, ..dome_settings(64) };
-        let g0 = Pop::new(st.clone()).unwrap().solve(&sc, &NoProgress).unwrap().scattering;
-        let g1 = Pop::new(st).unwrap().solve(&moved, &NoProgress).unwrap().scattering;
+        let g0 = Pop::new(st.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
+        let g1 = Pop::new(st).unwrap().solve(&moved, &mut SolveCtx::new(&NoProgress)).unwrap().scattering;
         relative_rmse(&g1.data, &g0.data)
     };
     let (with, without) = (change(true), change(false));
@@ -198,7 +198,7 @@ fn errors_fall_as_ordinates_grow() {
 
 /// POP's image of `sc` (composited, RGB) and its report.
 fn pop_image(sc: &Scene, st: &PopSettings) -> (Vec<Vec3>, PopReport) {
-    let (out, rep) = Pop::new(st.clone()).unwrap().solve_detailed(sc, &NoProgress).unwrap();
+    let (out, rep) = Pop::new(st.clone()).unwrap().solve(sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();
     let img = composite(sc, &out.scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
     (rgb(&img), rep)
 }

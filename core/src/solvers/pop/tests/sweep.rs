@@ -3,6 +3,7 @@
 //! (`key=value,key=value`, JSON values). Prints, asserts nothing: `cargo nextest run
 //! --cargo-profile release -p volscatter-core pop_sweep --run-ignored only --no-capture`.
 
+use crate::solvers::SolveCtx;
 use super::{pop_vs_fixture, test_settings, CASES};
 use crate::solvers::pop::{Pop, PopSettings};
 use crate::solvers::testing::cloud::cloud_scene;
@@ -25,7 +26,7 @@ fn pop_sweep() {
     let sc = cloud_scene();
     let s = with_env(PopSettings::default());
     let t = std::time::Instant::now();
-    let out = Pop::new(s).unwrap().solve(&sc, &NoProgress).unwrap();
+    let out = Pop::new(s).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
     let e = errors_against_fixture("cloud", &sc, &out.scattering);
     eprintln!("cloud     image {:.3} (x{:.3}) grid {:.3} (x{:.3}) {:.2}s", e.image, e.image_ratio, e.grid, e.grid_ratio, t.elapsed().as_secs_f64());
     if std::env::var("POP_MAP").is_ok() {
