@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use volscatter_core::solvers::pop::backend::CpuBackend;
-use volscatter_core::solvers::pop::Pop;
+use volscatter_core::solvers::pop::{Pop, PopDevice};
 use volscatter_core::stages::{NoProgress, Timings};
 use volscatter_core::Scene;
 use volscatter_gpu::pop::backend::GpuBackend;
@@ -48,7 +48,7 @@ fn main() {
     let output = arg_list(&args, "--output", &[128])[0];
     let cpu_max_cells = arg_list(&args, "--cpu-max-cells", &[300_000])[0] as u64;
     let ctx = match GpuContext::new() {
-        Ok(c) => c,
+        Ok(c) => std::sync::Arc::new(c),
         Err(e) => {
             eprintln!("no GPU: {e}");
             std::process::exit(2);
@@ -64,17 +64,19 @@ fn main() {
                                   "output_resolution": output, "dome_ordinates": 0});
             let pop = Pop::from_settings(settings.as_object().unwrap()).expect("settings");
             // Warm-up (shader compilation, allocation), then the timed run.
-            let _ = pop.solve_with(&scene, &NoProgress, &GpuBackend::new(&ctx, iterations));
+            // (Through `PopDevice`, the form a device's backend takes in a solve, so that the
+            // backend's own timings stay readable.)
+            let _ = GpuBackend::new(&ctx, iterations).solve(&pop, &scene, &NoProgress, None);
             let backend = GpuBackend::new(&ctx, iterations);
             let t = Instant::now();
-            let (gpu, report) = pop.solve_with(&scene, &NoProgress, &backend).expect("gpu pop");
+            let (gpu, report) = backend.solve(&pop, &scene, &NoProgress, None).expect("gpu pop");
             let gpu_total = t.elapsed().as_secs_f64();
             let prop = backend.propagation_times().first().cloned().unwrap_or_default();
             let dims = report.lights[0].dims;
             let cells = dims.iter().map(|&d| d as u64).product::<u64>();
             let cpu = (cells <= cpu_max_cells).then(|| {
                 let t = Instant::now();
-                let (out, _) = pop.solve_with(&scene, &NoProgress, &CpuBackend).expect("cpu pop");
+                let (out, _) = CpuBackend.solve(&pop, &scene, &NoProgress, None).expect("cpu pop");
                 (stages(&out.timings), t.elapsed().as_secs_f64())
             });
             println!(

@@ -15,7 +15,8 @@ use serde_json::json;
 use std::collections::BTreeMap;
 
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::vpl::{CpuBackend, Vpl, VplBackend, VplSettings};
+use volscatter_core::solvers::vpl::{CpuBackend, Vpl, VplBackend, VplReport, VplSettings};
+use volscatter_core::solvers::{SolveCtx, Solver};
 use volscatter_core::stages::{NoProgress, Timings};
 use volscatter_core::Scene;
 use volscatter_gpu::vpl::GpuBackend;
@@ -62,7 +63,7 @@ fn main() {
     let nears: Vec<String> = arg(&args, "--near").unwrap_or("auto").split(',').map(str::to_string).collect();
     let cpu_max_connections: f64 = arg(&args, "--cpu-max-connections").map_or(f64::INFINITY, |v| v.parse().expect("--cpu-max-connections"));
     let ctx = match GpuContext::new() {
-        Ok(c) => c,
+        Ok(c) => std::sync::Arc::new(c),
         Err(e) => {
             eprintln!("no GPU: {e}");
             std::process::exit(2);
@@ -77,15 +78,16 @@ fn main() {
                     let mut s: VplSettings = serde_json::from_value(json!({"walks": w, "gather_resolution": g, "output_resolution": output, "near_field": near, "cluster_distance": 0})).expect("settings");
                     s.seed = 1;
                     let solver = Vpl::new(s).expect("settings");
-                    let run = |backend: &dyn VplBackend| {
+                    let run = |backend: Box<dyn VplBackend>| {
                         let t = std::time::Instant::now();
-                        let (out, report) = solver.solve_with(&scene, &NoProgress, u32::MAX, backend).expect("solve");
+                        let out = solver.solve(&scene, &mut SolveCtx::new(&NoProgress).on(&backend)).expect("solve");
+                        let (out, report) = out.split::<VplReport>();
                         (out, report, t.elapsed().as_secs_f64())
                     };
                     // The GPU once untimed: the first solve compiles the kernels.
-                    let _ = run(&GpuBackend::new(&ctx));
-                    let (gpu, report, gpu_total) = run(&GpuBackend::new(&ctx));
-                    let cpu = (report.gather.connections as f64 <= cpu_max_connections).then(|| run(&CpuBackend));
+                    let _ = run(Box::new(GpuBackend::new(&ctx)));
+                    let (gpu, report, gpu_total) = run(Box::new(GpuBackend::new(&ctx)));
+                    let cpu = (report.gather.connections as f64 <= cpu_max_connections).then(|| run(Box::new(CpuBackend)));
                     let row = json!({
                         "adapter": ctx.describe(),
                         "software": ctx.is_software(),

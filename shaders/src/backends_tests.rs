@@ -2,7 +2,12 @@
 //! CPU, on the default scene and on a scene reading Blender's VDB fixture.
 
 use super::*;
+use crate::test_support::{solve, solve_session};
+use crate::DeviceUsed;
 use volscatter_core::image::relative_rmse;
+use volscatter_core::pipeline::Session;
+use volscatter_core::solvers::registry;
+use volscatter_core::Error;
 use volscatter_core::stages::NoProgress;
 
 fn pop_settings() -> serde_json::Map<String, serde_json::Value> {
@@ -67,7 +72,10 @@ fn cpu_choice_and_errors_need_no_gpu() {
 #[test]
 fn every_gpu_flagged_solver_has_a_backend_and_only_those() {
     for entry in registry::SOLVERS {
-        assert_eq!(gpu_backend(entry.name).is_some(), entry.gpu, "{}: registry gpu flag and GPU dispatch disagree", entry.name);
+        assert_eq!(backend_for(entry.name).is_some(), entry.gpu, "{}: registry gpu flag and GPU dispatch disagree", entry.name);
+    }
+    for (name, _) in GPU_BACKENDS {
+        assert!(registry::get(name).is_ok_and(|e| e.gpu), "{name}: a GPU backend for a name the registry does not flag");
     }
 }
 
@@ -104,14 +112,14 @@ fn auto_leaves_a_software_adapter_for_the_cpu() {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_session_matches_one_off_gpu_solves() {
     let settings = serde_json::json!({"name": "pop", "grid_resolution": 16, "dome_ordinates": 4}).as_object().unwrap().clone();
-    let mut session = Session::new("pop", &settings).unwrap();
+    let mut session = Session::new("pop", &settings, devices(DeviceChoice::Gpu)).unwrap();
     for f in 0..3 {
         let mut scene = Scene::default_scene();
         if let volscatter_core::scene::Light::Distant { direction, .. } = &mut scene.lights[0] {
             *direction = glam::Quat::from_rotation_z(0.3 * f as f32) * *direction;
         }
         let (one_off, _) = solve(DeviceChoice::Gpu, &scene, "pop", &settings, &NoProgress).unwrap();
-        let (kept, used) = solve_session(DeviceChoice::Gpu, &mut session, &scene, &NoProgress).unwrap();
+        let (kept, used) = solve_session(&mut session, &scene, &NoProgress).unwrap();
         assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: ran on {used}");
         assert_eq!(kept.scattering.data, one_off.scattering.data, "frame {f}");
     }
@@ -124,8 +132,8 @@ fn gpu_session_matches_one_off_gpu_solves() {
 fn auto_is_resolved_before_the_device_dispatch() {
     let scene = Scene::default_scene();
     let settings = serde_json::json!({"target_error": 0.3}).as_object().unwrap().clone();
-    let (out, used) = solve(DeviceChoice::Cpu, &scene, "auto", &settings, &NoProgress).unwrap();
-    let c = out.choice.expect("no choice from auto");
+    let solved = volscatter_core::pipeline::solve(&scene, "auto", &settings, devices(DeviceChoice::Cpu), &NoProgress).unwrap();
+    let (c, used) = (solved.choice.expect("no choice from auto"), solved.device);
     assert!(c.solver != "auto" && registry::get(&c.solver).is_ok(), "{c:?}");
     assert_eq!(used, DeviceUsed::Cpu);
     let bad = serde_json::json!({"target_error": -1.0}).as_object().unwrap().clone();

@@ -6,9 +6,9 @@ use super::*;
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn shared_context_is_reused_across_threads() {
-    let first = GpuContext::with_shared(|ctx| ctx as *const GpuContext as usize).expect("GPU test run without a usable adapter");
+    let first = GpuContext::with_shared(|ctx| std::sync::Arc::as_ptr(ctx) as usize).expect("GPU test run without a usable adapter");
     let others: Vec<usize> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..4).map(|_| s.spawn(|| GpuContext::with_shared(|ctx| ctx as *const GpuContext as usize).unwrap())).collect();
+        let handles: Vec<_> = (0..4).map(|_| s.spawn(|| GpuContext::with_shared(|ctx| std::sync::Arc::as_ptr(ctx) as usize).unwrap())).collect();
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     });
     assert!(others.iter().all(|&p| p == first), "a second context was opened");
@@ -20,7 +20,7 @@ fn shared_context_is_reopened_after_device_loss() {
     let lost = GpuContext::with_shared(|ctx| {
         ctx.device.destroy();
         let _ = ctx.device.poll(wgpu::PollType::Wait);
-        (ctx.is_lost(), ctx as *const GpuContext as usize)
+        (ctx.is_lost(), std::sync::Arc::as_ptr(ctx) as usize)
     })
     .expect("GPU test run without a usable adapter");
     assert!(lost.0, "destroying the device should report it lost");

@@ -84,7 +84,5 @@ mod tests {
     fn cpu_choice_declines_without_opening_a_device() {
         let r: Result<Attempt<()>, crate::GpuError> = try_gpu(DeviceChoice::Cpu, |_| panic!("GPU closure called under cpu"));
         assert!(matches!(r, Ok(Attempt::Declined(ref why)) if why.is_empty()));
-        let (v, used) = run_on(DeviceChoice::Cpu, |_| Ok(1), || 2).unwrap();
-        assert_eq!((v, used), (2, DeviceUsed::Cpu));
     }
 }

@@ -5,8 +5,8 @@
 use crate::GpuContext;
 
 /// Opens a GPU context; a test that asked for the GPU fails if there is none.
-pub fn gpu_or_skip() -> GpuContext {
-    GpuContext::new().unwrap_or_else(|e| panic!("GPU test run without a usable adapter: {e}"))
+pub fn gpu_or_skip() -> std::sync::Arc<GpuContext> {
+    std::sync::Arc::new(GpuContext::new().unwrap_or_else(|e| panic!("GPU test run without a usable adapter: {e}")))
 }
 
 /// Parses and validates WGSL with naga, returns the size in bytes of struct `name`.
@@ -48,4 +48,44 @@ pub fn shared_fixture(name: &str) -> volscatter_core::Scene {
     };
     let camera = Camera::look_at(Vec3::new(0.0, -6.0, 0.3), Vec3::ZERO, Vec3::Z, 25.0, 16, 16);
     volscatter_core::Scene { medium, lights: vec![light], camera, solver: Default::default() }
+}
+
+/// One solve through the pipeline with the GPU as accelerator on `choice`: the solver's output
+/// and where it ran (what the GPU-against-CPU tests compare).
+pub fn solve(
+    choice: crate::DeviceChoice,
+    scene: &volscatter_core::Scene,
+    name: &str,
+    settings: &serde_json::Map<String, serde_json::Value>,
+    progress: &dyn volscatter_core::Progress,
+) -> volscatter_core::Result<(volscatter_core::SolveOutput, crate::DeviceUsed)> {
+    let solved = volscatter_core::pipeline::solve(scene, name, settings, crate::devices(choice), progress)?;
+    Ok((solved.output, solved.device))
+}
+
+/// One frame of `session` (made with `crate::devices(choice)`): its output and where it ran.
+pub fn solve_session(
+    session: &mut volscatter_core::pipeline::Session,
+    scene: &volscatter_core::Scene,
+    progress: &dyn volscatter_core::Progress,
+) -> volscatter_core::Result<(volscatter_core::SolveOutput, crate::DeviceUsed)> {
+    let solved = session.solve(scene, progress)?;
+    Ok((solved.output, solved.device))
+}
+
+/// `solver` solved one-off with `backend` as the device's entry (boxed as the solver's backend
+/// trait object: `Box<dyn SweepBackend>`, ...), and in `state` when given (a session's frame).
+pub fn solve_on<B: ?Sized + 'static>(
+    solver: &dyn volscatter_core::Solver,
+    scene: &volscatter_core::Scene,
+    progress: &dyn volscatter_core::Progress,
+    backend: &Box<B>,
+    state: Option<&mut volscatter_core::solvers::session::SessionState>,
+) -> volscatter_core::Result<volscatter_core::SolveOutput> {
+    let ctx = volscatter_core::solvers::SolveCtx::new(progress).on(backend);
+    let mut ctx = match state {
+        Some(state) => ctx.in_session(state),
+        None => ctx,
+    };
+    solver.solve(scene, &mut ctx)
 }

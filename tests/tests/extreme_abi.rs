@@ -208,7 +208,7 @@ fn every_solver_cancels_within_500ms() {
     let a = api();
     let mut failures = Vec::new();
     let t0 = Instant::now();
-    for &name in volscatter_core::solvers::SOLVER_NAMES {
+    for &name in volscatter_core::solvers::registry::SOLVER_NAMES {
         let scene = format!(
             r#"{{"format": 1, "medium": {{"procedural": "plume", "dims": [48], "density_scale": 10.0, "albedo": 0.9}},
                 "lights": [{{"type": "distant", "direction": [0, 0, -1], "irradiance": 1.0}},

@@ -617,7 +617,7 @@ fn solvers_json_is_the_registry_and_static() {
         let doc: serde_json::Value = serde_json::from_str(&text(p1)).expect("registry JSON parses");
         assert_eq!(doc, volscatter_core::solvers::registry::to_json());
         let names: Vec<&str> = doc["solvers"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
-        assert_eq!(names, volscatter_core::solvers::SOLVER_NAMES);
+        assert_eq!(names, volscatter_core::solvers::registry::SOLVER_NAMES);
         // Every solver it lists is accepted by vs_scene_set_solver with each of its presets.
         let s = small_scene();
         for solver in doc["solvers"].as_array().unwrap() {
@@ -785,7 +785,7 @@ fn result_choice_says_what_auto_picked() {
         assert!(!p.is_null(), "auto's result has no choice");
         let j: serde_json::Value = serde_json::from_str(&text(p)).unwrap();
         let solver = j["solver"].as_str().unwrap_or_default();
-        assert!(volscatter_core::solvers::SOLVER_NAMES.contains(&solver) && solver != "auto", "{j}");
+        assert!(volscatter_core::solvers::registry::SOLVER_NAMES.contains(&solver) && solver != "auto", "{j}");
         assert!(j["settings"].is_object() && j["quality"].is_string() && j["why"].as_str().is_some_and(|w| w.contains("optical depth")), "{j}");
         assert_eq!(j["target_error"], serde_json::json!(0.3), "{j}");
         // The pointer stays valid (and the same) until the result is destroyed.

@@ -56,7 +56,7 @@ fn gpu_single_scattering_grid_matches_cpu() {
     let ctx = gpu_or_skip();
     let mut scene = Scene::default_scene();
     let check = |scene: &Scene, what: &str| {
-        let cpu = compositor::single_scattering_grid(scene, 24, 64).unwrap();
+        let cpu = volscatter_core::stages::single_scattering::single_scattering_grid(scene, 24, 64).unwrap();
         let gpu = single::single_scattering_grid(&ctx, scene, 24, 64).unwrap();
         assert_eq!(cpu.dims, gpu.dims);
         let e = relative_rmse(&gpu.data, &cpu.data);
@@ -98,7 +98,7 @@ fn gpu_bricked_density_matches_cpu() {
     let mut scene = Scene::default_scene();
     let g = scene.medium.g;
     scene.medium = Medium::new(grid, Affine3A::from_scale(Vec3::splat(0.06)), Vec3::splat(8.0), Vec3::splat(0.9), g);
-    let cpu = compositor::single_scattering_grid(&scene, 24, 16).unwrap();
+    let cpu = volscatter_core::stages::single_scattering::single_scattering_grid(&scene, 24, 16).unwrap();
     let gpu = single::single_scattering_grid(&ctx, &scene, 24, 16).unwrap();
     assert_eq!(cpu.dims, gpu.dims);
     let e = relative_rmse(&gpu.data, &cpu.data);
@@ -121,7 +121,7 @@ fn gpu_single_scattering_of_emission_matches_cpu() {
     let term = EmissionTerm::new(m.grid.clone(), m.index_to_world, EmissionLaw::Blackbody { temperature: 1500.0, intensity: 1.0, tint: Vec3::ONE });
     scene.medium.emission = Some(Emission { terms: vec![term], vpl_count: 64 });
     for dim in [24, 64] {
-        let cpu = compositor::single_scattering_grid(&scene, dim, 64).unwrap();
+        let cpu = volscatter_core::stages::single_scattering::single_scattering_grid(&scene, dim, 64).unwrap();
         let gpu = single::single_scattering_grid(&ctx, &scene, dim, 64).unwrap();
         let e = relative_rmse(&gpu.data, &cpu.data);
         eprintln!("emission VPLs, grid {dim}: single-scattering grid relative RMSE {e:e}");

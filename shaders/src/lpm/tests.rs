@@ -37,9 +37,10 @@ fn fixture(name: &str) -> Scene {
     Scene { medium, lights: vec![light], camera: Camera::look_at(Vec3::new(0.0, -cam_dist, 0.3), Vec3::ZERO, Vec3::Z, fov, 16, 16), solver: Default::default() }
 }
 
-fn run(sc: &Scene, s: &LpmSettings, layers: Option<usize>, backend: &dyn SweepBackend) -> LpmReport {
+fn run(sc: &Scene, s: &LpmSettings, layers: Option<usize>, backend: &Box<dyn SweepBackend>) -> LpmReport {
     let ov = Overrides { layers, j_only: true, ..Default::default() };
-    Lpm::new(s.clone()).unwrap().solve_with(sc, &NoProgress, ov, backend).unwrap().1
+    let lpm = Lpm::new(s.clone()).unwrap().with_overrides(ov);
+    crate::test_support::solve_on(&lpm, sc, &NoProgress, backend, None).unwrap().split::<LpmReport>().1
 }
 
 fn j_of(r: &LpmReport) -> &[Vec3] {
@@ -66,8 +67,8 @@ fn j_of(r: &LpmReport) -> &[Vec3] {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_lpm_matches_cpu() {
     let ctx = gpu_or_skip();
-    let gpu = GpuSweeps::new(&ctx);
-    let cpu = volscatter_core::solvers::lpm::stream::CpuSweeps;
+    let gpu: Box<dyn SweepBackend> = Box::new(GpuSweeps::new(&ctx));
+    let cpu: Box<dyn SweepBackend> = Box::new(volscatter_core::solvers::lpm::stream::CpuSweeps);
     for (name, first_order) in [("plume", FirstOrder::Boundary), ("plume", FirstOrder::Exact), ("plume_point", FirstOrder::Exact)] {
         let sc = fixture(name);
         let s = LpmSettings { grid_resolution: 24, directions: 9, max_orders: 3, first_order, ..Default::default() };

@@ -15,7 +15,7 @@ use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{cumulus, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Environment, Light};
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
-use volscatter_core::solvers::network::{particles, Network, NetworkSettings};
+use volscatter_core::solvers::network::{particles, Network, NetworkReport, NetworkSettings};
 use volscatter_core::solvers::{SolveOutput};
 use volscatter_core::stages::NoProgress;
 use volscatter_core::translate::sampling::BoundingSphere;
@@ -48,9 +48,10 @@ fn phase(out: &SolveOutput, name: &str) -> f64 {
 
 /// One solve on `backend`: wall seconds of the visibility network, of the iteration, of the
 /// splat, of the whole solve, and the iterations; with the solve's output.
-fn timed(sc: &Scene, s: &NetworkSettings, backend: &dyn NetworkBackend) -> (serde_json::Value, SolveOutput) {
+fn timed(sc: &Scene, s: &NetworkSettings, backend: &Box<dyn NetworkBackend>) -> (serde_json::Value, SolveOutput) {
     let t = Instant::now();
-    let (out, rep) = Network::new(s.clone()).unwrap().solve_on(sc, &NoProgress, backend, None).unwrap();
+    let net = Network::new(s.clone()).unwrap();
+    let (out, rep) = crate::test_support::solve_on(&net, sc, &NoProgress, backend, None).unwrap().split::<NetworkReport>();
     let total = t.elapsed().as_secs_f64();
     let iterate = phase(&out, "network iterate");
     let iterations = rep.residuals.len();
@@ -65,18 +66,19 @@ fn bench_network_gpu() {
     let ctx = gpu_or_skip();
     let quick = std::env::var("NETWORK_BENCH_QUICK").is_ok_and(|v| v == "1");
     let sc = paper_cloud();
-    let gpu = GpuBackend::new(&ctx, CHECK_EVERY);
+    let gpu: Box<dyn NetworkBackend> = Box::new(GpuBackend::new(&ctx, CHECK_EVERY));
+    let cpu: Box<dyn NetworkBackend> = Box::new(CpuBackend);
     let mut sizes = vec![(512u32, 128u32, 32u32), (1024, 128, 32), (2048, 64, 64)];
     if !quick {
         sizes.extend([(8192, 128, 64), (8192, 128, 128), (32768, 256, 128)]);
     }
     // Compiles the pipelines outside the timings.
     let warm = NetworkSettings { particles: 256, directions: 16, output_resolution: 8, ..Default::default() };
-    Network::new(warm).unwrap().solve_on(&sc, &NoProgress, &gpu, None).unwrap();
+    crate::test_support::solve_on(&Network::new(warm).unwrap(), &sc, &NoProgress, &gpu, None).unwrap();
     let mut rows = Vec::new();
     for (n, d, res) in sizes {
         let s = NetworkSettings { particles: n, directions: d, output_resolution: res, ..Default::default() };
-        let ((cpu, cpu_out), (gpu_row, gpu_out)) = (timed(&sc, &s, &CpuBackend), timed(&sc, &s, &gpu));
+        let ((cpu, cpu_out), (gpu_row, gpu_out)) = (timed(&sc, &s, &cpu), timed(&sc, &s, &gpu));
         let error = relative_rmse(&gpu_out.scattering.data, &cpu_out.scattering.data);
         rows.push(json!({"particles": n, "directions": d, "output_resolution": res, "cpu": cpu, "gpu": gpu_row, "s_rel_rmse": error}));
     }

@@ -27,7 +27,8 @@ fn network_wgsl_validates_and_params_layout_matches() {
 /// A backend that keeps what the wrapped one's iteration returned (I and the residuals).
 struct Recording<B> {
     inner: B,
-    last: RefCell<Option<Iterated>>,
+    /// Shared with the test, which keeps it while the solve owns the backend.
+    last: std::rc::Rc<RefCell<Option<Iterated>>>,
 }
 
 impl<B: NetworkBackend> NetworkBackend for Recording<B> {
@@ -47,7 +48,7 @@ impl<B: NetworkBackend> NetworkBackend for Recording<B> {
 }
 
 fn recording<B>(inner: B) -> Recording<B> {
-    Recording { inner, last: RefCell::new(None) }
+    Recording { inner, last: Default::default() }
 }
 
 /// The shared fixtures' cube scene `cube_g07` (core pop/tests.rs `case`, network/tests.rs
@@ -80,9 +81,12 @@ fn settings() -> NetworkSettings {
     NetworkSettings { particles: 1024, directions: 48, output_resolution: 16, ..Default::default() }
 }
 
-fn solve_on<B: NetworkBackend>(sc: &Scene, s: &NetworkSettings, backend: &Recording<B>) -> (SolveOutput, NetworkReport, Iterated) {
-    let (out, rep) = Network::new(s.clone()).unwrap().solve_on(sc, &NoProgress, backend, None).unwrap();
-    let it = backend.last.borrow_mut().take().expect("the solve iterated");
+fn solve_on<B: NetworkBackend + 'static>(sc: &Scene, s: &NetworkSettings, backend: Recording<B>) -> (SolveOutput, NetworkReport, Iterated) {
+    let last = backend.last.clone();
+    let backend: Box<dyn NetworkBackend> = Box::new(backend);
+    let net = Network::new(s.clone()).unwrap();
+    let (out, rep) = crate::test_support::solve_on(&net, sc, &NoProgress, &backend, None).unwrap().split::<NetworkReport>();
+    let it = last.borrow_mut().take().expect("the solve iterated");
     (out, rep, it)
 }
 
@@ -105,10 +109,10 @@ fn gpu_network_iteration_matches_cpu() {
     let ctx = gpu_or_skip();
     for (name, sc) in [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())] {
         let s = settings();
-        let (cpu_out, cpu_rep, cpu_it) = solve_on(&sc, &s, &recording(CpuBackend));
+        let (cpu_out, cpu_rep, cpu_it) = solve_on(&sc, &s, recording(CpuBackend));
         assert!(cpu_rep.residuals.len() > 3, "{name}: the CPU iterated {} times", cpu_rep.residuals.len());
         for check_every in [1, CHECK_EVERY] {
-            let (gpu_out, gpu_rep, gpu_it) = solve_on(&sc, &s, &recording(GpuBackend::new(&ctx, check_every)));
+            let (gpu_out, gpu_rep, gpu_it) = solve_on(&sc, &s, recording(GpuBackend::new(&ctx, check_every)));
             assert_eq!(gpu_rep.residuals.len(), cpu_rep.residuals.len(), "{name}, batches of {check_every}: iterations");
             for (k, (g, c)) in gpu_rep.residuals.iter().zip(&cpu_rep.residuals).enumerate() {
                 assert!((g - c).abs() <= 1e-4 * c.abs() + 1e-9, "{name}, batches of {check_every}: residual {k}: GPU {g:e}, CPU {c:e}");
@@ -133,11 +137,12 @@ fn gpu_network_session_keeps_the_network() {
     let ctx = gpu_or_skip();
     let s = NetworkSettings { residual_threshold: 1e-5, ..settings() };
     let net = Network::new(s).unwrap();
-    let gpu = GpuBackend::new(&ctx, CHECK_EVERY);
+    let gpu: Box<dyn NetworkBackend> = Box::new(GpuBackend::new(&ctx, CHECK_EVERY));
+    let cpu: Box<dyn NetworkBackend> = Box::new(CpuBackend);
     let mut state = SessionState::new();
     let mut frame = |sc: &Scene| {
         state.begin_frame();
-        net.solve_on(sc, &NoProgress, &gpu, Some(&mut state)).unwrap()
+        crate::test_support::solve_on(&net, sc, &NoProgress, &gpu, Some(&mut state)).unwrap().split::<NetworkReport>()
     };
     let sc = cube_g07();
     let (_, rep) = frame(&sc);
@@ -146,7 +151,7 @@ fn gpu_network_session_keeps_the_network() {
     moved.camera = Camera::look_at(Quat::from_rotation_z(0.5) * sc.camera.position, Vec3::ZERO, Vec3::Z, 22.0, 16, 16);
     let (out, rep) = frame(&moved);
     assert_eq!(rep.start, Start::Kept);
-    let (full, _) = net.solve_on(&moved, &NoProgress, &gpu, None).unwrap();
+    let (full, _) = crate::test_support::solve_on(&net, &moved, &NoProgress, &gpu, None).unwrap().split::<NetworkReport>();
     assert_eq!(out.scattering.data, full.scattering.data, "camera move against a full GPU solve");
     let mut turned = moved.clone();
     for l in &mut turned.lights {
@@ -156,7 +161,7 @@ fn gpu_network_session_keeps_the_network() {
     }
     let (warm, rep) = frame(&turned);
     assert_eq!(rep.start, Start::Warm);
-    let (cold, cold_rep) = net.solve_on(&turned, &NoProgress, &CpuBackend, None).unwrap();
+    let (cold, cold_rep) = crate::test_support::solve_on(&net, &turned, &NoProgress, &cpu, None).unwrap().split::<NetworkReport>();
     let e = relative_rmse(&warm.scattering.data, &cold.scattering.data);
     eprintln!("warm GPU ({} iterations) against cold CPU ({}): S rel. RMSE {e:e}", rep.residuals.len(), cold_rep.residuals.len());
     assert!(e < 1e-3, "warm GPU against cold CPU: S relative RMSE {e}");
@@ -169,16 +174,16 @@ fn gpu_network_session_keeps_the_network() {
 #[test]
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_device_choice_runs_network_on_the_gpu() {
-    use crate::{solve, solve_session, DeviceChoice, DeviceUsed};
-    use volscatter_core::solvers::session::Session;
-    let settings = serde_json::json!({"particles": 512, "directions": 32, "output_resolution": 12}).as_object().unwrap().clone();
-    let mut session = Session::new("network", &settings).unwrap();
+    use crate::test_support::{solve, solve_session};
+    use crate::{DeviceChoice, DeviceUsed};
+        let settings = serde_json::json!({"particles": 512, "directions": 32, "output_resolution": 12}).as_object().unwrap().clone();
+    let mut session = volscatter_core::pipeline::Session::new("network", &settings, crate::devices(DeviceChoice::Gpu)).unwrap();
     for f in 0..2 {
         let mut sc = cube_g07();
         sc.camera = Camera::look_at(Quat::from_rotation_z(0.4 * f as f32) * sc.camera.position, Vec3::ZERO, Vec3::Z, 22.0, 16, 16);
         let (gpu, used) = solve(DeviceChoice::Gpu, &sc, "network", &settings, &NoProgress).unwrap();
         assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: ran on {used}");
-        let (kept, used) = solve_session(DeviceChoice::Gpu, &mut session, &sc, &NoProgress).unwrap();
+        let (kept, used) = solve_session(&mut session, &sc, &NoProgress).unwrap();
         assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: session ran on {used}");
         assert_eq!(kept.scattering.data, gpu.scattering.data, "frame {f}: session against one-off");
         let (cpu, used) = solve(DeviceChoice::Cpu, &sc, "network", &settings, &NoProgress).unwrap();

@@ -33,9 +33,9 @@ fn paper_cumulus() -> Scene {
 }
 
 /// (trace seconds, reconstruction seconds, whole solve seconds) of a one-off solve.
-fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &dyn PhotonBackend) -> (f64, f64, f64) {
+fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &Box<dyn PhotonBackend>) -> (f64, f64, f64) {
     let t = Instant::now();
-    let (out, _) = PhotonGrid::new(s.clone()).unwrap().solve_generations_with(scene, 0, &NoProgress, backend).unwrap();
+    let out = crate::test_support::solve_on(&PhotonGrid::new(s.clone()).unwrap(), scene, &NoProgress, backend, None).unwrap();
     let total = t.elapsed().as_secs_f64();
     let stage = |name: &str| out.timings.0.iter().filter(|(k, _)| k == name).map(|(_, v)| *v).sum();
     (stage("trace"), stage("reconstruct"), total)
@@ -45,7 +45,8 @@ fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &dyn PhotonBackend) -> 
 #[ignore = "benchmark: scripts/bench_photon_grid.py --gpu runs it"]
 fn bench_photon_grid_gpu() {
     let ctx = gpu_or_skip();
-    let gpu = GpuPhotonBackend::new(&ctx);
+    let gpu: Box<dyn PhotonBackend> = Box::new(GpuPhotonBackend::new(&ctx));
+    let cpu: Box<dyn PhotonBackend> = Box::new(CpuBackend);
     let scene = paper_cumulus();
     let quick = std::env::var("VOLSCATTER_BENCH_QUICK").is_ok_and(|v| v == "1");
     let settings: &[(u32, u32)] = if quick { &[(9, 102_400)] } else { &[(9, 102_400), (18, 819_200), (36, 4_096_000)] };
@@ -55,7 +56,7 @@ fn bench_photon_grid_gpu() {
     for &(res, photons) in settings {
         for (what, n) in [("one-off", photons), ("frame (photons / 100)", photons / 100)] {
             let s = PhotonGridSettings { photons: n, cache_resolution: res, ..Default::default() };
-            let (cpu_trace, cpu_reconstruct, cpu_total) = timed(&scene, &s, &CpuBackend);
+            let (cpu_trace, cpu_reconstruct, cpu_total) = timed(&scene, &s, &cpu);
             let (gpu_trace, gpu_reconstruct, gpu_total) = timed(&scene, &s, &gpu);
             rows.push(json!({"cache_resolution": res, "photons": n, "run": what, "cpu_trace": cpu_trace, "cpu_total": cpu_total,
                 "gpu_trace": gpu_trace, "gpu_total": gpu_total, "cpu_reconstruct": cpu_reconstruct, "gpu_reconstruct": gpu_reconstruct}));
@@ -67,10 +68,10 @@ fn bench_photon_grid_gpu() {
     let mut reconstruct = Vec::new();
     for upsampling in [Upsampling::Trilinear, Upsampling::Physical] {
         let s = PhotonGridSettings { photons: 102_400, cache_resolution: 18, output_resolution: 90, upsampling, ..Default::default() };
-        let best = |backend: &dyn PhotonBackend| (0..3).map(|_| timed(&scene, &s, backend).1).fold(f64::INFINITY, f64::min);
-        let (cpu, gpu_s) = (best(&CpuBackend), best(&gpu));
+        let best = |backend: &Box<dyn PhotonBackend>| (0..3).map(|_| timed(&scene, &s, backend).1).fold(f64::INFINITY, f64::min);
+        let (cpu_s, gpu_s) = (best(&cpu), best(&gpu));
         reconstruct.push(json!({"upsampling": format!("{upsampling:?}").to_lowercase(), "cache_resolution": 18, "output_resolution": 90,
-            "cpu_reconstruct": cpu, "gpu_reconstruct": gpu_s}));
+            "cpu_reconstruct": cpu_s, "gpu_reconstruct": gpu_s}));
     }
     let doc = json!({"bench": "gpu", "data": {"device": ctx.describe(), "software": ctx.is_software(), "rows": rows, "reconstruct": reconstruct}});
     println!("BENCH_JSON {doc}");

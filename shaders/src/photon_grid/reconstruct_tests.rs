@@ -1,7 +1,7 @@
 use super::reconstruct::{ReconstructParams, WGSL};
 use super::*;
 use crate::test_support::{gpu_or_skip, naga_struct_size, shared_fixture};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::photon_grid::backend::CpuBackend;
 use volscatter_core::solvers::photon_grid::{PhotonGrid, SingleScattering, Upsampling};
@@ -14,12 +14,13 @@ fn wgsl_validates_and_params_layout_matches() {
 
 /// Traces on the CPU (deterministic: the same tallies every run) and reconstructs each frame
 /// on both the CPU and the GPU, keeping both grids; the solve goes on with the CPU's.
-struct Both<'c> {
-    gpu: GpuPhotonBackend<'c>,
-    grids: Mutex<Vec<(ScatteringGrid, ScatteringGrid)>>,
+struct Both {
+    gpu: GpuPhotonBackend,
+    /// Shared with the test, which keeps it while the solve owns the backend.
+    grids: Arc<Mutex<Vec<(ScatteringGrid, ScatteringGrid)>>>,
 }
 
-impl PhotonBackend for Both<'_> {
+impl PhotonBackend for Both {
     fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>> {
         CpuBackend.trace_generations(job, generations)
     }
@@ -44,10 +45,12 @@ fn settings(upsampling: Upsampling) -> PhotonGridSettings {
 }
 
 /// The CPU's and the GPU's reconstruction of the same tallies (one CPU trace).
-fn both(ctx: &GpuContext, scene: &Scene, s: &PhotonGridSettings) -> (ScatteringGrid, ScatteringGrid) {
-    let backend = Both { gpu: GpuPhotonBackend::new(ctx), grids: Mutex::new(Vec::new()) };
-    PhotonGrid::new(s.clone()).unwrap().solve_generations_with(scene, 0, &NoProgress, &backend).unwrap();
-    backend.grids.into_inner().unwrap().pop().unwrap()
+fn both(ctx: &Arc<GpuContext>, scene: &Scene, s: &PhotonGridSettings) -> (ScatteringGrid, ScatteringGrid) {
+    let grids = Arc::new(Mutex::new(Vec::new()));
+    let backend: Box<dyn PhotonBackend> = Box::new(Both { gpu: GpuPhotonBackend::new(ctx), grids: grids.clone() });
+    crate::test_support::solve_on(&PhotonGrid::new(s.clone()).unwrap(), scene, &NoProgress, &backend, None).unwrap();
+    let pair = grids.lock().unwrap().pop().unwrap();
+    pair
 }
 
 /// The largest difference of two grids' values over the largest value of `b` (per channel).
@@ -107,9 +110,9 @@ fn gpu_solve_with_physical_upsampling_matches_cpu() {
     let ctx = gpu_or_skip();
     let scene = shared_fixture("plume_point");
     let s = |seed: u64| PhotonGridSettings { seed, single_scattering: SingleScattering::Exact, ..settings(Upsampling::Physical) };
-    let run = |seed: u64, backend: &dyn PhotonBackend| PhotonGrid::new(s(seed)).unwrap().solve_generations_with(&scene, 0, &NoProgress, backend).unwrap().0;
-    let (cpu1, cpu2) = (run(1, &CpuBackend), run(2, &CpuBackend));
-    let gpu = run(1, &GpuPhotonBackend::new(&ctx));
+    let run = |seed: u64, backend: Box<dyn PhotonBackend>| crate::test_support::solve_on(&PhotonGrid::new(s(seed)).unwrap(), &scene, &NoProgress, &backend, None).unwrap();
+    let (cpu1, cpu2) = (run(1, Box::new(CpuBackend)), run(2, Box::new(CpuBackend)));
+    let gpu = run(1, Box::new(GpuPhotonBackend::new(&ctx)));
     let noise = relative_rmse(&cpu2.scattering.data, &cpu1.scattering.data);
     let e = relative_rmse(&gpu.scattering.data, &cpu1.scattering.data);
     eprintln!("whole solve, physical: GPU vs CPU {e:.4}, CPU seed 1 vs 2 {noise:.4}");
@@ -138,24 +141,24 @@ fn gpu_reconstruction_slabs_and_storage_limits() {
     // The storage limit lowered to what the tallies and the density need: the output's planes
     // then go in several slabs.
     let (cells_bytes, density_bytes) = input_bytes(&scene, &s);
-    ctx.limits.max_storage_buffer_binding_size = cells_bytes.max(density_bytes);
+    Arc::get_mut(&mut ctx).expect("no backend holds the context").limits.max_storage_buffer_binding_size = cells_bytes.max(density_bytes);
     let planes = ctx.limits.max_storage_buffer_binding_size / plane_bytes;
     assert!(planes >= 1 && planes * 2 < whole.dims[2], "{planes} planes a slab of {}", whole.dims[2]);
     let (_, slabs) = both(&ctx, &scene, &s);
     let bits = |v: &[Vec3]| v.iter().flat_map(|x| x.to_array().map(f32::to_bits)).collect::<Vec<_>>();
     assert_eq!(bits(&slabs.data), bits(&whole.data));
 
-    let refused = |ctx: &GpuContext, s: &PhotonGridSettings| {
-        let backend = Both { gpu: GpuPhotonBackend::new(ctx), grids: Mutex::new(Vec::new()) };
-        PhotonGrid::new(s.clone()).unwrap().solve_generations_with(&scene, 0, &NoProgress, &backend).err()
+    let refused = |ctx: &Arc<GpuContext>, s: &PhotonGridSettings| {
+        let backend: Box<dyn PhotonBackend> = Box::new(Both { gpu: GpuPhotonBackend::new(ctx), grids: Default::default() });
+        crate::test_support::solve_on(&PhotonGrid::new(s.clone()).unwrap(), &scene, &NoProgress, &backend, None).err()
     };
     // The cache's tallies over the limit.
-    ctx.limits.max_storage_buffer_binding_size = cells_bytes - 16;
+    Arc::get_mut(&mut ctx).expect("no backend holds the context").limits.max_storage_buffer_binding_size = cells_bytes - 16;
     let e = refused(&ctx, &s);
     assert!(matches!(&e, Some(Error::Device(m)) if m.contains("cache_resolution")), "{e:?}");
     // The density over it (a 2^3 cache fits).
     let small = PhotonGridSettings { cache_resolution: 2, ..s.clone() };
-    ctx.limits.max_storage_buffer_binding_size = input_bytes(&scene, &small).0.max(plane_bytes);
+    Arc::get_mut(&mut ctx).expect("no backend holds the context").limits.max_storage_buffer_binding_size = input_bytes(&scene, &small).0.max(plane_bytes);
     assert!(density_bytes > ctx.limits.max_storage_buffer_binding_size);
     let e = refused(&ctx, &small);
     assert!(matches!(&e, Some(Error::Device(m)) if m.contains("density")), "{e:?}");
@@ -181,7 +184,7 @@ fn gpu_reconstruction_stops_on_cancel() {
         }
     }
     /// Traces on the CPU and hands the tallies to the test.
-    struct Keep(Mutex<Option<Vec<Tallies>>>);
+    struct Keep(Arc<Mutex<Option<Vec<Tallies>>>>);
     impl PhotonBackend for Keep {
         fn trace_generations(&self, job: &TraceJob, generations: &[u64]) -> Result<Vec<Generation>> {
             CpuBackend.trace_generations(job, generations)
@@ -194,12 +197,14 @@ fn gpu_reconstruction_stops_on_cancel() {
     let mut ctx = gpu_or_skip();
     let scene = shared_fixture("plume");
     let s = settings(Upsampling::Trilinear);
-    let keep = Keep(Mutex::new(None));
-    let (out, _) = PhotonGrid::new(s.clone()).unwrap().solve_generations_with(&scene, 0, &NoProgress, &keep).unwrap();
-    let tallies = keep.0.into_inner().unwrap().unwrap();
+    let kept = Arc::new(Mutex::new(None));
+    let keep: Box<dyn PhotonBackend> = Box::new(Keep(kept.clone()));
+    let out = crate::test_support::solve_on(&PhotonGrid::new(s.clone()).unwrap(), &scene, &NoProgress, &keep, None).unwrap();
+    drop(keep);
+    let tallies = kept.lock().unwrap().take().unwrap();
     // Slabs of a few planes (the test above): at least 4 of them.
     let (cells_bytes, density_bytes) = input_bytes(&scene, &s);
-    ctx.limits.max_storage_buffer_binding_size = cells_bytes.max(density_bytes);
+    Arc::get_mut(&mut ctx).expect("no backend holds the context").limits.max_storage_buffer_binding_size = cells_bytes.max(density_bytes);
     let planes = ctx.limits.max_storage_buffer_binding_size / (out.scattering.dims[0] * out.scattering.dims[1] * 16);
     assert!(out.scattering.dims[2].div_ceil(planes) >= 4);
     for after in [0, 1, 3] {

@@ -21,8 +21,8 @@ fn settings(photons: u32, seed: u64) -> PhotonGridSettings {
     PhotonGridSettings { photons, seed, cache_resolution: 12, output_resolution: 24, single_scattering: SingleScattering::Photons, ..Default::default() }
 }
 
-fn solve(scene: &Scene, s: PhotonGridSettings, backend: &dyn PhotonBackend) -> (SolveOutput, PhotonGridReport) {
-    PhotonGrid::new(s).unwrap().solve_generations_with(scene, 0, &NoProgress, backend).unwrap()
+fn solve(scene: &Scene, s: PhotonGridSettings, backend: &Box<dyn PhotonBackend>) -> (SolveOutput, PhotonGridReport) {
+    crate::test_support::solve_on(&PhotonGrid::new(s).unwrap(), scene, &NoProgress, backend, None).unwrap().split()
 }
 
 fn rgb_rel(a: DVec3, b: DVec3) -> f64 {
@@ -45,9 +45,9 @@ fn rgb_rel(a: DVec3, b: DVec3) -> f64 {
 fn check_against_cpu(what: &str, scene: &Scene) {
     let ctx = gpu_or_skip();
     let n = 1 << 15;
-    let (cpu1, rep1) = solve(scene, settings(n, 1), &CpuBackend);
-    let (cpu2, _) = solve(scene, settings(n, 2), &CpuBackend);
-    let (gpu, rep) = solve(scene, settings(n, 1), &GpuPhotonBackend::new(&ctx));
+    let (cpu1, rep1) = solve(scene, settings(n, 1), &(Box::new(CpuBackend) as Box<dyn PhotonBackend>));
+    let (cpu2, _) = solve(scene, settings(n, 2), &(Box::new(CpuBackend) as Box<dyn PhotonBackend>));
+    let (gpu, rep) = solve(scene, settings(n, 1), &(Box::new(GpuPhotonBackend::new(&ctx)) as Box<dyn PhotonBackend>));
     let noise = relative_rmse(&cpu2.scattering.data, &cpu1.scattering.data);
     let e = relative_rmse(&gpu.scattering.data, &cpu1.scattering.data);
     eprintln!("{what}: S relative RMSE gpu vs cpu {e:.4}, cpu seed 1 vs 2 {noise:.4}");
@@ -95,7 +95,7 @@ fn gpu_tracing_matches_cpu_with_a_local_light() {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_tracing_is_exact_run_to_run_and_through_the_ring() {
     let ctx = gpu_or_skip();
-    let backend = GpuPhotonBackend::new(&ctx);
+    let backend: Box<dyn PhotonBackend> = Box::new(GpuPhotonBackend::new(&ctx));
     let mut scene = Scene::default_scene();
     let s = PhotonGridSettings { generations: 3, ..settings(1 << 13, 5) };
     let (a, _) = solve(&scene, s.clone(), &backend);
@@ -105,7 +105,7 @@ fn gpu_tracing_is_exact_run_to_run_and_through_the_ring() {
 
     let solver = PhotonGrid::new(s.clone()).unwrap();
     let mut state = SessionState::new();
-    solver.solve_in_session_with(&scene, &NoProgress, &mut state, &backend).unwrap();
+    crate::test_support::solve_on(&solver, &scene, &NoProgress, &backend, Some(&mut state)).unwrap();
     if let Some(Light::Distant { irradiance, .. }) = scene.lights.iter_mut().find(|l| matches!(l, Light::Distant { .. })) {
         *irradiance *= 2.0;
     } else {
@@ -114,11 +114,11 @@ fn gpu_tracing_is_exact_run_to_run_and_through_the_ring() {
     let mut last = None;
     for _ in 0..3 {
         state.begin_frame();
-        last = Some(solver.solve_in_session_with(&scene, &NoProgress, &mut state, &backend).unwrap());
+        last = Some(crate::test_support::solve_on(&solver, &scene, &NoProgress, &backend, Some(&mut state)).unwrap().split::<PhotonGridReport>());
     }
     let (ring, rep) = last.unwrap();
     assert_eq!(rep.generations, vec![3, 4, 5]);
-    let (fresh, _) = solver.solve_generations_with(&scene, 3, &NoProgress, &backend).unwrap();
+    let fresh = crate::test_support::solve_on(&solver.from_generation(3), &scene, &NoProgress, &backend, None).unwrap();
     assert_eq!(ring.scattering.data, fresh.scattering.data);
 }
 
@@ -138,7 +138,8 @@ fn gpu_tracing_stops_on_cancel() {
     }
     let ctx = gpu_or_skip();
     let solver = PhotonGrid::new(settings(1 << 16, 1)).unwrap();
-    let r = solver.solve_generations_with(&Scene::default_scene(), 0, &Cancelled, &GpuPhotonBackend::new(&ctx));
+    let gpu: Box<dyn PhotonBackend> = Box::new(GpuPhotonBackend::new(&ctx));
+    let r = crate::test_support::solve_on(&solver, &Scene::default_scene(), &Cancelled, &gpu, None);
     assert!(matches!(r, Err(Error::Cancelled)), "{:?}", r.err());
 }
 
@@ -152,10 +153,10 @@ fn device_gpu_runs_the_gpu_backend() {
     use crate::device::{DeviceChoice, DeviceUsed};
     let scene = Scene::default_scene();
     let map = |seed: u64| serde_json::json!({"photons": 1 << 14, "seed": seed, "cache_resolution": 12, "output_resolution": 24}).as_object().unwrap().clone();
-    let (gpu, used) = crate::solve(DeviceChoice::Gpu, &scene, "photon-grid", &map(1), &NoProgress).unwrap();
+    let (gpu, used) = crate::test_support::solve(DeviceChoice::Gpu, &scene, "photon-grid", &map(1), &NoProgress).unwrap();
     assert!(matches!(used, DeviceUsed::Gpu(_)), "ran on {used}");
-    let (cpu1, _) = crate::solve(DeviceChoice::Cpu, &scene, "photon-grid", &map(1), &NoProgress).unwrap();
-    let (cpu2, _) = crate::solve(DeviceChoice::Cpu, &scene, "photon-grid", &map(2), &NoProgress).unwrap();
+    let (cpu1, _) = crate::test_support::solve(DeviceChoice::Cpu, &scene, "photon-grid", &map(1), &NoProgress).unwrap();
+    let (cpu2, _) = crate::test_support::solve(DeviceChoice::Cpu, &scene, "photon-grid", &map(2), &NoProgress).unwrap();
     let noise = relative_rmse(&cpu2.scattering.data, &cpu1.scattering.data);
     let e = relative_rmse(&gpu.scattering.data, &cpu1.scattering.data);
     eprintln!("--device gpu: S relative RMSE against the CPU {e:.4}, CPU seed to seed {noise:.4}");
@@ -173,8 +174,8 @@ fn workgroup_presum_is_bit_exact() {
     let scene = Scene::default_scene();
     for cache_resolution in [12, 3] {
         let s = PhotonGridSettings { cache_resolution, ..settings(1 << 14, 3) };
-        let (a, ra) = solve(&scene, s.clone(), &GpuPhotonBackend::new(&ctx));
-        let (b, rb) = solve(&scene, s, &GpuPhotonBackend { presum: false, ..GpuPhotonBackend::new(&ctx) });
+        let (a, ra) = solve(&scene, s.clone(), &(Box::new(GpuPhotonBackend::new(&ctx)) as Box<dyn PhotonBackend>));
+        let (b, rb) = solve(&scene, s, &(Box::new(GpuPhotonBackend { presum: false, ..GpuPhotonBackend::new(&ctx) }) as Box<dyn PhotonBackend>));
         let bits = |v: &[Vec3]| v.iter().flat_map(|x| x.to_array().map(f32::to_bits)).collect::<Vec<_>>();
         assert!(a.scattering.data.iter().any(|v| v.x > 0.0));
         assert_eq!(bits(&a.scattering.data), bits(&b.scattering.data), "cache {cache_resolution}");

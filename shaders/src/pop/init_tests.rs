@@ -1,7 +1,8 @@
 use super::*;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::solvers::pop::{accumulate, init as cpu_init, light_grid::LightGrid, mip::MediumMip};
+use volscatter_core::solvers::pop::{accumulate, init as cpu_init, light_grid::LightGrid};
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::Scene;
 
 #[test]

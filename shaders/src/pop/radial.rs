@@ -139,8 +139,8 @@ mod tests {
             .as_object()
             .unwrap()
             .clone();
-        let (cpu, _) = crate::solve::solve(DeviceChoice::Cpu, &scene, "pop", &settings, &NoProgress).unwrap();
-        let (gpu, used) = crate::solve::solve(DeviceChoice::Gpu, &scene, "pop", &settings, &NoProgress).unwrap();
+        let (cpu, _) = crate::test_support::solve(DeviceChoice::Cpu, &scene, "pop", &settings, &NoProgress).unwrap();
+        let (gpu, used) = crate::test_support::solve(DeviceChoice::Gpu, &scene, "pop", &settings, &NoProgress).unwrap();
         assert!(matches!(used, DeviceUsed::Gpu(_)), "ran on {used}");
         let e = relative_rmse(&gpu.scattering.data, &cpu.scattering.data);
         eprintln!("local lights: scattering grid relative RMSE GPU vs CPU {e:e}");

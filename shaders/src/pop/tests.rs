@@ -2,7 +2,8 @@ use super::*;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::pop::propagate::RunOptions;
-use volscatter_core::solvers::pop::{accumulate, init, light_grid::LightGrid, mip::MediumMip};
+use volscatter_core::solvers::pop::{accumulate, init, light_grid::LightGrid};
+use volscatter_core::stages::mip::MediumMip;
 use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 

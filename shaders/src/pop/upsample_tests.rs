@@ -37,7 +37,7 @@ fn gpu_upsample_matches_cpu() {
     let merged = Merged { j, density };
     let gmerged = GpuMerged::upload(&ctx, &merged).unwrap();
     for (upsample_on, spatial_sigma) in [(true, 0.8), (true, 1.4), (false, 0.8)] {
-        let settings = PopSettings { output_resolution: 48, upsample: upsample_on, spatial_sigma, ..Default::default() };
+        let settings = volscatter_core::solvers::pop::PopSettings { output_resolution: 48, upsample: upsample_on, spatial_sigma, ..Default::default() }.upsampling();
         let cpu = cpu_upsample::upsample(medium, &mip, &merged, &settings).unwrap();
         let gpu = upsample(&ctx, &gmip, medium, &mip, &gmerged, &settings).unwrap();
         assert_eq!(gpu.dims, cpu.dims);

@@ -118,8 +118,8 @@ fn gpu_vpl_solve_matches_cpu() {
         let mut settings = serde_json::to_value(test_settings(NearField::Auto)).unwrap();
         settings["near_upsample"] = serde_json::Value::from(near_upsample);
         let settings = settings.as_object().unwrap();
-        let (cpu, _) = crate::solve(DeviceChoice::Cpu, &scene, "vpl", settings, &NoProgress).unwrap();
-        let (gpu, used) = crate::solve(DeviceChoice::Gpu, &scene, "vpl", settings, &NoProgress).unwrap();
+        let (cpu, _) = crate::test_support::solve(DeviceChoice::Cpu, &scene, "vpl", settings, &NoProgress).unwrap();
+        let (gpu, used) = crate::test_support::solve(DeviceChoice::Gpu, &scene, "vpl", settings, &NoProgress).unwrap();
         assert!(matches!(used, crate::DeviceUsed::Gpu(_)), "{name}: ran on {used:?}");
         let e = relative_rmse(&gpu.scattering.data, &cpu.scattering.data);
         eprintln!("{name} {near_upsample}: S relative RMSE {e:e}");
