@@ -14,8 +14,8 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use volscatter_core::scene::Light;
-use volscatter_core::solvers::session::Session;
-use volscatter_core::solvers::{by_name, SolveOutput};
+use volscatter_core::pipeline::{self, Devices, Session};
+use volscatter_core::solvers::SolveOutput;
 use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
 
@@ -52,15 +52,15 @@ fn main() {
     let mut runs = Vec::new();
     let mut identical = true;
     for r in 0..repeats {
-        let mut session = Session::new("pop", &settings).expect("pop settings");
+        let mut session = Session::new("pop", &settings, Devices::cpu()).expect("pop settings");
         let (mut t_one, mut t_sess) = (0.0, 0.0);
         let (mut ph_one, mut ph_sess) = (BTreeMap::new(), BTreeMap::new());
         for scene in &scenes {
             let t = Instant::now();
-            let one = by_name("pop", &settings).and_then(|s| s.solve(scene, &mut SolveCtx::new(&NoProgress))).expect("one-off solve");
+            let one = pipeline::solve(scene, "pop", &settings, Devices::cpu(), &NoProgress).expect("one-off solve").output;
             t_one += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            let kept = session.solve(scene, &mut SolveCtx::new(&NoProgress)).expect("session solve");
+            let kept = session.solve(scene, &NoProgress).expect("session solve").output;
             t_sess += t.elapsed().as_secs_f64();
             identical &= one.scattering.data == kept.scattering.data;
             add_phases(&mut ph_one, &one);

@@ -10,8 +10,8 @@ use glam::{Affine3A, IVec3, Mat4, Vec3};
 use volscatter_core::compositor::{self, CompositeOptions};
 use volscatter_core::medium::{DensityGrid, GridLimits};
 use volscatter_core::scene::{self, json, Scene};
-use volscatter_core::solvers::{self, reference::Reference};
-use volscatter_core::stages::{NoProgress, Timings};
+use volscatter_core::pipeline::{self, Devices};
+use volscatter_core::stages::NoProgress;
 use volscatter_core::{vdb, Medium};
 use volscatter_tests::cdylib::{cdylib, have_program, scratch_dir, workspace_root};
 
@@ -45,7 +45,7 @@ fn max_rel_diff(what: &str, a: &[f32], b: &[f32]) -> f64 {
     diff / scale
 }
 
-fn grid_floats(g: &solvers::ScatteringGrid) -> Vec<f32> {
+fn grid_floats(g: &volscatter_core::stages::ScatteringGrid) -> Vec<f32> {
     g.data.iter().flat_map(|v| v.to_array()).collect()
 }
 
@@ -56,9 +56,9 @@ fn row_major(a: Affine3A) -> [f32; 16] {
 /// Same seed, same code: the C and Rust numbers agree to float rounding (in practice exactly).
 const TOL: f64 = 1e-5;
 
-fn check_grid(dir: &Path, file: &str, scene: &Scene) -> solvers::ScatteringGrid {
+fn check_grid(dir: &Path, file: &str, scene: &Scene) -> volscatter_core::stages::ScatteringGrid {
     let name = scene.solver_name().unwrap_or("reference");
-    let out = solvers::by_name(name, &scene.solver).unwrap().solve(scene, &NoProgress).unwrap();
+    let out = pipeline::solve(scene, name, &scene.solver, Devices::cpu(), &NoProgress).unwrap().output;
     let g = out.scattering;
     let dump = read_dump(&dir.join(file), 3, 16);
     assert_eq!(dump.head, g.dims.to_vec(), "{file}: dims");
@@ -82,7 +82,8 @@ fn reference_image(scene: &Scene) -> volscatter_core::Image {
         None | Some("reference") => scene.solver.clone(),
         Some(_) => Default::default(),
     };
-    Reference::from_settings(&settings).unwrap().render_image(scene, &NoProgress, &mut Timings::default()).unwrap()
+    let mut session = pipeline::Session::new("reference", &settings, Devices::cpu()).unwrap();
+    pipeline::render(&mut session, scene, &CompositeOptions::default(), &NoProgress).unwrap().image
 }
 
 fn compile_smoke(dir: &Path) -> PathBuf {
@@ -133,7 +134,7 @@ fn c_host_renders_and_matches_the_rust_api() {
     assert!(run.status.success(), "smoke.c failed ({}):\n{}", run.status, String::from_utf8_lossy(&run.stderr));
     assert!(String::from_utf8_lossy(&run.stdout).contains("smoke: ok"));
     // The registry JSON the C host read is the Rust registry's, byte for byte in length.
-    let registry_len = solvers::registry::to_json().to_string().len();
+    let registry_len = volscatter_core::solvers::registry::to_json().to_string().len();
     assert!(String::from_utf8_lossy(&run.stdout).contains(&format!("solvers: {registry_len} bytes of JSON")), "registry JSON length differs from {registry_len}");
 
     // A: scene file -> grid, composite, reference render; grid files read back.
