@@ -23,7 +23,6 @@ Mitsuba's EXR reader (tests/mitsuba/mitsuba_scenes.read_exr_layers).
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import platform
@@ -33,25 +32,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
+from benchlib import (SHARED, log, phase_sum, quick_mark, read_exr_layers, rel_rmse, render as render_report, today,
+                      volscatter_bin, write_scene, publish)
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-sys.path.insert(0, str(REPO_ROOT / "tests" / "mitsuba"))
-from benchmarks_md import write_section  # noqa: E402
-from mitsuba_scenes import read_exr_layers  # noqa: E402
-
-SMOKE_VDB = Path(os.environ.get("VOLSCATTER_SHARED", "/work/shared")) / "fixtures" / "blender_noise_cube" / "volumes" / "Volume.vdb"
+SMOKE_VDB = SHARED / "fixtures" / "blender_noise_cube" / "volumes" / "Volume.vdb"
 SINGLE_PHASE = "composite: single-scattering AOV"
-
-
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def volscatter_bin() -> Path:
-    env = os.environ.get("VOLSCATTER_BIN")
-    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
 
 
 def smoke_scene(work: Path) -> Path:
@@ -66,31 +51,20 @@ def smoke_scene(work: Path) -> Path:
         "camera": {"position": [0, -6, 0.5], "look_at": [0, 0, 0], "fov_deg": 39.6, "width": 256, "height": 256},
         "solver": {"name": "pop"},
     }
-    path = work / "smoke.json"
-    path.write_text(json.dumps(scene))
-    return path
+    return write_scene(work / "smoke.json", scene)
 
 
 def render(binary: Path, scene: Path | None, out: Path, aov: str | None) -> dict:
-    report = out.with_suffix(".json")
-    cmd = [str(binary), "render"] + ([str(scene)] if scene else []) + [
-        "--solver", "pop", "--device", "cpu", "--out", str(out), "--report", str(report), "-q"]
-    if aov is not None:
-        cmd += ["--aov", aov]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    ph = json.loads(report.read_text())["phases_seconds"]
-    return {"solve": sum(v for k, v in ph.items() if k.startswith("pop")), "composite": ph["composite"],
-            "single": ph.get(SINGLE_PHASE)}
+    rep = render_report(out, out.with_suffix(".json"), scene, solver="pop", device="cpu", binary=binary,
+                        extra=[] if aov is None else ["--aov", aov], stdout=subprocess.DEVNULL)
+    ph = rep["phases_seconds"]
+    return {"solve": phase_sum(rep, lambda k: k.startswith("pop")), "composite": ph["composite"], "single": ph.get(SINGLE_PHASE)}
 
 
 def median_runs(binary: Path, scene: Path | None, out: Path, aov: str | None, repeats: int) -> dict:
     runs = [render(binary, scene, out, aov) for _ in range(repeats)]
     med = lambda k: None if runs[0][k] is None else statistics.median(r[k] for r in runs)  # noqa: E731
     return {k: med(k) for k in runs[0]}
-
-
-def rrmse(a, b) -> float:
-    return float(np.sqrt(((a - b) ** 2).sum() / max((b ** 2).sum(), 1e-30)))
 
 
 def fmt(x) -> str:
@@ -122,9 +96,9 @@ def main() -> None:
             la = read_exr_layers(work / "all.exr")
             ln = read_exr_layers(work / "none.exr")
             row = {"scene": label, "before": before, "no_aov": no_aov, "with_aov": with_aov,
-                   "single_rrmse": rrmse(la["single"], lb["single"]),
-                   "multiple_rrmse": rrmse(la["multiple"], lb["multiple"]),
-                   "rgb_rrmse": rrmse(ln["rgb"], lb["rgb"]),
+                   "single_rrmse": rel_rmse(la["single"], lb["single"]),
+                   "multiple_rrmse": rel_rmse(la["multiple"], lb["multiple"]),
+                   "rgb_rrmse": rel_rmse(ln["rgb"], lb["rgb"]),
                    "layers_default": sorted(k for k in ln if k != "rgb")}
             rows.append(row)
             log(json.dumps(row))
@@ -132,9 +106,9 @@ def main() -> None:
     lines = [
         "## Compositor AOVs (`scripts/bench_composite.py`)",
         "",
-        f"`python3 scripts/bench_composite.py` on {datetime.date.today().isoformat()}, {platform.machine()},"
+        f"`python3 scripts/bench_composite.py` on {today()}, {platform.machine()},"
         f" {os.cpu_count()} CPU threads (shared with other jobs: wall-clock, pessimistic), median of {repeats}"
-        f"{' — QUICK RUN, not for committing' if args.quick else ''}.",
+        f"{quick_mark(args.quick)}.",
         "`volscatter render --solver pop --device cpu`, 256 x 256, 2 x 2 subpixels. *Before*: the CLI of main as the",
         "change started from (commit 027183e's release build, copied aside before the change), which always",
         "computed the single-scattering grid (48^3, 64 dome directions). *After*: `--aov background` (the default: no",
@@ -162,8 +136,7 @@ def main() -> None:
         "importance-sampled directions for a bright sky, proportionally fewer for a dim one (`compositor::dome_directions_for`;",
         "the longer shadow-ray step adds 0.05%).",
     ]
-    path = write_section("composite", "\n".join(lines))
-    log(f"wrote {path}")
+    publish("composite", lines)
 
 
 if __name__ == "__main__":

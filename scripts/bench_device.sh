@@ -10,6 +10,8 @@
 #   there:  bash scripts/bench_device.sh run OUT [--quick] [--only STEP,STEP]
 #           (device run: carry .devbin .gl .whl; OUT is $OUT)
 #
+# The scripts themselves travel with the working tree (scripts/*.py, with the helpers they share,
+# scripts/benchlib.py, which `run` checks for first).
 # `run` puts scripts/device/cargo (runs the prebuilt binaries instead of building) first on
 # PATH and runs each GPU benchmark script as it is, most important first, each under its own
 # time limit, copying BENCHMARKS.md and the log to OUT after every step, so that a step cut off
@@ -22,7 +24,7 @@ set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
-# The sections the GPU benchmarks write (benchmarks_md.py markers).
+# The sections the GPU benchmarks write (benchlib.py's write_section markers).
 GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm solvers-gpu pop-local-lights)
 
 stage() {
@@ -78,6 +80,9 @@ run() {
     if [ "$built" != . ] && [ ! -e "$(dirname "$built")/shared" ]; then ln -s "$root/.devbin/shared" "$(dirname "$built")/shared"; fi
     export PATH="$root/scripts/device:$PATH" VOLSCATTER_PREBUILT="$root/.devbin" VOLSCATTER_BIN="$root/.devbin/volscatter"
     export PYTHONUNBUFFERED=1
+    # The scripts travel with the working tree; they all import scripts/benchlib.py (stdlib only).
+    python3 -c 'import sys; sys.path.insert(0, "scripts"); import benchlib' ||
+        { echo "scripts/benchlib.py missing or broken: every benchmark script needs it"; exit 3; }
     date -u
     nvidia-smi -L 2>/dev/null || echo "(no nvidia-smi)"
     echo "CPUs: $(nproc)"
@@ -130,20 +135,15 @@ run() {
 # the CPU-only sections there were not rerun).
 merge() {
     local theirs=$1
-    python3 - "$theirs" "${GPU_SECTIONS[@]}" <<'EOF'
+    python3 - "$(realpath "$theirs")" "${GPU_SECTIONS[@]}" <<'EOF'
 import sys
-from pathlib import Path
 sys.path.insert(0, "scripts")
-from benchmarks_md import write_section
-theirs = Path(sys.argv[1]).read_text()
+from benchlib import read_section, write_section
 for name in sys.argv[2:]:
-    begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
-    if begin not in theirs:
+    body = read_section(name, sys.argv[1])
+    if body is None:
         print(f"{name}: not in {sys.argv[1]}"); continue
-    body = theirs.split(begin, 1)[1].split(end, 1)[0].strip("\n")
-    mine = Path("BENCHMARKS.md").read_text()
-    old = mine.split(begin, 1)[1].split(end, 1)[0].strip("\n") if begin in mine else None
-    if body == old:
+    if body == read_section(name):
         print(f"{name}: unchanged"); continue
     write_section(name, body + "\n")
     print(f"{name}: replaced")

@@ -15,33 +15,16 @@ switched off, and the reference baseline at BASE_SPP (scattering grids on a 16^3
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import json
 import math
-import os
-import platform
 import struct
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import (camera, quick_parser, sample_counts, compare, log, noise_cube_vdb, require_volscatter, runs_by_solver, scene_doc, set_args,
+                      write_scene, publish, written_line)
 
 ORDINATES = [16, 32, 64, 125]
 SUN = (0.6, -0.3, 0.75)
-
-
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def volscatter_bin() -> Path:
-    env = os.environ.get("VOLSCATTER_BIN")
-    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
 
 
 def sky_pixels(width: int, height: int) -> list[tuple[float, float, float]]:
@@ -98,30 +81,16 @@ def write_exr(path: Path, width: int, height: int, pixels: list[tuple[float, flo
 
 
 def scene_file(workdir: Path) -> Path:
-    vdb = REPO_ROOT / ".." / "shared" / "fixtures" / "blender_noise_cube" / "volumes" / "Volume.vdb"
-    if not vdb.exists():
-        sys.exit(f"{vdb} not found: shared/ must sit beside the repository")
+    medium = {"vdb": str(noise_cube_vdb()), "grid": "density", "density_scale": 8.0, "albedo": [0.95, 0.95, 0.95], "g": 0.6}
     write_exr(workdir / "sky.exr", 256, 128, sky_pixels(256, 128))
-    scene = {
-        "format": 1,
-        "medium": {"vdb": str(vdb.resolve()), "grid": "density", "density_scale": 8.0, "albedo": [0.95, 0.95, 0.95], "g": 0.6},
-        "lights": [{"type": "dome", "texture": "sky.exr", "intensity": 1.0}],
-        "camera": {"position": [0, -6, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 30.0, "width": 48, "height": 48},
-        "solver": {"name": "pop"},
-    }
-    path = workdir / "blender_vdb_sky.json"
-    path.write_text(json.dumps(scene))
-    return path
+    scene = scene_doc(medium, [{"type": "dome", "texture": "sky.exr", "intensity": 1.0}], camera([0, -6, 0.3], 30.0))
+    return write_scene(workdir / "blender_vdb_sky.json", scene)
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true")
-    args = ap.parse_args()
-    div = 16 if args.quick else 1
-    base_spp, grid_spp = 4096 // div, 1024 // div
-    if not volscatter_bin().exists():
-        sys.exit(f"{volscatter_bin()} not found: run `cargo build --release` first (or set VOLSCATTER_BIN)")
+    args = quick_parser().parse_args()
+    base_spp, grid_spp = sample_counts(args.quick, 4096, 1024)
+    require_volscatter()
     variants = [(f"pop#{n}", n, {"dome_ordinates": n}) for n in ORDINATES]
     variants += [
         ("pop#64-no-importance", 64, {"dome_ordinates": 64, "dome_importance": False}),
@@ -132,21 +101,15 @@ def main() -> None:
         scene = scene_file(work)
         sets = ["--set", f"reference.spp={base_spp}"]
         for name, _, kv in variants:
-            for k, v in kv.items():
-                sets += ["--set", f"{name}.{k}={json.dumps(v)}"]
-        out = work / "cmp.json"
-        cmd = [str(volscatter_bin()), "compare", str(scene), "--solvers", ",".join([v[0] for v in variants] + ["reference"]),
-               "--json", str(out), "-q", "--grid-resolution", "16", "--grid-spp", str(grid_spp)] + sets
-        log("$", " ".join(cmd))
-        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-        doc = json.loads(out.read_text())
-    runs = {r["solver"]: r for r in doc["runs"]}
+            sets += set_args(kv, f"{name}.")
+        doc = compare(scene, work / "cmp.json", ",".join([v[0] for v in variants] + ["reference"]),
+                      ["--grid-resolution", "16", "--grid-spp", str(grid_spp)] + sets)
+    runs = runs_by_solver(doc)
     ref = runs["reference"]
     lines = [
         "## pop under an HDR environment (dome ordinates, importance, isotropic residuum)",
         "",
-        f"`python3 scripts/bench_dome.py` on {datetime.date.today().isoformat()}, {platform.machine()}, {os.cpu_count()} CPU threads"
-        f" (shared with other jobs: times are wall-clock and pessimistic){' — QUICK RUN, not for committing' if args.quick else ''}.",
+        written_line("python3 scripts/bench_dome.py", args.quick),
         "Scene: the Blender-exported VDB (noise cube, density scale 8, albedo 0.95, g 0.6) under a lat-long EXR sky the script",
         "writes (4-degree sun of radiance 300, about half the light; blue sky; dim ground), 48x48 image, CPU.",
         f"Baseline: `reference` at {base_spp} spp ({ref['image_seconds']:.1f} s); grids compared on 16^3 points at {grid_spp} paths per point.",
@@ -186,8 +149,7 @@ def main() -> None:
         f" {off['grid_relative_rmse']:.3f}. Importance propagation at N 64: scattered error {on['scattered_relative_rmse']:.3f}"
         f" with, {noimp['scattered_relative_rmse']:.3f} without.",
     ]
-    write_section("pop-dome", "\n".join(lines))
-    log("wrote BENCHMARKS.md section `pop-dome`")
+    publish("pop-dome", lines)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import eevee_scenes as es  # noqa: E402
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import write_section  # noqa: E402
 
 PICTURE = os.path.join(REPO, "docs", "eevee_comparison.png")
 UPSCALE = 3  # each 80x60 render shown as 240x180 (nearest neighbour: froxels stay visible)

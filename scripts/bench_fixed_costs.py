@@ -17,15 +17,12 @@ the change is meant to move them by float rounding only.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import log, phase_sum, render, volscatter_bin, write_section
 
 # (solver, extra arguments): vpl at the walks of issue 16's profile; the reference at few
 # samples (a control only).
@@ -39,13 +36,11 @@ SOLVERS = [
 ]
 
 
-def render(binary: str, solver: str, extra: list[str]) -> dict:
+def render_default(binary: str, solver: str, extra: list[str]) -> dict:
     """The report of one render of the default scene."""
     with tempfile.TemporaryDirectory() as d:
-        report = Path(d) / "r.json"
-        cmd = [binary, "render", "--solver", solver, "--device", "cpu", "-q", "--report", str(report), "--out", str(Path(d) / "o.exr"), *extra]
-        subprocess.run(cmd, check=True, capture_output=True)
-        return json.loads(report.read_text())
+        return render(Path(d) / "o.exr", Path(d) / "r.json", solver=solver, device="cpu", extra=extra, binary=binary,
+                      stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
 def best_of(binaries: list[str], solver: str, extra: list[str], repeat: int) -> list[dict]:
@@ -54,7 +49,7 @@ def best_of(binaries: list[str], solver: str, extra: list[str], repeat: int) -> 
     best: list[dict | None] = [None] * len(binaries)
     for _ in range(repeat):
         for k, binary in enumerate(binaries):
-            r = render(binary, solver, extra)
+            r = render_default(binary, solver, extra)
             if best[k] is None or r["total_seconds"] < best[k]["total_seconds"]:
                 best[k] = r
     return best
@@ -63,7 +58,7 @@ def best_of(binaries: list[str], solver: str, extra: list[str], repeat: int) -> 
 def phase(report: dict, word: str) -> float:
     """Sum of the phases whose name contains `word` (solvers name their single-scattering
     phase after themselves: `vpl single scattering`, `lpm single scattering`, ...)."""
-    return sum(v for k, v in report["phases_seconds"].items() if word in k)
+    return phase_sum(report, lambda k: word in k)
 
 
 def main() -> None:
@@ -71,14 +66,14 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-write", action="store_true", help="print the table only")
     args = ap.parse_args()
-    after_bin = os.environ.get("VOLSCATTER_BIN", "target/release/volscatter")
+    after_bin = str(volscatter_bin())
     before_bin = os.environ.get("VOLSCATTER_BIN_BEFORE")
     rows = []
     for solver, extra in SOLVERS:
         runs = best_of([after_bin] + ([before_bin] if before_bin else []), solver, extra, args.repeat)
         after, before = runs[0], (runs[1] if before_bin else None)
         rows.append((solver, before, after))
-        print(solver, "done", file=sys.stderr)
+        log(solver, "done")
 
     def cell(before, after, word):
         a = phase(after, word) if word else after["total_seconds"]

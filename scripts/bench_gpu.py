@@ -7,14 +7,8 @@ Mesa's lavapipe), and reports per-stage times of the whole POP pipeline for one 
 on the GPU and on the CPU, and how far each GPU propagation is from its memory-traffic floor.
 """
 import argparse
-import datetime
-import json
-import os
-import subprocess
-import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import json_lines, run_cargo_example, today, write_section
 
 # Bytes one propagation iteration must move per cell if every buffer is read or written once
 # per kernel (ideal caching of the six neighbours), from shaders/src/pop/propagate.wgsl:
@@ -48,19 +42,14 @@ def main():
     ap.add_argument("--cpu-max-cells", default="300000", help="largest propagation grid also solved on the CPU")
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    cmd = ["cargo", "run", "--release", "-q", "-p", "volscatter-gpu", "--example", "bench_pop", "--",
-           "--sizes", a.sizes, "--grids", a.grids, "--iterations", a.iterations, "--output", a.output,
-           "--cpu-max-cells", a.cpu_max_cells]
-    out = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
-    if out.returncode != 0:
-        sys.exit(f"bench_pop failed ({out.returncode}):\n{out.stderr}")
-    rows = [json.loads(l) for l in out.stdout.splitlines() if l.startswith("{")]
+    out = run_cargo_example("volscatter-gpu", "bench_pop", ["--sizes", a.sizes, "--grids", a.grids, "--iterations", a.iterations,
+                                                            "--output", a.output, "--cpu-max-cells", a.cpu_max_cells])
+    rows = json_lines(out.stdout)
     adapter = rows[0]["adapter"] if rows else "none"
     bw = bandwidth_of(adapter)
     lines = [
         f"Adapter: **{adapter}**; {rows[0]['threads'] if rows else '?'} CPU threads; "
-        f"{datetime.date.today().isoformat()}; the plume at each size, one distant light, diffusion correction on, "
+        f"{today()}; the plume at each size, one distant light, diffusion correction on, "
         f"{a.iterations} iterations (residual threshold 0), merge grid twice the propagation grid, "
         f"{a.output}^3 output grid. Command: `python scripts/bench_gpu.py --sizes {a.sizes} --grids {a.grids}`.",
         "",
@@ -94,7 +83,7 @@ def main():
     text = "\n".join(lines)
     print(text)
     if not a.no_write:
-        write_section("gpu", "## POP on the GPU (issue 5/9)\n\n" + text, path=os.path.join(root, "BENCHMARKS.md"))
+        write_section("gpu", "## POP on the GPU (issue 5/9)\n\n" + text)
 
 
 if __name__ == "__main__":

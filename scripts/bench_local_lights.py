@@ -16,24 +16,16 @@ tests). `--quick` divides the sample counts by 16 (for trying the script, not fo
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import json
-import os
-import platform
-import struct
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import (camera, quick_parser, sample_counts, compare, is_software_adapter, log, phase_sum, render, require_volscatter, runs_by_solver,
+                      scene_doc, write_raw_f32, write_scene, publish, written_line)
 
 BESIDE = [1.6, -0.8, 0.6]
 TOWARDS_PLUME = [-1.6, 0.8, -0.5]  # from BESIDE to (0, 0, 0.1)
-CAMERA = {"position": [0, -6, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 25.0, "width": 48, "height": 48}
+CAMERA = camera([0, -6, 0.3], 25.0)
 PLUME = {"procedural": "plume", "dims": [32], "density_scale": 6.0, "albedo": [0.98, 0.98, 0.98], "g": 0.6}
 
 LIGHTS = {
@@ -46,20 +38,8 @@ LIGHTS = {
 }
 
 
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def volscatter_bin() -> Path:
-    env = os.environ.get("VOLSCATTER_BIN")
-    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
-
-
 def plume_scene(workdir: Path, key: str, light: dict) -> Path:
-    scene = {"format": 1, "medium": PLUME, "lights": [light], "camera": CAMERA, "solver": {"name": "pop"}}
-    path = workdir / f"plume_{len(list(workdir.iterdir()))}.json"
-    path.write_text(json.dumps(scene))
-    return path
+    return write_scene(workdir / f"plume_{len(list(workdir.iterdir()))}.json", scene_doc(PLUME, [light], CAMERA))
 
 
 def fig10_scene(workdir: Path) -> Path:
@@ -74,45 +54,27 @@ def fig10_scene(workdir: Path) -> Path:
             for x in range(n):
                 r = ((origin + x * voxel) ** 2 + (origin + y * voxel) ** 2 + (origin + z * voxel) ** 2) ** 0.5
                 vals.append(min(1.0, max(0.0, (radius - r) / voxel + 0.5)))
-    raw = workdir / "sphere32.f32"
-    raw.write_bytes(struct.pack(f"<{n ** 3}f", *vals))
-    scene = {
-        "format": 1,
-        "medium": {"raw": raw.name, "dims": [n, n, n], "origin": [origin] * 3, "voxel_size": voxel,
-                   "density_scale": [0.8, 1.0, 1.3], "albedo": [1, 1, 1], "g": 0.8},
-        "lights": [{"type": "point", "position": [0, 0, 0], "intensity": [1, 1, 1], "radius": 0.0}],
-        "camera": {"position": [0, -12, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 28.0, "width": 48, "height": 48},
-        "solver": {"name": "pop"},
-    }
-    path = workdir / "fig10.json"
-    path.write_text(json.dumps(scene))
-    return path
-
-
-def run(cmd: list[str]) -> None:
-    log("$", " ".join(cmd))
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    raw = write_raw_f32(workdir / "sphere32.f32", vals)
+    medium = {"raw": raw.name, "dims": [n, n, n], "origin": [origin] * 3, "voxel_size": voxel,
+              "density_scale": [0.8, 1.0, 1.3], "albedo": [1, 1, 1], "g": 0.8}
+    light = {"type": "point", "position": [0, 0, 0], "intensity": [1, 1, 1], "radius": 0.0}
+    return write_scene(workdir / "fig10.json", scene_doc(medium, [light], camera([0, -12, 0], 28.0)))
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true")
+    ap = quick_parser()
     ap.add_argument("--gpu", action="store_true", help="also time POP's solve with --device gpu")
     args = ap.parse_args()
-    div = 16 if args.quick else 1
-    base_spp, grid_spp = 2048 // div, 512 // div
-    if not volscatter_bin().exists():
-        sys.exit(f"{volscatter_bin()} not found: run `cargo build --release` first (or set VOLSCATTER_BIN)")
+    base_spp, grid_spp = sample_counts(args.quick, 2048, 512)
+    require_volscatter()
     rows = []
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
         scenes = [(f"plume, {k}", plume_scene(work, k, v)) for k, v in LIGHTS.items()]
         scenes.append(("Fig. 10: point in sphere, g 0.8", fig10_scene(work)))
         for label, scene in scenes:
-            out = work / "cmp.json"
-            run([str(volscatter_bin()), "compare", str(scene), "--solvers", "pop,reference", "--json", str(out), "-q",
-                 "--set", f"reference.spp={base_spp}", "--grid-resolution", "16", "--grid-spp", str(grid_spp)])
-            runs = {r["solver"]: r for r in json.loads(out.read_text())["runs"]}
+            runs = runs_by_solver(compare(scene, work / "cmp.json", "pop,reference",
+                                          ["--set", f"reference.spp={base_spp}", "--grid-resolution", "16", "--grid-spp", str(grid_spp)]))
             pop, ref = runs["pop"], runs["reference"]
             row = {
                 "scene": label,
@@ -126,11 +88,8 @@ def main() -> None:
                 "gpu_solve_seconds": None,
             }
             if args.gpu:
-                rep = work / "gpu.json"
-                run([str(volscatter_bin()), "render", str(scene), "--device", "gpu", "--out", str(work / "gpu.exr"), "--report", str(rep)])
-                doc = json.loads(rep.read_text())
-                ph = doc["phases_seconds"]
-                row["gpu_solve_seconds"] = sum(v for k, v in ph.items() if k.startswith("pop"))
+                doc = render(work / "gpu.exr", work / "gpu.json", scene, device="gpu", quiet=False, stdout=subprocess.DEVNULL)
+                row["gpu_solve_seconds"] = phase_sum(doc, lambda k: k.startswith("pop"))
                 row["gpu_device"] = doc["device"]["solve"]
             rows.append(row)
             log(row)
@@ -142,9 +101,7 @@ def main() -> None:
     lines = [
         "## pop with local lights (radial grids, paper 01 Sec. 6)",
         "",
-        f"`python3 scripts/bench_local_lights.py{' --gpu' if args.gpu else ''}` on {datetime.date.today().isoformat()},"
-        f" {platform.machine()}, {os.cpu_count()} CPU threads (shared with other jobs: times are wall-clock and pessimistic)"
-        f"{' — QUICK RUN, not for committing' if args.quick else ''}.",
+        written_line(f"python3 scripts/bench_local_lights.py{' --gpu' if args.gpu else ''}", args.quick),
         f"Baseline: `reference` at {base_spp} spp, 48x48; grids compared on 16^3 points ({grid_spp} paths per point).",
         "POP at its defaults (32 octahedral columns per side, shells growing by 1 + 3.5/32, residual 1e-3, area lights as",
         "3 x 3 VPLs). Errors: relative RMSE against the baseline (*scattered* = image minus background).",
@@ -170,11 +127,10 @@ def main() -> None:
         "a medium gives the path tracer heavy-tailed NEE weights: the test fixture at 65536 spp still has 31% image noise),",
         "so that row overstates POP's error; the test compares averages over the scene's rotational symmetry instead.",
         *([] if not args.gpu else ["GPU times are Mesa's llvmpipe (a CPU rasteriser), not a GPU."] if any(
-            w in d.lower() for d in devices for w in ("llvmpipe", "lavapipe")) else ["GPU times: a hardware GPU, uploads and read-backs included."]),
+            is_software_adapter(d) for d in devices) else ["GPU times: a hardware GPU, uploads and read-backs included."]),
         "Tests and their measured errors: core/src/solvers/pop/radial/tests.rs.",
     ]
-    write_section("pop-local-lights", "\n".join(lines))
-    log("wrote BENCHMARKS.md section `pop-local-lights`")
+    publish("pop-local-lights", lines)
 
 
 if __name__ == "__main__":

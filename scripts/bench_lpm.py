@@ -49,29 +49,17 @@ Mitsuba's EXR reader for the comparison (skipped, and said so, without them).
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import resource
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
-
-
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def volscatter_bin() -> Path:
-    env = os.environ.get("VOLSCATTER_BIN")
-    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
+import benchlib
+from benchlib import (cpu_name, exr_rel_rmse as rel_rmse, is_software_adapter, log, phase_sum, read_section,
+                      render_cmd, today, volscatter_bin, write_section)
 
 
 def scene(procedural: str, dims: int, g: float, albedo: float) -> dict:
@@ -104,9 +92,7 @@ def solve(work: Path, tag: str, sc: dict, settings: dict, device: str = "cpu", b
     path = work / f"{tag}.json"
     path.write_text(json.dumps(sc))
     report = work / f"{tag}.report.json"
-    cmd = [str(binary or volscatter_bin()), "render", str(path), "--solver", "lpm", "--device", device, "--out", str(work / f"{tag}.exr"), "--report", str(report)]
-    for k, v in settings.items():
-        cmd += ["--set", f"{k}={json.dumps(v)}"]
+    cmd = render_cmd(work / f"{tag}.exr", report, path, solver="lpm", device=device, settings=settings, quiet=False, binary=binary)
     rss, wall, p = peak_rss_kib_of(cmd)
     if p.returncode != 0:
         if device == "gpu":
@@ -114,37 +100,20 @@ def solve(work: Path, tag: str, sc: dict, settings: dict, device: str = "cpu", b
             return {"tag": tag, "solver_s": None, "device": f"unavailable ({p.stderr.strip().splitlines()[-1] if p.stderr.strip() else p.returncode})"}
         raise SystemExit(f"{tag}: volscatter failed: {p.stderr[-2000:]}")
     rep = json.loads(report.read_text())
-    phases = rep.get("phases_seconds", {})
-    if isinstance(phases, list):
-        phases = {k: v for k, v in phases}
-    solver_s = sum(v for k, v in phases.items() if k.startswith("lpm ") and k != "lpm single scattering")
+    phases = benchlib.phases(rep)
+    solver_s = phase_sum(rep, lambda k: k.startswith("lpm ") and k != "lpm single scattering")
     log(f"{tag}: lpm {solver_s:.2f} s (wall {wall:.1f} s), peak RSS {rss / 1024:.0f} MiB")
     used = rep.get("device", {}).get("solve", device) if isinstance(rep.get("device"), dict) else device
     return {"tag": tag, "solver_s": solver_s, "phases": phases, "wall_s": wall, "rss_mib": rss / 1024, "exr": work / f"{tag}.exr", "device": used}
 
 
-def rel_rmse(a_exr: Path, b_exr: Path) -> str:
-    try:
-        import numpy as np
-
-        sys.path.insert(0, str(REPO_ROOT / "tests" / "mitsuba"))
-        from mitsuba_scenes import read_exr_layers  # noqa: E402
-    except Exception as e:  # noqa: BLE001
-        return f"skipped ({e})"
-    a = read_exr_layers(a_exr)
-    b = read_exr_layers(b_exr)
-    ka = next(iter(a))
-    x, y = np.asarray(a[ka], dtype=np.float64), np.asarray(b[ka], dtype=np.float64)
-    return f"{float(np.sqrt(np.mean((x - y) ** 2)) / max(float(np.sqrt(np.mean(y ** 2))), 1e-30)):.2e}"
-
-
 def kept_paper_rows() -> list[str] | None:
     """The section's lines before its streaming part, as BENCHMARKS.md has them (`--only-ooc`:
     the paper's cases are not rerun, their rows stay)."""
-    text = (REPO_ROOT / "BENCHMARKS.md").read_text()
-    if "<!-- BEGIN lpm -->" not in text:
+    text = read_section("lpm")
+    if text is None:
         return None
-    body = text.split("<!-- BEGIN lpm -->", 1)[1].split("<!-- END lpm -->", 1)[0].strip("\n").splitlines()
+    body = text.splitlines()
     cut = next((i for i, l in enumerate(body) if l.startswith(("Streaming:", "Out of core", "The out-of-core rows below"))), len(body))
     while cut > 0 and not body[cut - 1].strip():
         cut -= 1
@@ -154,10 +123,10 @@ def kept_paper_rows() -> list[str] | None:
 def kept_out_of_core_rows() -> list[str] | None:
     """The section's streaming part, as BENCHMARKS.md has it (`--paper-only`: the paper's cases
     rerun, on a machine with a GPU, say, while the out-of-core rows stay)."""
-    text = (REPO_ROOT / "BENCHMARKS.md").read_text()
-    if "<!-- BEGIN lpm -->" not in text:
+    text = read_section("lpm")
+    if text is None:
         return None
-    body = text.split("<!-- BEGIN lpm -->", 1)[1].split("<!-- END lpm -->", 1)[0].strip("\n").splitlines()
+    body = text.splitlines()
     cut = next((i for i, l in enumerate(body) if l.startswith(("Streaming:", "Out of core"))), None)
     return None if cut is None else body[cut:]
 
@@ -184,11 +153,11 @@ def accuracy() -> None:
                 cells.append(f"{err:.3f} (x{ratio:.2f}), {solve:.1f} s")
                 log(f"{name} delta_m {delta_m}: error {err:.4f} x{ratio:.3f}, solve {solve:.1f} s")
             rows.append(cells)
-    cpu = platform.processor() or platform.machine()
+    cpu = cpu_name()
     lines = [
         "## lpm accuracy: the delta-M split (issue 19)",
         "",
-        f"Written by `scripts/bench_lpm.py --accuracy` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared, CPU).",
+        f"Written by `scripts/bench_lpm.py --accuracy` on {today()} ({cpu}, {os.cpu_count()} logical CPUs, shared, CPU).",
         f"lpm at its preview preset (`{json.dumps(PREVIEW)}`) on the benchmark scenes against their converged references (bench/references, their own noise in the second column): image relative RMSE (mean brightness against the reference), and the solve time (the report's phases without the composite).",
         "",
         "| scene | reference noise | delta_m on (default) | delta_m off (the paper) |",
@@ -251,12 +220,12 @@ def region(n: int, grid: int, full_in_memory: bool) -> None:
         for f in work.glob("*"):
             f.unlink()
         work.rmdir()
-    cpu = platform.processor() or platform.machine()
+    cpu = cpu_name()
     scratch = grid**3 * (12 * 3 + 2 * 6 * 12)
     lines = [
         "## lpm: a medium larger than memory (issue 19)",
         "",
-        f"Written by `scripts/bench_lpm.py --region {n} --grid {grid}` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared, CPU, nice 15).",
+        f"Written by `scripts/bench_lpm.py --region {n} --grid {grid}` on {today()} ({cpu}, {os.cpu_count()} logical CPUs, shared, CPU, nice 15).",
         f"The procedural cumulus at {n}^3 voxels ({n**3 * 4 / 2**30:.2f} GiB dense) written as a Zip VDB 8 z-planes at a time (`cumulus_vdb`, `vdb::FloatVdbStream`): {wb['mib']:.1f} MiB in {wb['wall_s']:.1f} s, peak RSS {wb['rss_mib']:.0f} MiB ({n // 2}^3: {wh['mib']:.1f} MiB in {wh['wall_s']:.1f} s).",
         f"lpm on a {grid}^3 propagation grid, 25 x 6 directions, 3 orders, `first_order: boundary`, output {grid}^3; sun and sky, 64x64 image. Streamed: `medium.max_resolution: {max_res}` (the VDB box-filtered as it is read, through a 64 KiB window, vdb/filter.rs) and `out_of_core: true` (scratch files at most {scratch / 2**20:.0f} MiB).",
         "",
@@ -346,12 +315,12 @@ def main() -> None:
             raise SystemExit("--paper-only: BENCHMARKS.md has no out-of-core rows to keep; run without it once")
         if not args.paper_only:
             ooc = out_of_core(work, 96 if args.quick else args.large, 32 if args.quick else args.grid)
-    cpu = platform.processor() or platform.machine()
+    cpu = cpu_name()
     kept = kept_paper_rows() if args.only_ooc else None
     lines = kept if kept else [
         "## lpm (light propagation maps, paper 05)",
         "",
-        f"Written by `scripts/bench_lpm.py` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared). GPU: the sweeps (propagate + collect kernels, host packing and readback per slab included).",
+        f"Written by `scripts/bench_lpm.py` on {today()} ({cpu}, {os.cpu_count()} logical CPUs, shared). GPU: the sweeps (propagate + collect kernels, host packing and readback per slab included).",
         "Solve time = the `lpm *` phases of the render report (grid, phase table, first order, propagation, upsampling), without the compositor's single scattering and the composite.",
         "",
         "| case | propagation grid | directions | orders | lpm CPU before (s) | lpm CPU (s) | lpm GPU (s) | GPU image vs CPU (rel. RMSE) | paper (GPU, ms) | peak RSS CPU (MiB) |",
@@ -363,7 +332,7 @@ def main() -> None:
     if args.before:
         lines += ["", f"CPU before: {args.before_note or 'the CLI given with --before'}; its image against this build's in brackets."]
     gpu_dev = rows[0][3]["device"] if rows else "none"
-    soft = any(w in gpu_dev.lower() for w in ("llvmpipe", "lavapipe", "softpipe", "swiftshader"))
+    soft = is_software_adapter(gpu_dev)
     lines += [] if kept else [
         "",
         f"GPU column: device `{gpu_dev}`" + (" -- lavapipe (software, for correctness only): not GPU speed." if soft else "."),

@@ -17,35 +17,19 @@ with a real GPU, rerun `--gpu-only` to replace it.
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import os
 import platform
-import subprocess
 import sys
-from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
-from bench_photon_grid import run_benches  # noqa: E402
+from benchlib import cargo_test_benches, cpu_only_line, publish, table, today
 
 
 def run_gpu_bench(quick: bool) -> dict:
-    """shaders/src/network/bench.rs: its one BENCH_JSON document's data."""
-    cmd = ["cargo", "test", "--release", "-q", "-p", "volscatter-gpu", "--lib", "--", "--ignored", "network::bench",
-           "--nocapture", "--test-threads", "1"]
-    env = dict(os.environ, NETWORK_BENCH_QUICK="1" if quick else "0")
-    print("$", " ".join(cmd), file=sys.stderr, flush=True)
-    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, env=env)
-    sys.stderr.write(out.stderr[-4000:])
-    if out.returncode != 0:
-        sys.exit(f"network GPU bench failed ({out.returncode})")
-    for line in out.stdout.splitlines():
-        at = line.find("BENCH_JSON ")
-        if at >= 0:
-            return json.loads(line[at + len("BENCH_JSON "):])["data"]
-    sys.exit("network GPU bench printed no BENCH_JSON line")
+    """shaders/src/network/bench.rs: its BENCH_JSON document's data."""
+    found = cargo_test_benches("network", "volscatter-gpu", {"NETWORK_BENCH_QUICK": "1" if quick else "0"})
+    if "gpu" not in found:
+        sys.exit("network GPU bench printed no BENCH_JSON line")
+    return found["gpu"]
 
 
 def gpu_section(quick: bool) -> None:
@@ -54,7 +38,7 @@ def gpu_section(quick: bool) -> None:
     lines = [
         "## network on the GPU (`scripts/bench_network.py --gpu-only`)",
         "",
-        f"{datetime.date.today().isoformat()}, adapter: {g['device']}: {kind}; CPU {platform.machine()},"
+        f"{today()}, adapter: {g['device']}: {kind}; CPU {platform.machine()},"
         f" {os.cpu_count()} cores{' (quick sizes)' if g['quick'] else ''}. Wall-clock seconds of the same solve on the CPU"
         " backend and on the GPU backend (visibility: per-direction keys, bitonic sort, upstream neighbours,"
         " marched opacities, read back; iteration: source product, column sweep, residual; splat: particles binned"
@@ -77,8 +61,7 @@ def gpu_section(quick: bool) -> None:
         "",
         "The paper reports 45 and 26 frames per second at N 512 and 1024 (D 128) for its whole GPU frame.",
     ]
-    path = write_section("network-gpu", "\n".join(lines) + "\n")
-    print(f"wrote {path}", file=sys.stderr)
+    publish("network-gpu", lines)
 
 
 def main() -> None:
@@ -92,22 +75,17 @@ def main() -> None:
 
 
 def cpu_section() -> None:
-    b = run_benches("solvers::network")
+    b = cargo_test_benches("solvers::network")
     lines = [
         "## network (illumination networks, paper 02; `scripts/bench_network.py`)",
         "",
-        f"{datetime.date.today().isoformat()}, {platform.machine()}, {os.cpu_count()} cores shared with other jobs"
-        " (wall-clock, pessimistic), CPU only.",
+        cpu_only_line(),
         "",
         "### Error against time (D 64, M from the paper's bound, output 32; rel. RMSE against the reference fixtures)",
         "",
-        "| scene | N | M | iterations | s | image rel. RMSE | image mean ratio | grid rel. RMSE |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for r in b["error_vs_time"]:
-        lines.append(f"| {r['scene']} | {r['particles']} | {r['window']} | {r['iterations']} | {r['seconds']:.2f} |"
-                     f" {r['image']:.3f} | x{r['image_ratio']:.3f} | {r['grid']:.3f} |")
-    lines += [
+        *table("| scene | N | M | iterations | s | image rel. RMSE | image mean ratio | grid rel. RMSE |",
+               [f"| {r['scene']} | {r['particles']} | {r['window']} | {r['iterations']} | {r['seconds']:.2f} |"
+                f" {r['image']:.3f} | x{r['image_ratio']:.3f} | {r['grid']:.3f} |" for r in b["error_vs_time"]]),
         "",
         "The dense cloud's darkness is the window: at the paper's M (clamped at sqrt(N)) a column holds about one particle,"
         " so light cannot diffuse through the network (network/tests.rs `network_cloud_vs_fixture` gives the measured"
@@ -118,21 +96,16 @@ def cpu_section() -> None:
         "The paper: 45 frames per second at N 512 and 26 at N 1024 (GPU, whole frame). Camera orbit: six 30-degree steps"
         " in a session (I kept, re-splatted: exactly the full solve's S) against a full solve of each view.",
         "",
-        "| N | M | iterations | ms per iteration | visibility s | direct s | full solve s | orbit frame s |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for r in b["paper_cloud"]:
-        lines.append(f"| {r['particles']} | {r['window']} | {r['iterations']} | {r['per_iteration_ms']:.1f} |"
-                     f" {r['visibility_seconds']:.3f} | {r['direct_seconds']:.3f} | {r['full_solve_seconds']:.3f} |"
-                     f" {r['orbit_frame_seconds']:.3f} |")
-    lines += [
+        *table("| N | M | iterations | ms per iteration | visibility s | direct s | full solve s | orbit frame s |",
+               [f"| {r['particles']} | {r['window']} | {r['iterations']} | {r['per_iteration_ms']:.1f} |"
+                f" {r['visibility_seconds']:.3f} | {r['direct_seconds']:.3f} | {r['full_solve_seconds']:.3f} |"
+                f" {r['orbit_frame_seconds']:.3f} |" for r in b["paper_cloud"]]),
         "",
         "An orbit frame keeps the particles, visibility links and the iterated I; it still computes the exact single"
         " scattering towards the new camera (dome included), the network's direct light (recomputed to check that the"
         " lights did not change: its bits are the key) and the splat.",
     ]
-    path = write_section("network", "\n".join(lines) + "\n")
-    print(f"wrote {path}", file=sys.stderr)
+    publish("network", lines)
 
 
 if __name__ == "__main__":

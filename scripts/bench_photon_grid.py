@@ -18,46 +18,27 @@ on a machine with a GPU, rerun it as is. `--quick`: the first setting only.
 
 from __future__ import annotations
 
-import datetime
+import argparse
 import json
 import math
 import os
 import platform
-import subprocess
-import sys
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import cargo_test_benches, cpu_only_line, loglog, publish, table, today
 
-
-def run_benches(module: str, crate: str = "volscatter-core", env: dict | None = None) -> dict:
-    cmd = ["cargo", "test", "--release", "-q", "-p", crate, "--lib", "--", "--ignored", f"{module}::bench",
-           "--nocapture", "--test-threads", "1"]
-    print("$", " ".join(cmd), file=sys.stderr, flush=True)
-    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, env={**os.environ, **(env or {})})
-    sys.stderr.write(out.stderr[-4000:])
-    if out.returncode != 0:
-        sys.exit(f"{module} benches failed ({out.returncode})")
-    found = {}
-    for line in out.stdout.splitlines():
-        # The test harness may print its progress on the same line before ours.
-        at = line.find("BENCH_JSON ")
-        if at >= 0:
-            doc = json.loads(line[at + len("BENCH_JSON "):])
-            found[doc["bench"]] = doc["data"]
-    return found
+#: Cells of paper Fig. 12's three cache resolutions, as the paper gives them.
+PAPER_CELLS = {9: 270, 18: 2080, 36: 16640}
 
 
 def gpu_main(quick: bool) -> None:
-    b = run_benches("photon_grid", "volscatter-gpu", {"VOLSCATTER_BENCH_QUICK": "1" if quick else "0"})["gpu"]
+    b = cargo_test_benches("photon_grid", "volscatter-gpu", {"VOLSCATTER_BENCH_QUICK": "1" if quick else "0"})["gpu"]
     device = b["device"]
     label = "lavapipe (software, for correctness only)" if b["software"] else "GPU"
     lines = [
         "## photon-grid on the GPU (tracing and reconstruction kernels, issue 17; `scripts/bench_photon_grid.py --gpu`)",
         "",
-        f"{datetime.date.today().isoformat()}, {platform.machine()}, {os.cpu_count()} CPU cores shared with other jobs;"
+        f"{today()}, {platform.machine()}, {os.cpu_count()} CPU cores shared with other jobs;"
         f" adapter: {device}. GPU column: {label}." + (" Quick run (first setting only)." if quick else ""),
         "",
         "Paper Fig. 12's settings on the 48 x 62 x 90 cumulus (sigma_t 25, albedo 0.99, g 0.9). `trace`: the photon"
@@ -68,56 +49,45 @@ def gpu_main(quick: bool) -> None:
         " both columns). A session frame traces photons / m (m = 100): its row is a"
         " one-off solve of that many photons. The paper's GPU frame times: 4.8 / 9.1 / 33.4 ms.",
         "",
-        f"| cache res | photons | run | CPU trace s | CPU reconstruct s | CPU solve s | {label} trace s | {label} reconstruct s | {label} solve s |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in b["rows"]:
-        lines.append(f"| {r['cache_resolution']} | {r['photons']} | {r['run']} | {r['cpu_trace']:.3f} | {r['cpu_reconstruct']:.4f} |"
-                     f" {r['cpu_total']:.3f} | {r['gpu_trace']:.3f} | {r['gpu_reconstruct']:.4f} | {r['gpu_total']:.3f} |")
-    lines += [
+        *table(f"| cache res | photons | run | CPU trace s | CPU reconstruct s | CPU solve s | {label} trace s | {label} reconstruct s | {label} solve s |",
+               [f"| {r['cache_resolution']} | {r['photons']} | {r['run']} | {r['cpu_trace']:.3f} | {r['cpu_reconstruct']:.4f} |"
+                f" {r['cpu_total']:.3f} | {r['gpu_trace']:.3f} | {r['gpu_reconstruct']:.4f} | {r['gpu_total']:.3f} |" for r in b["rows"]]),
         "",
         "The reconstruction alone at the cumulus's own resolution (output 90: 48 x 62 x 90 points), cache 18, each"
         " upsampling (trilinear: 8 cells a point and lobe; physical, the paper's Sec. 4.3: 27); the fastest of 3 solves.",
         "",
-        f"| upsampling | cache res | output res | CPU reconstruct s | {label} reconstruct s |",
-        "|---|---|---|---|---|",
     ]
-    for r in b.get("reconstruct", []):
-        lines.append(f"| {r['upsampling']} | {r['cache_resolution']} | {r['output_resolution']} | {r['cpu_reconstruct']:.4f} |"
-                     f" {r['gpu_reconstruct']:.4f} |")
+    lines += table(f"| upsampling | cache res | output res | CPU reconstruct s | {label} reconstruct s |",
+                   [f"| {r['upsampling']} | {r['cache_resolution']} | {r['output_resolution']} | {r['cpu_reconstruct']:.4f} |"
+                    f" {r['gpu_reconstruct']:.4f} |" for r in b.get("reconstruct", [])])
     if b["software"]:
         lines += ["", "lavapipe runs the kernel on the same shared CPU cores: these times say nothing of a GPU's speed."]
-    path = write_section("photon-grid-gpu", "\n".join(lines) + "\n")
-    print(f"wrote {path}", file=sys.stderr)
+    publish("photon-grid-gpu", lines)
 
 
 def main() -> None:
-    if "--gpu" in sys.argv[1:]:
-        gpu_main("--quick" in sys.argv[1:])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", type=Path, help="also save the benches' data here")
+    ap.add_argument("--from-json", type=Path, help="re-render from a saved run (--json of an earlier run), without running")
+    ap.add_argument("--gpu", action="store_true", help="only the GPU section (photon-grid-gpu)")
+    ap.add_argument("--quick", action="store_true", help="with --gpu: the first setting only")
+    args = ap.parse_args()
+    if args.gpu:
+        gpu_main(args.quick)
         return
-    args = sys.argv[1:]
-    if "--from-json" in args:
-        # Re-render from a saved run (--json PATH of an earlier run), without running.
-        b = json.loads(Path(args[args.index("--from-json") + 1]).read_text())
-    else:
-        b = run_benches("solvers::photon_grid")
-    if "--json" in args:
-        Path(args[args.index("--json") + 1]).write_text(json.dumps(b))
+    b = json.loads(args.from_json.read_text()) if args.from_json else cargo_test_benches("solvers::photon_grid")
+    if args.json:
+        args.json.write_text(json.dumps(b))
     lines = [
         "## photon-grid (photon beams into HG-lobe caches, paper 04; `scripts/bench_photon_grid.py`)",
         "",
-        f"{datetime.date.today().isoformat()}, {platform.machine()}, {os.cpu_count()} cores shared with other jobs"
-        " (wall-clock, pessimistic), CPU only.",
+        cpu_only_line(),
         "",
         "### Error against time (defaults: cache 24, output 64, exact single scattering; rel. RMSE against the converged"
         " reference fixtures, whose own noise is 0.5% to 3% on the cubes and 2.2% / 4.2% on the dense cloud)",
         "",
-        "| scene | photons | s | image rel. RMSE | image mean ratio | grid rel. RMSE |",
-        "|---|---|---|---|---|---|",
-    ]
-    for r in b["error_vs_time"]:
-        lines.append(f"| {r['scene']} | {r['photons']} | {r['seconds']:.2f} | {r['image']:.3f} | x{r['image_ratio']:.3f} | {r['grid']:.3f} |")
-    lines += [
+        *table("| scene | photons | s | image rel. RMSE | image mean ratio | grid rel. RMSE |",
+               [f"| {r['scene']} | {r['photons']} | {r['seconds']:.2f} | {r['image']:.3f} | x{r['image_ratio']:.3f} | {r['grid']:.3f} |" for r in b["error_vs_time"]]),
         "",
         "### Paper Fig. 12 settings on a 48 x 62 x 90 cumulus (m = 100)",
         "",
@@ -125,14 +95,9 @@ def main() -> None:
         " cloud's sun). A one-off solve traces all photons; a session frame traces photons / m and replaces the oldest"
         " generation (ring.rs). The paper's GPU frame times: 4.8 / 9.1 / 33.4 ms (GPU: the photon-grid-gpu section).",
         "",
-        "| cache res | cells (paper) | photons | one-off s (trace s) | session frame s (trace s) |",
-        "|---|---|---|---|---|",
-    ]
-    paper_cells = {9: 270, 18: 2080, 36: 16640}
-    for r in b["fig12"]:
-        lines.append(f"| {r['cache_resolution']} | {r['cells']} ({paper_cells.get(r['cache_resolution'], '?')}) | {r['photons']} |"
-                     f" {r['one_off_seconds']:.2f} ({r['one_off_trace']:.2f}) | {r['frame_seconds']:.3f} ({r['frame_trace']:.3f}) |")
-    lines += [
+        *table("| cache res | cells (paper) | photons | one-off s (trace s) | session frame s (trace s) |",
+               [f"| {r['cache_resolution']} | {r['cells']} ({PAPER_CELLS.get(r['cache_resolution'], '?')}) | {r['photons']} |"
+                f" {r['one_off_seconds']:.2f} ({r['one_off_trace']:.2f}) | {r['frame_seconds']:.3f} ({r['frame_trace']:.3f}) |" for r in b["fig12"]]),
         "",
         "A session frame's time beyond its trace is the per-frame work that does not shrink with m: the majorant grid,"
         " the cells' mass, the reconstruction and the exact single scattering at the output resolution.",
@@ -141,12 +106,8 @@ def main() -> None:
         "",
         "Flicker: rel. RMS change of S between consecutive frames (the sun's own motion included, the same in every row).",
         "",
-        "| run | m | flicker | s per frame |",
-        "|---|---|---|---|",
-    ]
-    for r in b["flicker"]:
-        lines.append(f"| {r['run']} | {r['generations']} | {r['flicker']:.4f} | {r['frame_seconds']:.3f} |")
-    lines += [
+        *table("| run | m | flicker | s per frame |",
+               [f"| {r['run']} | {r['generations']} | {r['flicker']:.4f} | {r['frame_seconds']:.3f} |" for r in b["flicker"]]),
         "",
         "A fixed seed re-uses the same random numbers every frame, so its noise moves only as the paths diverge; a new seed"
         " per frame gives full, independent noise each frame. The ring renews 1 / m of the photons per frame, so its"
@@ -154,8 +115,7 @@ def main() -> None:
         " measured 0.510 at m 4, predicted 0.500), at 1 / m of the tracing per frame and up to m - 1 frames of lag.",
     ]
     lines += aim_lines(b["cloud_aim"])
-    path = write_section("photon-grid", "\n".join(lines) + "\n")
-    print(f"wrote {path}", file=sys.stderr)
+    publish("photon-grid", lines)
 
 
 def aim_lines(aim: dict) -> list[str]:
@@ -198,8 +158,7 @@ def aim_lines(aim: dict) -> list[str]:
             t = mine[i]["seconds"]
             if i > 0:
                 a, b = mine[i - 1], mine[i]
-                f = math.log(0.05 / a["image"]) / math.log(b["image"] / a["image"])
-                t = math.exp(math.log(a["seconds"]) + f * (math.log(b["seconds"]) - math.log(a["seconds"])))
+                t = loglog(0.05, a["image"], a["seconds"], b["image"], b["seconds"])
             lines.append(f"- {method}: 5% reached in {t:.2f} s, {ref_time(0.05) / t:.1f}x below the reference's time.")
         else:
             best = min(mine, key=lambda r: r["image"])

@@ -19,100 +19,43 @@ paper's Fig. 12 cube with g = 0.7; the plume with g = 0.9, albedo 0.99):
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import json
-import os
-import platform
 import statistics
-import struct
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import (camera, quick_parser, sample_counts, compare, log, noise_cube_vdb, require_volscatter, runs_by_solver, scene_doc, write_raw_f32,
+                      write_scene, publish, written_line)
 
 SWEEP = [4, 16, 64]
 LIGHT = {"type": "distant", "direction": [0.4, -0.5, -0.75], "irradiance": [3.0, 3.0, 3.0], "angle_deg": 0.0}
 
 
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def volscatter_bin() -> Path:
-    env = os.environ.get("VOLSCATTER_BIN")
-    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
-
-
 def cube_scene(workdir: Path, g: float) -> Path:
     """The paper's Fig. 12 cube: 1 m, sigma_s = 4 / m, albedo 1 (16^3 voxels of density 1)."""
     n = 16
-    raw = workdir / "cube16.f32"
-    raw.write_bytes(struct.pack(f"<{n ** 3}f", *([1.0] * n ** 3)))
+    raw = write_raw_f32(workdir / "cube16.f32", [1.0] * n ** 3)
     voxel = 1.0 / n
-    scene = {
-        "format": 1,
-        "medium": {"raw": raw.name, "dims": [n, n, n], "origin": [-(n - 1) * 0.5 * voxel] * 3, "voxel_size": voxel,
-                   "density_scale": 4.0, "albedo": [1.0, 1.0, 1.0], "g": g},
-        "lights": [LIGHT],
-        "camera": {"position": [0, -4, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 22.0, "width": 48, "height": 48},
-        "solver": {"name": "pop"},
-    }
-    path = workdir / f"cube_g{g}.json"
-    path.write_text(json.dumps(scene))
-    return path
+    medium = {"raw": raw.name, "dims": [n, n, n], "origin": [-(n - 1) * 0.5 * voxel] * 3, "voxel_size": voxel,
+              "density_scale": 4.0, "albedo": [1.0, 1.0, 1.0], "g": g}
+    return write_scene(workdir / f"cube_g{g}.json", scene_doc(medium, [LIGHT], camera([0, -4, 0.3], 22.0)))
 
 
 def plume_scene(workdir: Path) -> Path:
-    scene = {
-        "format": 1,
-        "medium": {"procedural": "plume", "dims": [32], "density_scale": 8.0, "albedo": [0.99, 0.99, 0.99], "g": 0.9},
-        "lights": [LIGHT],
-        "camera": {"position": [0, -6, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 25.0, "width": 48, "height": 48},
-        "solver": {"name": "pop"},
-    }
-    path = workdir / "plume_g09.json"
-    path.write_text(json.dumps(scene))
-    return path
+    medium = {"procedural": "plume", "dims": [32], "density_scale": 8.0, "albedo": [0.99, 0.99, 0.99], "g": 0.9}
+    return write_scene(workdir / "plume_g09.json", scene_doc(medium, [LIGHT], camera([0, -6, 0.3], 25.0)))
 
 
 def blender_vdb_scene(workdir: Path) -> Path:
     """The VDB Blender 5.0.1 wrote for shared/fixtures/blender_noise_cube (Volume Cube + Noise,
     40^3 voxels over [-1, 1]^3), as smoke: density scale 8, albedo 0.95, g 0.6."""
-    vdb = REPO_ROOT / ".." / "shared" / "fixtures" / "blender_noise_cube" / "volumes" / "Volume.vdb"
-    if not vdb.exists():
-        sys.exit(f"{vdb} not found: shared/ must sit beside the repository")
-    scene = {
-        "format": 1,
-        "medium": {"vdb": str(vdb.resolve()), "grid": "density", "density_scale": 8.0, "albedo": [0.95, 0.95, 0.95], "g": 0.6},
-        "lights": [LIGHT],
-        "camera": {"position": [0, -6, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 30.0, "width": 48, "height": 48},
-        "solver": {"name": "pop"},
-    }
-    path = workdir / "blender_vdb.json"
-    path.write_text(json.dumps(scene))
-    return path
-
-
-def compare(scene: Path | None, out: Path, solvers: str, extra: list[str]) -> dict:
-    cmd = [str(volscatter_bin()), "compare"] + ([str(scene)] if scene else []) + ["--solvers", solvers, "--json", str(out), "-q"] + extra
-    log("$", " ".join(cmd))
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    return json.loads(out.read_text())
+    medium = {"vdb": str(noise_cube_vdb()), "grid": "density", "density_scale": 8.0, "albedo": [0.95, 0.95, 0.95], "g": 0.6}
+    return write_scene(workdir / "blender_vdb.json", scene_doc(medium, [LIGHT], camera([0, -6, 0.3], 30.0)))
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true")
-    args = ap.parse_args()
-    div = 16 if args.quick else 1
-    base_spp, grid_spp = 4096 // div, 1024 // div
-    if not volscatter_bin().exists():
-        sys.exit(f"{volscatter_bin()} not found: run `cargo build --release` first (or set VOLSCATTER_BIN)")
+    args = quick_parser().parse_args()
+    base_spp, grid_spp = sample_counts(args.quick, 4096, 1024)
+    require_volscatter()
     rows, phase_rows = [], []
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
@@ -126,7 +69,7 @@ def main() -> None:
         for label, scene, extra in scenes:
             doc = compare(scene, work / "cmp.json", solvers,
                           extra + ["--set", f"reference.spp={base_spp}", "--grid-resolution", "16", "--grid-spp", str(grid_spp)])
-            runs = {r["solver"]: r for r in doc["runs"]}
+            runs = runs_by_solver(doc)
             pop = runs["pop"]
             sweep = [(s, runs[f"reference@{s}"]) for s in SWEEP]
             c = statistics.median(r["scattered_relative_rmse"] * s ** 0.5 for s, r in sweep)
@@ -155,12 +98,10 @@ def main() -> None:
             phase_rows.append((res, pop["phases_seconds"], pop["grid_seconds"]))
             log(res, pop["phases_seconds"])
 
-    threads = os.cpu_count()
     lines = [
         "## pop (principal-ordinates propagation, distant lights + dome ordinates)",
         "",
-        f"`python3 scripts/bench_pop.py` on {datetime.date.today().isoformat()}, {platform.machine()}, {threads} CPU threads"
-        f" (shared with other jobs: times are wall-clock and pessimistic){' — QUICK RUN, not for committing' if args.quick else ''}.",
+        written_line("python3 scripts/bench_pop.py", args.quick),
         f"Baseline: `reference` at {base_spp} spp; grids compared on 16^3 points, reference grid at {grid_spp} paths per point.",
         "POP at its defaults (32 cells along the longest side per light, 16 dome ordinates at 16 with importance, isotropic residuum, residual 1e-3, output 128).",
         "Errors are relative RMSE against the baseline: *image* as rendered (incl. background), *scattered* = image minus",
@@ -201,8 +142,7 @@ def main() -> None:
         "(mean ratio above), where the camera does not see (optically thick); the image error counts what is visible.",
         "Energy conservation and the per-case errors on the test scenes: core/src/solvers/pop/tests.rs.",
     ]
-    write_section("pop", "\n".join(lines))
-    log("wrote BENCHMARKS.md section `pop`")
+    publish("pop", lines)
 
 
 if __name__ == "__main__":

@@ -20,17 +20,12 @@ times on whatever machine runs it (the table says which).
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import platform
 import re
 import subprocess
-import sys
-from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import REPO_ROOT, log, nextest_ignored_cmd, publish, utc_now
 
 # (name, POP_SET): the defaults, then the options docs/pop-dense-clouds.md measures.
 VARIANTS = [
@@ -44,12 +39,8 @@ SIZES = "16x16x16,22x22x40,32x32x32,64x64x64,128x128x128,256x256x256"
 NUM = r"([0-9.eE+-]+)"
 
 
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
 def nextest(test: str, env: dict) -> str:
-    cmd = ["cargo", "nextest", "run", "--cargo-profile", "release", "-p", "volscatter-core", test, "--run-ignored", "only", "--no-capture"]
+    cmd = nextest_ignored_cmd(test)
     r = subprocess.run(cmd, cwd=REPO_ROOT, env={**os.environ, **env}, capture_output=True, text=True)
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}")
@@ -91,7 +82,7 @@ def main():
     variants = [v for v in VARIANTS if not args.variants or v[0] in args.variants.split(",")]
     cloud = cloud_rows(variants)
     cost = cost_rows(args.sizes)
-    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = utc_now()
     md = [
         "## POP on the dense cloud, and cost against volume size (issue 15)",
         "",
@@ -112,8 +103,7 @@ def main():
         "|---|---|---:|---|",
         *cost,
     ]
-    path = write_section("pop-cloud", "\n".join(md))
-    log(f"wrote {path}")
+    publish("pop-cloud", md)
 
 
 if __name__ == "__main__":

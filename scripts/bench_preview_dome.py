@@ -4,16 +4,17 @@ Quick-Smoke-like plume under a sun, pop's Preview with the default dome against
 `dome_ordinates` 6 and `dome_importance` off, for worlds of growing strength: solve time and
 the image's relative RMSE against the reference path tracer. Writes BENCHMARKS.md section
 `preview-dome`. Run: VOLSCATTER_LIB=... python scripts/bench_preview_dome.py"""
+import argparse
 import math
-import os
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "install", "blender", "volscatter_blender"))
-sys.path.insert(0, HERE)
+import numpy as np
+
+from benchlib import REPO_ROOT, rel_rmse, write_section
+
+sys.path.insert(0, str(REPO_ROOT / "install" / "blender" / "volscatter_blender"))
 import native  # noqa: E402  (the add-on's own binding, no bpy needed)
-from benchmarks_md import write_section  # noqa: E402
 
 SUN = 3.0  # W/m^2, the sun of the issue's Quick Smoke scene
 PREVIEW = {"grid_resolution": 32, "max_iterations": 400, "output_resolution": 128}
@@ -44,12 +45,12 @@ def render(world, solver, warm=True):
 
 
 def rmse(a, b):
-    num = sum((x - y) ** 2 for i, (x, y) in enumerate(zip(a, b)) if i % 4 != 3)
-    den = sum(y * y for i, y in enumerate(b) if i % 4 != 3)
-    return math.sqrt(num / den)
+    """Relative RMSE of two flat RGBA lists, alpha left out."""
+    return rel_rmse(np.reshape(a, (-1, 4)), np.reshape(b, (-1, 4)))
 
 
 def main():
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     rows = ["| world grey | world share of fluence | pop default: s, rel. RMSE | 6 ordinates, no importance: s, rel. RMSE |",
             "|---:|---:|---:|---:|"]
     for world in (0.05, 0.1, 0.2, 0.5):

@@ -18,7 +18,6 @@ Measures, with the `volscatter` CLI ($VOLSCATTER_BIN, default target/release/vol
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import platform
@@ -31,21 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-sys.path.insert(0, str(REPO_ROOT / "tests" / "mitsuba"))
-from benchmarks_md import write_section  # noqa: E402
-import mitsuba_scenes as ms  # noqa: E402
+from benchlib import REPO_ROOT, cpu_model, log, mitsuba_scenes, render_cmd, require_volscatter, usable_cores, utc_now, write_section
 
-
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
+ms = mitsuba_scenes()
 
 
 def render_default(workdir: Path, spp: int, seed: int) -> tuple[np.ndarray, dict]:
     out, report = workdir / f"default_{spp}_{seed}.exr", workdir / f"default_{spp}_{seed}.json"
-    cmd = [str(ms.volscatter_bin()), "render", "--solver", "reference", "--out", str(out),
-           "--spp", str(spp), "--seed", str(seed), "--report", str(report), "-q"]
+    cmd = render_cmd(out, report, solver="reference", extra=["--spp", str(spp), "--seed", str(seed)])
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -57,15 +49,8 @@ def render_default(workdir: Path, spp: int, seed: int) -> tuple[np.ndarray, dict
 
 
 def machine_info() -> str:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cpu = cpu_model()
+    cores = usable_cores()
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO_ROOT,
                                 capture_output=True, text=True).stdout.strip()
@@ -73,7 +58,7 @@ def machine_info() -> str:
         commit = "?"
     mi = ms.import_mitsuba()
     mver = mi.__version__ if mi else "not installed"
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = utc_now()
     load = "/".join(f"{x:.1f}" for x in os.getloadavg())
     return (f"{date}; {cores} cores ({cpu}); {platform.system()} {platform.machine()}; "
             f"commit {commit}; Mitsuba {mver}; load average at start {load}")
@@ -84,7 +69,7 @@ def bench_throughput(workdir: Path, spp: int) -> dict:
     _, rep = render_default(workdir, spp, seed=100)
     w, h = rep["width"], rep["height"]
     secs = rep["phases_seconds"]["path tracing"]
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cores = usable_cores()
     return {"width": w, "height": h, "spp": spp, "seconds": secs, "threads": rep.get("threads"),
             "paths_per_s": w * h * spp / secs, "total_seconds": rep["total_seconds"],
             "cpu_seconds": rep["cpu_seconds"], "cores": cores,
@@ -98,7 +83,7 @@ def bench_convergence(workdir: Path, ref_spp: int, spps: list[int]) -> dict:
     norm = np.linalg.norm(ref)
     ref_noise = np.linalg.norm(r1 - r2) / (2 * norm)
     sec_per_spp = (rep1["phases_seconds"]["path tracing"] + rep2["phases_seconds"]["path tracing"]) / (2 * ref_spp)
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cores = usable_cores()
     # Seconds per spp on otherwise idle cores: process CPU time spread over all cores.
     free_sec_per_spp = (rep1["cpu_seconds"] + rep2["cpu_seconds"]) / (2 * ref_spp) / cores
     rows = []
@@ -223,8 +208,7 @@ def main():
     ap.add_argument("--out", default="BENCHMARKS.md")
     args = ap.parse_args()
     div = 8 if args.quick else 1
-    if not ms.volscatter_bin().exists():
-        sys.exit(f"{ms.volscatter_bin()} not found: run `cargo build --release` or set VOLSCATTER_BIN")
+    require_volscatter()
     if ms.import_mitsuba() is None:
         log("warning: mitsuba not importable; EXR reading needs it")
         sys.exit("pip install mitsuba (used to read EXR and for the agreement figures)")

@@ -12,17 +12,12 @@ and reports each repeat's totals and per-phase sums. The table gives the median 
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import platform
 import statistics
-import subprocess
 import sys
-from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import publish, run_cargo_example, today
 
 
 def main() -> None:
@@ -31,13 +26,9 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--degrees", type=float, default=4.0)
     args = ap.parse_args()
-    cmd = ["cargo", "run", "--release", "-q", "-p", "volscatter-core", "--example", "bench_session", "--",
-           "--frames", str(args.frames), "--repeats", str(args.repeats), "--degrees", str(args.degrees)]
-    print("$", " ".join(cmd), file=sys.stderr, flush=True)
-    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True)
+    out = run_cargo_example("volscatter-core", "bench_session",
+                            ["--frames", str(args.frames), "--repeats", str(args.repeats), "--degrees", str(args.degrees)])
     sys.stderr.write(out.stderr)
-    if out.returncode != 0:
-        sys.exit(f"bench_session failed ({out.returncode})")
     doc = json.loads(out.stdout.strip().splitlines()[-1])
     runs = doc["runs"]
     one = statistics.median(r["one_off_seconds"] for r in runs)
@@ -55,7 +46,7 @@ def main() -> None:
     lines = [
         "## Sessions: a moving sun, one session against one-off POP solves",
         "",
-        f"`python3 scripts/bench_session.py` on {datetime.date.today().isoformat()}, {platform.machine()},"
+        f"`python3 scripts/bench_session.py` on {today()}, {platform.machine()},"
         f" {doc['threads']} worker threads (shared with other jobs: wall-clock, pessimistic). Default scene (64^3 plume,"
         f" sun + sky dome), POP at its defaults, CPU; {n} frames, the sun turned {doc['degrees_per_frame']:g} degrees"
         f" about the vertical per frame. Median of {len(runs)} repeats, each a new session, one-off and session solves"
@@ -89,8 +80,7 @@ def main() -> None:
         "only the mip and the importance are reused. Not tried: warm-starting the propagation from the previous",
         "frame's accumulation (its answer would differ from the one-off solve's).",
     ]
-    write_section("session", "\n".join(lines))
-    print("wrote BENCHMARKS.md section `session`", file=sys.stderr)
+    publish("session", lines)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,6 @@ shared machine falls on both sides alike; run it under `nice -n 15`.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import math
 import os
@@ -45,12 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-sys.path.insert(0, str(REPO_ROOT / "tests" / "mitsuba"))
-from benchmarks_md import write_section  # noqa: E402
-
-import bench_scenes  # noqa: E402
+import bench_scenes
+from benchlib import (REPO_ROOT, cpu_model, gpu_info, is_software_adapter, log, loglog, phase_sum,
+                      read_exr_rgb, rel_rmse, render_cmd, set_args, solver_registry as registry, today, volscatter_bin,
+                      write_section)
 
 SCENE_DIR = REPO_ROOT / "bench" / "scenes"
 REF_DIR = REPO_ROOT / "bench" / "references"
@@ -70,28 +67,6 @@ REF_SPP = {"thin_smoke": 4096, "dense_cloud": 16384, "smoke_point": 8192, "overc
 REF_SETTINGS = {"dense_cloud": {"rr_depth": 1000}}
 
 
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def volscatter_bin() -> Path:
-    env = os.environ.get("VOLSCATTER_BIN")
-    return Path(env) if env else REPO_ROOT / "target" / "release" / "volscatter"
-
-
-def read_exr_rgb(path: Path) -> np.ndarray:
-    """RGB of an EXR as float64 (height, width, 3), top row first (through mitsuba.Bitmap)."""
-    import mitsuba_scenes as ms
-    return ms.read_exr_rgb(path)
-
-
-def rel_rmse(img: np.ndarray, ref: np.ndarray) -> float:
-    """||img - ref|| / ||ref|| over the premultiplied RGB of all pixels."""
-    a = np.asarray(img, dtype=np.float64)[..., :3]
-    b = np.asarray(ref, dtype=np.float64)[..., :3]
-    return float(math.sqrt(np.mean((a - b) ** 2) / np.mean(b ** 2)))
-
-
 def scene_json(name: str) -> Path:
     return SCENE_DIR / name / "scene.json"
 
@@ -104,24 +79,17 @@ def render(name: str, solver: str, settings: dict, work: Path, tag: str, spp: in
            seed: int | None = None) -> tuple[np.ndarray, dict]:
     """`volscatter render` of scene `name` (transparent film, CPU, no AOVs); (RGB, report)."""
     out, rep = work / f"{tag}.exr", work / f"{tag}.json"
-    cmd = [str(volscatter_bin()), "render", str(scene_json(name)), "--solver", solver, "--out", str(out),
-           "--report", str(rep), "--transparent", "--device", "cpu", "--aov", "none", "-q"]
-    if spp is not None:
-        cmd += ["--spp", str(spp)]
-    if seed is not None:
-        cmd += ["--seed", str(seed)]
-    for k, v in settings.items():
-        cmd += ["--set", f"{k}={json.dumps(v)}"]
-    subprocess.run(cmd, check=True)
+    extra = ["--transparent", "--aov", "none"] + (["--spp", str(spp)] if spp is not None else [])
+    extra += ["--seed", str(seed)] if seed is not None else []
+    subprocess.run(render_cmd(out, rep, scene_json(name), solver=solver, device="cpu", settings=settings, extra=extra), check=True)
     return read_exr_rgb(out), json.loads(rep.read_text())
 
 
 def split_phases(report: dict) -> tuple[float, float]:
     """(solve, composite) seconds from a report's phases: the composite phase apart, scene
     loading and writing left out, everything else is the solve."""
-    ph = report["phases_seconds"]
-    composite = ph.get("composite", 0.0)
-    solve = sum(v for k, v in ph.items() if k not in ("load scene", "write") and not k.startswith("composite"))
+    composite = report["phases_seconds"].get("composite", 0.0)
+    solve = phase_sum(report, lambda k: k not in ("load scene", "write") and not k.startswith("composite"))
     return solve, composite
 
 
@@ -197,36 +165,26 @@ def cycles_time_at(cycles: list[dict], error: float, minus_sync: bool = False) -
     pts = [(t, e) for t, e in pts if t > 0]
     if len(pts) < 2:
         return None, ""
-    lt = [math.log(t) for t, _ in pts]
     le = [math.log(e) for _, e in pts]
     le_target = math.log(error)
     # the first segment (in time) whose errors bracket the target
     for i in range(len(pts) - 1):
         lo, hi = sorted((le[i], le[i + 1]))
         if lo <= le_target <= hi and le[i] != le[i + 1]:
-            f = (le_target - le[i]) / (le[i + 1] - le[i])
-            return math.exp(lt[i] + f * (lt[i + 1] - lt[i])), ""
+            return loglog(error, pts[i][1], pts[i][0], pts[i + 1][1], pts[i + 1][0]), ""
     if le_target < min(le):
         # below Cycles' best: its last segment is often flat (fireflies, disagreement with our
         # reference), so a line through it promises anything; only the bound is sure
         return pts[-1][0], ">"
     if le_target > max(le) + math.log(EXTRAPOLATE):
         return pts[0][0], "<"
-    i = 0
-    if le[i + 1] >= le[i]:
+    if le[1] >= le[0]:
         return None, ""
-    f = (le_target - le[i]) / (le[i + 1] - le[i])
-    return math.exp(lt[i] + f * (lt[i + 1] - lt[i])), "~"
+    return loglog(error, pts[0][1], pts[0][0], pts[1][1], pts[1][0]), "~"
 
 
 # ---------------------------------------------------------------------------------------------
 # solvers
-
-
-def registry() -> list[dict]:
-    out = subprocess.run([str(volscatter_bin()), "solvers"], check=True, capture_output=True, text=True).stdout
-    doc = json.loads(out)
-    return doc["solvers"] if isinstance(doc, dict) else doc
 
 
 def full_settings(entry: dict, quality: str) -> dict:
@@ -288,8 +246,7 @@ def grid_pass(scenes: list[str], quality: str, grid_spp: int, work: Path) -> Non
                "--grid-resolution", "32", "--grid-spp", str(grid_spp), "--json", str(out), "-q",
                "--set", "reference.spp=1"]
         for r in runs:
-            for k, v in r["settings"].items():
-                cmd += ["--set", f"{r['solver']}#{quality}.{k}={json.dumps(v)}"]
+            cmd += set_args(r["settings"], f"{r['solver']}#{quality}.")
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
         rows = {row["solver"]: row for row in json.loads(out.read_text())["runs"]}
         for r in runs:
@@ -306,25 +263,17 @@ def grid_pass(scenes: list[str], quality: str, grid_spp: int, work: Path) -> Non
 
 
 def machine() -> str:
-    info = Path("/proc/cpuinfo")
-    names = [ln.split(":", 1)[1].strip() for ln in (info.read_text().splitlines() if info.is_file() else [])
-             if ln.startswith("model name")]
-    cpu = names[0] if names else (platform.processor() or "unknown CPU")
-    return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
-
-
-def today() -> str:
-    return datetime.date.today().isoformat()
+    return f"{cpu_model()}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
 
 
 def gpu_note() -> str:
     """GPU columns appear only with a hardware adapter; `volscatter gpu-info` says which exists."""
     try:
-        out = subprocess.run([str(volscatter_bin()), "gpu-info"], capture_output=True, text=True, timeout=60)
+        out = gpu_info(timeout=60)
         text = (out.stdout + out.stderr).strip()
     except (OSError, subprocess.TimeoutExpired) as e:
         text = str(e)
-    soft = any(w in text.lower() for w in ("llvmpipe", "lavapipe", "software", "no adapter", "cpu"))
+    soft = is_software_adapter(text) or any(w in text.lower() for w in ("no adapter", "cpu"))
     return "no hardware GPU adapter on this machine (only a software one), so no GPU columns" if soft or not text \
         else "a GPU adapter exists but GPU runs are not measured by this script yet"
 
@@ -422,8 +371,7 @@ def images_from(work: Path, meas: dict) -> dict:
         p = work / f"cycles_{c['scene']}_{c['spp']}.exr"
         top = max(x["spp"] for x in meas["cycles"] if x["scene"] == c["scene"])
         if c["spp"] == top and p.is_file():
-            import mitsuba_scenes as ms
-            images.setdefault(c["scene"], {})["cycles"] = (top, ms.read_exr_layers(p)["rgb"])
+            images.setdefault(c["scene"], {})["cycles"] = (top, read_exr_rgb(p))
     return images
 
 

@@ -5,7 +5,7 @@ and with `--device cpu`. Writes the "solvers-gpu" section of BENCHMARKS.md.
     python3 scripts/bench_solvers_gpu.py [--presets preview,final] [--repeat 2]
 
 Uses the `volscatter` CLI ($VOLSCATTER_BIN, default target/release/volscatter); numpy and an EXR
-reader (Mitsuba, or the OpenEXR package; bench_lpm.py's `rel_rmse`) for the GPU image against the CPU's. Times are the render
+reader (Mitsuba, or the OpenEXR package; scripts/benchlib.py's `exr_rel_rmse`) for the GPU image against the CPU's. Times are the render
 report's: *solve* = every phase but loading, compositing and writing; *composite* = the ray-marched
 image (on the GPU with `--device gpu`); the fastest of `--repeat` runs (the first run of a process
 also compiles the kernels: each run is a new process, as a host's first frame is). On a software
@@ -15,7 +15,6 @@ this script (scripts/bench_device.sh does).
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import platform
@@ -24,32 +23,22 @@ import sys
 import tempfile
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
-from bench_lpm import rel_rmse  # noqa: E402  (two EXRs' relative RMSE, or why not)
+from benchlib import (exr_rel_rmse as rel_rmse, gpu_info, is_software_adapter, phase_sum, render_cmd, require_volscatter,
+                      solver_registry, today, write_section)
 
 NOT_SOLVE = ("load scene", "composite", "write")
 
 
-def volscatter_bin() -> Path:
-    return Path(os.environ.get("VOLSCATTER_BIN", REPO_ROOT / "target" / "release" / "volscatter"))
-
-
 def render(work: Path, solver: str, settings: dict, device: str, tag: str) -> dict:
     out, rep = work / f"{tag}.exr", work / f"{tag}.json"
-    cmd = [str(volscatter_bin()), "render", "--solver", solver, "--device", device, "--out", str(out), "--report", str(rep), "-q",
-           "--aov", "none"]
-    for k, v in settings.items():
-        cmd += ["--set", f"{k}={json.dumps(v)}"]
+    cmd = render_cmd(out, rep, solver=solver, device=device, settings=settings, extra=["--aov", "none"])
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed ({p.returncode}):\n{p.stderr}")
     doc = json.loads(rep.read_text())
-    ph = doc["phases_seconds"]
     return {
-        "solve": sum(v for k, v in ph.items() if k not in NOT_SOLVE),
-        "composite": ph.get("composite", 0.0),
+        "solve": phase_sum(doc, lambda k: k not in NOT_SOLVE),
+        "composite": doc["phases_seconds"].get("composite", 0.0),
         "total": doc["total_seconds"],
         "device": doc["device"],
         "exr": out,
@@ -62,10 +51,10 @@ def best(work: Path, solver: str, settings: dict, device: str, tag: str, repeat:
 
 
 def adapter() -> tuple[str, bool]:
-    p = subprocess.run([str(volscatter_bin()), "gpu-info"], capture_output=True, text=True)
+    p = gpu_info()
     lines = [l for l in p.stdout.splitlines() if l.strip()]
     name = lines[0] if lines else "none"
-    return name, any(w in p.stdout.lower() for w in ("llvmpipe", "lavapipe", "software"))
+    return name, is_software_adapter(p.stdout)
 
 
 def main() -> None:
@@ -74,13 +63,11 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
-    if not volscatter_bin().exists():
-        sys.exit(f"{volscatter_bin()} not found: cargo build --release (or set VOLSCATTER_BIN)")
+    require_volscatter()
     name, software = adapter()
     if name == "none":
         sys.exit("no GPU adapter (volscatter gpu-info): nothing to measure")
-    entries = json.loads(subprocess.run([str(volscatter_bin()), "solvers"], capture_output=True, text=True, check=True).stdout)
-    entries = entries["solvers"] if isinstance(entries, dict) else entries
+    entries = solver_registry()
     rows = []
     with tempfile.TemporaryDirectory() as d:
         work = Path(d)
@@ -102,7 +89,7 @@ def main() -> None:
     lines = [
         "## Every solver on the GPU, end to end (`scripts/bench_solvers_gpu.py`)",
         "",
-        f"{datetime.date.today()}, GPU adapter: {label}; CPU {platform.machine()}, {os.cpu_count()} logical CPUs.",
+        f"{today()}, GPU adapter: {label}; CPU {platform.machine()}, {os.cpu_count()} logical CPUs.",
         "`volscatter render` of the embedded default scene (256 x 256) at each GPU-capable solver's presets, `--device gpu`",
         "against `--device cpu`, `--aov none`; seconds from the render report, the fastest of "
         f"{args.repeat} runs, each a new process (kernels compiled in every run, as on a host's first frame).",

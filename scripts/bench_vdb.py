@@ -21,8 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "scripts"))
+from benchlib import volscatter_bin, write_section
 
 SYS_PY = "/usr/bin/python3"
 
@@ -53,7 +52,7 @@ print(json.dumps({"read_s": best, "active": g.activeVoxelCount()}))
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--bin", default=os.environ.get("VOLSCATTER_BIN", str(ROOT / "target" / "release" / "volscatter")))
+    ap.add_argument("--bin", default=str(volscatter_bin()))
     ap.add_argument("--no-write", action="store_true", help="print the section, leave BENCHMARKS.md alone")
     args = ap.parse_args()
 
@@ -92,8 +91,6 @@ def main() -> int:
     ])
     print(text)
     if not args.no_write:
-        from benchmarks_md import write_section
-
         print("wrote", write_section("vdb", text))
     return 0
 

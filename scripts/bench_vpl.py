@@ -39,18 +39,13 @@ lavapipe (software: its times say nothing of GPU speed). `--gpu-only` reruns jus
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import math
 import os
-import platform
 import subprocess
-import sys
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / "scripts"))
-from benchmarks_md import write_section  # noqa: E402
+from benchlib import REPO_ROOT, cpu_name, json_lines, log, loglog, nextest_ignored_cmd, run_cargo_example, today, write_section
 
 # The near fields vpl_bench runs at each walk count (tests.rs).
 NEAR_FIELDS = ("clamp", "ball", "hat", "compensate")
@@ -66,15 +61,10 @@ CASE_TITLES = {
 }
 
 
-def log(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
 def run_ignored_test(test: str, env: dict, what: str) -> list[dict]:
     """Runs the ignored vpl test `test` with `env` added; returns its `BENCH {json}` rows (and
     logs them, and its converged-image lines, as they come)."""
-    cmd = ["cargo", "nextest", "run", "--cargo-profile", "release", "-p", "volscatter-core", "--run-ignored", "only",
-           "-E", f"test(=solvers::vpl::tests::{test})", "--no-capture"]
+    cmd = nextest_ignored_cmd("-E", f"test(=solvers::vpl::tests::{test})")
     log("running:", " ".join(cmd), f"({what})")
     p = subprocess.Popen(cmd, cwd=REPO_ROOT, env=dict(os.environ, **env), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     rows = []
@@ -94,16 +84,12 @@ def run_bench(cases: str, walks: str, spp: str) -> list[dict]:
 
 
 def run_gpu_bench(walks: str, gathers: str, cases: str, near: str, cpu_max_connections: str) -> list[dict]:
-    cmd = ["cargo", "run", "--release", "-q", "-p", "volscatter-gpu", "--example", "bench_vpl", "--",
-           "--walks", walks, "--gathers", gathers, "--cases", cases, "--near", near, "--cpu-max-connections", cpu_max_connections]
-    log("running:", " ".join(cmd))
-    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True)
+    out = run_cargo_example("volscatter-gpu", "bench_vpl", ["--walks", walks, "--gathers", gathers, "--cases", cases, "--near", near,
+                                                            "--cpu-max-connections", cpu_max_connections], ok=(0, 2))
     if out.returncode == 2:
         log("no GPU adapter: GPU rows skipped")
         return []
-    if out.returncode != 0:
-        raise SystemExit(f"bench_vpl example failed ({out.returncode}):\n{out.stderr}")
-    rows = [json.loads(l) for l in out.stdout.splitlines() if l.startswith("{")]
+    rows = json_lines(out.stdout)
     for r in rows:
         log(json.dumps(r))
     return rows
@@ -125,12 +111,9 @@ def vpl_time_to(runs: list[dict], target: float) -> tuple[float | None, str]:
     unless it is a heavy tail, which the runs' ratios show) or the slope is flatter than -0.3."""
     runs = sorted(runs, key=lambda r: r["walks"])
     pts = [(r["seconds"], r["image"]) for r in runs]
-    for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
-        if e0 > target >= e1:
-            k = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
-            return math.exp(math.log(t0) + k * (math.log(t1) - math.log(t0))), "measured"
-    if pts and pts[0][1] <= target:
-        return pts[0][0], "measured (first run)"
+    measured = time_between(pts, target)
+    if measured:
+        return measured
     if len(runs) < 2:
         return None, "too few runs"
     last = runs[-1]
@@ -147,11 +130,11 @@ def vpl_time_to(runs: list[dict], target: float) -> tuple[float | None, str]:
 
 def image_section(rows: list[dict]) -> str:
     """Issue 16's time to 5% at host-sized images: the reference's and vpl's (default settings)."""
-    cpu = platform.processor() or platform.machine()
+    cpu = cpu_name()
     lines = [
         "## vpl at host image sizes: time to 5% (issue 16's aim)",
         "",
-        f"Written by `scripts/bench_vpl.py --image-only` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs shared with",
+        f"Written by `scripts/bench_vpl.py --image-only` on {today()} ({cpu}, {os.cpu_count()} logical CPUs shared with",
         "other jobs: times indicative). `default` is the embedded default scene at its own 256 x 256 pixels (the README's",
         "`volscatter render`); other scenes are fixture scenes with the camera enlarged. Truth: the reference path tracer's",
         "image in two independent halves (seeds 101, 102); its own noise n (half the rel. RMSE between the halves) is taken",
@@ -197,8 +180,8 @@ def gpu_section(rows: list[dict]) -> str:
     lines = [
         "## vpl on the GPU (issue 16)",
         "",
-        f"Written by `scripts/bench_vpl.py` on {datetime.date.today()}: GPU adapter {adapter};",
-        f"CPU {platform.processor() or platform.machine()}, {rows[0]['threads']} rayon threads"
+        f"Written by `scripts/bench_vpl.py` on {today()}: GPU adapter {adapter};",
+        f"CPU {cpu_name()}, {rows[0]['threads']} rayon threads"
         + (" (shared with other jobs)." if software else " (the GPU machine's own cores)."),
         "The same solve (same walks, seed 1, 64-cell output) with the gather's connections, the",
         "upsampling and the single scattering on the GPU backend, and all on the CPU; the walks stay on the CPU in both",
@@ -238,8 +221,7 @@ def interp_loglog(points: list[tuple[float, float]], x: float) -> float | None:
         return None
     for (x0, y0), (x1, y1) in zip(pts, pts[1:]):
         if x <= x1 or (x1, y1) == pts[-1]:
-            t = (math.log(x) - math.log(x0)) / (math.log(x1) - math.log(x0))
-            return math.exp(math.log(y0) + t * (math.log(y1) - math.log(y0)))
+            return loglog(x, x0, y0, x1, y1)
     return None
 
 
@@ -255,6 +237,17 @@ def slope(points: list[tuple[float, float]]) -> float:
 TARGET = 0.05  # issue 16's aim: 5% image rel. RMSE at >= 30x below the reference's time to it
 
 
+def time_between(pts: list[tuple[float, float]], target: float) -> tuple[float, str] | None:
+    """The time at which the error reaches `target`, from (seconds, error) runs in order, where
+    two runs bracket it (log-log between them) or the first is already there; else None."""
+    for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
+        if e0 > target >= e1:
+            return loglog(target, e0, t0, e1, t1), "measured"
+    if pts and pts[0][1] <= target:
+        return pts[0][0], "measured (first run)"
+    return None
+
+
 def time_to(points: list[tuple[float, float]], target: float, fixed_slope: float | None = None) -> tuple[float | None, str]:
     """Time at which the error reaches `target` from (seconds, error) runs: log-log
     interpolation between the runs that bracket it, else extrapolated from the last run along
@@ -264,12 +257,9 @@ def time_to(points: list[tuple[float, float]], target: float, fixed_slope: float
     pts = sorted(p for p in points if p[0] > 0 and p[1] > 0)
     if not pts:
         return None, "no runs"
-    for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
-        if e0 > target >= e1:
-            k = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
-            return math.exp(math.log(t0) + k * (math.log(t1) - math.log(t0))), "measured"
-    if pts[0][1] <= target:
-        return pts[0][0], "measured (first run)"
+    measured = time_between(pts, target)
+    if measured:
+        return measured
     k = fixed_slope if fixed_slope is not None else (slope(pts) if len(pts) >= 2 else float("nan"))
     # Flatter than -0.3 (noise alone falls at -0.5): a bias or a heavy tail rules the error,
     # and extrapolating along it would be a guess.
@@ -353,11 +343,11 @@ def main() -> None:
     rows = [json.loads(l[6:]) for f in args.from_log for l in Path(f).read_text().splitlines() if l.startswith("BENCH ")]
     if args.walks or args.spp:
         rows += run_bench(args.cases, args.walks, args.spp)
-    cpu = platform.processor() or platform.machine()
+    cpu = cpu_name()
     lines = [
         "## vpl (virtual point lights with bias compensation, paper 03)",
         "",
-        f"Written by `scripts/bench_vpl.py` on {datetime.date.today()} ({cpu}, {os.cpu_count()} logical CPUs, shared with other jobs:",
+        f"Written by `scripts/bench_vpl.py` on {today()} ({cpu}, {os.cpu_count()} logical CPUs, shared with other jobs:",
         "times are indicative). Each scene is a fixture of core/src/solvers/fixtures/ (reference path tracer, 65536 paths per pixel);",
         "vpl at 12-cell gather, 24-cell output (the tests' settings), every walk gathered at every point; time = the whole solve",
         "(walks, single scattering, gather, compensation, upsampling), error = relative RMSE of the composited image (and of the",
