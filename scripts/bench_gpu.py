@@ -53,7 +53,7 @@ def main():
         f"{a.iterations} iterations (residual threshold 0), merge grid twice the propagation grid, "
         f"{a.output}^3 output grid. Command: `python scripts/bench_gpu.py --sizes {a.sizes} --grids {a.grids}`.",
         "",
-        "Times in milliseconds, from the solver's own stage timings (`Pop::solve_with` with the GPU "
+        "Times in milliseconds, from the solver's own stage timings (`PopDevice::solve` with the GPU "
         "and the CPU backend; each GPU stage waits for the device, so its time is its GPU time). "
         "On the CPU in both: mip pyramid, light-grid sampling. GPU: sweep (with the light's upload), "
         "propagation (its iterations alone in brackets: first dispatch to idle), merge (in brackets: of which "

@@ -1,5 +1,5 @@
 """Every solver against Cycles on the benchmark scene set (issue 21). Writes the "solvers"
-section of BENCHMARKS.md, core/src/solvers/auto/measurements.json (what the `auto` solver is
+section of BENCHMARKS.md, core/src/pipeline/auto/measurements.json (what the `auto` solver is
 fitted to), docs/bench_error_time.png and docs/bench_strip_<scene>.png.
 
     python3 scripts/bench_solvers.py --references [--scenes ...]   # converged references, once
@@ -51,7 +51,7 @@ from benchlib import (REPO_ROOT, cpu_model, gpu_info, is_software_adapter, log, 
 
 SCENE_DIR = REPO_ROOT / "bench" / "scenes"
 REF_DIR = REPO_ROOT / "bench" / "references"
-MEASUREMENTS = REPO_ROOT / "core" / "src" / "solvers" / "auto" / "measurements.json"
+MEASUREMENTS = REPO_ROOT / "core" / "src" / "pipeline" / "auto" / "measurements.json"
 DOCS = REPO_ROOT / "docs"
 QUALITIES = ("draft", "preview", "final")
 CYCLES_SPP = (16, 64, 256, 1024)
@@ -305,7 +305,7 @@ def skipped_runs(meas: dict) -> list[str]:
 def markdown(meas: dict, note_gpu: str) -> str:
     skipped = skipped_runs(meas)
     lines = ["## Solvers against Cycles (issue 21)", "",
-             "Written by `scripts/bench_solvers.py`; measurements in `core/src/solvers/auto/measurements.json`, "
+             "Written by `scripts/bench_solvers.py`; measurements in `core/src/pipeline/auto/measurements.json`, "
              "plots `docs/bench_error_time.png` and `docs/bench_strip_<scene>.png`.", "",
              f"Machine: {meas['machine']}; date {meas['date']}"
              + (f" (then {meas['updated']}; the plots are from the full run)" if meas.get("updated") else "")

@@ -1,5 +1,5 @@
 """The solver benchmark's committed data (issue 21): the scenes under bench/scenes/ load with the
-CLI, and core/src/solvers/auto/measurements.json (what the `auto` solver is fitted to) follows
+CLI, and core/src/pipeline/auto/measurements.json (what the `auto` solver is fitted to) follows
 its schema; and `vpl` (issue 16) on those Blender-exported VDBs against their converged
 references. No bpy: scripts/bench_scenes.py and scripts/bench_solvers.py wrote the files.
 """
@@ -15,7 +15,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ROOT / "bench" / "scenes"
-MEASUREMENTS = ROOT / "core" / "src" / "solvers" / "auto" / "measurements.json"
+MEASUREMENTS = ROOT / "core" / "src" / "pipeline" / "auto" / "measurements.json"
 NAMES = ("thin_smoke", "dense_cloud", "smoke_point", "overcast", "fire_smoke")
 
 

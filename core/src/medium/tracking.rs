@@ -18,7 +18,7 @@ use crate::rng::Rng;
 
 /// Most tentative collisions one flight or shadow ray may take before the medium is treated as
 /// opaque there: 2^22 (~0.1 s). A ray crossing 1000 voxels at the largest optical depth per
-/// voxel a scene may have (`solvers::guard::MAX_OPTICAL_DEPTH_PER_VOXEL`, 1e4) takes 1e7
+/// voxel a scene may have (`pipeline::guard::MAX_OPTICAL_DEPTH_PER_VOXEL`, 1e4) takes 1e7
 /// steps in the worst case, but its transmittance is exp(-1e7) long before: only a ray through
 /// a cell whose majorant far exceeds its density gets near this, and then it is bounded.
 pub const MAX_TENTATIVE_STEPS: u32 = 1 << 22;
@@ -61,7 +61,7 @@ impl<'a> Tracking<'a> {
     /// Always ends: returns `Some(t)` when it gave up at `t` because the medium is beyond what
     /// float32 tracking can step (a step that no longer advances t, or more than
     /// `MAX_TENTATIVE_STEPS` in one call); callers treat the medium there as opaque. Scenes
-    /// get there only past `solvers::guard::check_medium`, which refuses such media up front.
+    /// get there only past `pipeline::guard::check_medium`, which refuses such media up front.
     fn tentative_collisions(&self, x: Vec3, d: Vec3, t_max: f32, rng: &mut Rng, mut visit: impl FnMut(f32, Vec3, f32, &mut Rng) -> bool) -> Option<f32> {
         let (o, di) = self.index_ray(x, d);
         let scale = self.medium.density_scale;

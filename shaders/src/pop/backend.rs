@@ -1,4 +1,4 @@
-//! `Pop::solve_with`'s backend on the GPU: every stage that touches every cell runs here, and a
+//! The backend of `Pop`'s solve on the GPU: every stage that touches every cell runs here, and a
 //! light's packets and J stay in device memory from its sweep to the merge, the merged grid from
 //! the merge to the upsampling. What crosses the bus: each light grid's coefficients and view
 //! cosines (sampled on the CPU) and the density mip, once; back come per-column sums (energy
@@ -29,7 +29,7 @@ pub fn gpu_error(e: GpuError) -> Error {
     e.into()
 }
 
-/// One per solve (as `Pop::solve_with` is called): it holds that solve's density mip.
+/// One per solve (the GPU table builds one for each solve): it holds that solve's density mip.
 pub struct GpuBackend {
     ctx: Arc<GpuContext>,
     /// Residual checks of the propagation every this many iterations (one small readback).

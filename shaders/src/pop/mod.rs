@@ -2,7 +2,7 @@
 //! `volscatter_core::solvers::pop` and tested against it: the transmittance sweep (init.rs),
 //! the propagation loop (Eq. 1-8, here), the merge of the lights (merge.rs) and the joint
 //! bilateral upsampling (upsample.rs), over a density mip uploaded once (mip.rs).
-//! `backend::GpuBackend` runs them as `Pop::solve_with`'s backend, keeping each light's data in
+//! `backend::GpuBackend` runs them as the backend of `Pop`'s solve, keeping each light's data in
 //! device memory (light.rs) from its sweep to the merge; only S and a few sums come back.
 //! Still on the CPU: the mip pyramid and the sampling of each light grid's coefficients.
 

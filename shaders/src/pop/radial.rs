@@ -114,7 +114,7 @@ mod tests {
     use volscatter_core::stages::NoProgress;
     use volscatter_core::Scene;
 
-    /// The whole pipeline through `volscatter_gpu::solve` (the CLI's and the C ABI's entry
+    /// The whole pipeline through the pipeline (the CLI's and the C ABI's entry
     /// point) with a point, a spot and a rect light (2 x 2 VPLs) beside the plume and the
     /// default scene's sun: every radial grid propagates on the GPU, against the CPU pipeline.
     /// Residual threshold 0, 48 iterations each. Tolerance 1e-4 relative RMSE of the

@@ -1,4 +1,4 @@
-//! `vpl` on the GPU: `Vpl::solve_with`'s backend (volscatter-core solvers/vpl/backend.rs). The
+//! `vpl` on the GPU: the backend of `Vpl`'s solve (volscatter-core solvers/vpl/backend.rs). The
 //! walks stay on the CPU (as in paper 03); the gather's connections run in `gather.wgsl`, the
 //! upsampling in pop's kernel (pop/upsample.rs) and the single scattering in the compositor's
 //! (composite/single.rs). What crosses the bus: the VPLs and gather points once, the

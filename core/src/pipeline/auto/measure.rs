@@ -111,7 +111,7 @@ fn write_measurements(path: &Path, scenes: &[Value], runs: &[Value]) {
     let threads = rayon::current_num_threads();
     let doc = json!({
         "format": 1,
-        "written_by": "core/src/solvers/auto/measure.rs regenerate_auto_measurements (provisional: the solver fixtures, until scripts/bench_solvers.py writes this file)",
+        "written_by": "core/src/pipeline/auto/measure.rs regenerate_auto_measurements (provisional: the solver fixtures, until scripts/bench_solvers.py writes this file)",
         "machine": format!("{threads} rayon threads on the shared development machine ({} cores), timings noisy", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0)),
         "date": date(),
         "error": "image_error: relative RMSE of the composited image (transparent background) against the fixture's converged reference; grid_error: of the scattering grid on the fixture's 10^3 frame",

@@ -1,4 +1,4 @@
-//! Where `network`'s heavy stages run. `Network::solve_on` builds the network (particles,
+//! Where `network`'s heavy stages run. `Network`'s solve builds the network (particles,
 //! visibility, phase matrix) and the direct light, and hands the stages that touch every
 //! (particle, direction) pair or every output cell to a `NetworkBackend`: the CPU code of this
 //! module's siblings (`CpuBackend`), or the GPU port in volscatter-gpu (shaders/src/network/).

@@ -1,4 +1,4 @@
-//! Where POP's per-light and whole-medium stages run. `Pop::solve_with` drives the pipeline
+//! Where POP's per-light and whole-medium stages run. `Pop`'s solve drives the pipeline
 //! (ordinates, mip, light grids, reports) and hands the stages that touch every cell to a
 //! `PopBackend`: the CPU code of this module's siblings (`CpuBackend`), or the GPU port in
 //! volscatter-gpu, which keeps each light's data in device memory from the sweep through merge

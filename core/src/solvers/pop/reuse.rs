@@ -43,7 +43,7 @@ pub struct ReuseCounts {
     pub lights_solved: u32,
 }
 
-/// A distant ordinate as `Pop::solve_reusing` builds its grid: direction of travel, fluence,
+/// A distant ordinate as `Pop`'s solve builds its grid: direction of travel, fluence,
 /// initial anisotropy (bits) and grid resolution.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OrdinateKey([u32; 8]);

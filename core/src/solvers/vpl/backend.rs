@@ -1,4 +1,4 @@
-//! Where `vpl`'s heavy stages run. `Vpl::solve_with` traces the walks on the CPU (as the
+//! Where `vpl`'s heavy stages run. `Vpl`'s solve traces the walks on the CPU (as the
 //! paper does) and hands the stages that touch every gather or output point to a
 //! `VplBackend`: the CPU code of this module's siblings (`CpuBackend`), or the GPU port in
 //! volscatter-gpu (shaders/src/vpl).

@@ -49,7 +49,7 @@ use propagate::RadialPropagation;
 /// `RadialPropagation::run` (the CPU) does; volscatter-gpu passes its port.
 pub type RadialPropagateFn<'a> = dyn Fn(&RadialPropagation, &init::RadialInitial, &mut [Vec3], &dyn Progress) -> Result<PropagationStats> + Sync + 'a;
 
-/// The CPU propagation, for `Pop::solve_with_backends`.
+/// The CPU propagation, for `Pop`'s solve.
 pub fn cpu_propagate(prop: &RadialPropagation, init: &init::RadialInitial, j: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
     prop.run(init, j, progress)
 }
