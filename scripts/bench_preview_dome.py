@@ -10,9 +10,9 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "install", "blender", "volscatter_blender"))
+sys.path.insert(0, os.path.join(HERE, "..", "usd"))
 sys.path.insert(0, HERE)
-import native  # noqa: E402  (the add-on's own binding, no bpy needed)
+from volscatter import _native as native  # noqa: E402  (the one binding, the add-on's too; no bpy needed)
 from benchmarks_md import write_section  # noqa: E402
 
 SUN = 3.0  # W/m^2, the sun of the Quick Smoke scene
@@ -40,7 +40,7 @@ def render(world, solver, warm=True):
             if len(times) < (2 if warm else 1):
                 r.close()
         with r, r.composite(transparent=True) as img:  # the medium only, no background pixels
-            return min(times), list(img.rgba())
+            return min(times), [float(v) for v in img.rgba().ravel()]
 
 
 def rmse(a, b):
