@@ -16,6 +16,7 @@
 
 use std::collections::BTreeMap;
 use std::ffi::{c_char, CString};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -315,7 +316,8 @@ struct GridPart {
 /// Every grid of a version-224 file (or only the one named `only`) as parts to copy.
 fn grids_of(path: &Path, only: Option<&str>) -> FfiResult<Vec<GridPart>> {
     let f = VdbFile::open(path, MAX_FILE_BYTES)?;
-    let bytes = std::fs::read(path).map_err(|e| FfiError::new(VsStatus::Io, format!("{}: {e}", path.display())))?;
+    let io = |e: std::io::Error| FfiError::new(VsStatus::Io, format!("{}: {e}", path.display()));
+    let mut file = std::fs::File::open(path).map_err(io)?;
     let mut out = Vec::new();
     for g in &f.grids {
         if only.is_some_and(|n| n != g.name && n != g.unique_name) {
@@ -330,10 +332,15 @@ fn grids_of(path: &Path, only: Option<&str>) -> FfiResult<Vec<GridPart>> {
         if !g.instance_parent.is_empty() || g.block_pos == 0 {
             return Err(FfiError::new(VsStatus::Unsupported, format!("{}: grid `{}` is an instance of `{}`; it cannot be copied", path.display(), g.name, g.instance_parent)));
         }
-        let (a, b, e) = (g.grid_pos as usize, g.block_pos as u64, g.end_pos as usize);
-        let body = bytes.get(a..e).ok_or_else(|| FfiError::new(VsStatus::Format, format!("{}: grid `{}` runs past the end of the file", path.display(), g.name)))?;
+        // The offsets were checked against the file's size when it was opened; only the
+        // grid's own bytes are read.
+        let len = (g.end_pos - g.grid_pos) as u64;
+        volscatter_core::budget::check(&format!("grid `{}` of {}", g.name, path.display()), len)?;
+        let mut body = vec![0u8; len as usize];
+        file.seek(SeekFrom::Start(g.grid_pos as u64)).map_err(io)?;
+        file.read_exact(&mut body).map_err(io)?;
         let tree_type = if g.half { format!("{}_HalfFloat", g.grid_type) } else { g.grid_type.clone() };
-        out.push(GridPart { name: g.unique_name.clone(), tree_type, body: body.to_vec(), block: b - g.grid_pos as u64 });
+        out.push(GridPart { name: g.unique_name.clone(), tree_type, body, block: (g.block_pos - g.grid_pos) as u64 });
         if only.is_some() {
             break;
         }
