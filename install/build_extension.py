@@ -5,8 +5,10 @@
     python3 install/build_extension.py --no-build   # pack an already built library
     python3 install/build_extension.py --lib PATH   # pack this library file
 
-The zip holds, at its root: the add-on's Python files, `blender_manifest.toml` (generated here:
-version from the workspace Cargo.toml, platform of the library packed) and `lib/<cdylib>`.
+The zip holds, at its root: the add-on's Python files, `native.py` (the library's one Python
+binding, usd/volscatter/_native.py, copied into the add-on folder by `copy_binding`),
+`blender_manifest.toml` (generated here: version from the workspace Cargo.toml, platform of the
+library packed) and `lib/<cdylib>`.
 Blender installs it with Preferences > Get Extensions > Install from Disk, or
 `blender --command extension install-file -r user_default -e dist/volscatter-<ver>-<plat>.zip`.
 
@@ -27,6 +29,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 ADDON_DIR = os.path.join(HERE, "blender", "volscatter_blender")
 EXT_ID = "volscatter_blender"
+#: The one Python binding of libvolscatter (the USD host's `volscatter._native`), and where the
+#: add-on gets its copy: the add-on ships self-contained, importing it as `from . import native`.
+BINDING_SRC = os.path.join(REPO, "usd", "volscatter", "_native.py")
+BINDING_DST = os.path.join(ADDON_DIR, "native.py")
 
 
 def workspace_version(cargo_toml=os.path.join(REPO, "Cargo.toml")):
@@ -100,6 +106,24 @@ paths_exclude_pattern = ["__pycache__/", "*.pyc"]
 '''
 
 
+def copy_binding(dst=BINDING_DST):
+    """Copies the binding into the add-on folder (git-ignored there), when it differs; returns
+    `dst`. Run by `pack`, and by anything that loads the add-on from the source tree."""
+    with open(BINDING_SRC, "rb") as f:
+        data = f.read()
+    try:
+        with open(dst, "rb") as f:
+            if f.read() == data:
+                return dst
+    except OSError:
+        pass
+    tmp = dst + ".part"
+    with open(tmp, "wb") as f:
+        f.write(data)
+    os.replace(tmp, dst)
+    return dst
+
+
 def cargo_build():
     cmd = ["cargo", "build", "--release", "-p", "volscatter", "--lib"]
     print("+", " ".join(cmd), flush=True)
@@ -138,11 +162,12 @@ def pack(lib_path, out_dir, version=None, plat=None, strip=True):
     os.makedirs(out_dir, exist_ok=True)
     zpath = os.path.join(out_dir, "volscatter-%s-%s.zip" % (version, plat))
     tmp = zpath + ".part"
+    copy_binding()
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         for root, dirs, files in os.walk(ADDON_DIR):
             dirs[:] = sorted(d for d in dirs if d not in ("__pycache__", "lib"))
             for f in sorted(files):
-                if f.endswith((".pyc", ".pyo")) or f == "blender_manifest.toml":
+                if f.endswith((".pyc", ".pyo", ".part")) or f == "blender_manifest.toml":
                     continue
                 full = os.path.join(root, f)
                 z.write(full, os.path.relpath(full, ADDON_DIR))

@@ -15,6 +15,7 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 sys.path.insert(0, os.path.join(HERE, "blender"))
+sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(REPO, "tests", "python"))
 
 
@@ -55,6 +56,8 @@ def main():
     import bpy
     import numpy as np
     import blender_scenes as bs
+    import build_extension
+    build_extension.copy_binding()  # the add-on's native.py, from usd/volscatter/_native.py
     import volscatter_blender
 
     bs.reset()

@@ -22,6 +22,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 sys.path.insert(0, os.path.join(REPO, "tests", "python"))
 sys.path.insert(0, os.path.join(REPO, "install", "blender"))
+sys.path.insert(0, os.path.join(REPO, "install"))
 sys.path.insert(0, HERE)
 os.environ.setdefault("VOLSCATTER_LIB", os.path.join(REPO, "target", "release", "libvolscatter.so"))
 
@@ -37,6 +38,8 @@ GAP = 4
 
 
 def _eevee_module():
+    import build_extension
+    build_extension.copy_binding()  # the add-on's native.py, from usd/volscatter/_native.py
     import volscatter_blender
     volscatter_blender.register()
     return sys.modules["volscatter_blender.eevee"]

@@ -13,8 +13,8 @@ import numpy as np
 
 from benchlib import REPO_ROOT, rel_rmse, write_section
 
-sys.path.insert(0, str(REPO_ROOT / "install" / "blender" / "volscatter_blender"))
-import native  # noqa: E402  (the add-on's own binding, no bpy needed)
+sys.path.insert(0, str(REPO_ROOT / "usd"))
+from volscatter import _native as native  # noqa: E402  (the one binding, the add-on's too; no bpy needed)
 
 SUN = 3.0  # W/m^2, the sun of the Quick Smoke scene
 PREVIEW = {"grid_resolution": 32, "max_iterations": 400, "output_resolution": 128}
@@ -41,7 +41,7 @@ def render(world, solver, warm=True):
             if len(times) < (2 if warm else 1):
                 r.close()
         with r, r.composite(transparent=True) as img:  # the medium only, no background pixels
-            return min(times), list(img.rgba())
+            return min(times), [float(v) for v in img.rgba().ravel()]
 
 
 def rmse(a, b):

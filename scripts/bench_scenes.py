@@ -31,6 +31,8 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT / "tests" / "python"))
 sys.path.insert(0, str(REPO_ROOT / "install" / "blender"))
+sys.path.insert(0, str(REPO_ROOT / "install"))
+__import__("build_extension").copy_binding()  # the add-on's native.py, from usd/volscatter/_native.py
 
 SCENES = ("thin_smoke", "dense_cloud", "smoke_point", "overcast", "fire_smoke")
 WIDTH, HEIGHT = 64, 48

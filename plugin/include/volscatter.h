@@ -88,6 +88,13 @@
 #define VS_AOV_ALL ((VS_AOV_SINGLE | VS_AOV_MULTIPLE) | VS_AOV_BACKGROUND)
 
 /**
+ * `vs_vdb_info_json` flag: also read every grid's tree for its statistics (bounding box,
+ * active voxels, sum of values, metadata), as `volscatter vdb-info` prints them. Without it
+ * only the file's header and grid descriptors are read.
+ */
+#define VS_VDB_INFO_STATS 1
+
+/**
  * Outcome of a call. `VS_STATUS_OK` is 0; every other value is a failure whose message is
  * available from the handle's `vs_*_last_error` (or, for calls without a handle, from
  * `vs_status_message`). New values may be added in later versions with the same ABI version:
@@ -242,6 +249,38 @@ typedef struct {
  * taken when it started).
  */
 typedef int32_t (*VsProgressCallback)(void *user, const char *stage, float fraction);
+
+/**
+ * One grid for `vs_vdb_write_grids`: `components` 1 (a float grid) or 3 (a vec3s grid) values
+ * per voxel, `len == nx * ny * nz * components` finite floats, x fastest then y then z (a vec3s
+ * voxel's three values together). Voxel (i, j, k) is active when any of its values is not 0.
+ */
+typedef struct {
+  /**
+   * Grid name: UTF-8, not empty, without the character 0x1E.
+   */
+  const char *name;
+  uint32_t components;
+  const float *values;
+  size_t len;
+} VsVdbGrid;
+
+/**
+ * One grid copied byte for byte into the file `vs_vdb_write_grids` writes: grid
+ * `source_grid` (its name or unique name; NULL: `name`) of the OpenVDB file `source_path`,
+ * which must be file version 224 (what volscatter and current OpenVDB write) and not an
+ * instance grid; it keeps its own transform, values and metadata (OpenVDB names a grid by
+ * its `name` metadata when it has one: `name` is the descriptor's name, which volscatter
+ * reads, and a renamed copy may show its old name in OpenVDB).
+ */
+typedef struct {
+  /**
+   * Name of the grid in the new file.
+   */
+  const char *name;
+  const char *source_path;
+  const char *source_grid;
+} VsVdbGridCopy;
 
 
 
@@ -796,6 +835,51 @@ VsStatus vs_image_write_exr(const VsImage *image, const char *path);
  * Thread safety: may be called from any thread at any time.
  */
 VsStatus vs_solvers_json(const char **out);
+
+/**
+ * Writes into the caller's buffer `buf` of `len` bytes the JSON describing the OpenVDB file
+ * at `path` (UTF-8, NUL-terminated), and sets `*needed` to its size in bytes, NUL included.
+ * Call with `buf` NULL and `len` 0 to get `*needed` only; then call again with a buffer of
+ * exactly `*needed` bytes (any other length: `VS_STATUS_BUFFER_SIZE`, `*needed` still set).
+ * The JSON: `{"file", "file_version", "library_version", "grids": [{"name", "unique_name",
+ * "value_type" ("float", "vec3s", ...), "tree_type", "half", "instance_parent" (or null)},
+ * ...]}` in file order; with `VS_VDB_INFO_STATS` in `flags` each grid also has what
+ * `volscatter vdb-info` prints ("class", "compression", "transform", "index_to_world",
+ * "bbox_min", "bbox_max", "active_voxels", "sum", "metadata"). Other flag bits are refused.
+ * Errors (missing file: `VS_STATUS_IO`; not a VDB: `VS_STATUS_FORMAT`) are recorded on
+ * `scene` for `vs_scene_last_error`; the scene is not changed.
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_vdb_info_json(VsScene *scene,
+                          const char *path,
+                          uint32_t flags,
+                          char *buf,
+                          size_t len,
+                          size_t *needed);
+
+/**
+ * Writes a new OpenVDB file (version 224) at `path` holding, in this order, the `copy_count`
+ * grids of `copies` (copied byte for byte, see `VsVdbGridCopy`) and the `grid_count` grids of
+ * `grids` (see `VsVdbGrid`), the latter all of `dims` (3 values nx, ny, nz, each 1..=65536)
+ * voxels placed by `index_to_world` (16 doubles, row-major 4x4 affine, invertible, each finite
+ * in single precision): voxel (i, j, k) sits at `index_to_world * (i, j, k, 1)`. Float grids
+ * are written by the library's VDB writer (Zip; their map in single precision, as every grid
+ * it writes); vec3s grids uncompressed, with the map as given. Names must be unique in the file. `grids` may be
+ * NULL when `grid_count` is 0 and `copies` when `copy_count` is 0; at least one grid is
+ * needed. The file is written beside `path` and renamed over it: on failure `path` is left as
+ * it was. Errors are recorded on `scene` for `vs_scene_last_error`; the scene is not changed.
+ *
+ * Thread safety: any thread; calls on one scene are serialised.
+ */
+VsStatus vs_vdb_write_grids(VsScene *scene,
+                            const char *path,
+                            const uint32_t *dims,
+                            const double *index_to_world,
+                            const VsVdbGrid *grids,
+                            size_t grid_count,
+                            const VsVdbGridCopy *copies,
+                            size_t copy_count);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -143,6 +143,16 @@ def test_zip_layout_and_manifest(zip_path):
     assert os.path.basename(zip_path) == "volscatter-%s-%s.zip" % (version, build_extension.blender_platform())
 
 
+def test_the_installed_binding_is_the_usd_hosts(installed):
+    """One Python binding of the library: the add-on's native.py is usd/volscatter/_native.py,
+    copied byte for byte by build_extension (no second copy is committed in the add-on)."""
+    with open(os.path.join(installed, "native.py"), "rb") as f:
+        ours = f.read()
+    with open(build_extension.BINDING_SRC, "rb") as f:
+        assert ours == f.read()
+    assert build_extension.BINDING_SRC == os.path.join(REPO, "usd", "volscatter", "_native.py")
+
+
 def test_zip_passes_blenders_extension_validator(zip_path):
     """Blender's own `extension validate` (bl_pkg's blender_ext.py, shipped inside bpy)."""
     import glob
@@ -506,7 +516,7 @@ def test_native_session_close_and_context_manager(installed, fresh):
     with native.Scene.from_json(doc) as sc:
         with native.Session(sc) as session:
             with session.solve(sc) as a, sc.solve() as b:
-                assert list(a.rgb()) == list(b.rgb())
+                assert a.rgb().tolist() == b.rgb().tolist()
             assert session.frame_count == 1
         assert session._ptr is None
         with pytest.raises(native.VolscatterError, match="closed"):
@@ -900,8 +910,8 @@ def test_single_scattering_matches_cycles(fresh, light):
     assert [l["type"] for l in doc["lights"]] == [light.replace("sun", "distant")], warnings
     with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite(aovs=("single",)) as img:
         w, h = img.size()
-        single = list(img.aov("single"))
-        alpha = list(img.rgba())[3::4]
+        single = img.aov("single").ravel().tolist()
+        alpha = img.rgba().ravel().tolist()[3::4]
     sc = bpy.context.scene
     assert sc.cycles.volume_bounces == 0
     sc.render.film_transparent = True
@@ -964,7 +974,7 @@ def test_emission_scattered_by_smoke_matches_cycles(fresh, mode):
     em["vpls"] = 1024
     with native.Scene.from_json(doc) as sc, sc.solve() as r, r.composite(aovs=("single",)) as img:
         w, h = img.size()
-        single = list(img.aov("single"))
+        single = img.aov("single").ravel().tolist()
     sc = bpy.context.scene
     assert sc.cycles.volume_bounces == 0
     sc.render.film_transparent = True
@@ -1073,7 +1083,7 @@ def test_gpu_failure_falls_back_to_the_cpu_with_a_warning(fresh, monkeypatch):
 
     def solve(self, progress=None):
         if devices.get(id(self)) == 'GPU':
-            raise native.VolscatterError(native.STATUS_DEVICE, "device: no GPU adapter found")
+            raise native.VolscatterError("device: no GPU adapter found", native.STATUS_DEVICE)
         return real_solve(self, progress)
 
     real_set = native.Scene.set_device
@@ -1096,7 +1106,7 @@ def test_gpu_failure_falls_back_to_the_cpu_with_a_warning(fresh, monkeypatch):
     # Any other failure is not retried: it is the operator's error.
     devices.clear()
     monkeypatch.setattr(native.Scene, "solve", lambda self, progress=None: (_ for _ in ()).throw(
-        native.VolscatterError(5, "scene: camera: broken")))
+        native.VolscatterError("scene: camera: broken", 5)))
     op, ctx = H(), _UIContext(ob)
     op.reports = []
     assert _drive(op, ctx) == {'CANCELLED'}

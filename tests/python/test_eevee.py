@@ -81,6 +81,9 @@ def addon():
     for mod in [m for m in list(bpy.context.preferences.addons.keys()) if m.endswith("volscatter_blender")]:
         addon_utils.disable(mod, default_set=True)
     sys.path.insert(0, os.path.join(REPO, "install", "blender"))
+    sys.path.insert(0, os.path.join(REPO, "install"))
+    import build_extension
+    build_extension.copy_binding()  # the add-on's native.py, from usd/volscatter/_native.py
     import volscatter_blender
     volscatter_blender.register()
     yield sys.modules["volscatter_blender.eevee"]

@@ -638,12 +638,13 @@ def test_vec3_vdb_writer_against_openvdb(tmp_path):
     sys_py = "/usr/bin/python3"
     if not Path(sys_py).exists() or subprocess.run([sys_py, "-c", "import pyopenvdb"]).returncode != 0:
         pytest.skip("pyopenvdb not importable by /usr/bin/python3 (apt-get install python3-openvdb)")
-    from volscatter.vdbwrite import write_vec3_grid
+    from volscatter._native import vdb_info, write_vdb  # the library's writer (vs_vdb_write_grids)
     rng = np.random.default_rng(5)
     a = rng.random((9, 140, 130, 3)).astype(np.float32)  # crosses internal-node borders at 128
     a[a < 0.6] = 0.0
     m = [0.0, -0.05, 0.0, 1.0, 0.05, 0.0, 0.0, -2.0, 0.0, 0.0, 0.1, 0.5, 0, 0, 0, 1]  # rotated, scaled, moved
-    n = write_vec3_grid(tmp_path / "v.vdb", "scatter", a, m)
+    write_vdb(tmp_path / "v.vdb", [("scatter", a)], m)
+    n = vdb_info(tmp_path / "v.vdb", stats=True)["grids"][0]["active_voxels"]  # as the library reads it back
     assert n == int((a != 0).any(axis=3).sum())
     np.save(tmp_path / "v.npy", a)
     code = ("import pyopenvdb as v, numpy as np, sys, json\n"

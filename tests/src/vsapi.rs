@@ -135,6 +135,10 @@ api! {
     vs_image_write_exr: fn(Img, Cs) -> S;
     // The solver registry (issue 14).
     vs_solvers_json: fn(*mut Cs) -> S;
+    // VDB files for hosts (plugin/src/ffi/vdb_io.rs): grids is a VsVdbGrid array, copies a
+    // VsVdbGridCopy array.
+    vs_vdb_info_json: fn(Scene, Cs, u32, *mut c_char, usize, *mut usize) -> S;
+    vs_vdb_write_grids: fn(Scene, Cs, *const u32, *const f64, *const c_void, usize, *const c_void, usize) -> S;
 }
 
 /// Copies a C string returned by the library (NULL becomes "<NULL>").

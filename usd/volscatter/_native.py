@@ -1,16 +1,25 @@
-"""ctypes binding to libvolscatter (the C ABI of plugin/include/volscatter.h).
+"""ctypes binding to libvolscatter (the C ABI of plugin/include/volscatter.h): the one binding
+of the library in Python, used by the USD host (as ``volscatter._native``) and by the Blender
+add-on (install/build_extension.py copies this file into the add-on as
+``volscatter_blender/native.py``, so the add-on stays self-contained). It imports nothing of
+either host (no pxr, no bpy; numpy when present).
 
 Style: wasmtime-py / llvmlite. The library is loaded lazily, once, from
 
-1. the path in the environment variable ``VOLSCATTER_LIB``, else
-2. ``volscatter/lib/libvolscatter.so`` inside this package (where a wheel or an add-on ships it),
+1. the path in the environment variable ``VOLSCATTER_LIB`` when that file exists, else
+2. ``lib/libvolscatter.so`` (``.dylib``, ``volscatter.dll``) beside this file, where a wheel or
+   the add-on ships it,
 
 and refused unless ``vs_abi_version() == ABI_VERSION``. Every C signature is declared in
 ``_SIGNATURES`` below and nowhere else. A failing call raises :class:`VolscatterError` carrying
 the library's message (the handle's ``vs_*_last_error``, or ``vs_status_message`` when there is
-no handle) and the status. Native objects (:class:`Scene`, :class:`Result`, :class:`Image`) have
-``close()`` and are context managers; ``close()`` is idempotent and also runs on garbage
-collection.
+no handle) and the status; a cancelled call raises its subclass :class:`Cancelled`; a library
+that cannot be loaded, :class:`LibraryNotFound`. Native objects (:class:`Scene`,
+:class:`Session`, :class:`Result`, :class:`Image`) have ``close()`` (idempotent, also run on
+garbage collection) and are context managers.
+
+Arrays come back as numpy arrays when numpy is importable (else flat lists): the scattering
+grid (nz, ny, nx, 3), images (h, w, 4) and AOVs (h, w, 3), rows top to bottom.
 """
 
 from __future__ import annotations
@@ -20,25 +29,33 @@ import json
 import os
 import sys
 import threading
-from ctypes import (CFUNCTYPE, POINTER, c_char_p, c_float, c_int32, c_size_t, c_uint32, c_uint64, c_void_p)
-from pathlib import Path
+from ctypes import (CFUNCTYPE, POINTER, c_char, c_char_p, c_double, c_float, c_int32, c_size_t, c_uint32, c_uint64, c_void_p)
 from typing import Callable, Optional, Sequence
 
 #: The ABI version this binding was written against (``VS_ABI_VERSION`` in the header).
 ABI_VERSION = 1
 
-#: Status codes (``VsStatus``).
+#: Status codes (``VsStatus``), by value.
 STATUS_NAMES = {
-    0: "ok", 1: "null argument", 2: "invalid argument", 3: "invalid handle", 4: "buffer size",
-    5: "invalid scene", 6: "io", 7: "format", 8: "too large", 9: "unsupported", 10: "cancelled",
-    11: "internal", 12: "device",
+    0: "OK", 1: "NULL_ARGUMENT", 2: "INVALID_ARGUMENT", 3: "INVALID_HANDLE", 4: "BUFFER_SIZE",
+    5: "INVALID_SCENE", 6: "IO", 7: "FORMAT", 8: "TOO_LARGE", 9: "UNSUPPORTED",
+    10: "CANCELLED", 11: "INTERNAL", 12: "DEVICE",
 }
+STATUS_OK = 0
+STATUS_NULL_ARGUMENT = 1
+STATUS_INVALID_ARGUMENT = 2
+STATUS_INVALID_HANDLE = 3
+STATUS_BUFFER_SIZE = 4
+STATUS_IO = 6
+STATUS_FORMAT = 7
+STATUS_UNSUPPORTED = 9
 STATUS_CANCELLED = 10
 #: The GPU asked for failed (no adapter, out of memory, lost); the CPU still works.
 STATUS_DEVICE = 12
 
-#: ``vs_scene_set_device`` values (``VS_DEVICE_*``).
-DEVICES = {"cpu": 0, "gpu": 1, "auto": 2}
+#: ``vs_scene_set_device`` values (``VS_DEVICE_*``), by name (matched case-insensitively; the
+#: add-on's Device menu identifiers).
+DEVICES = {"CPU": 0, "GPU": 1, "AUTO": 2}
 
 #: ``VsGridFormat`` values for :meth:`Result.write_grid`.
 GRID_FORMAT_EXR = 1
@@ -49,6 +66,9 @@ COMPOSITE_TRANSPARENT = 1
 
 #: ``VS_AOV_*`` bits of ``vs_result_composite_aovs``, by layer name (:meth:`Result.composite`).
 AOV_BITS = {"single": 1, "multiple": 2, "background": 4}
+
+#: ``vs_vdb_info_json`` flag: per-grid statistics too (:func:`vdb_info`).
+VDB_INFO_STATS = 1
 
 
 def aov_bits(aovs) -> int:
@@ -62,8 +82,9 @@ def aov_bits(aovs) -> int:
 
 
 class VolscatterError(Exception):
-    """A failure reported by libvolscatter (or by loading it). ``status`` is the ``VsStatus``
-    value (None when the library could not be loaded at all)."""
+    """A failure reported by libvolscatter (or by loading it): ``VolscatterError(message,
+    status)``. ``status`` is the ``VsStatus`` value (None when the library could not be loaded
+    at all), ``status_name`` its name ("IO", "INVALID_SCENE", ...)."""
 
     def __init__(self, message: str, status: Optional[int] = None):
         super().__init__(message)
@@ -71,8 +92,20 @@ class VolscatterError(Exception):
         self.status = status
 
     @property
+    def status_name(self) -> str:
+        return STATUS_NAMES.get(self.status, str(self.status))
+
+    @property
     def cancelled(self) -> bool:
         return self.status == STATUS_CANCELLED
+
+
+class Cancelled(VolscatterError):
+    """The progress callback stopped the call (status ``CANCELLED``)."""
+
+
+class LibraryNotFound(VolscatterError):
+    """libvolscatter is missing, not loadable, or of another ABI version."""
 
 
 # Opaque handle types: pointers to incomplete structs.
@@ -98,6 +131,25 @@ _ImagePtr = POINTER(_VsImage)
 _SessionPtr = POINTER(_VsSession)
 _F = POINTER(c_float)
 
+
+class LpmEstimate(ctypes.Structure):
+    """``VsLpmEstimate`` (the header's layout: eleven uint64 in groups)."""
+    _fields_ = [("voxels", c_uint64 * 3), ("dense_bytes", c_uint64),
+                ("medium_dims", c_uint64 * 3), ("medium_bytes", c_uint64),
+                ("grid_dims", c_uint64 * 3), ("in_memory_bytes", c_uint64),
+                ("out_of_core_bytes", c_uint64), ("scratch_bytes", c_uint64)]
+
+
+class VdbGrid(ctypes.Structure):
+    """``VsVdbGrid``: a grid of caller values for ``vs_vdb_write_grids``."""
+    _fields_ = [("name", c_char_p), ("components", c_uint32), ("values", _F), ("len", c_size_t)]
+
+
+class VdbGridCopy(ctypes.Structure):
+    """``VsVdbGridCopy``: a grid copied byte for byte by ``vs_vdb_write_grids``."""
+    _fields_ = [("name", c_char_p), ("source_path", c_char_p), ("source_grid", c_char_p)]
+
+
 #: int32_t (*)(void *user, const char *stage, float fraction)
 PROGRESS_CALLBACK = CFUNCTYPE(c_int32, c_void_p, c_char_p, c_float)
 
@@ -115,6 +167,7 @@ _SIGNATURES = {
     "vs_scene_load_file": (c_int32, [_ScenePtr, c_char_p]),
     "vs_scene_load_default": (c_int32, [_ScenePtr]),
     "vs_scene_set_medium_vdb": (c_int32, [_ScenePtr, c_char_p, c_char_p, _F]),
+    "vs_scene_lpm_estimate": (c_int32, [_ScenePtr, c_char_p, c_char_p, _F, c_uint32, c_char_p, POINTER(LpmEstimate)]),
     "vs_scene_set_medium_dense": (c_int32, [_ScenePtr, _F, c_size_t, c_uint32, c_uint32, c_uint32, _F]),
     "vs_scene_set_material": (c_int32, [_ScenePtr, _F, _F, c_float]),
     "vs_scene_clear_lights": (c_int32, [_ScenePtr]),
@@ -128,6 +181,7 @@ _SIGNATURES = {
     "vs_scene_light_count": (c_int32, [_ScenePtr, POINTER(c_size_t)]),
     "vs_scene_set_camera": (c_int32, [_ScenePtr, _F, _F, _F, c_float, c_uint32, c_uint32]),
     "vs_scene_set_solver": (c_int32, [_ScenePtr, c_char_p, c_char_p]),
+    "vs_scene_set_device": (c_int32, [_ScenePtr, c_uint32]),
     "vs_scene_solve": (c_int32, [_ScenePtr, PROGRESS_CALLBACK, c_void_p, POINTER(_ResultPtr)]),
     "vs_scene_render_reference": (c_int32, [_ScenePtr, PROGRESS_CALLBACK, c_void_p, POINTER(_ImagePtr)]),
     "vs_result_destroy": (c_int32, [_ResultPtr]),
@@ -152,30 +206,48 @@ _SIGNATURES = {
     "vs_image_copy_rgba": (c_int32, [_ImagePtr, _F, c_size_t]),
     "vs_image_copy_aov": (c_int32, [_ImagePtr, c_char_p, _F, c_size_t]),
     "vs_image_write_exr": (c_int32, [_ImagePtr, c_char_p]),
-    # device and solver registry (issue 14)
-    "vs_scene_set_device": (c_int32, [_ScenePtr, c_uint32]),
     "vs_solvers_json": (c_int32, [POINTER(c_char_p)]),
+    # VDB files (plugin/src/ffi/vdb_io.rs)
+    "vs_vdb_info_json": (c_int32, [_ScenePtr, c_char_p, c_uint32, POINTER(c_char), c_size_t, POINTER(c_size_t)]),
+    "vs_vdb_write_grids": (c_int32, [_ScenePtr, c_char_p, POINTER(c_uint32), POINTER(c_double), POINTER(VdbGrid), c_size_t,
+                                     POINTER(VdbGridCopy), c_size_t]),
 }
 
 _lib = None
-_lib_path: Optional[Path] = None
+_lib_path: Optional[str] = None
 _lock = threading.Lock()
 
 
-def _package_lib() -> Path:
-    name = {"darwin": "libvolscatter.dylib", "win32": "volscatter.dll"}.get(sys.platform, "libvolscatter.so")
-    return Path(__file__).resolve().parent / "lib" / name
+def library_filename() -> str:
+    if sys.platform == "win32":
+        return "volscatter.dll"
+    if sys.platform == "darwin":
+        return "libvolscatter.dylib"
+    return "libvolscatter.so"
 
 
-def library_path() -> Path:
-    """Where the library is (or would be) loaded from: ``$VOLSCATTER_LIB``, else the package's
-    ``lib/`` folder."""
+def library_candidates() -> list:
+    """Where the library is looked for, in order: ``$VOLSCATTER_LIB``, then ``lib/`` beside
+    this file."""
+    out = []
     env = os.environ.get("VOLSCATTER_LIB")
-    return Path(env) if env else _package_lib()
+    if env:
+        out.append(env)
+    out.append(os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib", library_filename()))
+    return out
+
+
+def library_path() -> str:
+    """The library's path: the one loaded, else the first candidate that exists (the last
+    candidate when none does)."""
+    if _lib_path is not None:
+        return _lib_path
+    cands = library_candidates()
+    return next((c for c in cands if os.path.isfile(c)), cands[-1])
 
 
 def lib():
-    """The loaded library (loading it on first use). Raises VolscatterError if it is missing,
+    """The loaded library (loading it on first use). Raises LibraryNotFound if it is missing,
     not loadable, or of another ABI version."""
     global _lib, _lib_path
     if _lib is not None:
@@ -183,25 +255,27 @@ def lib():
     with _lock:
         if _lib is not None:
             return _lib
-        path = library_path()
-        if not path.exists():
-            raise VolscatterError(
-                f"libvolscatter not found at {path} (set VOLSCATTER_LIB, or build it with "
-                "`cargo build --release -p volscatter --lib` and copy it into volscatter/lib/)")
+        cands = library_candidates()
+        path = next((c for c in cands if os.path.isfile(c)), None)
+        if path is None:
+            raise LibraryNotFound(
+                f"libvolscatter not found (looked at: {', '.join(cands)}); set VOLSCATTER_LIB, reinstall the add-on, "
+                "or build it with `cargo build --release -p volscatter --lib` and copy it into lib/")
         try:
-            handle = ctypes.CDLL(str(path))
+            handle = ctypes.CDLL(path)
         except OSError as e:
-            raise VolscatterError(f"cannot load libvolscatter from {path}: {e}") from e
+            raise LibraryNotFound(f"cannot load libvolscatter from {path}: {e}") from e
         missing = [name for name in _SIGNATURES if not hasattr(handle, name)]
         if missing:
-            raise VolscatterError(f"{path} does not export {', '.join(missing)}: not a libvolscatter of ABI {ABI_VERSION}")
+            raise LibraryNotFound(f"{path} does not export {', '.join(missing)}: not a libvolscatter of ABI "
+                                  f"{ABI_VERSION} with this binding's functions (library too old?)")
         for name, (restype, argtypes) in _SIGNATURES.items():
             fn = getattr(handle, name)
             fn.restype = restype
             fn.argtypes = argtypes
         abi = handle.vs_abi_version()
         if abi != ABI_VERSION:
-            raise VolscatterError(f"{path} has ABI version {abi}, this binding needs {ABI_VERSION}")
+            raise LibraryNotFound(f"{path} has ABI version {abi}, this binding needs {ABI_VERSION}")
         _lib, _lib_path = handle, path
         return _lib
 
@@ -225,10 +299,15 @@ def solvers() -> dict:
     if _solvers is None:
         out = c_char_p()
         status = lib().vs_solvers_json(ctypes.byref(out))
-        if status != 0:
+        if status != STATUS_OK:
             raise _status_error(status, "", "solver registry")
         _solvers = json.loads(_decode(out.value))
     return _solvers
+
+
+def solver(name: str) -> Optional[dict]:
+    """The registry entry of solver ``name``, or None."""
+    return next((s for s in solvers()["solvers"] if s["name"] == name), None)
 
 
 def solver_names() -> list:
@@ -240,16 +319,17 @@ def _decode(b: Optional[bytes]) -> str:
     return b.decode("utf-8", "replace") if b else ""
 
 
-def _status_error(status: int, message: str, what: str) -> VolscatterError:
+def _status_error(status: int, message: str, what: str = "") -> VolscatterError:
     if not message:
         message = _decode(lib().vs_status_message(status)) or STATUS_NAMES.get(status, "unknown status")
-    return VolscatterError(f"{what}: {message}", status)
+    cls = Cancelled if status == STATUS_CANCELLED else VolscatterError
+    return cls(f"{what}: {message}" if what else message, status)
 
 
 def _floats(values: Sequence[float], n: int, what: str):
     vals = [float(v) for v in values]
     if len(vals) != n:
-        raise VolscatterError(f"{what}: expected {n} numbers, got {len(vals)}", 2)
+        raise VolscatterError(f"{what}: expected {n} numbers, got {len(vals)}", STATUS_INVALID_ARGUMENT)
     return (c_float * n)(*vals)
 
 
@@ -257,10 +337,20 @@ def _path_bytes(p) -> bytes:
     return os.fsencode(os.fspath(p))
 
 
+def _shaped(buf, shape):
+    """A ctypes float buffer as a numpy array of ``shape`` (a copy), or a flat list without numpy."""
+    try:
+        import numpy as np
+    except ImportError:
+        return list(buf)
+    return np.frombuffer(buf, dtype=np.float32).reshape(shape).copy()
+
+
 class _Progress:
-    """Wraps a Python progress function ``fn(stage: str, fraction: float) -> bool | None`` as the C
-    callback. Returning False cancels. Exceptions in ``fn`` are kept and re-raised after the
-    call, and cancel the native work (they cannot unwind through the library)."""
+    """Wraps a Python progress function ``fn(stage: str, fraction: float) -> bool`` as the C
+    callback; a false return (False, None, 0) cancels. Exceptions in ``fn`` are kept and
+    re-raised after the call, and cancel the native work (they cannot unwind through the
+    library). Called from worker threads."""
 
     def __init__(self, fn: Optional[Callable[[str, float], Optional[bool]]]):
         self.fn = fn
@@ -273,8 +363,7 @@ class _Progress:
             with self._lock:
                 if self.error is not None:
                     return 0
-                keep = self.fn(_decode(stage), float(fraction))
-            return 0 if keep is False else 1
+                return 1 if self.fn(_decode(stage), float(fraction)) else 0
         except BaseException as e:  # noqa: BLE001 - must not unwind into C
             self.error = e
             return 0
@@ -297,15 +386,24 @@ class _Handle:
     def closed(self) -> bool:
         return not self._ptr
 
-    def _p(self):
+    @property
+    def ptr(self):
+        """The native handle (VolscatterError INVALID_HANDLE once closed)."""
         if not self._ptr:
-            raise VolscatterError(f"{self._kind} is closed", 3)
+            raise VolscatterError(f"{self._kind} is closed", STATUS_INVALID_HANDLE)
         return self._ptr
 
-    def _check(self, status: int, what: str):
-        if status != 0:
+    def _p(self):
+        return self.ptr
+
+    def _check(self, status: int, what: str = ""):
+        if status != STATUS_OK:
             msg = _decode(getattr(lib(), self._last_error)(self._ptr)) if self._ptr else ""
             raise _status_error(status, msg, what)
+
+    def _call(self, name: str, *args, what: str = ""):
+        """Calls ``name(handle, *args)`` and raises on failure."""
+        self._check(getattr(lib(), name)(self.ptr, *args), what)
 
     def close(self):
         """Destroys the native object. Safe to call more than once."""
@@ -335,7 +433,7 @@ class Scene(_Handle):
     def __init__(self):
         out = _ScenePtr()
         status = lib().vs_scene_new(ctypes.byref(out))
-        if status != 0:
+        if status != STATUS_OK:
             raise _status_error(status, "", "vs_scene_new")
         super().__init__(out)
 
@@ -352,98 +450,100 @@ class Scene(_Handle):
     def load_json(self, doc, base_dir=None):
         """Replaces the scene with JSON text (scene format 1) or a dict."""
         text = doc if isinstance(doc, str) else json.dumps(doc)
-        self._check(lib().vs_scene_load_json(self._p(), text.encode(), _path_bytes(base_dir) if base_dir else None),
-                    "scene JSON")
+        self._call("vs_scene_load_json", text.encode(), _path_bytes(base_dir) if base_dir else None, what="scene JSON")
 
     def load_file(self, path):
-        self._check(lib().vs_scene_load_file(self._p(), _path_bytes(path)), f"scene file {path}")
+        self._call("vs_scene_load_file", _path_bytes(path), what=f"scene file {path}")
 
     def load_default(self):
-        self._check(lib().vs_scene_load_default(self._p()), "default scene")
+        self._call("vs_scene_load_default", what="default scene")
 
     def set_medium_vdb(self, path, grid: Optional[str] = None, object_to_world: Optional[Sequence[float]] = None):
         m = _floats(object_to_world, 16, "object_to_world") if object_to_world is not None else None
-        self._check(lib().vs_scene_set_medium_vdb(self._p(), _path_bytes(path), grid.encode() if grid else None, m),
-                    f"VDB {path}")
+        self._call("vs_scene_set_medium_vdb", _path_bytes(path), grid.encode() if grid else None, m, what=f"VDB {path}")
 
     def set_material(self, density_scale, albedo, g: float):
         ds = _floats(density_scale if isinstance(density_scale, (list, tuple)) else [density_scale] * 3, 3, "density_scale")
         al = _floats(albedo if isinstance(albedo, (list, tuple)) else [albedo] * 3, 3, "albedo")
-        self._check(lib().vs_scene_set_material(self._p(), ds, al, float(g)), "material")
+        self._call("vs_scene_set_material", ds, al, float(g), what="material")
 
     def clear_lights(self):
-        self._check(lib().vs_scene_clear_lights(self._p()), "clear lights")
+        self._call("vs_scene_clear_lights", what="clear lights")
 
     def add_distant_light(self, direction, irradiance, angle_deg: float = 0.0):
-        self._check(lib().vs_scene_add_distant_light(self._p(), _floats(direction, 3, "direction"),
-                                                     _floats(irradiance, 3, "irradiance"), float(angle_deg)),
-                    "distant light")
+        self._call("vs_scene_add_distant_light", _floats(direction, 3, "direction"), _floats(irradiance, 3, "irradiance"),
+                   float(angle_deg), what="distant light")
 
     def add_point_light(self, position, intensity, radius: float = 0.0):
-        self._check(lib().vs_scene_add_point_light(self._p(), _floats(position, 3, "position"),
-                                                   _floats(intensity, 3, "intensity"), float(radius)), "point light")
+        self._call("vs_scene_add_point_light", _floats(position, 3, "position"), _floats(intensity, 3, "intensity"),
+                   float(radius), what="point light")
 
     def add_spot_light(self, position, direction, intensity, cone_half_angle_deg: float, blend: float = 0.0,
                        radius: float = 0.0):
-        self._check(lib().vs_scene_add_spot_light(self._p(), _floats(position, 3, "position"),
-                                                  _floats(direction, 3, "direction"), _floats(intensity, 3, "intensity"),
-                                                  float(cone_half_angle_deg), float(blend), float(radius)), "spot light")
+        self._call("vs_scene_add_spot_light", _floats(position, 3, "position"), _floats(direction, 3, "direction"),
+                   _floats(intensity, 3, "intensity"), float(cone_half_angle_deg), float(blend), float(radius),
+                   what="spot light")
 
     def add_rect_light(self, position, normal, width: float, height: float, radiance, tangent=None):
         t = None if tangent is None else _floats(tangent, 3, "tangent")
-        self._check(lib().vs_scene_add_rect_light(self._p(), _floats(position, 3, "position"), _floats(normal, 3, "normal"),
-                                                  t, float(width), float(height), _floats(radiance, 3, "radiance")),
-                    "rect light")
+        self._call("vs_scene_add_rect_light", _floats(position, 3, "position"), _floats(normal, 3, "normal"), t,
+                   float(width), float(height), _floats(radiance, 3, "radiance"), what="rect light")
 
     def add_disk_light(self, position, normal, radius: float, radiance):
-        self._check(lib().vs_scene_add_disk_light(self._p(), _floats(position, 3, "position"), _floats(normal, 3, "normal"),
-                                                  float(radius), _floats(radiance, 3, "radiance")), "disk light")
+        self._call("vs_scene_add_disk_light", _floats(position, 3, "position"), _floats(normal, 3, "normal"),
+                   float(radius), _floats(radiance, 3, "radiance"), what="disk light")
 
     def add_dome_light(self, color):
-        self._check(lib().vs_scene_add_dome_light(self._p(), _floats(color, 3, "color")), "dome light")
+        self._call("vs_scene_add_dome_light", _floats(color, 3, "color"), what="dome light")
 
     def add_dome_texture(self, path, intensity: float = 1.0):
-        self._check(lib().vs_scene_add_dome_texture(self._p(), _path_bytes(path), float(intensity)), f"dome texture {path}")
+        self._call("vs_scene_add_dome_texture", _path_bytes(path), float(intensity), what=f"dome texture {path}")
 
     def light_count(self) -> int:
         n = c_size_t()
-        self._check(lib().vs_scene_light_count(self._p(), ctypes.byref(n)), "light count")
+        self._call("vs_scene_light_count", ctypes.byref(n), what="light count")
         return int(n.value)
 
     def set_camera(self, position, look_at, up=None, fov_deg: float = 39.6, width: int = 256, height: int = 256):
-        self._check(lib().vs_scene_set_camera(self._p(), _floats(position, 3, "position"), _floats(look_at, 3, "look_at"),
-                                              _floats(up, 3, "up") if up is not None else None, float(fov_deg),
-                                              int(width), int(height)), "camera")
+        self._call("vs_scene_set_camera", _floats(position, 3, "position"), _floats(look_at, 3, "look_at"),
+                   _floats(up, 3, "up") if up is not None else None, float(fov_deg), int(width), int(height),
+                   what="camera")
 
     def set_device(self, device):
-        """Where solves and composites run: "cpu" (the default), "gpu" (any adapter; fails with
-        status ``STATUS_DEVICE`` when none works) or "auto" (a hardware GPU when one works, else
-        the CPU); or a ``VS_DEVICE_*`` number."""
-        value = DEVICES[device.lower()] if isinstance(device, str) else int(device)
-        self._check(lib().vs_scene_set_device(self._p(), value), f"device {device}")
+        """Where solves and composites run: "CPU" (the default), "GPU" (any adapter; fails with
+        status ``STATUS_DEVICE`` when none works) or "AUTO" (a hardware GPU when one works, else
+        the CPU), in any case; or a ``VS_DEVICE_*`` number."""
+        value = DEVICES[device.upper()] if isinstance(device, str) else int(device)
+        self._call("vs_scene_set_device", value, what=f"device {device}")
 
     def set_solver(self, name: str, settings: Optional[dict] = None):
         text = json.dumps(settings).encode() if settings else None
-        self._check(lib().vs_scene_set_solver(self._p(), name.encode(), text), f"solver {name}")
+        self._call("vs_scene_set_solver", name.encode(), text, what=f"solver {name}")
 
     def solve(self, progress: Optional[Callable[[str, float], Optional[bool]]] = None) -> "Result":
         """Runs the scene's solver; returns the scattering grid. ``progress(stage, fraction)``
-        may return False to cancel (VolscatterError with ``cancelled``)."""
+        is called from worker threads; a false return cancels (:class:`Cancelled`)."""
         cb = _Progress(progress)
         out = _ResultPtr()
-        status = lib().vs_scene_solve(self._p(), cb.c, None, ctypes.byref(out))
-        cb.reraise()
-        self._check(status, "solve")
-        return Result(out)
+        status = lib().vs_scene_solve(self.ptr, cb.c, None, ctypes.byref(out))
+        return Result(_finish(status, out, cb, self, "solve", "vs_result_destroy"))
 
     def render_reference(self, progress: Optional[Callable[[str, float], Optional[bool]]] = None) -> "Image":
         """Path-traces the image with the reference solver."""
         cb = _Progress(progress)
         out = _ImagePtr()
-        status = lib().vs_scene_render_reference(self._p(), cb.c, None, ctypes.byref(out))
-        cb.reraise()
-        self._check(status, "reference render")
-        return Image(out)
+        status = lib().vs_scene_render_reference(self.ptr, cb.c, None, ctypes.byref(out))
+        return Image(_finish(status, out, cb, self, "reference render", "vs_image_destroy"))
+
+
+def _finish(status, out, cb: _Progress, owner: _Handle, what: str, destroy: str):
+    """After a call that made ``out``: the callback's exception first (destroying ``out``),
+    then the status; returns ``out``."""
+    if cb.error is not None and out:
+        getattr(lib(), destroy)(out)
+    cb.reraise()
+    owner._check(status, what)
+    return out
 
 
 class Session(_Handle):
@@ -456,23 +556,21 @@ class Session(_Handle):
 
     def __init__(self, scene: Scene):
         out = _SessionPtr()
-        scene._check(lib().vs_session_new(scene._p(), ctypes.byref(out)), "vs_session_new")
+        scene._call("vs_session_new", ctypes.byref(out), what="vs_session_new")
         super().__init__(out)
 
     def solve(self, scene: Scene, progress: Optional[Callable[[str, float], Optional[bool]]] = None) -> "Result":
         """One frame: solves ``scene``; ``progress`` as for :meth:`Scene.solve`."""
         cb = _Progress(progress)
         out = _ResultPtr()
-        status = lib().vs_session_solve(self._p(), scene._p(), cb.c, None, ctypes.byref(out))
-        cb.reraise()
-        self._check(status, "session solve")
-        return Result(out)
+        status = lib().vs_session_solve(self.ptr, scene.ptr, cb.c, None, ctypes.byref(out))
+        return Result(_finish(status, out, cb, self, "session solve", "vs_result_destroy"))
 
     @property
     def frame_count(self) -> int:
         """Solves run in this session so far."""
         n = c_uint64()
-        self._check(lib().vs_session_frame_count(self._p(), ctypes.byref(n)), "session frame count")
+        self._call("vs_session_frame_count", ctypes.byref(n), what="session frame count")
         return int(n.value)
 
 
@@ -483,43 +581,39 @@ class Result(_Handle):
 
     def dims(self):
         d = (c_uint32 * 3)()
-        self._check(lib().vs_result_dims(self._p(), d), "result dims")
+        self._call("vs_result_dims", d, what="result dims")
         return tuple(int(v) for v in d)
 
     def device(self) -> str:
-        """Where the solve ran: "cpu" or "gpu" (never "auto"; ``vs_result_device``)."""
+        """Where the solve ran: "CPU" or "GPU" (never "AUTO"; ``vs_result_device``)."""
         d = c_uint32()
-        self._check(lib().vs_result_device(self._p(), ctypes.byref(d)), "result device")
+        self._call("vs_result_device", ctypes.byref(d), what="result device")
         return {v: k for k, v in DEVICES.items()}[d.value]
 
     def choice(self) -> Optional[dict]:
         """What the ``auto`` solver picked and why (solver, quality, settings, predicted_error,
         predicted_seconds, why, ...; ``vs_result_choice``), None for the other solvers."""
-        raw = lib().vs_result_choice(self._p())
+        raw = lib().vs_result_choice(self.ptr)
         return json.loads(raw.decode()) if raw else None
 
     def index_to_world(self):
-        """Row-major 4x4 (16 floats): grid point (i, j, k) sits at M (i, j, k, 1)."""
+        """Row-major 4x4 as 16 floats: grid point (i, j, k) sits at M (i, j, k, 1)."""
         m = (c_float * 16)()
-        self._check(lib().vs_result_index_to_world(self._p(), m), "index_to_world")
+        self._call("vs_result_index_to_world", m, what="index_to_world")
         return list(m)
 
     def rgb(self):
         """The scattering grid S (W/m^3/sr): numpy array (nz, ny, nx, 3) when numpy is there,
         else a flat list (x fastest, RGB interleaved)."""
         n = c_size_t()
-        self._check(lib().vs_result_float_count(self._p(), ctypes.byref(n)), "result size")
+        self._call("vs_result_float_count", ctypes.byref(n), what="result size")
         buf = (c_float * n.value)()
-        self._check(lib().vs_result_copy_rgb(self._p(), buf, n.value), "copy rgb")
-        try:
-            import numpy as np
-        except ImportError:
-            return list(buf)
+        self._call("vs_result_copy_rgb", buf, n.value, what="copy rgb")
         nx, ny, nz = self.dims()
-        return np.frombuffer(buf, dtype=np.float32).reshape(nz, ny, nx, 3).copy()
+        return _shaped(buf, (nz, ny, nx, 3))
 
     def write_grid(self, path, fmt: int = GRID_FORMAT_VDB):
-        self._check(lib().vs_result_write_grid(self._p(), _path_bytes(path), int(fmt)), f"write grid {path}")
+        self._call("vs_result_write_grid", _path_bytes(path), int(fmt), what=f"write grid {path}")
 
     def composite(self, transparent: bool = False, subpixels: int = 0, step_voxels: float = 0.0,
                   aovs=()) -> "Image":
@@ -527,8 +621,8 @@ class Result(_Handle):
         "multiple", "background"; none by default: single and multiple cost a second light pass)."""
         out = _ImagePtr()
         flags = COMPOSITE_TRANSPARENT if transparent else 0
-        self._check(lib().vs_result_composite_aovs(self._p(), flags, aov_bits(aovs), int(subpixels), float(step_voxels),
-                                                   ctypes.byref(out)), "composite")
+        self._call("vs_result_composite_aovs", flags, aov_bits(aovs), int(subpixels), float(step_voxels),
+                   ctypes.byref(out), what="composite")
         return Image(out)
 
 
@@ -539,31 +633,97 @@ class Image(_Handle):
 
     def size(self):
         w, h = c_uint32(), c_uint32()
-        self._check(lib().vs_image_size(self._p(), ctypes.byref(w), ctypes.byref(h)), "image size")
+        self._call("vs_image_size", ctypes.byref(w), ctypes.byref(h), what="image size")
         return int(w.value), int(h.value)
 
     def rgba(self):
         """Linear RGBA, rows top to bottom: numpy (h, w, 4) when numpy is there, else a flat list."""
         w, h = self.size()
-        n = w * h * 4
-        buf = (c_float * n)()
-        self._check(lib().vs_image_copy_rgba(self._p(), buf, n), "copy rgba")
-        try:
-            import numpy as np
-        except ImportError:
-            return list(buf)
-        return np.frombuffer(buf, dtype=np.float32).reshape(h, w, 4).copy()
+        buf = (c_float * (w * h * 4))()
+        self._call("vs_image_copy_rgba", buf, w * h * 4, what="copy rgba")
+        return _shaped(buf, (h, w, 4))
 
     def aov(self, name: str):
+        """AOV layer ``name`` ("single", "multiple", "background"): numpy (h, w, 3) when numpy is
+        there, else a flat list."""
         w, h = self.size()
-        n = w * h * 3
-        buf = (c_float * n)()
-        self._check(lib().vs_image_copy_aov(self._p(), name.encode(), buf, n), f"AOV {name}")
-        try:
-            import numpy as np
-        except ImportError:
-            return list(buf)
-        return np.frombuffer(buf, dtype=np.float32).reshape(h, w, 3).copy()
+        buf = (c_float * (w * h * 3))()
+        self._call("vs_image_copy_aov", name.encode(), buf, w * h * 3, what=f"AOV {name}")
+        return _shaped(buf, (h, w, 3))
 
     def write_exr(self, path):
-        self._check(lib().vs_image_write_exr(self._p(), _path_bytes(path)), f"write EXR {path}")
+        self._call("vs_image_write_exr", _path_bytes(path), what=f"write EXR {path}")
+
+
+# ---------------------------------------------------------------------------------------------
+# file queries without a scene of their own (a scratch scene carries the error message)
+
+
+def lpm_estimate(path, grid=None, object_to_world=None, max_resolution=0, settings=None) -> dict:
+    """What the VDB at ``path`` is as a medium and what ``lpm`` with ``settings`` (a dict of lpm
+    settings) will hold for it, from the file's topology alone (``vs_scene_lpm_estimate``):
+    a dict of the ``VsLpmEstimate`` fields (lists for the dims). ``object_to_world``: 16 floats,
+    row-major; ``max_resolution`` 0: read whole. Raises VolscatterError with the library's
+    message (missing file, not a VDB, bad settings)."""
+    m = _floats(object_to_world, 16, "object_to_world") if object_to_world is not None else None
+    out = LpmEstimate()
+    with Scene() as sc:
+        sc._call("vs_scene_lpm_estimate", _path_bytes(path), grid.encode() if grid else None, m, int(max_resolution),
+                 json.dumps(settings or {}).encode(), ctypes.byref(out))
+    return {name: (list(getattr(out, name)) if isinstance(getattr(out, name), ctypes.Array) else int(getattr(out, name)))
+            for name, _ in LpmEstimate._fields_}
+
+
+def vdb_info(path, stats: bool = False) -> dict:
+    """The OpenVDB file at ``path`` as the library reads it (``vs_vdb_info_json``): ``{"file",
+    "file_version", "library_version", "grids": [{"name", "unique_name", "value_type",
+    "tree_type", "half", "instance_parent"}, ...]}``; with ``stats`` each grid also has the
+    statistics ``volscatter vdb-info`` prints (bbox, active_voxels, sum, metadata, ...), which
+    reads every voxel. Raises VolscatterError (status IO, FORMAT) naming the file."""
+    flags = VDB_INFO_STATS if stats else 0
+    needed = c_size_t()
+    with Scene() as sc:
+        what = f"VDB {path}"
+        sc._call("vs_vdb_info_json", _path_bytes(path), flags, None, 0, ctypes.byref(needed), what=what)
+        buf = ctypes.create_string_buffer(needed.value)
+        sc._call("vs_vdb_info_json", _path_bytes(path), flags, buf, needed.value, ctypes.byref(needed), what=what)
+    return json.loads(buf.value.decode("utf-8"))
+
+
+def write_vdb(path, grids, index_to_world: Sequence[float], copies=()):
+    """Writes a new OpenVDB file through the library (``vs_vdb_write_grids``), atomically:
+    ``grids`` = [(name, array (nz, ny, nx) or (nz, ny, nx, 1 or 3))], all of one shape, a float
+    grid per 1 component and a vec3s grid per 3, voxel (i, j, k) = a[k, j, i], placed by
+    ``index_to_world`` (16 numbers, row-major 4x4, passed as doubles); ``copies`` = [(name, source path, source grid
+    name)], grids copied byte for byte from OpenVDB files of version 224 (written first).
+    Raises VolscatterError with the library's message (a copy that cannot be made: status
+    UNSUPPORTED or FORMAT)."""
+    import numpy as np
+    arrays = []
+    dims = None
+    for name, a in grids:
+        a = np.ascontiguousarray(a, dtype=np.float32)
+        if a.ndim == 3:
+            a = a[..., None]
+        if a.ndim != 4 or a.shape[3] not in (1, 3):
+            raise VolscatterError(f"grid {name}: expected an (nz, ny, nx, 1 or 3) array, got {a.shape}",
+                                  STATUS_INVALID_ARGUMENT)
+        d = (a.shape[2], a.shape[1], a.shape[0])
+        if dims is not None and d != dims:
+            raise VolscatterError(f"grid {name}: shape {a.shape[:3]} differs from the other grids'", STATUS_INVALID_ARGUMENT)
+        dims = d
+        arrays.append((name, a))
+    c_grids = (VdbGrid * max(1, len(arrays)))()
+    for i, (name, a) in enumerate(arrays):
+        c_grids[i] = VdbGrid(name.encode(), a.shape[3], a.ctypes.data_as(_F), a.size)
+    c_copies = (VdbGridCopy * max(1, len(copies)))()
+    for i, (name, src, src_grid) in enumerate(copies):
+        c_copies[i] = VdbGridCopy(name.encode(), _path_bytes(src), src_grid.encode() if src_grid else None)
+    c_dims = (c_uint32 * 3)(*(dims or (1, 1, 1)))
+    vals = [float(v) for v in index_to_world]
+    if len(vals) != 16:
+        raise VolscatterError(f"index_to_world: expected 16 numbers, got {len(vals)}", STATUS_INVALID_ARGUMENT)
+    m = (c_double * 16)(*vals)
+    with Scene() as sc:
+        sc._call("vs_vdb_write_grids", _path_bytes(path), c_dims, m, c_grids if arrays else None, len(arrays),
+                 c_copies if copies else None, len(copies), what=f"write VDB {path}")

@@ -23,8 +23,8 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import stage as stage_mod
-from ._native import Result, Scene, Session, VolscatterError, solvers
-from .vdbwrite import write_grids
+from ._native import (STATUS_FORMAT, STATUS_UNSUPPORTED, Result, Scene, Session, VolscatterError, solvers,
+                      write_vdb)
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
 
@@ -316,15 +316,21 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             # its fields), with the density copied in: one file per Volume and frame
             o2w = np.asarray(v.object_to_world, dtype=np.float64).reshape(4, 4)
             i2l = np.linalg.solve(o2w, i2w)
-            copied = write_grids(os.path.join(out_dir, fname),
-                                 [("scatter", rgb), ("scattering_r", rgb[..., 0]), ("scattering_g", rgb[..., 1]),
-                                  ("scattering_b", rgb[..., 2])],
-                                 i2l.reshape(-1).tolist(),
-                                 copy=[("density", v.vdb_path, v.field_name or "density")])
-            if not copied:
+            grids = [("scatter", rgb), ("scattering_r", rgb[..., 0]), ("scattering_g", rgb[..., 1]),
+                     ("scattering_b", rgb[..., 2])]
+            i2l_flat = i2l.reshape(-1).tolist()
+            try:
+                write_vdb(os.path.join(out_dir, fname), grids, i2l_flat,
+                          copies=[("density", v.vdb_path, v.field_name or "density")])
+                copied = True
+            except VolscatterError as e:
+                if e.status not in (STATUS_FORMAT, STATUS_UNSUPPORTED):
+                    raise
+                write_vdb(os.path.join(out_dir, fname), grids, i2l_flat)
+                copied = False
                 msg = (f"volume {v.path}: its density grid ({v.vdb_path}) could not be copied into the bake's VDB "
-                       "(not an OpenVDB 224 file); field:density keeps its own file (Blender's importer reads one "
-                       "file per Volume)")
+                       f"({e.message}); field:density keeps its own file (Blender's importer reads one file per "
+                       "Volume)")
                 all_warnings.append(msg)
                 if warn:
                     warn(msg)

@@ -1,6 +1,7 @@
 """Reading a USD stage (pxr) into volscatter's scene model (scene JSON, format 1).
 
-Everything here is pure translation; no native code runs. Conventions (see usd/README.md):
+Everything here is translation; the only native call lists a VDB's grids (libvolscatter's
+``vs_vdb_info_json``, through :func:`vdb_grid_names`). Conventions (see usd/README.md):
 
 * World: volscatter works in metres, Z up. Positions are multiplied by the stage's
   ``metersPerUnit``; a Y-up stage is turned +90 degrees about X (x, y, z) -> (x, -z, y), so
@@ -84,7 +85,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from ._native import VolscatterError
+from ._native import VolscatterError, vdb_info
 
 #: Medium defaults when neither the stage nor the caller gives a value.
 DEFAULT_DENSITY_SCALE = 1.0
@@ -143,57 +144,14 @@ def blackbody_rgb(kelvin: float) -> Tuple[float, float, float]:
 
 
 # ----------------------------------------------------------------------------------------------
-# small file-header readers (no native code): VDB grid names, EXR data window
+# small file-header readers: VDB grid names (through the library), EXR data window
 
 def vdb_grid_names(path) -> List[Tuple[str, str]]:
-    """(stored name, type) of every grid in an OpenVDB file, from its header. Raises
-    VolscatterError when the file is not a readable VDB."""
-    try:
-        f = open(path, "rb")
-    except OSError as e:
-        raise VolscatterError(f"cannot read VDB {path}: {e.strerror}", 6) from e
-    with f:
-        def take(n):
-            b = f.read(n)
-            if len(b) != n:
-                raise VolscatterError(f"{path}: truncated or not an OpenVDB file", 7)
-            return b
-
-        def u32():
-            return struct.unpack("<I", take(4))[0]
-
-        def string():
-            n = u32()
-            if n > 1 << 20:
-                raise VolscatterError(f"{path}: corrupt header (string of {n} bytes)", 7)
-            return take(n).decode("utf-8", "replace")
-
-        if take(8) != b"\x20\x42\x44\x56\x00\x00\x00\x00":
-            raise VolscatterError(f"{path}: not an OpenVDB file (bad magic number)", 7)
-        version = u32()
-        if version < 216:
-            raise VolscatterError(f"{path}: OpenVDB file version {version} is too old", 7)
-        take(8)  # library major, minor
-        has_offsets = take(1)[0]
-        take(36)  # uuid
-        for _ in range(u32()):  # file metadata: name, type, sized value
-            string()
-            string()
-            take(u32())
-        grids = []
-        count = u32()
-        if count > 1 << 16:
-            raise VolscatterError(f"{path}: corrupt header ({count} grids)", 7)
-        for _ in range(count):
-            name = string()
-            gtype = string()
-            string()  # instance parent
-            grids.append((name, gtype))
-            if not has_offsets:  # pragma: no cover - every OpenVDB since 2.0 writes offsets
-                break
-            _grid, _block, end = struct.unpack("<3q", take(24))
-            f.seek(end)
-        return grids
+    """(stored name, tree type) of every grid in an OpenVDB file, from its header as
+    libvolscatter reads it (``vs_vdb_info_json``). Raises VolscatterError when the file is not
+    a readable VDB."""
+    info = vdb_info(path)
+    return [(g["unique_name"], g["tree_type"] + ("_HalfFloat" if g["half"] else "")) for g in info["grids"]]
 
 
 def exr_size(path) -> Optional[Tuple[int, int]]:

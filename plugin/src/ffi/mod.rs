@@ -17,6 +17,7 @@ pub mod session;
 pub mod image;
 // The solver registry (issue 14).
 pub mod solvers;
+pub mod vdb_io;
 pub mod guard;
 mod grid_exr;
 mod handle;
