@@ -653,6 +653,16 @@ VsStatus vs_result_device(const VsResult *result, uint32_t *out);
 const char *vs_result_choice(const VsResult *result);
 
 /**
+ * What the solve's pipeline has to tell the user (a fall-back from the GPU to the CPU, a light
+ * a solver left out, a dome map read at a lower resolution), one note a line, UTF-8; "" when
+ * there is nothing to say. Owned by the result: valid until it is destroyed. NULL for a NULL
+ * or dead handle.
+ *
+ * Thread safety: any thread.
+ */
+const char *vs_result_notes(const VsResult *result);
+
+/**
  * Writes the number of floats `vs_result_copy_rgb` needs (nx * ny * nz * 3) to `*out`.
  *
  * Thread safety: any thread; calls on one result are serialised.

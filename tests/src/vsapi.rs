@@ -116,6 +116,7 @@ api! {
     vs_result_dims: fn(Res, *mut u32) -> S;
     vs_result_device: fn(Res, *mut u32) -> S;
     vs_result_choice: fn(Res) -> Cs;
+    vs_result_notes: fn(Res) -> Cs;
     vs_result_float_count: fn(Res, *mut usize) -> S;
     vs_result_index_to_world: fn(Res, *mut f32) -> S;
     vs_result_copy_rgb: fn(Res, *mut f32, usize) -> S;

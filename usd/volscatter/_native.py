@@ -189,6 +189,7 @@ _SIGNATURES = {
     "vs_result_dims": (c_int32, [_ResultPtr, POINTER(c_uint32)]),
     "vs_result_device": (c_int32, [_ResultPtr, POINTER(c_uint32)]),
     "vs_result_choice": (c_char_p, [_ResultPtr]),
+    "vs_result_notes": (c_char_p, [_ResultPtr]),
     "vs_result_float_count": (c_int32, [_ResultPtr, POINTER(c_size_t)]),
     "vs_result_index_to_world": (c_int32, [_ResultPtr, _F]),
     "vs_result_copy_rgb": (c_int32, [_ResultPtr, _F, c_size_t]),
@@ -595,6 +596,12 @@ class Result(_Handle):
         predicted_seconds, why, ...; ``vs_result_choice``), None for the other solvers."""
         raw = lib().vs_result_choice(self.ptr)
         return json.loads(raw.decode()) if raw else None
+
+    def notes(self) -> list:
+        """What the solve has to tell the user (a fall-back from the GPU to the CPU, a light the
+        solver left out, ...; ``vs_result_notes``): the library never prints, the host shows these."""
+        raw = lib().vs_result_notes(self.ptr)
+        return [line for line in raw.decode().split("\n") if line] if raw else []
 
     def index_to_world(self):
         """Row-major 4x4 as 16 floats: grid point (i, j, k) sits at M (i, j, k, 1)."""
