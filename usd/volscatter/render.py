@@ -157,6 +157,12 @@ def render(stage_path, out, png: Optional[str] = None, time=None, camera: Option
             solved = sessions.solve(scene, progress, sc.volumes[vi].path) if sessions else scene.solve(progress)
             with solved as result:
                 choice = result.choice()
+                # What the library has to say (a fall-back to the CPU, a light left out): it never
+                # prints, the host shows it.
+                for note in result.notes():
+                    warnings.append(note)
+                    if warn:
+                        warn(note)
                 image = result.composite(transparent=transparent, aovs=aovs)
         with image:
             _ensure_parent(out)

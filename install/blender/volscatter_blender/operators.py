@@ -258,6 +258,12 @@ class _JobOperator:
                 job = self if len(self._frames) > 1 else None  # a range: one session
                 with _solve_on(sc, self._settings.device, progress, state.notes, job) as result:
                     self._ran_on.add(result.device())  # read back from the library, not assumed
+                    # The library never prints: what it has to say is reported like the rest, but
+                    # for where it ran under Device Auto (the panel's Device line says it).
+                    for n in result.notes():
+                        quiet = self._settings.device == 'AUTO' and n.startswith(("solved on the CPU", "ran on the CPU"))
+                        if not quiet and "volscatter: " + n not in state.notes:
+                            state.notes.append("volscatter: " + n)
                     choice = result.choice()
                     if choice:
                         self._choices.append(choice)
