@@ -11,6 +11,7 @@ pub mod reference;
 pub mod guard;
 pub mod registry;
 pub mod session;
+pub mod settings_table;
 pub mod vpl;
 #[cfg(test)]
 pub(crate) mod testing;
