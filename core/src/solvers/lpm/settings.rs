@@ -47,7 +47,7 @@ crate::settings! {
             "delta-M split of the phase function's forward peak (f = g^2): the peak's light goes on unscattered, the direction bins carry the broad rest";
         /// Sec. 4.2. Refused with the size needed when a one-layer slice does not fit.
         memory_budget: u64 = 0,
-            "bytes for the propagation's slice buffers (with out_of_core: for everything a slice holds), from which the slice thickness is picked (0: one slice, the whole volume)";
+            "bytes for the propagation's slice buffers, which set the slice thickness (with out_of_core: everything a slice holds; 0: one slice)";
         /// out_of_core.rs: the per-cell arrays (sigma_t, density, U of two orders, J) in scratch
         /// files in `TMPDIR`, read and written a slab at a time; same J as in memory, to the bit.
         out_of_core: bool = false,
@@ -89,7 +89,7 @@ pub const ENTRY: SolverEntry = SolverEntry {
         Preset::preview(r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"#),
         Preset::final_(r#"{"grid_resolution": 64, "directions": 49, "output_resolution": 128}"#),
     ],
-    // furnace.rs: grid 16, output 16 (extreme.rs does not run lpm).
+    // furnace.rs's (its bounds were measured with them).
     test: Preset::test(r#"{"grid_resolution": 16, "output_resolution": 16}"#),
     cpu: |m| Ok(Box::new(super::Lpm::from_settings(m)?)),
     gpu: true,

@@ -70,7 +70,7 @@ pub const ENTRY: SolverEntry = SolverEntry {
         Preset::preview(r#"{"particles": 2048, "directions": 64, "output_resolution": 64}"#),
         Preset::final_(r#"{"particles": 8192, "directions": 128, "output_resolution": 128}"#),
     ],
-    // furnace.rs: 1024 particles, 48 directions, output 16; extreme.rs: 256 particles, output 16.
+    // furnace.rs's (its bounds were measured with them).
     test: Preset::test(r#"{"particles": 1024, "directions": 48, "output_resolution": 16}"#),
     cpu: |m| Ok(Box::new(super::Network::from_settings(m)?)),
     gpu: true,

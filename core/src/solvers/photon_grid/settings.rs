@@ -99,7 +99,7 @@ crate::settings! {
         /// less noisy below ~2^21 photons; their bias (one HG lobe per cell cannot hold the flat,
         /// half-range radiance leaving a surface) shows at g 0.9 and on dense clouds.
         angular: Angular = Angular::Lobes,
-            "what a cache cell keeps of the light's directions: two HG lobes (any view, GPU) or S towards this camera, each photon weighted by the exact phase (no lobe bias, noisier; CPU only)";
+            "what a cache cell keeps of the light's directions: two HG lobes (any view, GPU) or S towards this camera by the exact phase (no lobe bias, noisier; CPU only)";
         /// The temporal ring (Sec. 3.2, 4.2; ring.rs): the cache is the sum of m generations of
         /// photons / m each; a session's later frame traces one new generation and drops the
         /// oldest. 1: every frame of a session is the one-off solve (session.rs's contract).
@@ -129,8 +129,7 @@ pub const ENTRY: SolverEntry = SolverEntry {
         Preset::preview(r#"{"photons": 262144, "cache_resolution": 24, "output_resolution": 64}"#),
         Preset::final_(r#"{"photons": 2097152, "cache_resolution": 48, "output_resolution": 128}"#),
     ],
-    // furnace.rs: 65536 photons, cache 10, output 16; extreme.rs: 4096 photons, cache 8,
-    // output 16.
+    // furnace.rs's (its bounds were measured with them).
     test: Preset::test(r#"{"photons": 65536, "cache_resolution": 10, "output_resolution": 16}"#),
     cpu: |m| Ok(Box::new(super::PhotonGrid::from_settings(m)?)),
     gpu: true,
