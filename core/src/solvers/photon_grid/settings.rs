@@ -159,9 +159,7 @@ impl PhotonGridSettings {
     /// `ScatteringGrid::over_medium` also covers the one-voxel trilinear ramp on each side, so
     /// a 64-voxel medium at 64 would get 64 points over 66 voxel spacings: points between the
     /// voxel centres, S sampled where the density is interpolated and interpolated again by
-    /// the compositor. Measured on the dense cloud (64 voxels; exact phase per deposit, so no
-    /// lobe bias, 2^22 photons): image 0.113 (x1.072) at 64 against 0.087 (x1.023) on the
-    /// voxels (66 points).
+    /// the compositor (measured: docs/solvers/photon-grid.md, `output_resolution`).
     pub fn output_dim(&self, medium: &crate::medium::Medium) -> u32 {
         let (lo, hi) = medium.grid.bbox();
         let voxels = (hi - lo + glam::IVec3::ONE).max_element().max(1) as u32;
