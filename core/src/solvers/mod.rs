@@ -9,6 +9,7 @@ pub mod pop;
 pub mod reference;
 pub mod registry;
 pub mod session;
+pub mod settings_table;
 pub mod vpl;
 #[cfg(test)]
 pub(crate) mod testing;

@@ -1,8 +1,11 @@
-//! The registry against the settings structs and constructors it describes: a table that
-//! drifted from a struct (a key added, a default or a range changed in `validate()` only)
-//! fails here.
+//! The registry against the settings structs and constructors it describes. The tables are
+//! generated from the structs (`settings!`), so what can still go wrong is checked here: a
+//! default outside its own range or of another JSON type, a constructor that does not validate
+//! (or refuses a value naming another setting), a range end off by one, a cross-field check
+//! refusing what the table says is fine, a preset that does not build, a help of several lines.
 
 use super::*;
+use serde_json::Map;
 
 fn defaults_of(entry: &SolverEntry) -> Map<String, Value> {
     match (entry.defaults)() {
@@ -116,9 +119,12 @@ fn ranges_match_validate() {
 fn presets_build_their_solver_and_name_only_its_settings() {
     for entry in SOLVERS {
         assert!(!entry.presets.is_empty(), "{}: no presets", entry.name);
-        for p in entry.presets {
+        for p in entry.presets.iter().chain([&entry.test]) {
             let parsed: Value = serde_json::from_str(p.settings_json).unwrap_or_else(|e| panic!("{}/{}: {e}", entry.name, p.name));
             assert!(parsed.is_object() && !p.settings().is_empty(), "{}/{}: not a settings object", entry.name, p.name);
+            for key in p.settings().keys() {
+                assert!(entry.settings.iter().any(|s| s.name == key), "{}/{}: `{key}` is no setting", entry.name, p.name);
+            }
             entry.validate(&p.settings()).unwrap_or_else(|e| panic!("{}/{}: refused: {e}", entry.name, p.name));
         }
     }
@@ -127,6 +133,57 @@ fn presets_build_their_solver_and_name_only_its_settings() {
     for e in SOLVERS {
         assert_eq!(names(e), names(&SOLVERS[0]), "{}: preset names differ from {}", e.name, SOLVERS[0].name);
     }
+}
+
+/// Every solver has a `test` preset, found by name, and it stays out of the hosts' menu (the
+/// presets of the JSON).
+#[test]
+fn every_solver_has_a_test_preset_outside_the_hosts_menu() {
+    for entry in SOLVERS {
+        let test = entry.preset("test").unwrap_or_else(|| panic!("{}: no test preset", entry.name));
+        assert_eq!((test.name, test.settings_json), ("test", entry.test.settings_json), "{}", entry.name);
+        assert!(entry.presets.iter().all(|p| p.name != "test"), "{}: test preset in the hosts' menu", entry.name);
+        assert!(entry.preset("no such preset").is_none());
+    }
+    for s in to_json()["solvers"].as_array().unwrap() {
+        assert!(s["presets"].as_array().unwrap().iter().all(|p| p["name"] != "test"), "{}: test preset in the JSON", s["name"]);
+    }
+}
+
+/// Help is what a host shows as a tooltip: one line, one sentence, no measurement log (those
+/// live in docs/solvers/<name>.md).
+#[test]
+fn help_strings_are_short_single_sentences() {
+    for entry in SOLVERS {
+        let helps = std::iter::once((entry.name, entry.help)).chain(entry.settings.iter().map(|s| (s.name, s.help)));
+        for (what, help) in helps {
+            let what = format!("{}.{what}", entry.name);
+            assert!(!help.is_empty() && !help.contains('\n'), "{what}: help must be one line");
+            assert!(help.len() <= 200, "{what}: help of {} characters: move the detail to docs/solvers/{}.md", help.len(), entry.name);
+            assert!(!help.trim_end_matches('.').contains(". "), "{what}: help of several sentences: {help}");
+        }
+    }
+}
+
+/// The generated range check: the ends as declared, 0 where it stands for a derived value, a
+/// non-finite float refused, and a message that says the range.
+#[test]
+fn setting_check_refuses_outside_its_range_and_says_why() {
+    let spec = |range, zero| SettingSpec { name: "x", kind: SettingType::Float, range, zero, choices: &[], help: "h" };
+    let half_open = Range { min: Some(0.0), max: Some(1.0), min_exclusive: false, max_exclusive: true };
+    let s = spec(Some(half_open), None);
+    assert!(s.check(Some(0.0)).is_ok() && s.check(Some(0.999)).is_ok() && s.check(None).is_ok());
+    let e = s.check(Some(1.0)).unwrap_err();
+    assert!(matches!(&e, Error::Scene { field, .. } if field == "solver.x"), "{e}");
+    assert!(e.to_string().contains("must be in [0, 1), got 1"), "{e}");
+    assert!(s.check(Some(-1e-9)).is_err() && s.check(Some(f64::NAN)).is_err() && s.check(Some(f64::INFINITY)).is_err());
+    let z = spec(Some(Range::closed(2.0, 8.0)), Some("derived"));
+    assert!(z.check(Some(0.0)).is_ok() && z.check(Some(2.0)).is_ok() && z.check(Some(8.0)).is_ok());
+    let e = z.check(Some(1.0)).unwrap_err().to_string();
+    assert!(e.contains("must be 0 (derived) or in [2, 8], got 1"), "{e}");
+    let unbounded = spec(Some(Range { min: Some(0.0), max: None, min_exclusive: true, max_exclusive: false }), None);
+    assert!(unbounded.check(Some(1e30)).is_ok() && unbounded.check(Some(0.0)).is_err());
+    assert!(unbounded.check(Some(0.0)).unwrap_err().to_string().contains("must be > 0"));
 }
 
 #[test]
@@ -160,4 +217,28 @@ fn range_contains_respects_open_ends() {
     let r = Range { min: Some(0.0), max: Some(1.0), min_exclusive: true, max_exclusive: false };
     assert!(!r.contains(0.0) && r.contains(1e-9) && r.contains(1.0) && !r.contains(1.0 + 1e-9));
     assert!(Range::closed(2.0, 4.0).contains(2.0) && !Range::closed(2.0, 4.0).contains(4.5));
+}
+
+/// Every solver's `test` preset solves a small lit box, quickly, to a finite, non-negative,
+/// non-zero S: small settings that still run the whole solver.
+#[test]
+fn test_presets_solve_a_small_scene() {
+    use crate::scene::{Camera, Light, Scene};
+    use glam::Vec3;
+    let scene = Scene {
+        medium: super::super::testing::homogeneous_box(8, 0.125, 4.0, 0.9, 0.6),
+        lights: vec![Light::Distant { direction: Vec3::new(0.3, 0.2, -1.0).normalize(), irradiance: Vec3::ONE, half_angle: 0.0 }],
+        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.5), Vec3::ZERO, Vec3::Z, 22.0, 12, 12),
+        solver: Default::default(),
+    };
+    for entry in SOLVERS {
+        let t = std::time::Instant::now();
+        // Through the pipeline, as hosts solve (auto picks a solver there).
+        let solved = crate::pipeline::solve(&scene, entry.name, &entry.test.settings(), crate::pipeline::Devices::cpu(), &crate::stages::NoProgress);
+        let out = solved.unwrap_or_else(|e| panic!("{}: {e}", entry.name)).output;
+        let s = &out.scattering.data;
+        assert!(!s.is_empty() && s.iter().all(|v| v.is_finite() && v.min_element() >= 0.0), "{}: S not finite and >= 0", entry.name);
+        assert!(s.iter().map(|v| v.x).sum::<f32>() > 0.0, "{}: S is zero", entry.name);
+        eprintln!("{}: test preset {:.2} s", entry.name, t.elapsed().as_secs_f64());
+    }
 }

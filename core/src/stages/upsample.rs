@@ -13,11 +13,11 @@ use rayon::prelude::*;
 
 use super::mip::MediumMip;
 use super::ScatteringGrid;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::medium::Medium;
 
 /// The upsampling's settings, as every solver that upsamples through it declares them
-/// (pop, vpl, lpm: the same names, limits and messages for all).
+/// (pop, vpl, lpm: the same names and ranges in each one's settings table).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Upsampling {
     /// The output grid's longest side in points (`ScatteringGrid::over_medium`).
@@ -28,23 +28,6 @@ pub struct Upsampling {
     pub range_sigma: f32,
     /// The spatial Gaussian's width, in coarse cells.
     pub spatial_sigma: f32,
-}
-
-impl Upsampling {
-    /// The checks every solver's `validate()` runs on these settings.
-    pub fn validate(&self) -> Result<()> {
-        let Upsampling { output_resolution, range_sigma, spatial_sigma, .. } = *self;
-        if !(2..=1024).contains(&output_resolution) {
-            return Err(Error::scene("solver.output_resolution", format!("must be in 2..=1024, got {output_resolution}")));
-        }
-        if !(range_sigma.is_finite() && range_sigma > 0.0) {
-            return Err(Error::scene("solver.range_sigma", format!("must be > 0, got {range_sigma}")));
-        }
-        if !(spatial_sigma.is_finite() && spatial_sigma > 0.0 && spatial_sigma <= 4.0) {
-            return Err(Error::scene("solver.spatial_sigma", format!("must be in (0, 4], got {spatial_sigma}")));
-        }
-        Ok(())
-    }
 }
 
 /// A solver's coarse solution, ready to upsample: J (in-scattered radiance per unit sigma_s)

@@ -10,51 +10,23 @@
 pub mod features;
 pub mod model;
 pub mod pick;
+pub mod settings;
 
-use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 pub use features::Features;
 pub use model::Model;
 pub use pick::Choice;
+pub use settings::AutoSettings;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
+#[cfg(test)]
+use crate::error::Error;
 use crate::solvers::parse_settings;
 use crate::scene::Scene;
 
 /// The solver's name in the registry.
 pub const NAME: &str = "auto";
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct AutoSettings {
-    /// Image relative RMSE to reach against a converged reference. The default, 0.25, is reached
-    /// by some measured configuration on every measured scene whose reference is converged
-    /// enough to tell (measurements.json from scripts/bench_solvers.py: the dense cloud's best
-    /// is photon-grid final at 0.22; see `default_target_is_reached_on_every_measured_scene` in tests.rs).
-    pub target_error: f64,
-    /// Seconds (CPU, solve + composite) the solve may take; 0: no budget, reach the target.
-    /// With a budget, the lowest predicted error within it.
-    pub time_budget: f64,
-}
-
-impl Default for AutoSettings {
-    fn default() -> Self {
-        AutoSettings { target_error: 0.25, time_budget: 0.0 }
-    }
-}
-
-impl AutoSettings {
-    pub fn validate(&self) -> Result<()> {
-        if !(self.target_error.is_finite() && self.target_error > 0.0) {
-            return Err(Error::scene("solver.target_error", format!("must be a finite number > 0 (an image relative RMSE), got {}", self.target_error)));
-        }
-        if !(self.time_budget.is_finite() && self.time_budget >= 0.0) {
-            return Err(Error::scene("solver.time_budget", format!("must be a finite number of seconds >= 0 (0: no budget), got {}", self.time_budget)));
-        }
-        Ok(())
-    }
-}
 
 /// Checks `auto`'s settings (its registry entry's validation).
 pub fn validate(settings: &Map<String, Value>) -> Result<()> {

@@ -1,138 +1,103 @@
-//! Settings of `lpm`, read from the scene JSON's `solver` block and `--set KEY=VALUE`.
-//! Unknown keys are an error (a typo must not silently fall back to a default).
-
-use serde::{Deserialize, Serialize};
+//! Settings of `lpm`, read from the scene JSON's `solver` block and `--set KEY=VALUE`, and its
+//! registry entry. Unknown keys are an error (a typo must not silently fall back to a default).
+//! The measurements behind the defaults: docs/solvers/lpm.md.
 
 use crate::error::{Error, Result};
+use crate::solvers::settings_table::LightType;
+use crate::solvers::settings_table::{Make, Preset, SolverEntry, defaults_of};
 
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(default, deny_unknown_fields)]
-pub struct LpmSettings {
-    /// Cells of the propagation grid along the medium's longest side. The propagation costs
-    /// cells x 6 x `directions` per order; 32 keeps an order of the 64-voxel plume near 0.1 s
-    /// on one core, and the error against the fixtures falls with it (tests.rs).
-    pub grid_resolution: u32,
-    /// Propagation directions per cube face (n, a perfect square: a k x k lattice over the
-    /// face). The paper's 25; fewer shows the ray effect, more costs linearly per order (and
-    /// the phase table, 6n x 6n, quadratically: 256 is its cap).
-    pub directions: u32,
-    /// Storage directions per face side: m = 6 x `storage_per_face`^2 bins of U. The paper's
-    /// 6 (1 per face) flattens an anisotropic phase function to one value per face. Measured
-    /// against the fixtures (grid 24, 25 directions), image rel. RMSE for s = 1 / 2 / 5.
-    /// Without delta-M: cube g 0 0.023 / 0.023; cube g 0.7 0.115 / 0.104; cube g 0.9 0.40 /
-    /// 0.41 / 0.34 (all about x1.35 too bright: the 16-degree propagation bins blur a g 0.9
-    /// lobe whatever m is); plume 0.250 / 0.248. With delta-M (the default, which leaves U the
-    /// residual lobe, g' = g / (1 + g)): cube g 0.7 0.098 / 0.087 / 0.096; cube g 0.9 0.147 /
-    /// 0.157 / 0.150; plume 0.168 / 0.158 / 0.192; plume beside a point light (g 0.6) 0.085 /
-    /// 0.067 / 0.061; dense cloud 0.610 / 0.634 / 0.487; domes uniform 0.095 / 0.095 /
-    /// 0.095, sun 0.164 / 0.162 / 0.173, milk cube 0.124 / 0.167 / 0.111. So g > 0.5 needs no
-    /// more than the paper's 6 once delta-M is in: 24 bins (4x the collect's cost, about 2x
-    /// the solve's time) and 150 (6-15x the solve's time) move the errors both ways by up to
-    /// 0.12 (only the dense cloud gains clearly, 0.61 to 0.49 at 150), and the default stays 6. Above
-    /// sqrt(directions) it acts as sqrt(directions) (one storage bin per propagation bin).
-    pub storage_per_face: u32,
-    /// Stop when the largest U of an order falls below this fraction of the first order's
-    /// largest (Fattal's criterion, relative so that it does not depend on the lights' units).
-    pub epsilon: f32,
-    /// Cap on propagated orders after the first (a thick white medium converges slowly: the
-    /// furnace cloud needs hundreds).
-    pub max_orders: u32,
-    /// First scattering of distant lights: `exact` (transmittance marched to every cell, like
-    /// POP's exact sweep) or `boundary` (the paper: the sun is radiance E / solid angle in its
-    /// direction bin at the boundary). Measured in tests.rs: exact is closer, see there.
-    pub first_order: FirstOrder,
-    /// The delta-M split of the phase function's forward peak (delta_m.rs): the light the
-    /// peak (f = g^2) scatters goes on unscattered through sigma_t (1 - albedo f), and U
-    /// scatters with the residual lobe g / (1 + g), which the 16-degree direction bins can
-    /// represent; S's single scattering keeps the true medium, J towards the viewer the true
-    /// phase. Measured (tests.rs, image rel. RMSE, on / off): cube g 0.9 0.147 / 0.403, plume
-    /// 0.168 / 0.250, dense cloud 0.610 / 0.993, point light (g 0.6) 0.085 / 0.164, milk dome
-    /// 0.124 / 0.277, cube g 0.7 0.098 / 0.115 (its grid 0.086 / 0.078), isotropic the same;
-    /// and 3-4x fewer orders to epsilon. Off: the paper's phase table as it is.
-    pub delta_m: bool,
-    /// Bytes the propagation's working buffers (the maps carried between slices and the
-    /// slice's per-direction ray buffer) may use; the slice thickness is picked from it
-    /// (Sec. 4.2). 0: one slice spanning the whole volume. Refused with the size needed when a
-    /// one-layer slice does not fit. With `out_of_core` it bounds everything a slice holds,
-    /// the slice's boxes of the per-cell arrays included (out_of_core.rs `slab_bytes`).
-    pub memory_budget: u64,
-    /// Keep the per-cell arrays (sigma_t, density, U of two orders, J) in scratch files in the
-    /// system temp dir (`TMPDIR`), read and written a slab at a time, and bound the whole
-    /// solve, not only the sweeps, by `memory_budget` (out_of_core.rs): for grids whose arrays
-    /// do not fit in memory. CPU only; distant lights need `first_order: boundary`, local
-    /// lights are refused. Same J as in memory, to the bit.
-    pub out_of_core: bool,
-    /// Largest side of the returned scattering grid.
-    pub output_resolution: u32,
-    /// Joint bilateral upsampling guided by the density (pop's upsample.rs); off: trilinear.
-    pub upsample: bool,
-    /// Range sigma of the bilateral filter, a fraction of the largest density.
-    pub range_sigma: f32,
-    /// Spatial sigma of the bilateral filter, in propagation cells.
-    pub spatial_sigma: f32,
-    /// Dome directions of the exact single scattering (the compositor's grid).
-    pub dome_directions: u32,
-}
-
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum FirstOrder {
-    Exact,
-    Boundary,
-}
-
-impl Default for LpmSettings {
-    fn default() -> Self {
-        LpmSettings {
-            grid_resolution: 32,
-            directions: 25,
-            storage_per_face: 1,
-            epsilon: 1e-3,
-            max_orders: 200,
-            first_order: FirstOrder::Exact,
-            delta_m: true,
-            memory_budget: 0,
-            out_of_core: false,
-            output_resolution: 64,
-            upsample: true,
-            range_sigma: 0.25,
-            spatial_sigma: 0.7,
-            dome_directions: 32,
-        }
+crate::setting_choices! {
+    /// First scattering of distant lights.
+    pub enum FirstOrder {
+        /// Transmittance marched to every cell, like POP's exact sweep.
+        Exact = "exact",
+        /// The paper: the sun is radiance E / solid angle in its direction bin at the boundary.
+        Boundary = "boundary",
     }
 }
+
+crate::settings! {
+    pub struct LpmSettings {
+        /// The propagation costs cells x 6 x `directions` per order; 32 keeps an order of the
+        /// 64-voxel plume near 0.1 s on one core.
+        grid_resolution: u32 = 32, range(>= 2, <= 512),
+            "cells of the propagation grid along the longest side";
+        /// A k x k lattice over each face. Fewer shows the ray effect; more costs linearly per
+        /// order, and the 6n x 6n phase table quadratically (256 is its cap).
+        directions: u32 = 25, range(>= 1, <= 256),
+            "propagation directions per cube face (a perfect square; the paper's 25)";
+        /// With delta-M on, the paper's 6 bins (1 per face) are enough for g > 0.5: more bins
+        /// move the errors both ways at several times the cost. Above sqrt(directions) it acts
+        /// as sqrt(directions).
+        storage_per_face: u32 = 1, range(>= 1, <= 32),
+            "storage directions m = 6 x this^2 (1: the paper's 6, enough for g > 0.5 with delta_m on)";
+        /// Fattal's criterion, relative so that it does not depend on the lights' units.
+        epsilon: f32 = 1e-3, range(> 0, < 1),
+            "stop when an order's largest U falls below this fraction of the first order's";
+        /// A thick white medium converges slowly: the furnace cloud needs hundreds.
+        max_orders: u32 = 200, range(>= 1, <= 100_000),
+            "cap on propagated orders";
+        /// Exact is closer (tests.rs).
+        first_order: FirstOrder = FirstOrder::Exact,
+            "first scattering of distant lights: exact transmittance to every cell, or the paper's boundary radiance in one bin";
+        /// delta_m.rs: the peak's light goes on unscattered through sigma_t (1 - albedo f), and U
+        /// scatters with the residual lobe g / (1 + g), which the 16-degree direction bins can
+        /// represent; S's single scattering keeps the true medium. Also 3-4x fewer orders.
+        delta_m: bool = true,
+            "delta-M split of the phase function's forward peak (f = g^2): the peak's light goes on unscattered, the direction bins carry the broad rest";
+        /// Sec. 4.2. Refused with the size needed when a one-layer slice does not fit.
+        memory_budget: u64 = 0,
+            "bytes for the propagation's slice buffers, which set the slice thickness (with out_of_core: everything a slice holds; 0: one slice)";
+        /// out_of_core.rs: the per-cell arrays (sigma_t, density, U of two orders, J) in scratch
+        /// files in `TMPDIR`, read and written a slab at a time; same J as in memory, to the bit.
+        out_of_core: bool = false,
+            "keep the per-cell arrays in scratch files a slab at a time, so that memory_budget bounds the whole solve (CPU, first_order boundary, no local lights)";
+        output_resolution: u32 = 64, range(>= 2, <= 1024),
+            "largest side of the returned scattering grid";
+        /// pop's upsample.rs.
+        upsample: bool = true,
+            "joint bilateral upsampling guided by the density (off: trilinear)";
+        range_sigma: f32 = 0.25, range(> 0),
+            "range sigma of the bilateral filter, a fraction of the largest density";
+        spatial_sigma: f32 = 0.7, range(> 0, <= 4),
+            "spatial sigma of the bilateral filter, in propagation cells";
+        /// The compositor's grid.
+        dome_directions: u32 = 32, range(>= 1, <= 1024),
+            "dome directions of the exact single scattering";
+    }
+    check = cross_checks;
+}
+
+/// `directions` is a k x k lattice per face.
+fn cross_checks(s: &LpmSettings) -> Result<()> {
+    let k = s.lattice_side();
+    if k * k != s.directions {
+        return Err(Error::scene("solver.directions", format!("must be a perfect square (k x k per face), got {}", s.directions)));
+    }
+    Ok(())
+}
+
+pub const ENTRY: SolverEntry = SolverEntry {
+    name: "lpm",
+    label: "Light Propagation Maps",
+    help: "light propagation maps (paper 05): deterministic discrete ordinates, every order to a threshold, streamed in slices under a memory budget (also for media larger than memory)",
+    settings: LpmSettings::SETTINGS,
+    defaults: defaults_of::<LpmSettings>,
+    lights: &LightType::ALL,
+    presets: &[
+        Preset::draft(r#"{"grid_resolution": 16, "directions": 9, "output_resolution": 48}"#),
+        Preset::preview(r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"#),
+        Preset::final_(r#"{"grid_resolution": 64, "directions": 49, "output_resolution": 128}"#),
+    ],
+    // furnace.rs's (its bounds were measured with them).
+    test: Preset::test(r#"{"grid_resolution": 16, "output_resolution": 16}"#),
+    make: Make::Solver(|m| Ok(Box::new(super::Lpm::from_settings(m)?))),
+    gpu: true,
+};
 
 impl LpmSettings {
     /// Side k of the k x k direction lattice per face.
     pub fn lattice_side(&self) -> u32 {
         (self.directions as f64).sqrt().round() as u32
-    }
-
-    pub fn validate(&self) -> Result<()> {
-        let bad = |m: &str| {
-            let field = m.split(' ').next().unwrap_or("");
-            Err(Error::scene(format!("solver.{field}"), m.to_string()))
-        };
-        if !(2..=512).contains(&self.grid_resolution) {
-            return bad("grid_resolution must be in [2, 512]");
-        }
-        let k = self.lattice_side();
-        if !(1..=256).contains(&self.directions) || k * k != self.directions {
-            return bad("directions must be a perfect square (k x k per face) in [1, 256]");
-        }
-        if !(1..=32).contains(&self.storage_per_face) {
-            return bad("storage_per_face must be in [1, 32]");
-        }
-        if !(self.epsilon > 0.0 && self.epsilon < 1.0) {
-            return bad("epsilon must be in (0, 1)");
-        }
-        if !(1..=100_000).contains(&self.max_orders) {
-            return bad("max_orders must be in [1, 100000]");
-        }
-        self.upsampling().validate()?;
-        if !(1..=1024).contains(&self.dome_directions) {
-            return bad("dome_directions must be in [1, 1024]");
-        }
-        Ok(())
     }
 }

@@ -11,11 +11,11 @@
 //! - One PCG stream per pixel (or grid point): deterministic for a seed, any thread count.
 
 mod on_voxels;
+pub mod settings;
 mod tracer;
 
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
-use serde::Deserialize;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
@@ -24,68 +24,8 @@ use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::rng::Rng;
 use crate::scene::Scene;
+pub use settings::ReferenceSettings;
 pub use tracer::{PathRadiance, Tracer};
-
-#[derive(Clone, Debug, Deserialize, serde::Serialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ReferenceSettings {
-    /// Samples per pixel for images.
-    pub spp: u32,
-    pub seed: u64,
-    /// Maximum number of scattering events on a path.
-    pub max_depth: u32,
-    /// Scattering events before Russian roulette starts.
-    pub rr_depth: u32,
-    /// Leave the environment seen directly through the medium out of the image.
-    pub transparent: bool,
-    /// Scattering grid: largest dimension, and paths per grid point.
-    pub grid_resolution: u32,
-    pub grid_spp: u32,
-    /// Largest side of the returned grid, on the medium's voxels (at most): S = sigma_s of each
-    /// voxel times L interpolated from the `grid_resolution` grid (on_voxels.rs). 0: the
-    /// `grid_resolution` grid itself, with S point-sampled there (darker or brighter than the
-    /// path-traced image when coarser than the voxels: measured in on_voxels.rs).
-    pub output_resolution: u32,
-    /// Cells per axis of the majorant grid.
-    pub majorant_resolution: u32,
-}
-
-impl Default for ReferenceSettings {
-    fn default() -> Self {
-        ReferenceSettings {
-            spp: 64,
-            seed: 0,
-            max_depth: 1000,
-            rr_depth: 8,
-            transparent: false,
-            grid_resolution: 32,
-            grid_spp: 256,
-            output_resolution: 0,
-            majorant_resolution: 64,
-        }
-    }
-}
-
-impl ReferenceSettings {
-    pub fn validate(&self) -> Result<()> {
-        if self.spp == 0 || self.spp > 1 << 20 {
-            return Err(Error::scene("solver.spp", format!("must be in 1..=1048576, got {}", self.spp)));
-        }
-        if self.grid_spp == 0 || self.grid_spp > 1 << 20 {
-            return Err(Error::scene("solver.grid_spp", format!("must be in 1..=1048576, got {}", self.grid_spp)));
-        }
-        if !(2..=1024).contains(&self.grid_resolution) {
-            return Err(Error::scene("solver.grid_resolution", format!("must be in 2..=1024, got {}", self.grid_resolution)));
-        }
-        if self.output_resolution != 0 && !(2..=1024).contains(&self.output_resolution) {
-            return Err(Error::scene("solver.output_resolution", format!("must be 0 or in 2..=1024, got {}", self.output_resolution)));
-        }
-        if !(1..=512).contains(&self.majorant_resolution) {
-            return Err(Error::scene("solver.majorant_resolution", "must be in 1..=512"));
-        }
-        Ok(())
-    }
-}
 
 /// Paths between two reads of the cancel flag (a path is microseconds to a few ms).
 const CANCEL_CHECK: u32 = 16;
