@@ -8,7 +8,7 @@ use glam::{Quat, Vec3};
 use serde_json::json;
 use std::time::Instant;
 
-use super::tests::{cube_scene, plume_scene};
+use super::tests::cube_scene;
 use super::*;
 use crate::scene::{Camera, Environment, Light};
 use crate::solvers::testing::{cloud::cloud_scene, errors_against_fixture};
@@ -28,7 +28,7 @@ fn phase(out: &SolveOutput, name: &str) -> f64 {
 #[ignore]
 fn bench_network_error_vs_time() {
     let mut rows = Vec::new();
-    for (name, sc) in [("cube_g0", cube_scene(0.0, 1.0)), ("cube_g09", cube_scene(0.9, 1.0)), ("plume", plume_scene()), ("cloud", cloud_scene())] {
+    for (name, sc) in [("cube_g0", cube_scene(0.0, 1.0)), ("cube_g09", cube_scene(0.9, 1.0)), ("plume", crate::solvers::testing::fixture_scene("plume")), ("cloud", cloud_scene())] {
         for n in [1024u32, 2048, 4096] {
             let s = NetworkSettings { particles: n, output_resolution: 32, ..Default::default() };
             let t = Instant::now();

@@ -8,7 +8,7 @@ use glam::Vec3;
 use super::{NearField, Vpl, VplSettings};
 use crate::stages::single_scattering::single_scattering_grid;
 use crate::scene::Scene;
-use crate::solvers::testing::errors_against_fixture;
+use crate::solvers::testing::{against_reference, errors_against_fixture};
 use crate::solvers::{Solver};
 use crate::stages::NoProgress;
 
@@ -47,30 +47,15 @@ fn vpl_same_seed_same_result() {
     assert!(a.data != c.data);
 }
 
-fn check_case(name: &str, near_field: NearField, max_image: f64, max_grid: f64) {
-    let sc = case(name);
-    let t = std::time::Instant::now();
-    let (out, rep) = Vpl::new(VplSettings { near_field, ..test_settings() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
-    let e = errors_against_fixture(name, &sc, &out.scattering);
-    eprintln!(
-        "vpl {name} {near_field:?}: {e}; {} VPLs, {:.1}% near connections, {:.1} s",
-        rep.vpls,
-        100.0 * rep.gather.near as f64 / rep.gather.connections.max(1) as f64,
-        t.elapsed().as_secs_f64()
-    );
-    assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
-    assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+/// vpl with `test_settings()` and `near_field` (a ratchet row's solver).
+fn test_vpl(near_field: NearField) -> Vpl {
+    Vpl::new(VplSettings { near_field, ..test_settings() }).unwrap()
 }
 
-macro_rules! against_reference {
-    ($($test:ident: $case:literal, $nf:expr, $image:literal, $grid:literal;)*) => {
-        $(
-            #[test]
-            fn $test() {
-                check_case($case, $nf, $image, $grid);
-            }
-        )*
-    };
+/// A ratchet row's further print: the VPLs and the share of near connections.
+fn print_vpls(name: &str, _: &crate::solvers::testing::Errors, out: &SolveOutput) {
+    let rep = out.report::<VplReport>().expect("vpl's report");
+    eprintln!("vpl {name}: {} VPLs, {:.1}% near connections", rep.vpls, 100.0 * rep.gather.near as f64 / rep.gather.connections.max(1) as f64);
 }
 
 // Ratchets against the converged fixtures (65536 paths per pixel; their own noise 0.5-3%):
@@ -84,10 +69,12 @@ macro_rules! against_reference {
 // x1.024: the clamp loses ~10% of the multiple scattering, the ball kernel does not, so
 // `near_field: ball` is the default.
 against_reference! {
-    vpl_cube_g0_against_reference: "cube_g0", NearField::Ball, 0.086, 0.081;
-    vpl_cube_g07_against_reference: "cube_g07", NearField::Ball, 0.173, 0.163;
-    vpl_plume_against_reference: "plume", NearField::Ball, 0.370, 0.501;
-    vpl_cube_g07_clamp_against_reference: "cube_g07", NearField::Clamp, 0.177, 0.225;
+    solver: "vpl";
+    then: print_vpls;
+    vpl_cube_g0_against_reference: "cube_g0", test_vpl(NearField::Ball), 0.086, 0.081;
+    vpl_cube_g07_against_reference: "cube_g07", test_vpl(NearField::Ball), 0.173, 0.163;
+    vpl_plume_against_reference: "plume", test_vpl(NearField::Ball), 0.370, 0.501;
+    vpl_cube_g07_clamp_against_reference: "cube_g07", test_vpl(NearField::Clamp), 0.177, 0.225;
 }
 
 // Local lights beside the plume (pop/radial's fixtures; no multiple-scattering AOV in them),
@@ -97,9 +84,11 @@ against_reference! {
 // `normalize_energy` and `phase_cone`: point 0.1114 / 0.2234 x0.923, spot 0.0932 / 0.1343
 // x0.977, rect 0.1470 / 0.2251 x0.960.
 against_reference! {
-    vpl_plume_point_against_reference: "plume_point", NearField::Ball, 0.133, 0.233;
-    vpl_plume_spot_against_reference: "plume_spot", NearField::Ball, 0.113, 0.158;
-    vpl_plume_rect_against_reference: "plume_rect", NearField::Ball, 0.172, 0.258;
+    solver: "vpl";
+    then: print_vpls;
+    vpl_plume_point_against_reference: "plume_point", test_vpl(NearField::Ball), 0.133, 0.233;
+    vpl_plume_spot_against_reference: "plume_spot", test_vpl(NearField::Ball), 0.113, 0.158;
+    vpl_plume_rect_against_reference: "plume_rect", test_vpl(NearField::Ball), 0.172, 0.258;
 }
 
 // The dense cloud (optical depth over 30, g 0.9), same settings and margins. Measured: image
@@ -111,7 +100,9 @@ against_reference! {
 // (which smooths the two g 0.9 lobes below a quarter cell, the tail's source): 0.7072 /
 // 0.7643, x1.036; ratchet tightened.
 against_reference! {
-    vpl_cloud_against_reference: "cloud", NearField::Ball, 0.788, 0.851;
+    solver: "vpl";
+    then: print_vpls;
+    vpl_cloud_against_reference: "cloud", test_vpl(NearField::Ball), 0.788, 0.851;
 }
 
 // The dense cloud with the attenuated top hat (`near_field: hat`, what `auto` takes there):
@@ -119,7 +110,9 @@ against_reference! {
 // quarter of one, so no VPL's 1/d^2 peaks. Measured: image 0.4209 / grid 0.4179, x0.945
 // (the ball's row above: 0.7072 / 0.7643). Same margins.
 against_reference! {
-    vpl_cloud_hat_against_reference: "cloud", NearField::Hat, 0.473, 0.470;
+    solver: "vpl";
+    then: print_vpls;
+    vpl_cloud_hat_against_reference: "cloud", test_vpl(NearField::Hat), 0.473, 0.470;
 }
 
 // The default near field, `compensate` (4 vertices per gather point, depth 2, 256 walks per
@@ -129,10 +122,12 @@ against_reference! {
 // x0.989 (ball 0.3620 / 0.5311 x0.923); dense cloud 0.6219 / 0.7487 x0.655 (ball 0.7463 /
 // 0.7980 x0.660), in 2 s (plume) to 22 s (cloud) on one loaded core.
 against_reference! {
-    vpl_cube_g0_compensated_against_reference: "cube_g0", NearField::Compensate, 0.112, 0.077;
-    vpl_cube_g07_compensated_against_reference: "cube_g07", NearField::Compensate, 0.162, 0.137;
-    vpl_plume_compensated_against_reference: "plume", NearField::Compensate, 0.352, 0.453;
-    vpl_cloud_compensated_against_reference: "cloud", NearField::Compensate, 0.694, 0.834;
+    solver: "vpl";
+    then: print_vpls;
+    vpl_cube_g0_compensated_against_reference: "cube_g0", test_vpl(NearField::Compensate), 0.112, 0.077;
+    vpl_cube_g07_compensated_against_reference: "cube_g07", test_vpl(NearField::Compensate), 0.162, 0.137;
+    vpl_plume_compensated_against_reference: "plume", test_vpl(NearField::Compensate), 0.352, 0.453;
+    vpl_cloud_compensated_against_reference: "cloud", test_vpl(NearField::Compensate), 0.694, 0.834;
 }
 
 /// `transmittance` from VPL_TR (`map` or `march`; unset: the default) and `map_resolution`
