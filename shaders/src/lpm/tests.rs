@@ -1,11 +1,9 @@
 use super::*;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::medium::{procedural, GridLimits};
-use volscatter_core::scene::{Camera, Light, Scene};
+use volscatter_core::scene::Scene;
 use volscatter_core::solvers::lpm::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
 use volscatter_core::stages::NoProgress;
-use volscatter_core::Medium;
 
 #[test]
 fn wgsl_validates_and_layouts_match() {

@@ -1,12 +1,12 @@
 use std::cell::RefCell;
 
-use glam::{Affine3A, IVec3, Quat, Vec3};
+use glam::{Quat, Vec3};
 
 use super::*;
 use crate::network::{GpuBackend, CHECK_EVERY};
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::medium::{DensityGrid, GridLimits, Medium};
+use volscatter_core::solvers::testing::fixture_scene;
 use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend, SplatInput, VisibilityInput};
 use volscatter_core::solvers::network::visibility::DirectionLinks;

@@ -5,11 +5,8 @@ use crate::test_support::{gpu_or_skip, naga_struct_size};
 use glam::Vec3;
 use std::mem::size_of;
 use volscatter_core::image::relative_rmse;
-use volscatter_core::medium::{procedural, GridLimits};
-use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::vpl::{gather as cpu_gather, walks, NearField, Transmittance};
 use volscatter_core::stages::NoProgress;
-use volscatter_core::Medium;
 
 #[test]
 fn wgsl_validates_and_layouts_match() {
