@@ -37,11 +37,13 @@ fn network_phase_rows_sum_to_one() {
 #[test]
 fn network_albedo_zero_is_single_scattering() {
     let sc = cube_scene(0.7, 1e-4);
+
     // On the grid of the compositor's single-scattering AOV (CompositeOptions'
     // single_resolution 48, dome_directions 32), so that both are the same computation.
     let (grid, _) = solve(&sc, NetworkSettings { output_resolution: 48, dome_directions: 32, ..small() });
     let (rmse, ratio) = against_single_scattering(&sc, &grid);
     eprintln!("network albedo 1e-4: rel. RMSE {rmse:.5} mean ratio {ratio:.5}");
+
     // The network adds albedo^2-order light only (1e-4 of the single): the same grid's image.
     assert!(rmse < 1e-3 && (ratio - 1.0).abs() < 1e-3, "rmse {rmse} ratio {ratio}");
 }
@@ -91,30 +93,30 @@ fn ratchet(measured: f64) -> f64 {
 against_reference! {
     solver: "network";
     then: print_iterations;
+
     // Measured: image 0.092 (x1.083), grid 0.077 (x1.077): the furnace's column bias (+6-8%).
     network_cube_g0_vs_fixture: "cube_g0", fixture_network(), ratchet(0.092), ratchet(0.077);
+
     // Measured: image 0.086 (x1.087), grid 0.080 (x1.073).
     network_cube_g07_vs_fixture: "cube_g07", fixture_network(), ratchet(0.086), ratchet(0.080);
+
     // Measured: image 0.118 (x1.001), grid 0.115 (x1.036).
     network_cube_g09_vs_fixture: "cube_g09", fixture_network(), ratchet(0.118), ratchet(0.115);
+
     // Measured: image 0.196 (x1.024), grid 0.215 (x0.956): the plume's thin wisps hold few
     // particles, whose large balls smear their light (splat.rs).
     network_plume_vs_fixture: "plume", fixture_network(), ratchet(0.196), ratchet(0.215);
-}
 
-// The local-light and dome fixtures (testing::fixture_scene), measured at the same settings:
-// image / grid rel. RMSE (image mean ratio), ratchets as above. Measured: plume beside a
-// point light 0.100 / 0.132 (x1.07), spot 0.106 / 0.151 (x1.05), rect 0.102 / 0.131 (x1.07):
-// as good as lpm and better than vpl there (0.14-0.19). Under the dome scenes network is too
-// dark, as on the dense cloud: uniform dome 0.279 / 0.349 (x0.80), dome and sun 0.453 / 0.517
-// (x0.63): the same few-particles-per-column links (network_cloud_vs_fixture) keep the
-// scattered light from diffusing inwards from the lit surface. At g 0.9 network is closer than
-// vpl on the cube (0.118 against 0.09-0.14) and the plume (0.196 against 0.31), and farther on
-// the dense cloud (x0.36 against vpl's x0.66): vpl's walks carry light deep into the cloud,
-// network's column chains do not.
-against_reference! {
-    solver: "network";
-    then: print_iterations;
+    // The local-light and dome fixtures (testing::fixture_scene), measured at the same settings:
+    // image / grid rel. RMSE (image mean ratio), ratchets as above. Measured: plume beside a
+    // point light 0.100 / 0.132 (x1.07), spot 0.106 / 0.151 (x1.05), rect 0.102 / 0.131 (x1.07):
+    // as good as lpm and better than vpl there (0.14-0.19). Under the dome scenes network is too
+    // dark, as on the dense cloud: uniform dome 0.279 / 0.349 (x0.80), dome and sun 0.453 / 0.517
+    // (x0.63): the same few-particles-per-column links (network_cloud_vs_fixture) keep the
+    // scattered light from diffusing inwards from the lit surface. At g 0.9 network is closer than
+    // vpl on the cube (0.118 against 0.09-0.14) and the plume (0.196 against 0.31), and farther on
+    // the dense cloud (x0.36 against vpl's x0.66): vpl's walks carry light deep into the cloud,
+    // network's column chains do not.
     network_plume_point_vs_fixture: "plume_point", fixture_network(), ratchet(0.100), ratchet(0.132);
     network_plume_spot_vs_fixture: "plume_spot", fixture_network(), ratchet(0.106), ratchet(0.151);
     network_plume_rect_vs_fixture: "plume_rect", fixture_network(), ratchet(0.102), ratchet(0.131);

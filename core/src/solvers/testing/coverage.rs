@@ -57,14 +57,14 @@ fn every_registered_solver_is_in_every_harness() {
     let mut missing = Vec::new();
     for &name in SOLVER_NAMES.iter().filter(|n| !picks(n)) {
         if super::furnace::expectation_of(name).is_none() {
-            missing.push(format!("{name}: no furnace / energy tolerance (testing/furnace.rs `expectation`)"));
+            missing.push(format!("{name}: no furnace / energy tolerance (testing/furnace.rs `expectation_of`)"));
         }
         if !ratcheted.iter().any(|r| r == name) && no_ratchet_reason(name).is_none() {
             missing.push(format!("{name}: no `against_reference!` table (`solver: \"{name}\";`) in its tests"));
         }
     }
-    for name in &ratcheted {
-        assert!(SOLVER_NAMES.contains(&name.as_str()), "an `against_reference!` table names `{name}`, which the registry does not have");
+    for name in ratcheted.iter().filter(|r| !SOLVER_NAMES.contains(&r.as_str())) {
+        missing.push(format!("an `against_reference!` table names `{name}`, which the registry does not have"));
     }
     assert!(missing.is_empty(), "solvers missing from harnesses:\n{}", missing.join("\n"));
 }
