@@ -145,7 +145,8 @@ fn compare_runs_on_the_device_asked_for() {
     let (o, _) = compare("gpu", "pop,reference@1");
     assert_clean_failure(&o, "device: no GPU adapter");
     let (o, _) = compare("cpu", "popp,reference@1");
-    assert_clean_failure(&o, "unknown solver `popp` (known: reference, pop, vpl, photon-grid, network, lpm, auto)");
+    let known = volscatter_core::solvers::registry::SOLVER_NAMES.join(", ");
+    assert_clean_failure(&o, &format!("unknown solver `popp` (known: {known})"));
 }
 
 /// `--aov`: the EXR holds the layers asked for (default: background only) whatever the solver,
