@@ -34,9 +34,10 @@ stage() {
     lib=$(cargo test --release -p volscatter-gpu --lib --no-run --message-format=json 2>/dev/null |
         python3 -c 'import json,sys; print([j["executable"] for j in map(json.loads, sys.stdin) if j.get("executable")][-1])')
     rm -rf .devbin && mkdir -p .devbin
-    cp target/release/volscatter target/release/examples/bench_pop target/release/examples/bench_vpl .devbin/
+    cp target/release/volscatter target/release/examples/bench_pop target/release/examples/bench_vpl \
+        target/release/examples/bench_photon_grid_gpu target/release/examples/bench_network_gpu .devbin/
     cp "$lib" .devbin/volscatter-gpu-lib
-    strip .devbin/volscatter .devbin/bench_pop .devbin/bench_vpl .devbin/volscatter-gpu-lib
+    strip .devbin/volscatter .devbin/bench_pop .devbin/bench_vpl .devbin/bench_photon_grid_gpu .devbin/bench_network_gpu .devbin/volscatter-gpu-lib
     # The one shared fixture a GPU test reads (solve_tests.rs: ../../shared from the crate).
     mkdir -p .devbin/shared/fixtures/blender_noise_cube/volumes
     cp ../shared/fixtures/blender_noise_cube/volumes/Volume.vdb .devbin/shared/fixtures/blender_noise_cube/volumes/
@@ -104,7 +105,7 @@ run() {
     }
     if [ -n "$quick" ]; then
         step "vpl example" 120 bash -c '.devbin/bench_vpl --walks 512 --gathers 8 --output 32 --cases plume_point,plume_dense --near auto,compensate > "$0"' "$out/vpl_rows.jsonl"
-        step gpu-tests 600 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 1 vpl::tests solve::tests'
+        step gpu-tests 600 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --test-threads 1 vpl::tests solve::tests'
         step vpl 30 python3 scripts/bench_vpl.py --gpu-only --gpu-from "$out/vpl_rows.jsonl"
         step pop 120 python3 scripts/bench_gpu.py --sizes 64 --grids 16
         step photon-grid 120 python3 scripts/bench_photon_grid.py --gpu --quick
@@ -126,7 +127,7 @@ run() {
         # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees). One at a
         # time: in one process (nextest gives each its own) a test that destroys the shared
         # device would reopen it under another that checks it is never reopened.
-        step gpu-tests 150 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --skip ::bench:: --test-threads 1 --nocapture'
+        step gpu-tests 150 bash -c 'cd shaders && ../.devbin/volscatter-gpu-lib --ignored --test-threads 1 --nocapture'
     fi
     date -u
 }

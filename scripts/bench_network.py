@@ -7,8 +7,8 @@ BENCHMARKS.md.
     python3 scripts/bench_network.py --gpu-only    # only the "network-gpu" section
     python3 scripts/bench_network.py --gpu-only --quick   # small sizes (a software adapter)
 
-Runs the ignored tests of core/src/solvers/network/bench.rs (they time, never assert on
-speed; they need the crate's fixtures and internals) and of shaders/src/network/bench.rs (the
+Runs the examples core/examples/bench_network.rs (it times, never asserts on speed; it needs
+the shared fixtures: `--features testing`) and shaders/examples/bench_network_gpu.rs (the
 CPU and GPU backends on the same scenes, with the adapter's name), and reads their
 `BENCH_JSON` lines. The GPU section records the adapter and absolute times: on a machine
 with a real GPU, rerun `--gpu-only` to replace it.
@@ -21,12 +21,12 @@ import os
 import platform
 import sys
 
-from benchlib import cargo_test_benches, cpu_only_line, publish, table, today
+from benchlib import cargo_example_benches, cpu_only_line, publish, table, today
 
 
 def run_gpu_bench(quick: bool) -> dict:
-    """shaders/src/network/bench.rs: its BENCH_JSON document's data."""
-    found = cargo_test_benches("network", "volscatter-gpu", {"NETWORK_BENCH_QUICK": "1" if quick else "0"})
+    """shaders/examples/bench_network_gpu.rs: its BENCH_JSON document's data."""
+    found = cargo_example_benches("volscatter-gpu", "bench_network_gpu", env={"NETWORK_BENCH_QUICK": "1" if quick else "0"})
     if "gpu" not in found:
         sys.exit("network GPU bench printed no BENCH_JSON line")
     return found["gpu"]
@@ -75,7 +75,7 @@ def main() -> None:
 
 
 def cpu_section() -> None:
-    b = cargo_test_benches("solvers::network")
+    b = cargo_example_benches("volscatter-core", "bench_network", features=["testing"])
     lines = [
         "## network (illumination networks, paper 02; `scripts/bench_network.py`)",
         "",

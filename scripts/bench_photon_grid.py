@@ -6,11 +6,11 @@ BENCHMARKS.md.
     python3 scripts/bench_photon_grid.py [--json PATH] [--from-json PATH]
     python3 scripts/bench_photon_grid.py --gpu [--quick]
 
-Runs the ignored tests of core/src/solvers/photon_grid/bench.rs (they time, never assert; they
-need the crate's fixtures and internals) and reads their `BENCH_JSON` lines. Wall-clock on
+Runs the example core/examples/bench_photon_grid.rs (it times, never asserts; it needs the
+shared fixtures: `--features testing`) and reads its `BENCH_JSON` lines. Wall-clock on
 whatever cores the machine lends (shared: pessimistic).
 
-`--gpu` instead runs shaders/src/photon_grid/bench.rs (the tracing and reconstruction stages on
+`--gpu` instead runs the example shaders/examples/bench_photon_grid_gpu.rs (the tracing and reconstruction stages on
 the CPU and the GPU backend, paper Fig. 12's settings, then the reconstruction alone with each
 upsampling) and writes the "photon-grid-gpu" section with the adapter's name and absolute times:
 on a machine with a GPU, rerun it as is. `--quick`: the first setting only.
@@ -25,14 +25,14 @@ import os
 import platform
 from pathlib import Path
 
-from benchlib import cargo_test_benches, cpu_only_line, loglog, publish, table, today
+from benchlib import cargo_example_benches, cpu_only_line, loglog, publish, table, today
 
 #: Cells of paper Fig. 12's three cache resolutions, as the paper gives them.
 PAPER_CELLS = {9: 270, 18: 2080, 36: 16640}
 
 
 def gpu_main(quick: bool) -> None:
-    b = cargo_test_benches("photon_grid", "volscatter-gpu", {"VOLSCATTER_BENCH_QUICK": "1" if quick else "0"})["gpu"]
+    b = cargo_example_benches("volscatter-gpu", "bench_photon_grid_gpu", env={"VOLSCATTER_BENCH_QUICK": "1" if quick else "0"})["gpu"]
     device = b["device"]
     label = "lavapipe (software, for correctness only)" if b["software"] else "GPU"
     lines = [
@@ -75,7 +75,7 @@ def main() -> None:
     if args.gpu:
         gpu_main(args.quick)
         return
-    b = json.loads(args.from_json.read_text()) if args.from_json else cargo_test_benches("solvers::photon_grid")
+    b = json.loads(args.from_json.read_text()) if args.from_json else cargo_example_benches("volscatter-core", "bench_photon_grid", features=["testing"])
     if args.json:
         args.json.write_text(json.dumps(b))
     lines = [

@@ -13,7 +13,7 @@ Python has only the OpenEXR wheel it carries).
   `read_section(name)` returns that text; `table(header, rows)` a table's lines.
 - The CLI: `volscatter_bin()`, `require_volscatter()`, `render(...)`, `compare(...)`,
   `solver_registry()`, `gpu_info()`, `set_args(settings)`, `write_scene(...)`.
-- Cargo: `run_cargo_example(...)`, `cargo_test_benches(...)`, `json_lines(text)`.
+- Cargo: `run_cargo_example(...)`, `cargo_example_benches(...)`, `json_lines(text)`.
 - Errors: `rel_rmse(a, b)` on arrays, `exr_rel_rmse(a.exr, b.exr)` as the tables print it,
   `read_exr_layers` / `read_exr_rgb` / `mitsuba_scenes()`, `loglog(...)`.
 - Timing and reports: `phase_sum(report, keep)`, `timed(f, ...)`.
@@ -253,19 +253,18 @@ def run_cargo_example(crate: str, example: str, args: Iterable[str], ok: tuple[i
     return out
 
 
-def cargo_test_benches(module: str, crate: str = "volscatter-core", env: dict | None = None) -> dict:
-    """Runs the ignored tests `MODULE::bench` of CRATE's library and returns their `BENCH_JSON`
-    documents' data by bench name."""
-    cmd = ["cargo", "test", "--release", "-q", "-p", crate, "--lib", "--", "--ignored", f"{module}::bench",
-           "--nocapture", "--test-threads", "1"]
+def cargo_example_benches(crate: str, example: str, args: Iterable[str] = (), env: dict | None = None, features: Iterable[str] = ()) -> dict:
+    """Runs the bench example EXAMPLE of CRATE (`cargo run --release -q -p CRATE [--features F]
+    --example EXAMPLE -- ARGS`) and returns its `BENCH_JSON` documents' data by bench name."""
+    feats = ["--features", ",".join(features)] if features else []
+    cmd = ["cargo", "run", "--release", "-q", "-p", crate, *feats, "--example", example, "--", *args]
     log("$", " ".join(cmd))
     out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, env={**os.environ, **(env or {})})
     sys.stderr.write(out.stderr[-4000:])
     if out.returncode != 0:
-        sys.exit(f"{module} benches failed ({out.returncode})")
+        sys.exit(f"{example} failed ({out.returncode})")
     found = {}
     for line in out.stdout.splitlines():
-        # The test harness may print its progress on the same line before ours.
         at = line.find("BENCH_JSON ")
         if at >= 0:
             doc = json.loads(line[at + len("BENCH_JSON "):])

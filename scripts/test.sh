@@ -50,7 +50,7 @@ set -e
 if "$VOLSCATTER_BIN" gpu-info >/tmp/volscatter-gpu.txt 2>/dev/null; then
   log "GPU adapter: $(cat /tmp/volscatter-gpu.txt) -- running the GPU tests"
   set +e
-  cargo nextest run -p volscatter-gpu --cargo-profile release --no-fail-fast --run-ignored only -E 'not test(/::bench::/)' 2>&1 | tee /tmp/volscatter-nextest-gpu.log
+  cargo nextest run -p volscatter-gpu --cargo-profile release --no-fail-fast --run-ignored only 2>&1 | tee /tmp/volscatter-nextest-gpu.log
   gpu_rc=${PIPESTATUS[0]}
   set -e
   [ "$gpu_rc" = 0 ] || rust_rc=$gpu_rc

@@ -26,30 +26,6 @@ pub fn naga_struct_size(wgsl: &str, name: &str) -> u32 {
     size
 }
 
-/// Two of the shared fixtures' scenes (volscatter-core solvers/testing.rs `fixture_scene`,
-/// test-only in that crate, so rebuilt here from the same public pieces): "plume" (the 32^3
-/// procedural plume, density scale 8, albedo 0.99, g 0.9, lit by a sun) and "plume_point"
-/// (the plume at g 0.6, albedo 0.98, with a point light beside it).
-pub fn shared_fixture(name: &str) -> volscatter_core::Scene {
-    use glam::Vec3;
-    use volscatter_core::medium::{procedural, GridLimits};
-    use volscatter_core::scene::{Camera, Light};
-    let (grid, to_world) = procedural::plume(32, GridLimits::default()).unwrap();
-    let (medium, light) = match name {
-        "plume" => (
-            volscatter_core::Medium::new(grid, to_world, Vec3::splat(8.0), Vec3::splat(0.99), 0.9),
-            Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 },
-        ),
-        "plume_point" => (
-            volscatter_core::Medium::new(grid, to_world, Vec3::splat(6.0), Vec3::splat(0.98), 0.6),
-            Light::Point { position: Vec3::new(1.6, -0.8, 0.6), intensity: Vec3::splat(4.0), radius: 0.0 },
-        ),
-        _ => panic!("unknown shared fixture {name}"),
-    };
-    let camera = Camera::look_at(Vec3::new(0.0, -6.0, 0.3), Vec3::ZERO, Vec3::Z, 25.0, 16, 16);
-    volscatter_core::Scene { medium, lights: vec![light], camera, solver: Default::default() }
-}
-
 /// One solve through the pipeline with the GPU as accelerator on `choice`: the solver's output
 /// and where it ran (what the GPU-against-CPU tests compare).
 pub fn solve(

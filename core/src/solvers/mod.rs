@@ -11,8 +11,11 @@ pub mod registry;
 pub mod session;
 pub mod settings_table;
 pub mod vpl;
-#[cfg(test)]
-pub(crate) mod testing;
+/// The shared test harness (fixture scenes and their reference solutions, the metrics, the
+/// ratchet check): compiled for this crate's tests and, with the `testing` feature, for other
+/// crates' tests and benchmark examples (never in a plain build).
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
 
 use std::any::Any;
 

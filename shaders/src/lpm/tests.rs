@@ -1,11 +1,9 @@
 use super::*;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::medium::{procedural, GridLimits};
-use volscatter_core::scene::{Camera, Light, Scene};
+use volscatter_core::scene::Scene;
 use volscatter_core::solvers::lpm::{FirstOrder, Lpm, LpmReport, LpmSettings, Overrides};
 use volscatter_core::stages::NoProgress;
-use volscatter_core::Medium;
 
 #[test]
 fn wgsl_validates_and_layouts_match() {
@@ -14,28 +12,8 @@ fn wgsl_validates_and_layouts_match() {
     assert_eq!(naga_struct_size(COLLECT_WGSL, "Params") as usize, size_of::<LpmParams>());
 }
 
-/// The shared fixtures' scenes, rebuilt here (volscatter-core's `testing::fixture_scene` is
-/// test-only inside that crate): "plume" (32^3 procedural plume, density scale 8, albedo 0.99,
-/// g 0.9, a sun) and "plume_point" (the plume at g 0.6 with a point light beside it).
-fn fixture(name: &str) -> Scene {
-    let (grid, to_world) = procedural::plume(32, GridLimits::default()).unwrap();
-    let (medium, light, cam_dist, fov) = match name {
-        "plume" => (
-            Medium::new(grid, to_world, Vec3::splat(8.0), Vec3::splat(0.99), 0.9),
-            Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 },
-            6.0,
-            25.0,
-        ),
-        "plume_point" => (
-            Medium::new(grid, to_world, Vec3::splat(6.0), Vec3::splat(0.98), 0.6),
-            Light::Point { position: Vec3::new(1.6, -0.8, 0.6), intensity: Vec3::splat(4.0), radius: 0.0 },
-            6.0,
-            25.0,
-        ),
-        _ => panic!("unknown case {name}"),
-    };
-    Scene { medium, lights: vec![light], camera: Camera::look_at(Vec3::new(0.0, -cam_dist, 0.3), Vec3::ZERO, Vec3::Z, fov, 16, 16), solver: Default::default() }
-}
+/// The shared fixtures' scenes ("plume", "plume_point": volscatter-core testing/scenes.rs).
+use volscatter_core::solvers::testing::fixture_scene as fixture;
 
 fn run(sc: &Scene, s: &LpmSettings, layers: Option<usize>, backend: &Box<dyn SweepBackend>) -> LpmReport {
     let ov = Overrides { layers, j_only: true, ..Default::default() };

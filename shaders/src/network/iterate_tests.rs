@@ -1,12 +1,12 @@
 use std::cell::RefCell;
 
-use glam::{Affine3A, IVec3, Quat, Vec3};
+use glam::{Quat, Vec3};
 
 use super::*;
 use crate::network::{GpuBackend, CHECK_EVERY};
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
-use volscatter_core::medium::{DensityGrid, GridLimits, Medium};
+use volscatter_core::solvers::testing::fixture_scene;
 use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend, SplatInput, VisibilityInput};
 use volscatter_core::solvers::network::visibility::DirectionLinks;
@@ -51,23 +51,6 @@ fn recording<B>(inner: B) -> Recording<B> {
     Recording { inner, last: Default::default() }
 }
 
-/// The shared fixtures' cube scene `cube_g07` (core pop/tests.rs `case`, network/tests.rs
-/// `cube_scene`; the fixture scenes are test-only in core, hence rebuilt here): a 1 m cube of
-/// 16^3 voxels, sigma_s 4 m^-1, albedo 1, g 0.7, under a sun travelling down, sideways and
-/// towards the camera.
-pub(crate) fn cube_g07() -> Scene {
-    let n = 16;
-    let voxel = 1.0 / 16.0;
-    let grid = DensityGrid::from_dense(IVec3::ZERO, IVec3::splat(n), &vec![1.0f32; (n * n * n) as usize], GridLimits::default()).unwrap();
-    let to_world = Affine3A::from_translation(Vec3::splat(-(n as f32 - 1.0) * 0.5 * voxel)) * Affine3A::from_scale(Vec3::splat(voxel));
-    Scene {
-        medium: Medium::new(grid, to_world, Vec3::splat(4.0), Vec3::splat(1.0), 0.7),
-        lights: vec![Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
-        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.3), Vec3::ZERO, Vec3::Z, 22.0, 16, 16),
-        solver: Default::default(),
-    }
-}
-
 /// The default plume with a point light inside its bounding sphere in place of its lights (a
 /// local light: its direct light, and so E, varies strongly across the particles).
 pub(crate) fn plume_point_light() -> Scene {
@@ -107,7 +90,7 @@ fn solve_on<B: NetworkBackend + 'static>(sc: &Scene, s: &NetworkSettings, backen
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_network_iteration_matches_cpu() {
     let ctx = gpu_or_skip();
-    for (name, sc) in [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())] {
+    for (name, sc) in [("cube_g07", fixture_scene("cube_g07")), ("plume + point light", plume_point_light())] {
         let s = settings();
         let (cpu_out, cpu_rep, cpu_it) = solve_on(&sc, &s, recording(CpuBackend));
         assert!(cpu_rep.residuals.len() > 3, "{name}: the CPU iterated {} times", cpu_rep.residuals.len());
@@ -144,7 +127,7 @@ fn gpu_network_session_keeps_the_network() {
         state.begin_frame();
         crate::test_support::solve_on(&net, sc, &NoProgress, &gpu, Some(&mut state)).unwrap().split::<NetworkReport>()
     };
-    let sc = cube_g07();
+    let sc = fixture_scene("cube_g07");
     let (_, rep) = frame(&sc);
     assert_eq!(rep.start, Start::Cold);
     let mut moved = sc.clone();
@@ -179,7 +162,7 @@ fn gpu_device_choice_runs_network_on_the_gpu() {
         let settings = serde_json::json!({"particles": 512, "directions": 32, "output_resolution": 12}).as_object().unwrap().clone();
     let mut session = volscatter_core::pipeline::Session::new("network", &settings, crate::devices(DeviceChoice::Gpu)).unwrap();
     for f in 0..2 {
-        let mut sc = cube_g07();
+        let mut sc = fixture_scene("cube_g07");
         sc.camera = Camera::look_at(Quat::from_rotation_z(0.4 * f as f32) * sc.camera.position, Vec3::ZERO, Vec3::Z, 22.0, 16, 16);
         let (gpu, used) = solve(DeviceChoice::Gpu, &sc, "network", &settings, &NoProgress).unwrap();
         assert!(matches!(used, DeviceUsed::Gpu(_)), "frame {f}: ran on {used}");

@@ -10,8 +10,6 @@ pub mod iterate;
 pub mod sort;
 pub mod splat;
 pub mod visibility;
-#[cfg(test)]
-mod bench;
 
 use std::sync::Arc;
 use glam::Vec3;

@@ -1,7 +1,8 @@
 use glam::Vec3;
 
 use super::*;
-use crate::network::iterate::tests::{cube_g07, plume_point_light};
+use crate::network::iterate::tests::plume_point_light;
+use volscatter_core::solvers::testing::fixture_scene;
 use crate::network::visibility::tests::spiral;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
 use volscatter_core::image::relative_rmse;
@@ -48,7 +49,7 @@ fn network_answer(n: usize, d: usize) -> (Vec<Vec3>, Vec<Vec3>) {
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_network_splat_matches_cpu() {
     let ctx = gpu_or_skip();
-    let scenes: [(&str, Scene); 2] = [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())];
+    let scenes: [(&str, Scene); 2] = [("cube_g07", fixture_scene("cube_g07")), ("plume + point light", plume_point_light())];
     for (name, sc) in scenes {
         let p = particles::sample(&sc.medium, 1024, 1);
         let (dirs, radiance) = network_answer(p.len(), 24);

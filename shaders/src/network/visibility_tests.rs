@@ -1,7 +1,8 @@
 use glam::Vec3;
 
 use super::*;
-use crate::network::iterate::tests::{cube_g07, plume_point_light};
+use crate::network::iterate::tests::plume_point_light;
+use volscatter_core::solvers::testing::fixture_scene;
 use crate::network::sort::SortParams;
 use crate::network::splat::tests::Cancelled;
 use crate::test_support::{gpu_or_skip, naga_struct_size};
@@ -91,7 +92,7 @@ fn ambiguous_keys(p: &[Vec3], (u, v, w): (Vec3, Vec3, Vec3), centre: Vec3, radiu
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_network_visibility_matches_cpu() {
     let ctx = gpu_or_skip();
-    let scenes: [(&str, Scene); 2] = [("cube_g07", cube_g07()), ("plume + point light", plume_point_light())];
+    let scenes: [(&str, Scene); 2] = [("cube_g07", fixture_scene("cube_g07")), ("plume + point light", plume_point_light())];
     // With the axis-aligned ones: +-z is where `orthonormal_basis` switches branch.
     let dirs: Vec<Vec3> = spiral(29).into_iter().chain([Vec3::Z, -Vec3::Z, Vec3::X]).collect();
     let mut too_far = Vec::new();
@@ -185,7 +186,7 @@ fn gpu_bitonic_sort_matches_host_sort() {
 #[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
 fn gpu_network_visibility_refuses_oversized_windows() {
     let ctx = gpu_or_skip();
-    let sc = cube_g07();
+    let sc = fixture_scene("cube_g07");
     let p = particles::sample(&sc.medium, 64, 1);
     let sphere = BoundingSphere::of(&sc.medium);
     let dirs = spiral(4);

@@ -283,8 +283,6 @@ impl PhotonBackend for GpuPhotonBackend {
 }
 
 #[cfg(test)]
-mod bench;
-#[cfg(test)]
 #[path = "tests.rs"]
 mod tests;
 #[cfg(test)]

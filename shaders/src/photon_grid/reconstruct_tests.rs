@@ -1,6 +1,7 @@
 use super::reconstruct::{ReconstructParams, WGSL};
 use super::*;
-use crate::test_support::{gpu_or_skip, naga_struct_size, shared_fixture};
+use crate::test_support::{gpu_or_skip, naga_struct_size};
+use volscatter_core::solvers::testing::fixture_scene;
 use std::sync::{Arc, Mutex};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::solvers::photon_grid::backend::CpuBackend;
@@ -73,7 +74,7 @@ fn max_rel(a: &[Vec3], b: &[Vec3]) -> f32 {
 fn gpu_reconstruction_matches_cpu() {
     let ctx = gpu_or_skip();
     for name in ["plume", "plume_point"] {
-        let scene = shared_fixture(name);
+        let scene = fixture_scene(name);
         for upsampling in [Upsampling::Trilinear, Upsampling::Physical] {
             let (cpu, gpu) = both(&ctx, &scene, &settings(upsampling));
             assert_eq!((cpu.dims, cpu.index_to_world), (gpu.dims, gpu.index_to_world));
@@ -92,7 +93,7 @@ fn gpu_reconstruction_matches_cpu() {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_upsamplings_differ() {
     let ctx = gpu_or_skip();
-    let scene = shared_fixture("plume");
+    let scene = fixture_scene("plume");
     let (_, tri) = both(&ctx, &scene, &settings(Upsampling::Trilinear));
     let (_, phys) = both(&ctx, &scene, &settings(Upsampling::Physical));
     let d = relative_rmse(&phys.data, &tri.data);
@@ -108,7 +109,7 @@ fn gpu_upsamplings_differ() {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_solve_with_physical_upsampling_matches_cpu() {
     let ctx = gpu_or_skip();
-    let scene = shared_fixture("plume_point");
+    let scene = fixture_scene("plume_point");
     let s = |seed: u64| PhotonGridSettings { seed, single_scattering: SingleScattering::Exact, ..settings(Upsampling::Physical) };
     let run = |seed: u64, backend: Box<dyn PhotonBackend>| crate::test_support::solve_on(&PhotonGrid::new(s(seed)).unwrap(), &scene, &NoProgress, &backend, None).unwrap();
     let (cpu1, cpu2) = (run(1, Box::new(CpuBackend)), run(2, Box::new(CpuBackend)));
@@ -134,7 +135,7 @@ fn input_bytes(scene: &Scene, s: &PhotonGridSettings) -> (u32, u32) {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_reconstruction_slabs_and_storage_limits() {
     let mut ctx = gpu_or_skip();
-    let scene = shared_fixture("plume");
+    let scene = fixture_scene("plume");
     let s = settings(Upsampling::Physical);
     let (_, whole) = both(&ctx, &scene, &s);
     let plane_bytes = whole.dims[0] * whole.dims[1] * 16;
@@ -195,7 +196,7 @@ fn gpu_reconstruction_stops_on_cancel() {
         }
     }
     let mut ctx = gpu_or_skip();
-    let scene = shared_fixture("plume");
+    let scene = fixture_scene("plume");
     let s = settings(Upsampling::Trilinear);
     let kept = Arc::new(Mutex::new(None));
     let keep: Box<dyn PhotonBackend> = Box::new(Keep(kept.clone()));

@@ -5,11 +5,8 @@ use crate::test_support::{gpu_or_skip, naga_struct_size};
 use glam::Vec3;
 use std::mem::size_of;
 use volscatter_core::image::relative_rmse;
-use volscatter_core::medium::{procedural, GridLimits};
-use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::vpl::{gather as cpu_gather, walks, NearField, Transmittance};
 use volscatter_core::stages::NoProgress;
-use volscatter_core::Medium;
 
 #[test]
 fn wgsl_validates_and_layouts_match() {
@@ -18,31 +15,18 @@ fn wgsl_validates_and_layouts_match() {
     assert_eq!(naga_struct_size(WGSL, "Vpl") as usize, size_of::<GpuVpl>());
 }
 
-/// Two of the shared fixtures' scenes (volscatter-core solvers/testing.rs `fixture_scene`,
-/// test-only there, so rebuilt here from the same public pieces): "plume" (the procedural
-/// plume, g 0.9, albedo 0.99, lit by a sun) and "plume_point" (the plume at g 0.6, albedo 0.98,
-/// with a point light beside it).
+/// The shared fixtures' scenes (volscatter-core testing/scenes.rs: "plume", the procedural
+/// plume, g 0.9, albedo 0.99, lit by a sun; "plume_point", the plume at g 0.6, albedo 0.98,
+/// with a point light beside it), and "plume_dense": the plume at five times its density
+/// (density scale 40), optical size over 2, so that `near_field: auto` takes the hat
+/// (vpl/gather.rs `optical_size`).
 fn fixture_scene(name: &str) -> Scene {
-    let (grid, to_world) = procedural::plume(32, GridLimits::default()).unwrap();
-    let cam = Camera::look_at(Vec3::new(0.0, -6.0, 0.3), Vec3::ZERO, Vec3::Z, 25.0, 16, 16);
-    let (medium, light) = match name {
-        "plume" => (
-            Medium::new(grid, to_world, Vec3::splat(8.0), Vec3::splat(0.99), 0.9),
-            Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 },
-        ),
-        "plume_point" => (
-            Medium::new(grid, to_world, Vec3::splat(6.0), Vec3::splat(0.98), 0.6),
-            Light::Point { position: Vec3::new(1.6, -0.8, 0.6), intensity: Vec3::splat(4.0), radius: 0.0 },
-        ),
-        // Five times the plume's density: optical size over 2, so `near_field: auto` takes the
-        // hat (vpl/gather.rs `optical_size`).
-        "plume_dense" => (
-            Medium::new(grid, to_world, Vec3::splat(40.0), Vec3::splat(0.99), 0.9),
-            Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 },
-        ),
-        _ => panic!("unknown case {name}"),
-    };
-    Scene { medium, lights: vec![light], camera: cam, solver: Default::default() }
+    if name == "plume_dense" {
+        let mut sc = volscatter_core::solvers::testing::fixture_scene("plume");
+        sc.medium.density_scale = Vec3::splat(40.0);
+        return sc;
+    }
+    volscatter_core::solvers::testing::fixture_scene(name)
 }
 
 /// Small enough for lavapipe (each gather a few seconds there). `transmittance: march` and

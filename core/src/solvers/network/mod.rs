@@ -33,8 +33,6 @@ pub mod settings;
 pub mod splat;
 pub mod visibility;
 #[cfg(test)]
-mod bench;
-#[cfg(test)]
 mod session_tests;
 #[cfg(test)]
 mod tests;

@@ -1,23 +1,14 @@
 //! `network` against the compositor's single scattering, the reference fixtures, and its own
 //! invariants. Small grids and few particles: each test runs in seconds in release.
 
-use glam::Vec3;
-
 use super::*;
-use crate::medium::Medium;
-use crate::scene::{Camera, Light};
-use crate::solvers::testing::{against_single_scattering, errors_against_fixture, homogeneous_box, Errors};
+use crate::solvers::testing::{against_reference, against_single_scattering, errors_against_fixture, scenes, Errors};
 use crate::stages::{NoProgress, ScatteringGrid};
 
-/// The shared fixtures' cube scene (pop/tests.rs `case`): a 1 m cube of 16^3 voxels, sigma_s
+/// The shared fixtures' cube scene (testing/scenes.rs `distant_case`) at any albedo: a 1 m cube of 16^3 voxels, sigma_s
 /// 4 m^-1, albedo 1, under a sun travelling down, sideways and towards the camera.
 pub(super) fn cube_scene(g: f32, albedo: f32) -> Scene {
-    Scene {
-        medium: homogeneous_box(16, 1.0 / 16.0, 4.0, albedo, g),
-        lights: vec![Light::Distant { direction: Vec3::new(0.4, -0.5, -0.75).normalize(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
-        camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.3), Vec3::ZERO, Vec3::Z, 22.0, 16, 16),
-        solver: Default::default(),
-    }
+    scenes::scene(scenes::cube(16, 4.0, albedo, g), scenes::FIXTURE_SIZE, 4.0, 22.0)
 }
 
 pub(super) fn small() -> NetworkSettings {
@@ -46,11 +37,13 @@ fn network_phase_rows_sum_to_one() {
 #[test]
 fn network_albedo_zero_is_single_scattering() {
     let sc = cube_scene(0.7, 1e-4);
+
     // On the grid of the compositor's single-scattering AOV (CompositeOptions'
     // single_resolution 48, dome_directions 32), so that both are the same computation.
     let (grid, _) = solve(&sc, NetworkSettings { output_resolution: 48, dome_directions: 32, ..small() });
     let (rmse, ratio) = against_single_scattering(&sc, &grid);
     eprintln!("network albedo 1e-4: rel. RMSE {rmse:.5} mean ratio {ratio:.5}");
+
     // The network adds albedo^2-order light only (1e-4 of the single): the same grid's image.
     assert!(rmse < 1e-3 && (ratio - 1.0).abs() < 1e-3, "rmse {rmse} ratio {ratio}");
 }
@@ -78,95 +71,59 @@ fn network_deterministic() {
     assert_eq!(a.data, b.data);
 }
 
-/// The plume fixture's scene (pop/tests.rs `case`): procedural plume, 32 voxels, density
-/// scale 8, albedo 0.99, g 0.9, camera 6 m away.
-pub(super) fn plume_scene() -> Scene {
-    let (grid, to_world) = crate::medium::procedural::plume(32, crate::medium::GridLimits::default()).unwrap();
-    let mut sc = cube_scene(0.9, 0.99);
-    sc.medium = Medium::new(grid, to_world, Vec3::splat(8.0), Vec3::splat(0.99), 0.9);
-    sc.camera = Camera::look_at(Vec3::new(0.0, -6.0, 0.3), Vec3::ZERO, Vec3::Z, 25.0, 16, 16);
-    sc
+/// network with the ratchets' settings (N 2048, D 64, 16^3 output).
+fn fixture_network() -> Network {
+    Network::new(NetworkSettings { particles: 2048, directions: 64, output_resolution: 16, ..Default::default() }).unwrap()
 }
 
-fn vs_fixture(name: &str, sc: &Scene) -> Errors {
-    let t = std::time::Instant::now();
-    let (grid, rep) = solve(sc, NetworkSettings { particles: 2048, directions: 64, output_resolution: 16, ..Default::default() });
-    let e = errors_against_fixture(name, sc, &grid);
-    eprintln!(
-        "network {name}: {e}; M {} iterations {} {:.1}s",
-        rep.window,
-        rep.residuals.len(),
-        t.elapsed().as_secs_f64()
-    );
-    e
+/// A ratchet row's further print: the window M and the iterations.
+fn print_iterations(name: &str, _: &Errors, out: &SolveOutput) {
+    let rep = out.report::<NetworkReport>().expect("network's report");
+    eprintln!("network {name}: M {} iterations {}", rep.window, rep.residuals.len());
 }
 
 /// Ratchet: measured + 10% + 0.01 on image and grid rel. RMSE (pop/tests.rs's rule), so a
 /// regression fails and an improvement is kept by lowering the numbers.
-fn ratchet(name: &str, e: &Errors, measured: [f64; 2]) {
-    let bound = |m: f64| m * 1.1 + 0.01;
-    assert!(e.image <= bound(measured[0]), "{name}: image rel. RMSE {} (measured {})", e.image, measured[0]);
-    assert!(e.grid <= bound(measured[1]), "{name}: grid rel. RMSE {} (measured {})", e.grid, measured[1]);
+fn ratchet(measured: f64) -> f64 {
+    measured * 1.1 + 0.01
 }
 
 // Measured (N 2048, D 64, M 16 from the paper's bound, 16^3 output; fixture noise ~0.01).
 // pop at 16 cells for comparison (settings.rs): cube g 0 0.17, g 0.9 0.30, plume 0.35.
+against_reference! {
+    solver: "network";
+    then: print_iterations;
 
-#[test]
-fn network_cube_g0_vs_fixture() {
     // Measured: image 0.092 (x1.083), grid 0.077 (x1.077): the furnace's column bias (+6-8%).
-    ratchet("cube_g0", &vs_fixture("cube_g0", &cube_scene(0.0, 1.0)), [0.092, 0.077]);
-}
+    network_cube_g0_vs_fixture: "cube_g0", fixture_network(), ratchet(0.092), ratchet(0.077);
 
-#[test]
-fn network_cube_g07_vs_fixture() {
     // Measured: image 0.086 (x1.087), grid 0.080 (x1.073).
-    ratchet("cube_g07", &vs_fixture("cube_g07", &cube_scene(0.7, 1.0)), [0.086, 0.080]);
-}
+    network_cube_g07_vs_fixture: "cube_g07", fixture_network(), ratchet(0.086), ratchet(0.080);
 
-#[test]
-fn network_cube_g09_vs_fixture() {
     // Measured: image 0.118 (x1.001), grid 0.115 (x1.036).
-    ratchet("cube_g09", &vs_fixture("cube_g09", &cube_scene(0.9, 1.0)), [0.118, 0.115]);
-}
+    network_cube_g09_vs_fixture: "cube_g09", fixture_network(), ratchet(0.118), ratchet(0.115);
 
-#[test]
-fn network_plume_vs_fixture() {
     // Measured: image 0.196 (x1.024), grid 0.215 (x0.956): the plume's thin wisps hold few
     // particles, whose large balls smear their light (splat.rs).
-    ratchet("plume", &vs_fixture("plume", &plume_scene()), [0.196, 0.215]);
+    network_plume_vs_fixture: "plume", fixture_network(), ratchet(0.196), ratchet(0.215);
+
+    // The local-light and dome fixtures (testing::fixture_scene), measured at the same settings:
+    // image / grid rel. RMSE (image mean ratio), ratchets as above. Measured: plume beside a
+    // point light 0.100 / 0.132 (x1.07), spot 0.106 / 0.151 (x1.05), rect 0.102 / 0.131 (x1.07):
+    // as good as lpm and better than vpl there (0.14-0.19). Under the dome scenes network is too
+    // dark, as on the dense cloud: uniform dome 0.279 / 0.349 (x0.80), dome and sun 0.453 / 0.517
+    // (x0.63): the same few-particles-per-column links (network_cloud_vs_fixture) keep the
+    // scattered light from diffusing inwards from the lit surface. At g 0.9 network is closer than
+    // vpl on the cube (0.118 against 0.09-0.14) and the plume (0.196 against 0.31), and farther on
+    // the dense cloud (x0.36 against vpl's x0.66): vpl's walks carry light deep into the cloud,
+    // network's column chains do not.
+    network_plume_point_vs_fixture: "plume_point", fixture_network(), ratchet(0.100), ratchet(0.132);
+    network_plume_spot_vs_fixture: "plume_spot", fixture_network(), ratchet(0.106), ratchet(0.151);
+    network_plume_rect_vs_fixture: "plume_rect", fixture_network(), ratchet(0.102), ratchet(0.131);
+    network_dome_uniform_vs_fixture: "dome_uniform", fixture_network(), ratchet(0.279), ratchet(0.349);
+    network_dome_sun_vs_fixture: "dome_sun", fixture_network(), ratchet(0.453), ratchet(0.517);
 }
 
-/// The local-light and dome fixtures (testing::fixture_scene), measured at the same settings:
-/// image / grid rel. RMSE (image mean ratio), ratchets as above. Measured: plume beside a
-/// point light 0.100 / 0.132 (x1.07), spot 0.106 / 0.151 (x1.05), rect 0.102 / 0.131 (x1.07):
-/// as good as lpm and better than vpl there (0.14-0.19). Under the dome scenes network is too
-/// dark, as on the dense cloud: uniform dome 0.279 / 0.349 (x0.80), dome and sun 0.453 / 0.517
-/// (x0.63): the same few-particles-per-column links (network_cloud_vs_fixture) keep the
-/// scattered light from diffusing inwards from the lit surface. At g 0.9 network is closer than
-/// vpl on the cube (0.118 against 0.09-0.14) and the plume (0.196 against 0.31), and farther on
-/// the dense cloud (x0.36 against vpl's x0.66): vpl's walks carry light deep into the cloud,
-/// network's column chains do not.
-fn shared_fixture(name: &str, measured: [f64; 2]) {
-    ratchet(name, &vs_fixture(name, &crate::solvers::testing::fixture_scene(name)), measured);
-}
-
-#[test]
-fn network_local_light_and_dome_fixtures() {
-    for (name, measured) in [
-        ("plume_point", [0.100, 0.132]),
-        ("plume_spot", [0.106, 0.151]),
-        ("plume_rect", [0.102, 0.131]),
-        ("dome_uniform", [0.279, 0.349]),
-        ("dome_sun", [0.453, 0.517]),
-    ] {
-        shared_fixture(name, measured);
-    }
-}
-
-/// Without the rows' normalisation the 4 pi / D quadrature of a g 0.9 lobe over 64 directions
-/// is far from 1 (the lobe is narrower than the directions' spacing): the normalisation is
-/// what makes the phase matrix conserve energy.
 #[test]
 fn network_unnormalised_rows_lose_energy() {
     let dirs = directions::fibonacci(64);

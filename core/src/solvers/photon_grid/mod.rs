@@ -28,8 +28,6 @@ pub mod trace;
 pub mod upsample;
 
 #[cfg(test)]
-mod bench;
-#[cfg(test)]
 mod physics_tests;
 #[cfg(test)]
 mod temporal_tests;

@@ -11,10 +11,11 @@
 //! with 16-cell grids image 0.503 (flux x0.81), grid 0.944 (x1.69); with its defaults image
 //! 0.493 (x0.65), grid 1.067 (x1.88): far from converged, which issue 15 is to fix.
 
-use crate::solvers::SolveCtx;
-use crate::solvers::Solver;
+#[cfg(test)]
+use crate::solvers::{SolveCtx, Solver};
 use glam::Vec3;
 
+#[cfg(test)]
 use super::{env_u32, load_fixture, mean, regenerate_fixture};
 use crate::medium::{cumulus, GridLimits, Medium};
 use crate::scene::{Camera, Light, Scene};
@@ -24,23 +25,23 @@ use crate::scene::{Camera, Light, Scene};
 /// up to 190x their mean where a vertex's direction happens to face the sun), and the noise per
 /// pixel does not depend on the pixel count: 24 pixels (the other fixtures have 16) resolve
 /// the lit top, the flat base and the towers, at a quarter of the cost of 48.
-pub(crate) const CLOUD_SIZE: u32 = 24;
+pub const CLOUD_SIZE: u32 = 24;
 /// Voxels per side of the cumulus (2 m box: 4 cm voxels, finer than its eroded rim).
 const CLOUD_VOXELS: u32 = 64;
 /// Extinction (1/m) where the density is 1; with the ~1.5 m of core this gives the optical
 /// depths measured in `cloud_is_dense` (over 30, as the fixture requires).
-pub(crate) const CLOUD_SIGMA_T: f32 = 25.0;
+pub const CLOUD_SIGMA_T: f32 = 25.0;
 /// Elevation of the sun (degrees) and its azimuth: from the right and a little in front of
 /// the camera, so that the camera sees a sunlit flank and top and the shadowed flat base.
 const SUN_ELEVATION_DEG: f32 = 45.0;
 
-pub(crate) fn cloud_medium() -> Medium {
+pub fn cloud_medium() -> Medium {
     let (grid, to_world) = cumulus::cumulus(CLOUD_VOXELS, GridLimits::default()).unwrap();
     Medium::new(grid, to_world, Vec3::splat(CLOUD_SIGMA_T), Vec3::splat(0.99), 0.9)
 }
 
 /// Unit vector towards the sun.
-pub(crate) fn to_sun() -> Vec3 {
+pub fn to_sun() -> Vec3 {
     let e = SUN_ELEVATION_DEG.to_radians();
     let azimuth = Vec3::new(0.8, -0.6, 0.0); // +x and towards the camera (at -y)
     (azimuth * e.cos() + Vec3::Z * e.sin()).normalize()
@@ -48,7 +49,7 @@ pub(crate) fn to_sun() -> Vec3 {
 
 /// The cloud scene: camera 6 m in front of the cloud and a little below its base, looking at
 /// its centre (so the underside is seen at a grazing angle, as from the ground).
-pub(crate) fn cloud_scene() -> Scene {
+pub fn cloud_scene() -> Scene {
     Scene {
         medium: cloud_medium(),
         lights: vec![Light::Distant { direction: -to_sun(), irradiance: Vec3::splat(3.0), half_angle: 0.0 }],
@@ -59,7 +60,7 @@ pub(crate) fn cloud_scene() -> Scene {
 
 /// Optical depth along the segment a -> b (midpoint rule, 1 mm steps: far finer than the
 /// 3 cm voxels, so the quadrature error is well under 0.1%).
-pub(crate) fn optical_depth(medium: &Medium, a: Vec3, b: Vec3) -> f32 {
+pub fn optical_depth(medium: &Medium, a: Vec3, b: Vec3) -> f32 {
     let n = ((b - a).length() / 1e-3).ceil().max(1.0) as u32;
     let step = (b - a) / n as f32;
     let sum: f32 = (0..n).map(|i| medium.density_world(a + step * (i as f32 + 0.5))).sum();
@@ -128,6 +129,7 @@ fn cloud_is_dense() {
 
 /// Height (m) where each pixel's camera ray enters the cloud's core (density 0.5; `None` where
 /// it misses the core), marched in 5 mm steps.
+#[cfg(test)]
 fn entry_heights(sc: &Scene) -> Vec<Option<f32>> {
     let cam = &sc.camera;
     (0..cam.width * cam.height)
@@ -141,6 +143,7 @@ fn entry_heights(sc: &Scene) -> Vec<Option<f32>> {
 /// Mean luminance (channel sum) of the pixels whose camera ray enters the cloud's core through
 /// its upper part (above z = 0.3 m, the towers' sunlit tops) and through its lowest 0.1 m (the
 /// flat base and the foot of the flanks, in the cloud's own shadow), and their counts.
+#[cfg(test)]
 fn top_and_base(sc: &Scene, image: &[Vec3]) -> ((f64, usize), (f64, usize)) {
     let heights = entry_heights(sc);
     let band = |keep: &dyn Fn(f32) -> bool| {

@@ -22,7 +22,9 @@ fn solver_names() -> Vec<&'static str> {
 
 /// How a solver is run by these checks (its `solver` settings block: small and fast) and the
 /// bounds it must meet, each with its reason.
-struct Expectation {
+// TODO(test preset): each `settings` below is this harness's own; the bounds were measured with
+// them, so take the registry's `test` preset only where it is the same block (or re-measure).
+pub(super) struct Expectation {
     settings: serde_json::Value,
     /// Largest |mean S / sigma_s - 1| over the furnace box's interior, and largest |mean
     /// composited radiance - 1| over its image (background 1).
@@ -37,7 +39,12 @@ struct Expectation {
 }
 
 fn expectation(name: &str) -> Expectation {
-    match name {
+    expectation_of(name).unwrap_or_else(|| panic!("solver `{name}` has no stated furnace / energy tolerance: add it to testing/furnace.rs `expectation_of`"))
+}
+
+/// `expectation` of a solver, None for one without (coverage.rs lists those).
+pub(super) fn expectation_of(name: &str) -> Option<Expectation> {
+    Some(match name {
         // Unbiased: only its Monte Carlo noise and the energy integral's quadrature. Measured:
         // furnace box S / sigma_s 1.0003, image 0.9999; cloud S / sigma_s 0.9954 (256 paths
         // per point, through optical depth 30); energy 1.0072 (the 20^3-point quadrature of a
@@ -126,8 +133,8 @@ fn expectation(name: &str) -> Expectation {
             furnace_cloud: 0.12,
             energy: 0.03,
         },
-        other => panic!("solver `{other}` has no stated furnace / energy tolerance: add it to testing/furnace.rs `expectation`"),
-    }
+        _ => return None,
+    })
 }
 
 fn solve(name: &str, sc: &Scene) -> ScatteringGrid {

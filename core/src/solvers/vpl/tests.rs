@@ -8,7 +8,7 @@ use glam::Vec3;
 use super::{NearField, Vpl, VplSettings};
 use crate::stages::single_scattering::single_scattering_grid;
 use crate::scene::Scene;
-use crate::solvers::testing::errors_against_fixture;
+use crate::solvers::testing::{against_reference, errors_against_fixture};
 use crate::solvers::{Solver};
 use crate::stages::NoProgress;
 
@@ -47,30 +47,15 @@ fn vpl_same_seed_same_result() {
     assert!(a.data != c.data);
 }
 
-fn check_case(name: &str, near_field: NearField, max_image: f64, max_grid: f64) {
-    let sc = case(name);
-    let t = std::time::Instant::now();
-    let (out, rep) = Vpl::new(VplSettings { near_field, ..test_settings() }).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
-    let e = errors_against_fixture(name, &sc, &out.scattering);
-    eprintln!(
-        "vpl {name} {near_field:?}: {e}; {} VPLs, {:.1}% near connections, {:.1} s",
-        rep.vpls,
-        100.0 * rep.gather.near as f64 / rep.gather.connections.max(1) as f64,
-        t.elapsed().as_secs_f64()
-    );
-    assert!(e.image <= max_image, "{name}: image rel. RMSE {:.4} over {max_image}", e.image);
-    assert!(e.grid <= max_grid, "{name}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+/// vpl with `test_settings()` and `near_field` (a ratchet row's solver).
+fn test_vpl(near_field: NearField) -> Vpl {
+    Vpl::new(VplSettings { near_field, ..test_settings() }).unwrap()
 }
 
-macro_rules! against_reference {
-    ($($test:ident: $case:literal, $nf:expr, $image:literal, $grid:literal;)*) => {
-        $(
-            #[test]
-            fn $test() {
-                check_case($case, $nf, $image, $grid);
-            }
-        )*
-    };
+/// A ratchet row's further print: the VPLs and the share of near connections.
+fn print_vpls(name: &str, _: &crate::solvers::testing::Errors, out: &SolveOutput) {
+    let rep = out.report::<VplReport>().expect("vpl's report");
+    eprintln!("vpl {name}: {} VPLs, {:.1}% near connections", rep.vpls, 100.0 * rep.gather.near as f64 / rep.gather.connections.max(1) as f64);
 }
 
 // Ratchets against the converged fixtures (65536 paths per pixel; their own noise 0.5-3%):
@@ -84,55 +69,49 @@ macro_rules! against_reference {
 // x1.024: the clamp loses ~10% of the multiple scattering, the ball kernel does not, so
 // `near_field: ball` is the default.
 against_reference! {
-    vpl_cube_g0_against_reference: "cube_g0", NearField::Ball, 0.086, 0.081;
-    vpl_cube_g07_against_reference: "cube_g07", NearField::Ball, 0.173, 0.163;
-    vpl_plume_against_reference: "plume", NearField::Ball, 0.370, 0.501;
-    vpl_cube_g07_clamp_against_reference: "cube_g07", NearField::Clamp, 0.177, 0.225;
-}
+    solver: "vpl";
+    then: print_vpls;
+    vpl_cube_g0_against_reference: "cube_g0", test_vpl(NearField::Ball), 0.086, 0.081;
+    vpl_cube_g07_against_reference: "cube_g07", test_vpl(NearField::Ball), 0.173, 0.163;
+    vpl_plume_against_reference: "plume", test_vpl(NearField::Ball), 0.370, 0.501;
+    vpl_cube_g07_clamp_against_reference: "cube_g07", test_vpl(NearField::Clamp), 0.177, 0.225;
 
-// Local lights beside the plume (pop/radial's fixtures; no multiple-scattering AOV in them),
-// same settings and margins. Measured (image / grid, image mean ratio): point 0.166 / 0.203
-// x0.865 (only 327 of the 4096 walks reach the plume); spot 0.145 / 0.177 x0.912; rect 0.192
-// / 0.264 x0.894. (pop's radial grids: image 0.37 on the point case.) Tightened after
-// `normalize_energy` and `phase_cone`: point 0.1114 / 0.2234 x0.923, spot 0.0932 / 0.1343
-// x0.977, rect 0.1470 / 0.2251 x0.960.
-against_reference! {
-    vpl_plume_point_against_reference: "plume_point", NearField::Ball, 0.133, 0.233;
-    vpl_plume_spot_against_reference: "plume_spot", NearField::Ball, 0.113, 0.158;
-    vpl_plume_rect_against_reference: "plume_rect", NearField::Ball, 0.172, 0.258;
-}
+    // Local lights beside the plume (pop/radial's fixtures; no multiple-scattering AOV in them),
+    // same settings and margins. Measured (image / grid, image mean ratio): point 0.166 / 0.203
+    // x0.865 (only 327 of the 4096 walks reach the plume); spot 0.145 / 0.177 x0.912; rect 0.192
+    // / 0.264 x0.894. (pop's radial grids: image 0.37 on the point case.) Tightened after
+    // `normalize_energy` and `phase_cone`: point 0.1114 / 0.2234 x0.923, spot 0.0932 / 0.1343
+    // x0.977, rect 0.1470 / 0.2251 x0.960.
+    vpl_plume_point_against_reference: "plume_point", test_vpl(NearField::Ball), 0.133, 0.233;
+    vpl_plume_spot_against_reference: "plume_spot", test_vpl(NearField::Ball), 0.113, 0.158;
+    vpl_plume_rect_against_reference: "plume_rect", test_vpl(NearField::Ball), 0.172, 0.258;
 
-// The dense cloud (optical depth over 30, g 0.9), same settings and margins. Measured: image
-// 0.732 / grid 0.798, image mean x0.691; at 16384 walks and a 16-cell gather 0.431 / 0.654,
-// x0.779 in 46 s (pop: image 0.50, grid 0.94). Too dark: the multiple scattering of a cell
-// many mean free paths thick comes from the rare VPLs within a mean free path of the gather
-// point, a heavy-tailed estimator whose typical value is below its mean; the paper's bias
-// compensation (not in this landing) is the cure. With `normalize_energy` and `phase_cone`
-// (which smooths the two g 0.9 lobes below a quarter cell, the tail's source): 0.7072 /
-// 0.7643, x1.036; ratchet tightened.
-against_reference! {
-    vpl_cloud_against_reference: "cloud", NearField::Ball, 0.788, 0.851;
-}
+    // The dense cloud (optical depth over 30, g 0.9), same settings and margins. Measured: image
+    // 0.732 / grid 0.798, image mean x0.691; at 16384 walks and a 16-cell gather 0.431 / 0.654,
+    // x0.779 in 46 s (pop: image 0.50, grid 0.94). Too dark: the multiple scattering of a cell
+    // many mean free paths thick comes from the rare VPLs within a mean free path of the gather
+    // point, a heavy-tailed estimator whose typical value is below its mean; the paper's bias
+    // compensation (not in this landing) is the cure. With `normalize_energy` and `phase_cone`
+    // (which smooths the two g 0.9 lobes below a quarter cell, the tail's source): 0.7072 /
+    // 0.7643, x1.036; ratchet tightened.
+    vpl_cloud_against_reference: "cloud", test_vpl(NearField::Ball), 0.788, 0.851;
 
-// The dense cloud with the attenuated top hat (`near_field: hat`, what `auto` takes there):
-// its ball stays a whole gather cell (2-3 mean free paths) where the ball kernel's shrinks to a
-// quarter of one, so no VPL's 1/d^2 peaks. Measured: image 0.4209 / grid 0.4179, x0.945
-// (the ball's row above: 0.7072 / 0.7643). Same margins.
-against_reference! {
-    vpl_cloud_hat_against_reference: "cloud", NearField::Hat, 0.473, 0.470;
-}
+    // The dense cloud with the attenuated top hat (`near_field: hat`, what `auto` takes there):
+    // its ball stays a whole gather cell (2-3 mean free paths) where the ball kernel's shrinks to a
+    // quarter of one, so no VPL's 1/d^2 peaks. Measured: image 0.4209 / grid 0.4179, x0.945
+    // (the ball's row above: 0.7072 / 0.7643). Same margins.
+    vpl_cloud_hat_against_reference: "cloud", test_vpl(NearField::Hat), 0.473, 0.470;
 
-// The default near field, `compensate` (4 vertices per gather point, depth 2, 256 walks per
-// vertex), same settings and margins. Measured (image / grid, image mean ratio): cube g 0
-// 0.0928 / 0.0609 x1.090 (ball 0.0755 / 0.0639 x1.059: the same walks, both bright by their
-// noise); cube g 0.7 0.1383 / 0.1156 x1.103 (ball 0.1529 / 0.1444); plume 0.3112 / 0.4024
-// x0.989 (ball 0.3620 / 0.5311 x0.923); dense cloud 0.6219 / 0.7487 x0.655 (ball 0.7463 /
-// 0.7980 x0.660), in 2 s (plume) to 22 s (cloud) on one loaded core.
-against_reference! {
-    vpl_cube_g0_compensated_against_reference: "cube_g0", NearField::Compensate, 0.112, 0.077;
-    vpl_cube_g07_compensated_against_reference: "cube_g07", NearField::Compensate, 0.162, 0.137;
-    vpl_plume_compensated_against_reference: "plume", NearField::Compensate, 0.352, 0.453;
-    vpl_cloud_compensated_against_reference: "cloud", NearField::Compensate, 0.694, 0.834;
+    // The default near field, `compensate` (4 vertices per gather point, depth 2, 256 walks per
+    // vertex), same settings and margins. Measured (image / grid, image mean ratio): cube g 0
+    // 0.0928 / 0.0609 x1.090 (ball 0.0755 / 0.0639 x1.059: the same walks, both bright by their
+    // noise); cube g 0.7 0.1383 / 0.1156 x1.103 (ball 0.1529 / 0.1444); plume 0.3112 / 0.4024
+    // x0.989 (ball 0.3620 / 0.5311 x0.923); dense cloud 0.6219 / 0.7487 x0.655 (ball 0.7463 /
+    // 0.7980 x0.660), in 2 s (plume) to 22 s (cloud) on one loaded core.
+    vpl_cube_g0_compensated_against_reference: "cube_g0", test_vpl(NearField::Compensate), 0.112, 0.077;
+    vpl_cube_g07_compensated_against_reference: "cube_g07", test_vpl(NearField::Compensate), 0.162, 0.137;
+    vpl_plume_compensated_against_reference: "plume", test_vpl(NearField::Compensate), 0.352, 0.453;
+    vpl_cloud_compensated_against_reference: "cloud", test_vpl(NearField::Compensate), 0.694, 0.834;
 }
 
 /// `transmittance` from VPL_TR (`map` or `march`; unset: the default) and `map_resolution`
@@ -279,6 +258,7 @@ fn vpl_explore_furnace() {
 fn vpl_white_furnace_clamp_loses_compensation_restores() {
     let sc = furnace_box();
     let s = VplSettings { walks: 2048, gather_resolution: 10, output_resolution: 12, clamp_radius: 2.0, ..Default::default() };
+
     // The paper's clamp alone: without normalize_energy, which would restore its loss globally.
     let (clamp, rep_c) = furnace_ratio(&sc, VplSettings { near_field: NearField::Clamp, normalize_energy: false, ..s.clone() });
     let (clamp_normalized, rep_n) = furnace_ratio(&sc, VplSettings { near_field: NearField::Clamp, ..s.clone() });
@@ -289,6 +269,7 @@ fn vpl_white_furnace_clamp_loses_compensation_restores() {
     assert_eq!(rep_c.gather.restored, 0.0);
     assert!(rep.energy.is_none(), "normalize_energy is skipped with compensate");
     assert!(clamp < 0.85, "clamping alone should lose energy: S / sigma_s {clamp}");
+
     // normalize_energy puts the clamp's loss back as a whole (factor 1/0.695 where it took
     // 30%): measured 0.965; bound 0.94 (what remains is where: the faces' points lose less).
     assert!(clamp_normalized > 0.94 && clamp_normalized < 1.03, "normalized clamp S / sigma_s {clamp_normalized}");
@@ -468,6 +449,7 @@ fn vpl_double_scattering_matches_reference_order_two() {
     use crate::solvers::reference::{Reference, ReferenceSettings};
     use crate::solvers::testing::{mean, SolverOutput};
     let sc = case("cube_g0");
+
     // The ball kernel: the compensation's recursion adds orders of its own (its vertices
     // connect to the VPLs and recurse), which max_orders does not cut.
     let (out, _) = Vpl::new(VplSettings { near_field: NearField::Ball, ..test_settings() }).unwrap().with_max_orders(1).solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();
@@ -830,6 +812,7 @@ fn vpl_bench_image() {
     let list = |key: &str, default: &str| -> Vec<u32> { std::env::var(key).unwrap_or_else(|_| default.into()).split(',').filter(|s| !s.is_empty()).map(|s| s.parse().unwrap()).collect() };
     let dir = std::env::var("VPL_IMAGE_CACHE").map(std::path::PathBuf::from).unwrap_or_else(|_| std::env::temp_dir());
     let pixels = env_u32("VPL_IMAGE_PIXELS", 128);
+
     // "N" for every scene, or "name:N,..." (scenes not named: 1024).
     let ref_spp_of = |name: &str| -> u32 {
         let v = std::env::var("VPL_IMAGE_REF_SPP").unwrap_or_default();
@@ -1070,6 +1053,7 @@ fn vpl_auto_near_field_takes_the_hat_on_the_dense_clouds_only() {
     }
     // A setting other than auto is kept.
     assert_eq!(Vpl::new(VplSettings { near_field: NearField::Clamp, ..s.clone() }).unwrap().near_field_for(&case("cloud").medium).unwrap(), NearField::Clamp);
+
     // And the solve runs what it resolved, and says so.
     for (name, want) in [("cloud", NearField::Hat), ("cube_g0", NearField::Ball)] {
         let (_, rep) = Vpl::new(VplSettings { walks: 256, ..s.clone() }).unwrap().solve(&case(name), &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<VplReport>).unwrap();

@@ -2,55 +2,10 @@
 //! isotropic residuum's effect.
 
 use super::*;
-use crate::scene::{Environment, LatLongMap};
+use crate::scene::Environment;
+use crate::solvers::testing::check_against_reference;
+use crate::solvers::testing::scenes::{dome_case, dome_scene, DOME_CASES};
 
-/// Direction towards the sun of `sun_sky` (arriving light comes from there).
-const SUN: Vec3 = Vec3::new(0.6, -0.3, 0.75);
-
-/// A lat-long sky made here (no file): a sun of 4 degrees radius and radiance 300 (about 60%
-/// of the dome's light), a blue sky brightening towards the horizon, a dim brown ground.
-pub(super) fn sun_sky(width: usize, height: usize) -> LatLongMap {
-    let sun = SUN.normalize();
-    let cos_sun = 4.0f32.to_radians().cos();
-    let pixels = (0..width * height)
-        .map(|c| {
-            let (x, r) = (c % width, c / width);
-            let d = LatLongMap::uv_to_direction([(x as f32 + 0.5) / width as f32, 1.0 - (r as f32 + 0.5) / height as f32]);
-            if d.dot(sun) > cos_sun {
-                Vec3::splat(300.0)
-            } else if d.z >= 0.0 {
-                Vec3::new(0.25, 0.45, 1.0) * (0.5 + 0.5 * (1.0 - d.z))
-            } else {
-                Vec3::new(0.15, 0.12, 0.1)
-            }
-        })
-        .collect();
-    LatLongMap::new(width, height, pixels)
-}
-
-fn dome_scene(medium: Medium, env: Environment) -> Scene {
-    Scene {
-        medium,
-        lights: vec![Light::Dome(env)],
-        camera: Camera::look_at(Vec3::new(0.0, -6.0, 0.3), Vec3::ZERO, Vec3::Z, 25.0, FIXTURE_SIZE, FIXTURE_SIZE),
-        solver: Default::default(),
-    }
-}
-
-/// The dome cases: the heterogeneous plume (g 0.9, albedo 0.99) under a uniform bluish dome
-/// and under the sun sky, and a nearly white plume (albedo 0.999) under the sun sky, where
-/// light scatters hundreds of times (the isotropic residuum's case).
-pub(crate) fn dome_case(name: &str) -> Scene {
-    match name {
-        "dome_uniform" => dome_scene(plume(32, 8.0, 0.99, 0.9), Environment { color: Vec3::new(0.5, 0.7, 1.0), map: None }),
-        "dome_sun" => dome_scene(plume(32, 8.0, 0.99, 0.9), Environment { color: Vec3::ONE, map: Some(sun_sky(128, 64)) }),
-        "dome_milk" => dome_scene(cube(16, MILK_SIGMA_T, 0.999, MILK_G), Environment { color: Vec3::ONE, map: Some(sun_sky(128, 64)) }),
-        _ => panic!("unknown dome case {name}"),
-    }
-}
-const MILK_SIGMA_T: f32 = 10.0;
-const MILK_G: f32 = 0.9;
-const DOME_CASES: [&str; 3] = ["dome_uniform", "dome_sun", "dome_milk"];
 
 /// Regenerates the dome fixtures (`cargo nextest run -p volscatter-core --cargo-profile release
 /// regenerate_dome_fixtures --run-ignored only`; `FIXTURE_SPP`, `FIXTURE_GRID_SPP`, `POP_CASE` as
@@ -154,30 +109,33 @@ fn moved_camera_picks_neighbouring_ordinates() {
 // (one HG lobe per cell about each ordinate, see tests.rs); it falls as N grows because each
 // ordinate then stands for a smaller region of the sky.
 
+/// POP with the dome tests' settings at `n` ordinates (a ratchet row's solver).
+fn dome_pop(n: u32) -> Pop {
+    Pop::new(dome_settings(n)).unwrap()
+}
+
+/// A dome ratchet row's further print: POP's propagation work.
+fn print_cell_updates(name: &str, _: &Errors, out: &SolveOutput) {
+    eprintln!("{name}: propagation cell updates {}", out.report::<PopReport>().expect("POP's report").cell_updates());
+}
+
 fn check_dome(name: &str, n: u32, max_image: f64, max_grid: f64) -> Errors {
-    let (e, rep) = pop_vs_fixture_scene(name, &dome_case(name), &dome_settings(n));
-    eprintln!(
-        "{name} N {n}: image {:.4} (mean x{:.3}), grid {:.4} (mean x{:.3}), multiple {:.4}, propagation cell updates {}",
-        e.image, e.image_ratio, e.grid, e.grid_ratio, e.multiple.unwrap(), rep.cell_updates()
-    );
-    assert!(e.image <= max_image, "{name} N {n}: image rel. RMSE {:.4} over {max_image}", e.image);
-    assert!(e.grid <= max_grid, "{name} N {n}: grid rel. RMSE {:.4} over {max_grid}", e.grid);
+    let (e, out) = check_against_reference(&format!("{name} N {n}"), name, &dome_pop(n), max_image, max_grid, pop_errors);
+    print_cell_updates(name, &e, &out);
     e
 }
 
-/// Uniform bluish dome over the plume (g 0.9, albedo 0.99), 16 ordinates. Measured: image
-/// 0.298, grid 0.305 (mean x0.71: with 16 ordinates each lobe is wide, a0 about 0.85, and
-/// POP's lattice loses some of it; see `errors_fall_as_ordinates_grow`).
-#[test]
-fn uniform_dome_against_reference() {
-    check_dome("dome_uniform", 16, 0.338, 0.346);
-}
-
-/// The sun sky (lat-long map made in the test) over the plume, 16 ordinates. Measured: image
-/// 0.354, grid 0.324.
-#[test]
-fn sun_dome_against_reference() {
-    check_dome("dome_sun", 16, 0.40, 0.367);
+against_reference! {
+    solver: "pop";
+    measure: pop_errors;
+    then: print_cell_updates;
+    // Uniform bluish dome over the plume (g 0.9, albedo 0.99), 16 ordinates. Measured: image
+    // 0.298, grid 0.305 (mean x0.71: with 16 ordinates each lobe is wide, a0 about 0.85, and
+    // POP's lattice loses some of it; see `errors_fall_as_ordinates_grow`).
+    uniform_dome_against_reference: "dome_uniform", dome_pop(16), 0.338, 0.346;
+    // The sun sky (lat-long map made in the test) over the plume, 16 ordinates. Measured: image
+    // 0.354, grid 0.324.
+    sun_dome_against_reference: "dome_sun", dome_pop(16), 0.40, 0.367;
 }
 
 /// N = 16, 64, 125 ordinates: the error must not grow with N beyond a noise margin of 0.02

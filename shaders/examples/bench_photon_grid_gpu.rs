@@ -1,24 +1,39 @@
-//! Measurements for `scripts/bench_photon_grid.py --gpu` (an ignored test: it times, never
-//! asserts). Prints one line `BENCH_JSON {...}`: paper Fig. 12's three (cells, photons)
-//! settings on the 48 x 62 x 90 cumulus, the tracing and reconstruction stages on the CPU
-//! backend and on the GPU backend, for a one-off solve (all photons) and for a session frame's
-//! share (photons / m, m = 100), then the reconstruction alone at the cumulus's resolution with
-//! each upsampling, with the adapter's name. `VOLSCATTER_BENCH_QUICK=1`: the first setting only.
+//! Measurements for `scripts/bench_photon_grid.py --gpu` (it times, never asserts). Prints one
+//! line `BENCH_JSON {...}`: paper Fig. 12's three (cells, photons) settings on the 48 x 62 x 90
+//! cumulus, the tracing and reconstruction stages on the CPU backend and on the GPU backend, for
+//! a one-off solve (all photons) and for a session frame's share (photons / m, m = 100), then
+//! the reconstruction alone at the cumulus's resolution with each upsampling, with the adapter's
+//! name. `VOLSCATTER_BENCH_QUICK=1`: the first setting only.
+//!
+//! cargo run --release -p volscatter-gpu --example bench_photon_grid_gpu
 
 use glam::{IVec3, Vec3};
 use serde_json::json;
 use std::time::Instant;
 
-use super::GpuPhotonBackend;
-use crate::test_support::gpu_or_skip;
+use volscatter_gpu::photon_grid::GpuPhotonBackend;
 use volscatter_core::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Light};
 use volscatter_core::solvers::photon_grid::backend::{CpuBackend, PhotonBackend};
 use volscatter_core::solvers::photon_grid::{PhotonGrid, PhotonGridSettings, Upsampling};
 use volscatter_core::stages::NoProgress;
 use volscatter_core::Scene;
+use std::sync::Arc;
+use volscatter_core::solvers::{SolveCtx, SolveOutput, Solver};
+use volscatter_gpu::GpuContext;
 
-/// The cumulus of core's photon_grid/bench.rs `paper_cumulus`: sigma_t 25, albedo 0.99, g 0.9,
+/// `solver` solved one-off with `backend` as the device's entry (as the kernel tests'
+/// test_support.rs `solve_on`).
+fn solve_on<B: ?Sized + 'static>(solver: &dyn Solver, scene: &Scene, backend: &Box<B>) -> volscatter_core::Result<SolveOutput> {
+    solver.solve(scene, &mut SolveCtx::new(&NoProgress).on(backend))
+}
+
+/// The GPU context; the bench is for a machine that has one.
+fn gpu() -> Arc<GpuContext> {
+    Arc::new(GpuContext::new().unwrap_or_else(|e| panic!("this bench needs a usable GPU adapter: {e}")))
+}
+
+/// The cumulus of core's examples/bench_photon_grid.rs `paper_cumulus`: sigma_t 25, albedo 0.99, g 0.9,
 /// lit by the dense cloud's sun (45 degrees up, from +x and the camera's side).
 fn paper_cumulus() -> Scene {
     let (grid, to_world) = cumulus_on_lattice(IVec3::new(48, 62, 90), GridLimits::default()).unwrap();
@@ -35,16 +50,14 @@ fn paper_cumulus() -> Scene {
 /// (trace seconds, reconstruction seconds, whole solve seconds) of a one-off solve.
 fn timed(scene: &Scene, s: &PhotonGridSettings, backend: &Box<dyn PhotonBackend>) -> (f64, f64, f64) {
     let t = Instant::now();
-    let out = crate::test_support::solve_on(&PhotonGrid::new(s.clone()).unwrap(), scene, &NoProgress, backend, None).unwrap();
+    let out = solve_on(&PhotonGrid::new(s.clone()).unwrap(), scene, backend).unwrap();
     let total = t.elapsed().as_secs_f64();
     let stage = |name: &str| out.timings.0.iter().filter(|(k, _)| k == name).map(|(_, v)| *v).sum();
     (stage("trace"), stage("reconstruct"), total)
 }
 
-#[test]
-#[ignore = "benchmark: scripts/bench_photon_grid.py --gpu runs it"]
-fn bench_photon_grid_gpu() {
-    let ctx = gpu_or_skip();
+fn main() {
+    let ctx = gpu();
     let gpu: Box<dyn PhotonBackend> = Box::new(GpuPhotonBackend::new(&ctx));
     let cpu: Box<dyn PhotonBackend> = Box::new(CpuBackend);
     let scene = paper_cumulus();

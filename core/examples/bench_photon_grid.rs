@@ -1,26 +1,28 @@
-//! Measurements for `scripts/bench_photon_grid.py` (ignored tests: they time, never assert).
-//! Each prints one line `BENCH_JSON {...}` that the script turns into BENCHMARKS.md's
-//! "photon-grid" section. `cargo test --release -p volscatter-core --lib -- --ignored
-//! photon_grid::bench --nocapture --test-threads 1`
+//! Measurements for `scripts/bench_photon_grid.py` (they time, never assert). Each bench
+//! prints one line `BENCH_JSON {...}` that the script turns into BENCHMARKS.md's "photon-grid"
+//! section. Needs the shared fixtures (volscatter-core's `testing` feature):
+//!
+//! cargo run --release -p volscatter-core --features testing --example bench_photon_grid -- [BENCH...]
+//!
+//! BENCH: a part of a bench's name (`error_vs_time`, `fig12`, `flicker`, `cloud_aim`); none: all.
 
 use glam::{IVec3, Quat, Vec3};
 use serde_json::json;
 use std::time::Instant;
 
-use super::tests::case;
-use super::*;
-use crate::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
-use crate::scene::Light;
-use crate::solvers::testing::errors_against_fixture;
-use crate::stages::NoProgress;
+use volscatter_core::medium::{cumulus::cumulus_on_lattice, GridLimits, Medium};
+use volscatter_core::scene::{Light, Scene};
+use volscatter_core::solvers::photon_grid::{cache, Angular, PhotonGrid, PhotonGridReport, PhotonGridSettings, Similarity};
+use volscatter_core::solvers::session::SessionState;
+use volscatter_core::solvers::testing::{errors_against_fixture, fixture_scene as case};
+use volscatter_core::solvers::{SolveCtx, SolveOutput, Solver};
+use volscatter_core::stages::NoProgress;
 
 fn emit(name: &str, v: serde_json::Value) {
     println!("BENCH_JSON {}", json!({"bench": name, "data": v}));
 }
 
 /// Error against the shared fixtures against time, for 2^14, 2^16 and 2^18 photons.
-#[test]
-#[ignore]
 fn bench_photon_grid_error_vs_time() {
     let mut rows = Vec::new();
     for name in ["cube_g0", "cube_g09", "plume", "cloud"] {
@@ -49,8 +51,6 @@ fn paper_cumulus() -> Scene {
 /// Paper Fig. 12's three (cells, photons) settings at m = 100: 270 / 2080 / 16640 cells (here
 /// cache_resolution 9 / 18 / 36 over the 48 x 62 x 90 box) and 102 k / 819 k / 4096 k photons;
 /// the time of a one-off solve (all photons) and of a session frame (photons / m).
-#[test]
-#[ignore]
 fn bench_photon_grid_fig12() {
     let sc = paper_cumulus();
     let mut rows = Vec::new();
@@ -87,8 +87,6 @@ fn bench_photon_grid_fig12() {
 /// Flicker on a moving sun (0.5 degree per frame, 12 frames, cube g 0.7, 2^16 photons): the
 /// rel. RMS change of S between consecutive frames, and the time per frame, for one-off solves
 /// per frame (seed fixed, and a new seed per frame) and for sessions with m 4 and 16.
-#[test]
-#[ignore]
 fn bench_photon_grid_flicker() {
     let frames = 12u64;
     let scene = |f: u64| {
@@ -139,18 +137,16 @@ fn bench_photon_grid_flicker() {
 /// cache 32 at 2^18 to 2^24), and for the reference path tracer at 256 to 4096 paths per
 /// pixel, both against the cloud fixture (own noise 2.2%). PG_BENCH_MAX_PHOTONS caps the
 /// defaults' photon count (log2, default 22; the camera rows go 2 further).
-#[test]
-#[ignore]
 fn bench_photon_grid_cloud_aim() {
-    use crate::solvers::reference::{Reference, ReferenceSettings};
-    use crate::solvers::testing::{env_u32, load_fixture, rgb, Errors};
+    use volscatter_core::solvers::reference::{Reference, ReferenceSettings};
+    use volscatter_core::solvers::testing::{env_u32, load_fixture, rgb, Errors};
     let sc = case("cloud");
     let fx = load_fixture("cloud");
     let mut rows = Vec::new();
     for spp in [256u32, 1024, 4096] {
         let t = Instant::now();
         let r = Reference::new(ReferenceSettings { spp, transparent: true, ..Default::default() }).unwrap();
-        let img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut crate::stages::Timings::default()).expect("the reference renders images").unwrap();
+        let img = r.render_image(&sc, &mut SolveCtx::new(&NoProgress), false, &mut volscatter_core::stages::Timings::default()).expect("the reference renders images").unwrap();
         let secs = t.elapsed().as_secs_f64();
         let e = Errors::between(&rgb(&img), &[], &[], &fx.image(), &[], None);
         rows.push(json!({"method": "reference", "spp": spp, "seconds": secs, "image": e.image, "image_ratio": e.image_ratio}));
@@ -168,4 +164,16 @@ fn bench_photon_grid_cloud_aim() {
         }
     }
     emit("cloud_aim", json!({"rows": rows, "fixture_noise": fx.noise_image}));
+}
+
+/// Runs the benches named on the command line (a name's part selects; none: all), in order.
+fn main() {
+    let only: Vec<String> = std::env::args().skip(1).collect();
+    let benches: [(&str, fn()); 4] = [("bench_photon_grid_error_vs_time", bench_photon_grid_error_vs_time), ("bench_photon_grid_fig12", bench_photon_grid_fig12), ("bench_photon_grid_flicker", bench_photon_grid_flicker), ("bench_photon_grid_cloud_aim", bench_photon_grid_cloud_aim)];
+    for (name, bench) in benches {
+        if only.is_empty() || only.iter().any(|o| name.contains(o.as_str())) {
+            eprintln!("{name}");
+            bench();
+        }
+    }
 }

@@ -1,19 +1,22 @@
-//! Measurements for `scripts/bench_network.py` (ignored tests: they time, never assert). Each
-//! prints one line `BENCH_JSON {...}` that the script turns into BENCHMARKS.md's "network"
-//! section. `cargo test --release -p volscatter-core --lib -- --ignored network::bench
-//! --nocapture --test-threads 1`
+//! Measurements for `scripts/bench_network.py` (they time, never assert). Each bench prints
+//! one line `BENCH_JSON {...}` that the script turns into BENCHMARKS.md's "network" section.
+//! Needs the shared fixtures (volscatter-core's `testing` feature):
+//!
+//! cargo run --release -p volscatter-core --features testing --example bench_network -- [BENCH...]
+//!
+//! BENCH: a part of a bench's name (`error_vs_time`, `paper_cloud`); none: all.
 
-use crate::solvers::session::SessionState;
 use glam::{Quat, Vec3};
 use serde_json::json;
 use std::time::Instant;
 
-use super::tests::{cube_scene, plume_scene};
-use super::*;
-use crate::scene::{Camera, Environment, Light};
-use crate::solvers::testing::{cloud::cloud_scene, errors_against_fixture};
-use crate::stages::NoProgress;
-use crate::translate::sampling::BoundingSphere;
+use volscatter_core::scene::{Camera, Environment, Light, Scene};
+use volscatter_core::solvers::network::{particles, Network, NetworkReport, NetworkSettings, Start};
+use volscatter_core::solvers::session::SessionState;
+use volscatter_core::solvers::testing::{cloud::cloud_scene, errors_against_fixture, fixture_scene};
+use volscatter_core::solvers::{SolveOutput, SolveCtx, Solver};
+use volscatter_core::stages::NoProgress;
+use volscatter_core::translate::sampling::BoundingSphere;
 
 fn emit(name: &str, v: serde_json::Value) {
     println!("BENCH_JSON {}", json!({"bench": name, "data": v}));
@@ -24,11 +27,9 @@ fn phase(out: &SolveOutput, name: &str) -> f64 {
 }
 
 /// Error against the shared fixtures against time, N 1024 / 2048 / 4096 (D 64).
-#[test]
-#[ignore]
 fn bench_network_error_vs_time() {
     let mut rows = Vec::new();
-    for (name, sc) in [("cube_g0", cube_scene(0.0, 1.0)), ("cube_g09", cube_scene(0.9, 1.0)), ("plume", plume_scene()), ("cloud", cloud_scene())] {
+    for (name, sc) in [("cube_g0", fixture_scene("cube_g0")), ("cube_g09", fixture_scene("cube_g09")), ("plume", fixture_scene("plume")), ("cloud", cloud_scene())] {
         for n in [1024u32, 2048, 4096] {
             let s = NetworkSettings { particles: n, output_resolution: 32, ..Default::default() };
             let t = Instant::now();
@@ -61,8 +62,6 @@ fn paper_cloud() -> Scene {
 
 /// Time per iteration on the paper's cloud, N 512 and 1024, D 128, and the phases of a solve;
 /// then a camera orbit (12 frames of 30 degrees) in a session against full solves.
-#[test]
-#[ignore]
 fn bench_network_paper_cloud() {
     let sc = paper_cloud();
     let mut rows = Vec::new();
@@ -97,4 +96,16 @@ fn bench_network_paper_cloud() {
             "orbit_frame_seconds": mean(&orbit), "full_solve_seconds": mean(&full)}));
     }
     emit("paper_cloud", json!(rows));
+}
+
+/// Runs the benches named on the command line (a name's part selects; none: all), in order.
+fn main() {
+    let only: Vec<String> = std::env::args().skip(1).collect();
+    let benches: [(&str, fn()); 2] = [("bench_network_error_vs_time", bench_network_error_vs_time), ("bench_network_paper_cloud", bench_network_paper_cloud)];
+    for (name, bench) in benches {
+        if only.is_empty() || only.iter().any(|o| name.contains(o.as_str())) {
+            eprintln!("{name}");
+            bench();
+        }
+    }
 }

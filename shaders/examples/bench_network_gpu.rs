@@ -1,29 +1,42 @@
-//! Measurements for `scripts/bench_network.py --gpu-only` (ignored tests: they time, never
-//! assert). Prints one line `BENCH_JSON {...}` with the adapter's name, whether it is a
-//! software one (lavapipe: correctness only, not GPU speed), and absolute times of the CPU and
-//! GPU backends on the same scenes, so that a session with a real GPU only reruns it.
-//! `cargo test --release -p volscatter-gpu --lib -- --ignored network::bench --nocapture`
-//! (`NETWORK_BENCH_QUICK=1`: small sizes only).
+//! Measurements for `scripts/bench_network.py --gpu-only` (it times, never asserts). Prints one
+//! line `BENCH_JSON {...}` with the adapter's name, whether it is a software one (lavapipe:
+//! correctness only, not GPU speed), and absolute times of the CPU and GPU backends on the same
+//! scenes, so that a session with a real GPU only reruns it.
+//!
+//! cargo run --release -p volscatter-gpu --example bench_network_gpu (`NETWORK_BENCH_QUICK=1`:
+//! small sizes only).
 
 use glam::Vec3;
 use serde_json::json;
 use std::time::Instant;
 
-use crate::network::{GpuBackend, CHECK_EVERY};
-use crate::test_support::gpu_or_skip;
+use std::sync::Arc;
+use volscatter_gpu::network::{GpuBackend, CHECK_EVERY};
+use volscatter_gpu::GpuContext;
 use volscatter_core::image::relative_rmse;
 use volscatter_core::medium::{cumulus, GridLimits, Medium};
 use volscatter_core::scene::{Camera, Environment, Light};
 use volscatter_core::solvers::network::backend::{CpuBackend, NetworkBackend};
 use volscatter_core::solvers::network::{particles, Network, NetworkReport, NetworkSettings};
-use volscatter_core::solvers::{SolveOutput};
+use volscatter_core::solvers::{SolveCtx, SolveOutput, Solver};
 use volscatter_core::stages::NoProgress;
 use volscatter_core::translate::sampling::BoundingSphere;
 use volscatter_core::Scene;
 
-/// The paper's cloud as core network/bench.rs builds it (Sec. 5: 2 R tau = 20, albedo 0.9,
+/// `solver` solved one-off with `backend` as the device's entry (as the kernel tests'
+/// test_support.rs `solve_on`).
+fn solve_on<B: ?Sized + 'static>(solver: &dyn Solver, scene: &Scene, backend: &Box<B>) -> volscatter_core::Result<SolveOutput> {
+    solver.solve(scene, &mut SolveCtx::new(&NoProgress).on(backend))
+}
+
+/// The GPU context; the bench is for a machine that has one.
+fn gpu() -> Arc<GpuContext> {
+    Arc::new(GpuContext::new().unwrap_or_else(|e| panic!("this bench needs a usable GPU adapter: {e}")))
+}
+
+/// The paper's cloud as core's examples/bench_network.rs builds it (Sec. 5: 2 R tau = 20, albedo 0.9,
 /// g 0, two distant lights and a sky) on the procedural cumulus of the dense-cloud fixture
-/// (64 voxels per side), the fixture's own scene being test-only in core.
+/// (64 voxels per side), with its own camera.
 fn paper_cloud() -> Scene {
     let (grid, to_world) = cumulus::cumulus(64, GridLimits::default()).unwrap();
     let mut medium = Medium::new(grid, to_world, Vec3::splat(25.0), Vec3::splat(0.9), 0.0);
@@ -51,7 +64,7 @@ fn phase(out: &SolveOutput, name: &str) -> f64 {
 fn timed(sc: &Scene, s: &NetworkSettings, backend: &Box<dyn NetworkBackend>) -> (serde_json::Value, SolveOutput) {
     let t = Instant::now();
     let net = Network::new(s.clone()).unwrap();
-    let (out, rep) = crate::test_support::solve_on(&net, sc, &NoProgress, backend, None).unwrap().split::<NetworkReport>();
+    let (out, rep) = solve_on(&net, sc, backend).unwrap().split::<NetworkReport>();
     let total = t.elapsed().as_secs_f64();
     let iterate = phase(&out, "network iterate");
     let iterations = rep.residuals.len();
@@ -60,10 +73,8 @@ fn timed(sc: &Scene, s: &NetworkSettings, backend: &Box<dyn NetworkBackend>) -> 
     (row, out)
 }
 
-#[test]
-#[ignore]
-fn bench_network_gpu() {
-    let ctx = gpu_or_skip();
+fn main() {
+    let ctx = gpu();
     let quick = std::env::var("NETWORK_BENCH_QUICK").is_ok_and(|v| v == "1");
     let sc = paper_cloud();
     let gpu: Box<dyn NetworkBackend> = Box::new(GpuBackend::new(&ctx, CHECK_EVERY));
@@ -74,7 +85,7 @@ fn bench_network_gpu() {
     }
     // Compiles the pipelines outside the timings.
     let warm = NetworkSettings { particles: 256, directions: 16, output_resolution: 8, ..Default::default() };
-    crate::test_support::solve_on(&Network::new(warm).unwrap(), &sc, &NoProgress, &gpu, None).unwrap();
+    solve_on(&Network::new(warm).unwrap(), &sc, &gpu).unwrap();
     let mut rows = Vec::new();
     for (n, d, res) in sizes {
         let s = NetworkSettings { particles: n, directions: d, output_resolution: res, ..Default::default() };
