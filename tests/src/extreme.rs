@@ -18,20 +18,12 @@ pub fn solvers() -> Vec<&'static str> {
     volscatter_core::solvers::registry::SOLVER_NAMES.iter().copied().filter(|n| *n != "auto").collect()
 }
 
-/// The small base scene: a 16^3 plume lit by a sun, 16x12 pixels, the given solver with
-/// settings that take well under a second.
-// TODO(test preset): these settings per solver are this harness's own; take the registry's
-// `test` preset once every entry has one.
+/// The small base scene: a 16^3 plume lit by a sun, 16x12 pixels, the given solver at its
+/// registry `test` preset (small settings that take well under a second).
 fn base(solver: &str) -> Value {
-    let settings = match solver {
-        "reference" => json!({"name": "reference", "spp": 2, "grid_resolution": 8, "grid_spp": 4, "seed": 1}),
-        "pop" => json!({"name": "pop", "grid_resolution": 12, "output_resolution": 16, "dome_ordinates": 4}),
-        "vpl" => json!({"name": "vpl", "walks": 256, "gather_resolution": 8, "output_resolution": 16}),
-        "photon-grid" => json!({"name": "photon-grid", "photons": 4096, "cache_resolution": 8, "output_resolution": 16}),
-        "network" => json!({"name": "network", "particles": 256, "output_resolution": 16}),
-        "lpm" => json!({"name": "lpm", "grid_resolution": 8, "output_resolution": 16}),
-        other => panic!("solver {other} has no base settings in tests/src/extreme.rs: add them"),
-    };
+    let entry = volscatter_core::solvers::registry::get(solver).unwrap_or_else(|e| panic!("{e}"));
+    let mut settings = Value::Object(entry.test.settings());
+    settings["name"] = json!(solver);
     json!({"format": 1,
         "medium": {"procedural": "plume", "dims": [16], "density_scale": 10.0, "albedo": 0.9, "g": 0.5},
         "lights": [{"type": "distant", "direction": [-0.5, 0.6, -0.62], "irradiance": 4.0}],
