@@ -133,7 +133,7 @@ def main() -> None:
         + ", ".join(f"{r['rgb_rrmse']:.1e}" for r in rows)
         + f"); the default EXR's layers: {', '.join(rows[0]['layers_default']) or 'none'}.",
         "The single and multiple layers differ from main's by the dome's quadrature: 32 instead of 64",
-        "importance-sampled directions for a bright sky, proportionally fewer for a dim one (`compositor::dome_directions_for`;",
+        "importance-sampled directions for a bright sky, proportionally fewer for a dim one (`stages::single_scattering::dome_directions_for`;",
         "the longer shadow-ray step adds 0.05%).",
     ]
     publish("composite", lines)

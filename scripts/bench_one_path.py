@@ -32,6 +32,7 @@ def main():
     ap.add_argument("--after", default=str(benchlib.volscatter_bin()), help="the CLI under test (default: target/release/volscatter)")
     ap.add_argument("--solvers", default="pop,lpm", help="comma-separated solvers, each at its defaults")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--before-commit", default="", help="the commit the --before binary was built from (named in the table)")
     args = ap.parse_args()
     before, after = Path(args.before), Path(args.after)
     scenes = [("default", None)] + [(n, benchlib.REPO_ROOT / "bench" / "scenes" / n / "scene.json") for n in SCENES]
@@ -59,7 +60,7 @@ def main():
         "",
         benchlib.written_line(f"python3 scripts/bench_one_path.py --before {before.name} --solvers {args.solvers} --repeats {args.repeats}", args.quick),
         f"`volscatter render` (CPU, each solver at its defaults, the scene's own image size), the fastest of {args.repeats} runs of each binary, "
-        "taken in turns. Before: the CLI of the commit before issue 34's refactor; after: this tree's.",
+        f"taken in turns. Before: the CLI built from {args.before_commit or 'the commit before the change'}; after: this tree's.",
         "",
         *benchlib.table("| scene | solver | before (s) | after (s) | after / before |", rows),
         "",

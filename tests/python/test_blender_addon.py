@@ -482,7 +482,7 @@ def test_frame_range_pop(fresh):
 def test_frame_range_goes_through_one_session(fresh, monkeypatch):
     """The frame-range operator solves every frame in one native session, made from the first
     frame and closed when the job ends (that a session's frames equal one-off solves is tested
-    on the library: core/src/solvers/session.rs, tests/tests/ffi_host.rs)."""
+    on the library: core/src/pipeline/session.rs, tests/tests/ffi_host.rs)."""
     native = _native()
     made = []
 

@@ -96,31 +96,32 @@ impl Devices {
         Devices { choice, accelerator: Some(accelerator) }
     }
 
-    /// Runs `gpu` on the accelerator when the choice allows it, else (or when it declines, or
-    /// fails under `Auto`) `cpu`; a fall-back adds its reason to `notes`.
+    /// The device step: `job(Some(accelerator, choice))` when the choice allows the accelerator
+    /// and `accelerated` (it has a backend for the work), else, or when it declines or fails
+    /// under `Auto`, `job(None)` on the CPU (which must run: `Attempt::Ran`); a fall-back adds
+    /// its reason to `notes`. One job for both, so that it may hold what both use mutably (a
+    /// session's state).
     pub(crate) fn run<T>(
         &self,
         notes: &mut Vec<String>,
-        gpu: impl FnOnce(&dyn Accelerator) -> Result<Attempt<T>>,
-        cpu: impl FnOnce() -> Result<T>,
+        accelerated: bool,
+        mut job: impl FnMut(Option<(&dyn Accelerator, DeviceChoice)>) -> Result<Attempt<T>>,
     ) -> Result<(T, DeviceUsed)> {
-        let accelerator = match self.accelerator {
-            Some(a) if self.choice != DeviceChoice::Cpu => a,
-            _ => return Ok((cpu()?, DeviceUsed::Cpu)),
+        let fallback = match self.accelerator {
+            Some(a) if accelerated && self.choice != DeviceChoice::Cpu => match job(Some((a, self.choice))) {
+                Ok(Attempt::Ran(out, used)) => return Ok((out, used)),
+                Ok(Attempt::Declined(why)) => why,
+                Err(crate::Error::Device(e)) if self.choice == DeviceChoice::Auto => format!("device: {e}"),
+                Err(e) => return Err(e),
+            },
+            _ => String::new(),
         };
-        match gpu(accelerator) {
-            Ok(Attempt::Ran(out, used)) => Ok((out, used)),
-            Ok(Attempt::Declined(why)) => {
-                if !why.is_empty() {
-                    notes.push(format!("ran on the CPU: {why}"));
-                }
-                Ok((cpu()?, DeviceUsed::Cpu))
-            }
-            Err(crate::Error::Device(e)) if self.choice == DeviceChoice::Auto => {
-                notes.push(format!("ran on the CPU (device: {e})"));
-                Ok((cpu()?, DeviceUsed::Cpu))
-            }
-            Err(e) => Err(e),
+        if !fallback.is_empty() {
+            notes.push(format!("ran on the CPU: {fallback}"));
+        }
+        match job(None)? {
+            Attempt::Ran(out, _) => Ok((out, DeviceUsed::Cpu)),
+            Attempt::Declined(why) => Err(crate::Error::InvalidArgument(format!("the CPU path declined: {why}"))),
         }
     }
 }

@@ -47,14 +47,19 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions, dev
     let start = Instant::now();
     let single = if opts.aovs.needs_single() {
         let (single, _) = timings.time("composite: single-scattering AOV", || {
-            devices.run(&mut notes, |a| a.single_for(devices.choice, scene, opts), || compositor::single_for(scene, opts))
+            devices.run(&mut notes, true, |on| match on {
+                Some((accelerator, choice)) => accelerator.single_for(choice, scene, opts),
+                None => compositor::single_for(scene, opts).map(|s| Attempt::Ran(s, DeviceUsed::Cpu)),
+            })
         })?;
         single
     } else {
         None
     };
-    let (image, device) =
-        devices.run(&mut notes, |a| a.composite(devices.choice, scene, s, single.as_ref(), opts), || compositor::composite_with_single(scene, s, single.as_ref(), opts))?;
+    let (image, device) = devices.run(&mut notes, true, |on| match on {
+        Some((accelerator, choice)) => accelerator.composite(choice, scene, s, single.as_ref(), opts),
+        None => compositor::composite_with_single(scene, s, single.as_ref(), opts).map(|i| Attempt::Ran(i, DeviceUsed::Cpu)),
+    })?;
     timings.0.push(("composite".into(), start.elapsed().as_secs_f64()));
     Ok(Composited { image, device, notes, timings })
 }

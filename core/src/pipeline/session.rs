@@ -17,6 +17,8 @@
 //! average the last m frames' photons: its first frame is the one-off answer, later ones lag
 //! the scene by up to m - 1 frames for 1 / m of the cost.
 
+use std::any::Any;
+
 use serde_json::{Map, Value};
 
 use super::auto::{self, Choice};
@@ -116,7 +118,7 @@ impl Session {
         // Built in `new` for every name but auto, and by `pick` for auto.
         let Some(built) = built.as_ref() else { unreachable!("a session's solver is built before it solves") };
         let mut notes = scene.notes();
-        let mut job = |backend: Option<&dyn std::any::Any>| {
+        let mut solve = |backend: Option<&dyn Any>| {
             let ctx = SolveCtx::new(progress).in_session(state);
             let mut ctx = match backend {
                 Some(b) => ctx.on(b),
@@ -124,7 +126,11 @@ impl Session {
             };
             built.solver.solve(scene, &mut ctx)
         };
-        let (output, device) = run_solve(*devices, &built.name, &mut notes, &mut job)?;
+        let accelerated = devices.accelerator.is_some_and(|a| a.has_backend(&built.name));
+        let (output, device) = devices.run(&mut notes, accelerated, |on| match on {
+            Some((accelerator, choice)) => accelerator.solve(choice, &built.name, &mut |backend| solve(Some(backend))),
+            None => solve(None).map(|out| Attempt::Ran(out, DeviceUsed::Cpu)),
+        })?;
         notes.extend(output.notes.iter().cloned());
         guard::check_finite(scene, "scattering grid", output.scattering.data.iter().copied())?;
         Ok(Solved { output, choice, device, notes })
@@ -140,30 +146,6 @@ impl Session {
         self.pick(scene)?;
         let Some(built) = self.built.as_ref() else { unreachable!("a session's solver is built before it solves") };
         Ok((built.solver.as_ref(), &mut self.state))
-    }
-}
-
-/// The device step of a solve: the accelerator's backend for solver `name` when the devices
-/// allow it and it has one, else the CPU.
-fn run_solve(
-    devices: Devices,
-    name: &str,
-    notes: &mut Vec<String>,
-    job: &mut dyn FnMut(Option<&dyn std::any::Any>) -> Result<SolveOutput>,
-) -> Result<(SolveOutput, DeviceUsed)> {
-    let accelerated = devices.accelerator.filter(|a| devices.choice != super::device::DeviceChoice::Cpu && a.has_backend(name));
-    let Some(accelerator) = accelerated else { return Ok((job(None)?, DeviceUsed::Cpu)) };
-    match accelerator.solve(devices.choice, name, &mut |backend| job(Some(backend))) {
-        Ok(Attempt::Ran(out, used)) => Ok((out, used)),
-        Ok(Attempt::Declined(why)) => {
-            notes.push(format!("solved on the CPU: {why}"));
-            Ok((job(None)?, DeviceUsed::Cpu))
-        }
-        Err(crate::Error::Device(e)) if devices.choice == super::device::DeviceChoice::Auto => {
-            notes.push(format!("solved on the CPU (device: {e})"));
-            Ok((job(None)?, DeviceUsed::Cpu))
-        }
-        Err(e) => Err(e),
     }
 }
 

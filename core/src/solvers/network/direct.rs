@@ -1,5 +1,5 @@
 //! Direct light at the particles, exact: every light's true direction and ray-marched
-//! transmittance (as the compositor's single scattering), so the network carries only light
+//! transmittance (as the single-scattering stage), so the network carries only light
 //! that has scattered at least once and single scattering is not blurred by its D directions.
 //! Its first scattering is handed to the network as the source term E of Eq. 2.
 
@@ -14,7 +14,7 @@ use crate::stages::Progress;
 use crate::translate::dome::dome_directions_of;
 use crate::translate::scene_emitters;
 
-/// Area lights as k x k point emitters, the compositor's count (compositor::AREA_VPLS_PER_SIDE).
+/// Area lights as k x k point emitters, the single-scattering stage's count (stages::single_scattering::AREA_VPLS_PER_SIDE).
 const AREA_VPLS: u32 = crate::stages::single_scattering::AREA_VPLS_PER_SIDE;
 
 /// Per particle and direction (row-major, N x D): the radiance scattered once into `dirs[i]`,

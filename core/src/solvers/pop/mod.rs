@@ -42,7 +42,7 @@
 //! Local lights: each point, sphere or spot light, and each VPL of an area light, propagates in
 //! its own radial grid (radial/), whose J is added into the merged grid before upsampling.
 //!
-//! In a session (solvers/session.rs), what the medium, the camera and an ordinate alone decide
+//! In a session (pipeline/session.rs), what the medium, the camera and an ordinate alone decide
 //! is kept between frames and reused while it still applies (reuse.rs).
 
 pub mod accumulate;

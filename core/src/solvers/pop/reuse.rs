@@ -1,4 +1,4 @@
-//! What POP keeps between the frames of a session (solvers/session.rs): the stages that depend
+//! What POP keeps between the frames of a session (pipeline/session.rs): the stages that depend
 //! on the medium (and the camera) but not on the lights, so that a moving sun or a moving light
 //! recomputes only its own grids.
 //! - the density mip (mip.rs), keyed on the density grid's voxels and the finest footprint

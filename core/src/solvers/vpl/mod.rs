@@ -8,7 +8,7 @@
 //! `near_field: auto`, is the ball kernel on thin media and the attenuated top hat on dense
 //! ones, settings.rs says why); the
 //! gathered J (per unit sigma_s) is upsampled to the output grid by pop's density-guided joint
-//! bilateral filter (pop/upsample.rs), giving the multiple scattering; the single scattering
+//! bilateral filter (stages/upsample.rs), giving the multiple scattering; the single scattering
 //! is added exactly from the compositor's single-scattering grid, on the same output frame.
 //!
 //! Departures from the paper (and from issue 16):

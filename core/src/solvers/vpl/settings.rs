@@ -39,7 +39,7 @@ crate::setting_choices! {
     /// How the density-guided upsampling estimates J at an output point from its coarse
     /// neighbours (same weights in both).
     pub enum UpsampleFit {
-        /// pop's joint bilateral filter (pop/upsample.rs): the weighted mean, which at a
+        /// the joint bilateral filter (stages/upsample.rs): the weighted mean, which at a
         /// medium's surface is J at the weights' centroid, inside: bright on a cube, best on
         /// the dense cloud.
         Mean = "mean",
@@ -170,11 +170,11 @@ crate::settings! {
         /// At least ~0.8, so that the interleaved subsets of neighbouring points are averaged.
         spatial_sigma: f32 = 0.8, range(> 0, <= 4),
             "spatial sigma of the bilateral filter, in gather cells";
-        /// compositor::single_scattering_grid.
+        /// stages::single_scattering::single_scattering_grid.
         dome_directions: u32 = 32, range(>= 1, <= 1024),
             "dome directions of the exact single scattering";
         /// The sky's single scattering is smooth: marched on a coarser grid and interpolated
-        /// trilinearly (compositor::single_scattering_grid_dome_spaced). Only on grids of at
+        /// trilinearly (stages::single_scattering::single_scattering_grid_dome_spaced). Only on grids of at
         /// least 64 points (compositor::MIN_DOME_POINTS); the GPU takes every point.
         dome_spacing: u32 = 2, range(>= 1, <= 8),
             "the single scattering's sky marched on every n-th output point and blended between (CPU only, grids of 64 points or more)";

@@ -1,5 +1,5 @@
 //! `upsample_fit: linear`: pop's density-guided joint bilateral upsampling of J
-//! (pop/upsample.rs: same neighbourhood, spatial and range weights, S = sigma_s(x) J(x)), with
+//! (stages/upsample.rs: same neighbourhood, spatial and range weights, S = sigma_s(x) J(x)), with
 //! the weighted mean replaced by a weighted local linear fit (first-order normalised
 //! convolution) evaluated at the output point.
 //!
