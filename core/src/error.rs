@@ -16,6 +16,11 @@ pub enum Error {
     #[error("{}: {message}", path.display())]
     Format { path: PathBuf, message: String },
 
+    /// A file that can be decoded, but not for what was asked of it (e.g. a VDB grid copied
+    /// byte for byte from a file version the writer does not write).
+    #[error("{}: {message}", path.display())]
+    Unsupported { path: PathBuf, message: String },
+
     /// A request that would need more memory than allowed (checked before allocating).
     #[error("too large: {0}")]
     TooLarge(String),

@@ -5,9 +5,12 @@
 //! writer dropped without `flush` drops its error. Every output (EXR, PNG, VDB, grids) is
 //! encoded in memory and written here, so ENOSPC (`/dev/full`), a missing folder or a denied
 //! permission is an `Error::Io` naming the path, never a silent success.
+//! [`write_file_atomic`] also leaves the path either as it was or wholly new: a temporary
+//! beside it, then a rename.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::error::{Error, Result};
 
@@ -22,6 +25,27 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
         file.sync_data().map_err(|e| Error::io(path, e))?;
     }
     Ok(())
+}
+
+/// Writes `bytes` to a temporary file beside `path` ([`temp_beside`]) and renames it over
+/// `path`: `path` is either the old file or the whole new one. On any failure the temporary
+/// is removed and the error names the file at fault.
+pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = temp_beside(path);
+    let res = write_file(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
+    if res.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    res
+}
+
+/// A fresh name for a temporary file beside `path` (same folder, so that a rename replaces
+/// `path` without crossing file systems): `.<file name>.<process id>-<n>.tmp`.
+pub fn temp_beside(path: &Path) -> PathBuf {
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let n = N.fetch_add(1, Ordering::Relaxed);
+    let name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.{}-{n}.tmp", std::process::id()))
 }
 
 /// The size of `path`, which must be a regular file (`what` names it in the message).
@@ -60,5 +84,23 @@ mod tests {
         let e = write_file(&missing, b"x").unwrap_err();
         assert!(matches!(&e, Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound), "{e:?}");
         assert!(e.to_string().contains("out.exr"), "{e}");
+    }
+
+    #[test]
+    fn atomic_write_replaces_whole_or_leaves_the_file() {
+        let dir = std::env::temp_dir().join(format!("vs-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("a.bin");
+        write_file_atomic(&path, b"old").unwrap();
+        write_file_atomic(&path, b"new").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"new");
+        // A rename that fails (onto a non-empty directory) leaves neither a temporary nor a change.
+        let sub = dir.join("sub");
+        std::fs::create_dir_all(sub.join("x")).unwrap();
+        assert!(matches!(write_file_atomic(&sub, b"x"), Err(Error::Io { .. })));
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 2, "{names:?}");
+        assert!(sub.join("x").is_dir());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

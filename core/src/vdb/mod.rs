@@ -17,16 +17,19 @@
 //! are listed by name and type only.
 //!
 //! Write: float grids, full or half, uncompressed or Zip, file version 224 ([`writer`]); a
-//! dense RGB grid also z-planes at a time, for grids too large to hold ([`stream_writer`]).
+//! dense RGB grid also z-planes at a time, for grids too large to hold ([`stream_writer`]); a
+//! file mixing dense float and vec3s grids with grids copied byte for byte from another
+//! version-224 file, written atomically ([`mixed_writer`], what hosts write through the C ABI).
 //!
 //! Modules: [`header`] (header, metadata, grid descriptors), [`transform`] (maps),
 //! `tree` (5-4-3 topology and buffers), [`values`] (compressed value blocks), [`blosc`]
-//! (Blosc and Zip chunks), `stats` (vdb-info numbers), [`writer`].
+//! (Blosc and Zip chunks), `stats` (vdb-info numbers), [`writer`], [`mixed_writer`].
 
 pub mod blosc;
 mod bytes;
 pub mod filter;
 pub mod header;
+pub mod mixed_writer;
 mod stats;
 pub mod stream_writer;
 pub mod transform;
@@ -36,6 +39,8 @@ pub mod writer;
 
 #[cfg(test)]
 mod filter_tests;
+#[cfg(test)]
+mod mixed_writer_tests;
 #[cfg(test)]
 mod region_tests;
 #[cfg(test)]
@@ -54,6 +59,7 @@ use transform::GridTransform;
 use values::{Codec, ValueKind};
 
 pub use filter::{load_density_filtered, FilterReport, MaxResolution};
+pub use mixed_writer::{write_grids, DenseVec3s, GridCopy, GridSource};
 pub use stream_writer::{FloatVdbStream, RgbVdbStream};
 pub use writer::{write_dense_float_grids, write_float_grid, write_rgb_grids, DenseFloat, VdbCompression, WriteOptions};
 

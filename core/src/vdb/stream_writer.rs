@@ -18,7 +18,7 @@ use glam::{Affine3A, IVec3, Vec3};
 
 use super::bytes::{read_exact_at, Writer};
 use super::values::write_float_block;
-use super::writer::{compression_flags, file_head, unique_names, write_grid_head, FloatTree, WriteOptions};
+use super::writer::{compression_flags, file_head, unique_names, write_grid_head, FloatTree, GridMap, WriteOptions};
 use crate::error::{Error, Result};
 
 /// The grids of either stream: `k` values a voxel (one per grid), interleaved.
@@ -199,7 +199,7 @@ impl PlaneStream {
         let names = unique_names(self.names.iter().map(|s| s.as_str()))?;
         let mut buf = Vec::new();
         for (tree, (unique, name)) in self.trees.iter().zip(names) {
-            let (offsets_at, grid_pos) = write_grid_head(&mut w, &unique, name, tree, self.xf, &self.options);
+            let (offsets_at, grid_pos) = write_grid_head(&mut w, &unique, name, tree, GridMap::Single(self.xf), &self.options);
             let block_pos = base + w.pos() as u64;
             let end_pos = block_pos + tree.stored().map(|(_, len)| len).sum::<u64>();
             w.patch_i64(offsets_at, (base + grid_pos as u64) as i64);

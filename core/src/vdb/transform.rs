@@ -134,11 +134,17 @@ pub(crate) fn write_transform(w: &mut Writer, m: Affine3A) -> &'static str {
         write_vec3d(w, inv * 0.5);
         return name;
     }
-    w.string("AffineMap");
-    for v in glam::Mat4::from(m).to_cols_array() {
-        w.f64(v as f64);
-    }
+    write_affine_map(w, &glam::Mat4::from(m).as_dmat4());
     "AffineMap"
+}
+
+/// Writes `m` (index to world, column vectors) as an AffineMap in double precision as given:
+/// OpenVDB's matrix is row-vector, so its rows are our columns.
+pub(crate) fn write_affine_map(w: &mut Writer, m: &DMat4) {
+    w.string("AffineMap");
+    for v in m.to_cols_array() {
+        w.f64(v);
+    }
 }
 
 fn write_vec3d(w: &mut Writer, v: DVec3) {

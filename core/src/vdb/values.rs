@@ -224,11 +224,24 @@ impl Codec {
 /// value is +0.0 (the background), else all of them (metadata 6). `compression` is the grid's
 /// flags (ACTIVE_MASK always set by the writer, plus ZIP or nothing).
 pub(crate) fn write_float_block(w: &mut Writer, values: &[f32], mask: &[u64], half: bool, compression: u32) {
-    let inactive_zero = values.iter().enumerate().all(|(i, v)| bit(mask, i) || v.to_bits() == 0);
+    write_block(w, values, 1, mask, half, compression);
+}
+
+/// Writes a block of vec3s values (`values` holds 3 floats a value, `mask` a bit a value):
+/// as [`write_float_block`], a value being inactive-background when all 3 floats are +0.0.
+pub(crate) fn write_vec3s_block(w: &mut Writer, values: &[f32], mask: &[u64], half: bool, compression: u32) {
+    write_block(w, values, 3, mask, half, compression);
+}
+
+/// The block of `values.len() / comps` values of `comps` floats each (float: 1, vec3s: 3).
+fn write_block(w: &mut Writer, values: &[f32], comps: usize, mask: &[u64], half: bool, compression: u32) {
+    let value = |i: usize| &values[i * comps..(i + 1) * comps];
+    let count = values.len() / comps;
+    let inactive_zero = (0..count).all(|i| bit(mask, i) || value(i).iter().all(|v| v.to_bits() == 0));
     let all: Vec<f32>;
     let data: &[f32] = if inactive_zero && compression & COMPRESS_ACTIVE_MASK != 0 {
         w.u8(0);
-        all = values.iter().enumerate().filter(|(i, _)| bit(mask, *i)).map(|(_, v)| *v).collect();
+        all = (0..count).filter(|&i| bit(mask, i)).flat_map(value).copied().collect();
         &all
     } else {
         w.u8(6);

@@ -1,20 +1,22 @@
-//! Writer of float grids that OpenVDB reads back exactly: file version 224, full or half
-//! precision, no compression or Zip, always with the active-mask flag (inactive values are the
-//! background 0 and are left out; a node with other inactive values stores all of them).
+//! Writer of float and vec3s grids that OpenVDB reads back exactly: file version 224, full or
+//! half precision, no compression or Zip, always with the active-mask flag (inactive values are
+//! the background 0 and are left out; a node with other inactive values stores all of them).
 //!
 //! Sources: a [`DensityGrid`] (its constant bricks become active tiles of 8^3 voxels) or dense
 //! x-fastest arrays with an index-to-world map, such as the RGB scattering grid, which goes out
-//! as three float grids `<prefix>_r/_g/_b` (what Blender and USD read).
+//! as three float grids `<prefix>_r/_g/_b` (what Blender and USD read). One tree encoder
+//! ([`Tree`]) serves both value types; a file mixing float, vec3s and copied grids is written
+//! by [`super::mixed_writer::write_grids`].
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use glam::{Affine3A, IVec3, Vec3};
+use glam::{Affine3A, DMat4, IVec3, Vec3};
 
 use super::bytes::Writer;
 use super::header::{self, MetaMap, MetaValue, COMPRESS_ACTIVE_MASK, COMPRESS_ZIP};
-use super::transform::write_transform;
-use super::values::write_float_block;
+use super::transform::{write_affine_map, write_transform};
+use super::values::{write_float_block, write_vec3s_block};
 use crate::error::{Error, Result};
 use crate::medium::grid::BrickRef;
 use crate::medium::DensityGrid;
@@ -54,19 +56,68 @@ fn key(v: IVec3) -> Key {
     (v.x, v.y, v.z)
 }
 
-/// A float tree being assembled: leaves (VDB order, z fastest) and active 8^3 tiles,
-/// grouped as the file wants them: Internal5 origin -> Internal4 slot -> leaf/tile slot.
-#[derive(Default)]
-pub(super) struct FloatTree {
-    nodes: BTreeMap<Key, BTreeMap<usize, BTreeMap<usize, Slot>>>,
+/// A value type the writer encodes: float (`f32`) or vec3s (`[f32; 3]`). Everything but the
+/// value block and the tree type is shared.
+pub(super) trait Voxel: Copy + PartialEq + 'static {
+    /// The background (and the inactive value): 0.
+    const ZERO: Self;
+    /// The tree type, without the `_HalfFloat` suffix.
+    const TREE_TYPE: &'static str;
+    /// The grid's `vector_type` metadata (vector grids only).
+    const VECTOR_TYPE: Option<&'static str>;
+    /// The floats of `values`, in order.
+    fn floats(values: &[Self]) -> &[f32];
+    /// A compressed value block of `values` (values.rs).
+    fn write_block(w: &mut Writer, values: &[Self], mask: &[u64], half: bool, compression: u32);
+}
+
+impl Voxel for f32 {
+    const ZERO: Self = 0.0;
+    const TREE_TYPE: &'static str = "Tree_float_5_4_3";
+    const VECTOR_TYPE: Option<&'static str> = None;
+    fn floats(values: &[Self]) -> &[f32] {
+        values
+    }
+    fn write_block(w: &mut Writer, values: &[Self], mask: &[u64], half: bool, compression: u32) {
+        write_float_block(w, values, mask, half, compression);
+    }
+}
+
+impl Voxel for [f32; 3] {
+    const ZERO: Self = [0.0; 3];
+    const TREE_TYPE: &'static str = "Tree_vec3s_5_4_3";
+    const VECTOR_TYPE: Option<&'static str> = Some("invariant");
+    fn floats(values: &[Self]) -> &[f32] {
+        values.as_flattened()
+    }
+    fn write_block(w: &mut Writer, values: &[Self], mask: &[u64], half: bool, compression: u32) {
+        write_vec3s_block(w, values.as_flattened(), mask, half, compression);
+    }
+}
+
+/// How a grid's index-to-world map is written.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum GridMap {
+    /// The simplest map type that holds it, in single precision (`write_transform`).
+    Single(Affine3A),
+    /// An AffineMap in double precision, as given.
+    Double(DMat4),
+}
+
+/// A tree being assembled: leaves (VDB order, z fastest) and active 8^3 tiles, grouped as the
+/// file wants them: Internal5 origin -> Internal4 slot -> leaf/tile slot.
+pub(super) struct Tree<V: Voxel> {
+    nodes: BTreeMap<Key, BTreeMap<usize, BTreeMap<usize, Slot<V>>>>,
     voxels: u64,
     bbox_min: IVec3,
     bbox_max: IVec3,
 }
 
-enum Slot {
-    Leaf(Box<[f32; 512]>, [u64; 8]),
-    Tile(f32),
+pub(super) type FloatTree = Tree<f32>;
+
+enum Slot<V> {
+    Leaf(Box<[V; 512]>, [u64; 8]),
+    Tile(V),
     /// A leaf already encoded (its mask and value block, as the buffers section holds it) in
     /// a streaming writer's scratch file at `at`, `len` bytes (stream_writer.rs).
     Stored { mask: [u64; 8], at: u64, len: u64 },
@@ -81,17 +132,17 @@ fn i3_offset(o: IVec3) -> usize {
     ((l.x as usize) << 8) | ((l.y as usize) << 4) | l.z as usize
 }
 
-impl FloatTree {
+impl<V: Voxel> Tree<V> {
     pub(super) fn new() -> Self {
-        FloatTree { bbox_min: IVec3::MAX, bbox_max: IVec3::MIN, ..Default::default() }
+        Tree { nodes: BTreeMap::new(), voxels: 0, bbox_min: IVec3::MAX, bbox_max: IVec3::MIN }
     }
 
-    fn slot(&mut self, origin: IVec3) -> &mut BTreeMap<usize, Slot> {
+    fn slot(&mut self, origin: IVec3) -> &mut BTreeMap<usize, Slot<V>> {
         self.nodes.entry(key(origin & IVec3::splat(!4095))).or_default().entry(i4_offset(origin)).or_default()
     }
 
     /// A leaf at `origin` (multiple of 8), values z fastest. Non-zero voxels are active.
-    fn add_leaf(&mut self, origin: IVec3, values: Box<[f32; 512]>) {
+    fn add_leaf(&mut self, origin: IVec3, values: Box<[V; 512]>) {
         if let Some(mask) = self.leaf_mask(origin, &values) {
             self.slot(origin).insert(i3_offset(origin), Slot::Leaf(values, mask));
         }
@@ -104,10 +155,10 @@ impl FloatTree {
 
     /// The active mask of a leaf's values (non-zero voxels), counted into the voxel count and
     /// bounding box; None when none is active (the leaf is left out).
-    pub(super) fn leaf_mask(&mut self, origin: IVec3, values: &[f32; 512]) -> Option<[u64; 8]> {
+    pub(super) fn leaf_mask(&mut self, origin: IVec3, values: &[V; 512]) -> Option<[u64; 8]> {
         let mut mask = [0u64; 8];
         for (i, v) in values.iter().enumerate() {
-            if *v != 0.0 {
+            if *v != V::ZERO {
                 mask[i >> 6] |= 1 << (i & 63);
                 let p = origin + IVec3::new((i >> 6) as i32, ((i >> 3) & 7) as i32, (i & 7) as i32);
                 self.bbox_min = self.bbox_min.min(p);
@@ -126,8 +177,8 @@ impl FloatTree {
         })
     }
 
-    fn add_tile8(&mut self, origin: IVec3, v: f32) {
-        if v == 0.0 {
+    fn add_tile8(&mut self, origin: IVec3, v: V) {
+        if v == V::ZERO {
             return;
         }
         self.bbox_min = self.bbox_min.min(origin);
@@ -136,6 +187,30 @@ impl FloatTree {
         self.slot(origin).insert(i3_offset(origin), Slot::Tile(v));
     }
 
+    /// A dense array, x fastest: `get(i)` is voxel `i`'s value. Non-zero voxels are active.
+    pub(super) fn from_dense(dims: [u32; 3], get: impl Fn(usize) -> V) -> Self {
+        let mut t = Tree::new();
+        let d = [dims[0] as usize, dims[1] as usize, dims[2] as usize];
+        for bz in (0..d[2]).step_by(8) {
+            for by in (0..d[1]).step_by(8) {
+                for bx in (0..d[0]).step_by(8) {
+                    let mut zf = Box::new([V::ZERO; 512]);
+                    for x in 0..8.min(d[0] - bx) {
+                        for y in 0..8.min(d[1] - by) {
+                            for z in 0..8.min(d[2] - bz) {
+                                zf[(x << 6) | (y << 3) | z] = get((bx + x) + d[0] * ((by + y) + d[1] * (bz + z)));
+                            }
+                        }
+                    }
+                    t.add_leaf(IVec3::new(bx as i32, by as i32, bz as i32), zf);
+                }
+            }
+        }
+        t
+    }
+}
+
+impl FloatTree {
     fn from_density(g: &DensityGrid) -> Self {
         let mut t = FloatTree::new();
         g.for_each_brick(|origin, b| match b {
@@ -154,27 +229,6 @@ impl FloatTree {
         });
         t
     }
-
-    fn from_dense(dims: [u32; 3], get: impl Fn(usize) -> f32) -> Self {
-        let mut t = FloatTree::new();
-        let d = [dims[0] as usize, dims[1] as usize, dims[2] as usize];
-        for bz in (0..d[2]).step_by(8) {
-            for by in (0..d[1]).step_by(8) {
-                for bx in (0..d[0]).step_by(8) {
-                    let mut zf = Box::new([0.0f32; 512]);
-                    for x in 0..8.min(d[0] - bx) {
-                        for y in 0..8.min(d[1] - by) {
-                            for z in 0..8.min(d[2] - bz) {
-                                zf[(x << 6) | (y << 3) | z] = get((bx + x) + d[0] * ((by + y) + d[1] * (bz + z)));
-                            }
-                        }
-                    }
-                    t.add_leaf(IVec3::new(bx as i32, by as i32, bz as i32), zf);
-                }
-            }
-        }
-        t
-    }
 }
 
 pub(super) fn compression_flags(o: &WriteOptions) -> u32 {
@@ -182,9 +236,9 @@ pub(super) fn compression_flags(o: &WriteOptions) -> u32 {
 }
 
 /// Writes one grid (descriptor and body) and patches its offsets.
-fn write_grid(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, xf: Affine3A, o: &WriteOptions) {
+pub(super) fn write_grid<V: Voxel>(w: &mut Writer, unique_name: &str, name: &str, tree: &Tree<V>, map: GridMap, o: &WriteOptions) {
     let comp = compression_flags(o);
-    let (offsets_at, grid_pos) = write_grid_head(w, unique_name, name, tree, xf, o);
+    let (offsets_at, grid_pos) = write_grid_head(w, unique_name, name, tree, map, o);
     // Buffers, same order.
     let block_pos = w.pos();
     for i4s in tree.nodes.values() {
@@ -192,7 +246,7 @@ fn write_grid(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, x
             for s in slots.values() {
                 if let Slot::Leaf(vals, mask) = s {
                     w.mask(mask);
-                    write_float_block(w, &vals[..], mask, o.half, comp);
+                    V::write_block(w, &vals[..], mask, o.half, comp);
                 }
             }
         }
@@ -206,10 +260,10 @@ fn write_grid(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, x
 /// A grid's descriptor (offsets left 0), metadata, transform and topology: everything before
 /// its buffers. Returns where the three offsets are and where the grid starts (both
 /// positions in `w`).
-pub(super) fn write_grid_head(w: &mut Writer, unique_name: &str, name: &str, tree: &FloatTree, xf: Affine3A, o: &WriteOptions) -> (usize, usize) {
+pub(super) fn write_grid_head<V: Voxel>(w: &mut Writer, unique_name: &str, name: &str, tree: &Tree<V>, map: GridMap, o: &WriteOptions) -> (usize, usize) {
     let comp = compression_flags(o);
     w.string(unique_name);
-    w.string(if o.half { "Tree_float_5_4_3_HalfFloat" } else { "Tree_float_5_4_3" });
+    w.string(&format!("{}{}", V::TREE_TYPE, if o.half { header::HALF_SUFFIX } else { "" }));
     w.string(""); // instance parent
     let offsets_at = w.pos();
     w.i64(0);
@@ -217,25 +271,34 @@ pub(super) fn write_grid_head(w: &mut Writer, unique_name: &str, name: &str, tre
     w.i64(0);
     let grid_pos = w.pos();
     w.u32(comp);
-    let mut meta: MetaMap = vec![
-        ("class".into(), MetaValue::String(o.class.clone())),
-        ("name".into(), MetaValue::String(name.into())),
+    let mut meta: MetaMap = vec![("class".into(), MetaValue::String(o.class.clone())), ("name".into(), MetaValue::String(name.into()))];
+    if let Some(t) = V::VECTOR_TYPE {
+        meta.push(("vector_type".into(), MetaValue::String(t.into())));
+    }
+    meta.extend([
         ("is_saved_as_half_float".into(), MetaValue::Bool(o.half)),
         ("file_voxel_count".into(), MetaValue::Int(tree.voxels as i64)),
         ("creator".into(), MetaValue::String(format!("volscatter {}", crate::VERSION))),
-    ];
+    ]);
     if tree.voxels > 0 {
         meta.push(("file_bbox_min".into(), MetaValue::Vec3i(tree.bbox_min.to_array())));
         meta.push(("file_bbox_max".into(), MetaValue::Vec3i(tree.bbox_max.to_array())));
     }
     header::write_meta_map(w, &meta);
-    write_transform(w, xf);
+    match map {
+        GridMap::Single(xf) => {
+            write_transform(w, xf);
+        }
+        GridMap::Double(m) => write_affine_map(w, &m),
+    }
     // Topology.
     w.i32(1); // buffer count
-    w.f32(0.0); // background, full size even for half grids
+    for v in V::floats(&[V::ZERO]) {
+        w.f32(*v); // background, full size even for half grids
+    }
     w.u32(0); // root tiles
     w.u32(tree.nodes.len() as u32);
-    let zeros4096 = vec![0.0f32; 4096];
+    let zeros4096 = vec![V::ZERO; 4096];
     for (&(x, y, z), i4s) in &tree.nodes {
         w.i32(x);
         w.i32(y);
@@ -247,7 +310,7 @@ pub(super) fn write_grid_head(w: &mut Writer, unique_name: &str, name: &str, tre
         w.mask(&child);
         let none = vec![0u64; 512];
         w.mask(&none);
-        write_float_block(w, &vec![0.0f32; 32768], &none, o.half, comp);
+        V::write_block(w, &vec![V::ZERO; 32768], &none, o.half, comp);
         for slots in i4s.values() {
             let mut child = [0u64; 64];
             let mut active = [0u64; 64];
@@ -263,7 +326,7 @@ pub(super) fn write_grid_head(w: &mut Writer, unique_name: &str, name: &str, tre
             }
             w.mask(&child);
             w.mask(&active);
-            write_float_block(w, &vals, &active, o.half, comp);
+            V::write_block(w, &vals, &active, o.half, comp);
             for s in slots.values() {
                 if let Slot::Leaf(_, mask) | Slot::Stored { mask, .. } = s {
                     w.mask(mask);
@@ -277,7 +340,7 @@ pub(super) fn write_grid_head(w: &mut Writer, unique_name: &str, name: &str, tre
 fn write_file(path: &Path, grids: &[(&str, FloatTree)], xf: Affine3A, o: &WriteOptions) -> Result<()> {
     let mut w = file_head(path, grids.len(), xf, o)?;
     for ((_, tree), (unique, name)) in grids.iter().zip(unique_names(grids.iter().map(|g| g.0))?) {
-        write_grid(&mut w, &unique, name, tree, xf, o);
+        write_grid(&mut w, &unique, name, tree, GridMap::Single(xf), o);
     }
     crate::io::files::write_file(path, &w.buf)
 }
@@ -336,7 +399,7 @@ pub fn write_float_grid(path: &Path, name: &str, grid: &DensityGrid, index_to_wo
     write_file(path, &[(name, FloatTree::from_density(grid))], index_to_world, options)
 }
 
-fn check_dense(dims: [u32; 3], len: usize, what: &str) -> Result<()> {
+pub(super) fn check_dense(dims: [u32; 3], len: usize, what: &str) -> Result<()> {
     let n = dims[0] as u64 * dims[1] as u64 * dims[2] as u64;
     if n != len as u64 {
         return Err(Error::InvalidArgument(format!(

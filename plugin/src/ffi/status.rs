@@ -119,6 +119,7 @@ impl From<Error> for FfiError {
             Error::Scene { .. } => VsStatus::InvalidScene,
             Error::Io { .. } => VsStatus::Io,
             Error::Format { .. } => VsStatus::Format,
+            Error::Unsupported { .. } => VsStatus::Unsupported,
             Error::TooLarge(_) => VsStatus::TooLarge,
             Error::InvalidArgument(_) => VsStatus::InvalidArgument,
             Error::Cancelled => VsStatus::Cancelled,

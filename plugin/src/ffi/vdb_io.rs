@@ -6,23 +6,16 @@
 //! Both calls take a scene only to carry their error message (`vs_scene_last_error`), as
 //! `vs_scene_lpm_estimate` does; the scene is not read or changed.
 //!
-//! Writing: float grids go through core's writer (`vdb::write_dense_float_grids`: file
-//! version 224, Zip, active mask). The core writer has no vec3s grids and no grid copies, so
-//! those are assembled here: a vec3s grid's tree is encoded beside the float ones (same
-//! 5-4-3 layout, active-mask compression, values uncompressed), and a copied grid's bytes are
-//! taken verbatim from a version-224 file (a grid's bytes hold no absolute offsets). The file
-//! is written to a temporary beside `path` and renamed over it, so `path` is either the old
-//! file or the whole new one.
+//! Writing: the arguments are checked and converted here, then written by core's VDB writer
+//! in one call (`vdb::write_grids`: float and vec3s grids from the caller's arrays, grids
+//! copied byte for byte from version-224 files, written atomically).
 
-use std::collections::BTreeMap;
 use std::ffi::{c_char, CString};
-use std::io::{Read, Seek, SeekFrom};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::path::Path;
 
-use glam::{Affine3A, DMat4, DVec4, IVec3};
+use glam::{DMat4, DVec4};
 use serde_json::json;
-use volscatter_core::vdb::{self, header, DenseFloat, VdbFile, WriteOptions};
+use volscatter_core::vdb::{self, DenseFloat, DenseVec3s, GridCopy, GridSource, VdbFile, WriteOptions};
 
 use super::guard::{in_slice, input_file_arg, on_handle, opt_str_arg, path_arg, str_arg, write_out};
 use super::scene::{VsScene, SCENES};
@@ -177,7 +170,7 @@ pub unsafe extern "C" fn vs_vdb_write_grids(
         }
         // Every argument is checked before anything is read or allocated.
         let dims = dims_arg(dims)?;
-        let (m, xf) = affine_arg(index_to_world, "index_to_world")?;
+        let m = affine_arg(index_to_world, "index_to_world")?;
         let voxels = dims.iter().map(|&d| d as u64).product::<u64>();
         let mut names: Vec<&str> = Vec::new();
         let mut checked = Vec::with_capacity(grids.len());
@@ -194,9 +187,6 @@ pub unsafe extern "C" fn vs_vdb_write_grids(
                 )));
             }
             let values = in_slice(g.values, g.len, &format!("grids[{i}].values"))?;
-            if let Some(k) = values.iter().position(|v| !v.is_finite()) {
-                return Err(FfiError::invalid(format!("grids[{i}] `{name}`: value {k} is {}", values[k])));
-            }
             names.push(name);
             checked.push((name, g.components, values));
         }
@@ -217,33 +207,12 @@ pub unsafe extern "C" fn vs_vdb_write_grids(
             }
         }
 
-        let mut out = Vec::new();
-        for (name, src, grid) in &sources {
-            out.push(copied_grid(name, src, grid)?);
+        // Copies first, then the caller's grids, each in the caller's order.
+        let mut out: Vec<GridSource> = sources.iter().map(|(name, source, grid)| GridSource::Copy(GridCopy { name, source, grid })).collect();
+        for &(name, comps, values) in &checked {
+            out.push(if comps == 1 { GridSource::Float(DenseFloat { name, dims, values }) } else { GridSource::Vec3s(DenseVec3s { name, dims, values }) });
         }
-        let floats: Vec<_> = checked.iter().filter(|g| g.1 == 1).collect();
-        let mut float_parts = if floats.is_empty() {
-            Vec::new()
-        } else {
-            let dense: Vec<DenseFloat> = floats.iter().map(|g| DenseFloat { name: g.0, dims, values: g.2 }).collect();
-            let scratch = Scratch::beside(&path);
-            vdb::write_dense_float_grids(&scratch.0, &dense, xf, &WriteOptions::default())?;
-            grids_of(&scratch.0, None)?
-        };
-        float_parts.reverse();
-        for (name, comps, values) in &checked {
-            if *comps == 1 {
-                out.push(float_parts.pop().ok_or_else(|| FfiError::new(VsStatus::Internal, format!("float grid `{name}` was not written")))?);
-            } else {
-                out.push(vec3s_grid(name, dims, values, &m));
-            }
-        }
-        let bytes = assemble(&path, &out);
-        let tmp = Scratch::beside(&path);
-        volscatter_core::io::files::write_file(&tmp.0, &bytes)?;
-        std::fs::rename(&tmp.0, &path).map_err(|e| FfiError::new(VsStatus::Io, format!("{}: {e}", path.display())))?;
-        std::mem::forget(tmp); // renamed: nothing left to remove
-        Ok(())
+        Ok(vdb::write_grids(&path, &out, m, &WriteOptions::default())?)
     })
 }
 
@@ -260,8 +229,8 @@ unsafe fn dims_arg(p: *const u32) -> FfiResult<[u32; 3]> {
 }
 
 /// 16 doubles, row-major, an invertible affine map (last row 0 0 0 1) that is finite in single
-/// precision: the doubles as given and the map in single precision.
-unsafe fn affine_arg(p: *const f64, what: &str) -> FfiResult<(DMat4, Affine3A)> {
+/// precision (float grids hold their map in single precision).
+unsafe fn affine_arg(p: *const f64, what: &str) -> FfiResult<DMat4> {
     if p.is_null() {
         return Err(FfiError::null(what));
     }
@@ -282,290 +251,5 @@ unsafe fn affine_arg(p: *const f64, what: &str) -> FfiResult<(DMat4, Affine3A)> 
     if !(det.is_finite() && det.abs() > 1e-12) {
         return Err(FfiError::invalid(format!("{what}: matrix is not invertible (determinant {det})")));
     }
-    Ok((mat, Affine3A::from_mat4(single)))
-}
-
-/// A temporary file beside a target (same folder, so a rename replaces the target), removed
-/// when dropped.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn beside(target: &Path) -> Self {
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let n = N.fetch_add(1, Ordering::Relaxed);
-        let name = target.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        Scratch(target.with_file_name(format!(".{name}.{}-{n}.tmp", std::process::id())))
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
-
-/// A grid ready to be placed in a file: its descriptor's name and tree type, and its bytes
-/// from the grid's start to its end, with the buffers starting at `block` within them.
-struct GridPart {
-    name: String,
-    tree_type: String,
-    body: Vec<u8>,
-    block: u64,
-}
-
-/// Every grid of a version-224 file (or only the one named `only`) as parts to copy.
-fn grids_of(path: &Path, only: Option<&str>) -> FfiResult<Vec<GridPart>> {
-    let f = VdbFile::open(path, MAX_FILE_BYTES)?;
-    let io = |e: std::io::Error| FfiError::new(VsStatus::Io, format!("{}: {e}", path.display()));
-    let mut file = std::fs::File::open(path).map_err(io)?;
-    let mut out = Vec::new();
-    for g in &f.grids {
-        if only.is_some_and(|n| n != g.name && n != g.unique_name) {
-            continue;
-        }
-        if f.header.version != header::WRITE_FILE_VERSION {
-            return Err(FfiError::new(
-                VsStatus::Unsupported,
-                format!("{}: file version {} (a grid is copied byte for byte from version {} files only)", path.display(), f.header.version, header::WRITE_FILE_VERSION),
-            ));
-        }
-        if !g.instance_parent.is_empty() || g.block_pos == 0 {
-            return Err(FfiError::new(VsStatus::Unsupported, format!("{}: grid `{}` is an instance of `{}`; it cannot be copied", path.display(), g.name, g.instance_parent)));
-        }
-        // The offsets were checked against the file's size when it was opened; only the
-        // grid's own bytes are read.
-        let len = (g.end_pos - g.grid_pos) as u64;
-        volscatter_core::budget::check(&format!("grid `{}` of {}", g.name, path.display()), len)?;
-        let mut body = vec![0u8; len as usize];
-        file.seek(SeekFrom::Start(g.grid_pos as u64)).map_err(io)?;
-        file.read_exact(&mut body).map_err(io)?;
-        let tree_type = if g.half { format!("{}_HalfFloat", g.grid_type) } else { g.grid_type.clone() };
-        out.push(GridPart { name: g.unique_name.clone(), tree_type, body, block: (g.block_pos - g.grid_pos) as u64 });
-        if only.is_some() {
-            break;
-        }
-    }
-    Ok(out)
-}
-
-fn copied_grid(name: &str, src: &Path, grid: &str) -> FfiResult<GridPart> {
-    let mut parts = grids_of(src, Some(grid))?;
-    let mut part = parts.pop().ok_or_else(|| {
-        FfiError::new(VsStatus::Format, format!("{}: no grid named `{grid}`", src.display()))
-    })?;
-    part.name = name.to_string();
-    Ok(part)
-}
-
-/// Little-endian bytes, as OpenVDB files hold them.
-#[derive(Default)]
-struct Bytes(Vec<u8>);
-
-impl Bytes {
-    fn put(&mut self, b: &[u8]) {
-        self.0.extend_from_slice(b);
-    }
-    fn u8(&mut self, v: u8) {
-        self.0.push(v);
-    }
-    fn u32(&mut self, v: u32) {
-        self.put(&v.to_le_bytes());
-    }
-    fn i32(&mut self, v: i32) {
-        self.put(&v.to_le_bytes());
-    }
-    fn i64(&mut self, v: i64) {
-        self.put(&v.to_le_bytes());
-    }
-    fn f32(&mut self, v: f32) {
-        self.put(&v.to_le_bytes());
-    }
-    fn string(&mut self, s: &str) {
-        self.u32(s.len() as u32);
-        self.put(s.as_bytes());
-    }
-    fn mask(&mut self, words: &[u64]) {
-        for w in words {
-            self.put(&w.to_le_bytes());
-        }
-    }
-    fn meta_string(&mut self, k: &str, v: &str) {
-        self.string(k);
-        self.string("string");
-        self.string(v);
-    }
-}
-
-/// The whole file: header, file metadata, then each grid's descriptor and bytes.
-fn assemble(path: &Path, grids: &[GridPart]) -> Vec<u8> {
-    let mut w = Bytes::default();
-    w.put(&header::MAGIC.to_le_bytes());
-    w.u32(header::WRITE_FILE_VERSION);
-    w.u32(10); // library version of the format written: OpenVDB 10.0, as core's writer
-    w.u32(0);
-    w.u8(1); // grid offsets present
-    w.put(uuid_text(path).as_bytes());
-    w.u32(1);
-    w.meta_string("creator", &format!("volscatter {}", volscatter_core::VERSION));
-    w.i32(grids.len() as i32);
-    for g in grids {
-        w.string(&g.name);
-        w.string(&g.tree_type);
-        w.string(""); // instance parent
-        let start = (w.0.len() + 24) as i64;
-        w.i64(start);
-        w.i64(start + g.block as i64);
-        w.i64(start + g.body.len() as i64);
-        w.put(&g.body);
-    }
-    w.0
-}
-
-/// 36 characters in UUID form; unique enough to tell files apart.
-fn uuid_text(path: &Path) -> String {
-    use std::hash::{BuildHasher, Hash, Hasher};
-    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
-    path.hash(&mut h);
-    std::time::SystemTime::now().hash(&mut h);
-    let a = h.finish();
-    a.hash(&mut h);
-    let b = h.finish();
-    let s = format!("{a:016x}{b:016x}");
-    format!("{}-{}-{}-{}-{}", &s[0..8], &s[8..12], &s[12..16], &s[16..20], &s[20..32])
-}
-
-/// A leaf: active mask and the active voxels' values (3 each), VDB order (z fastest).
-type Leaf = ([u64; 8], Vec<f32>);
-
-/// A dense vec3s grid (x fastest, 3 values a voxel) as a 5-4-3 tree: active-mask compression,
-/// metadata 0 blocks (every inactive value is the background 0), values uncompressed.
-fn vec3s_grid(name: &str, dims: [u32; 3], values: &[f32], m: &DMat4) -> GridPart {
-    let d = dims.map(|n| n as usize);
-    let mut nodes: BTreeMap<(i32, i32, i32), BTreeMap<usize, BTreeMap<usize, Leaf>>> = BTreeMap::new();
-    let (mut voxels, mut lo, mut hi) = (0u64, IVec3::MAX, IVec3::MIN);
-    for bx in (0..d[0]).step_by(8) {
-        for by in (0..d[1]).step_by(8) {
-            for bz in (0..d[2]).step_by(8) {
-                let mut mask = [0u64; 8];
-                let mut vals = Vec::new();
-                for x in 0..8.min(d[0] - bx) {
-                    for y in 0..8.min(d[1] - by) {
-                        for z in 0..8.min(d[2] - bz) {
-                            let at = 3 * ((bx + x) + d[0] * ((by + y) + d[1] * (bz + z)));
-                            let v = &values[at..at + 3];
-                            if v.iter().all(|c| *c == 0.0) {
-                                continue;
-                            }
-                            let i = (x << 6) | (y << 3) | z;
-                            mask[i >> 6] |= 1 << (i & 63);
-                            let p = IVec3::new((bx + x) as i32, (by + y) as i32, (bz + z) as i32);
-                            lo = lo.min(p);
-                            hi = hi.max(p);
-                            voxels += 1;
-                        }
-                    }
-                }
-                if mask.iter().all(|w| *w == 0) {
-                    continue;
-                }
-                // Values in VDB order: the mask's set bits, ascending.
-                for i in 0..512usize {
-                    if mask[i >> 6] >> (i & 63) & 1 == 1 {
-                        let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
-                        let at = 3 * ((bx + x) + d[0] * ((by + y) + d[1] * (bz + z)));
-                        vals.extend_from_slice(&values[at..at + 3]);
-                    }
-                }
-                let o = IVec3::new(bx as i32, by as i32, bz as i32);
-                let o5 = o & IVec3::splat(!4095);
-                let l4: IVec3 = (o & IVec3::splat(4095)) >> 7;
-                let l3: IVec3 = (o & IVec3::splat(127)) >> 3;
-                let i4 = ((l4.x as usize) << 10) | ((l4.y as usize) << 5) | l4.z as usize;
-                let i3 = ((l3.x as usize) << 8) | ((l3.y as usize) << 4) | l3.z as usize;
-                nodes.entry((o5.x, o5.y, o5.z)).or_default().entry(i4).or_default().insert(i3, (mask, vals));
-            }
-        }
-    }
-    let mut w = Bytes::default();
-    w.u32(header::COMPRESS_ACTIVE_MASK);
-    // Grid metadata, as core's writer gives its float grids (class "unknown": not a fog volume).
-    let mut meta = Bytes::default();
-    let mut count = 0u32;
-    for (k, v) in [("class", "unknown"), ("name", name), ("vector_type", "invariant")] {
-        meta.meta_string(k, v);
-        count += 1;
-    }
-    meta.string("is_saved_as_half_float");
-    meta.string("bool");
-    meta.u32(1);
-    meta.u8(0);
-    meta.string("file_voxel_count");
-    meta.string("int64");
-    meta.u32(8);
-    meta.i64(voxels as i64);
-    meta.meta_string("creator", &format!("volscatter {}", volscatter_core::VERSION));
-    count += 3;
-    if voxels > 0 {
-        for (k, v) in [("file_bbox_min", lo), ("file_bbox_max", hi)] {
-            meta.string(k);
-            meta.string("vec3i");
-            meta.u32(12);
-            for c in v.to_array() {
-                meta.i32(c);
-            }
-            count += 1;
-        }
-    }
-    w.u32(count);
-    w.put(&meta.0);
-    // Transform: an AffineMap (OpenVDB's row-vector matrix: ours, column-major), in double
-    // precision as given.
-    w.string("AffineMap");
-    for v in m.to_cols_array() {
-        w.put(&v.to_le_bytes());
-    }
-    // Topology.
-    w.i32(1); // buffer count
-    for _ in 0..3 {
-        w.f32(0.0); // background
-    }
-    w.u32(0); // root tiles
-    w.u32(nodes.len() as u32);
-    for (&(x, y, z), i4s) in &nodes {
-        w.i32(x);
-        w.i32(y);
-        w.i32(z);
-        let mut child = vec![0u64; 512];
-        for &n in i4s.keys() {
-            child[n >> 6] |= 1 << (n & 63);
-        }
-        w.mask(&child);
-        w.mask(&[0u64; 512]);
-        w.u8(0); // values: metadata 0, none active
-        for leaves in i4s.values() {
-            let mut child = [0u64; 64];
-            for &n in leaves.keys() {
-                child[n >> 6] |= 1 << (n & 63);
-            }
-            w.mask(&child);
-            w.mask(&[0u64; 64]);
-            w.u8(0);
-            for (mask, _) in leaves.values() {
-                w.mask(mask);
-            }
-        }
-    }
-    let block = w.0.len() as u64;
-    for i4s in nodes.values() {
-        for leaves in i4s.values() {
-            for (mask, vals) in leaves.values() {
-                w.mask(mask);
-                w.u8(0);
-                for v in vals {
-                    w.f32(*v);
-                }
-            }
-        }
-    }
-    GridPart { name: name.to_string(), tree_type: "Tree_vec3s_5_4_3".into(), body: w.0, block }
+    Ok(mat)
 }
