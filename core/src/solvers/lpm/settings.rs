@@ -3,8 +3,7 @@
 //! The measurements behind the defaults: docs/solvers/lpm.md.
 
 use crate::error::{Error, Result};
-use crate::solvers::settings_table::LightType;
-use crate::solvers::settings_table::{Make, Preset, SolverEntry, defaults_of};
+use crate::solvers::settings_table::{defaults_of, LightType, Make, Preset, SolverEntry};
 
 crate::setting_choices! {
     /// First scattering of distant lights.

@@ -2,8 +2,7 @@
 //! its registry entry. Unknown keys are an error (a typo must not silently fall back to a
 //! default). Measurements: docs/solvers/network.md.
 
-use crate::solvers::settings_table::LightType;
-use crate::solvers::settings_table::{Make, Preset, SolverEntry, defaults_of};
+use crate::solvers::settings_table::{defaults_of, LightType, Make, Preset, SolverEntry};
 
 crate::setting_choices! {
     /// The optical depth of the gap between a particle and its upstream neighbour in direction w.

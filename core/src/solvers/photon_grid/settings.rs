@@ -3,8 +3,7 @@
 //! default). The measurements behind the defaults: docs/solvers/photon-grid.md.
 
 use crate::error::{Error, Result};
-use crate::solvers::settings_table::LightType;
-use crate::solvers::settings_table::{Make, Preset, SolverEntry, defaults_of};
+use crate::solvers::settings_table::{defaults_of, LightType, Make, Preset, SolverEntry};
 
 crate::setting_choices! {
     /// Where the first scattering order of S comes from.

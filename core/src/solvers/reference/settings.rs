@@ -2,8 +2,7 @@
 //! and its registry entry. Unknown keys are an error (a typo must not silently fall back to a
 //! default).
 
-use crate::solvers::settings_table::LightType;
-use crate::solvers::settings_table::{Make, Preset, SolverEntry, defaults_of};
+use crate::solvers::settings_table::{defaults_of, LightType, Make, Preset, SolverEntry};
 
 crate::settings! {
     pub struct ReferenceSettings {

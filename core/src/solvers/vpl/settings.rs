@@ -2,8 +2,7 @@
 //! registry entry. Unknown keys are an error. The measurements behind each default and each
 //! choice are in docs/solvers/vpl.md (and the tests in tests.rs).
 
-use crate::solvers::settings_table::LightType;
-use crate::solvers::settings_table::{Make, Preset, SolverEntry, defaults_of};
+use crate::solvers::settings_table::{defaults_of, LightType, Make, Preset, SolverEntry};
 
 crate::setting_choices! {
     /// How the 1/d^2 of a VPL's connection is kept finite near the VPL (paper Sec. 4.3).
