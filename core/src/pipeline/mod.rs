@@ -20,9 +20,9 @@ use crate::compositor::{self, CompositeOptions};
 use crate::error::Result;
 use crate::image::Image;
 use crate::scene::Scene;
-use crate::solvers::SolveCtx;
 use crate::stages::{Progress, ScatteringGrid, Timings};
 pub use device::{Accelerator, Attempt, DeviceChoice, DeviceUsed, Devices};
+use session::Frame;
 pub use session::{Session, Solved};
 
 /// A one-off solve of `scene` with solver `name` and `settings`.
@@ -79,24 +79,16 @@ pub struct Rendered {
 /// The camera's image of `scene`: a solver that renders images itself (the path tracer) renders
 /// it, any other solves and the result is composited. The image holds the AOVs `opts` asks for.
 pub fn render(session: &mut Session, scene: &Scene, opts: &CompositeOptions, progress: &dyn Progress) -> Result<Rendered> {
-    let devices = session.devices();
-    let direct = {
-        guard::check_scene(scene)?;
-        let (solver, state) = session.parts(scene)?;
-        let mut timings = Timings::default();
-        let mut ctx = SolveCtx::new(progress).in_session(state);
-        solver.render_image(scene, &mut ctx, opts.transparent, &mut timings).map(|image| image.map(|image| (image, timings)))
+    let solved = match session.render_frame(scene, progress, opts.transparent)? {
+        Frame::Image { mut image, timings, notes } => {
+            // The path tracer's layers cost nothing extra; the image still holds only those
+            // asked for, so that its layers do not depend on the solver.
+            image.aovs.retain(|(layer, _)| opts.aovs.contains(layer));
+            return Ok(Rendered { image, solved: None, device: DeviceUsed::Cpu, notes, timings });
+        }
+        Frame::Solved(solved) => solved,
     };
-    if let Some(rendered) = direct {
-        let (mut image, timings) = rendered?;
-        guard::check_finite(scene, "image", image.rgba.iter().map(|p| p.truncate()).chain(image.aovs.iter().flat_map(|a| a.1.iter().copied())))?;
-        // The path tracer's layers cost nothing extra; the image still holds only those asked
-        // for, so that its layers do not depend on the solver.
-        image.aovs.retain(|(layer, _)| opts.aovs.contains(layer));
-        return Ok(Rendered { image, solved: None, device: DeviceUsed::Cpu, notes: Vec::new(), timings });
-    }
-    let solved = session.solve(scene, progress)?;
-    let composited = composite(scene, &solved.output.scattering, opts, devices)?;
+    let composited = composite(scene, &solved.output.scattering, opts, session.devices())?;
     let mut timings = solved.output.timings.clone();
     timings.0.extend(composited.timings.0);
     let mut notes = solved.notes.clone();

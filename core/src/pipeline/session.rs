@@ -28,7 +28,8 @@ use crate::error::Result;
 use crate::scene::Scene;
 use crate::solvers::session::SessionState;
 use crate::solvers::{registry, SolveCtx, SolveOutput, Solver};
-use crate::stages::Progress;
+use crate::image::Image;
+use crate::stages::{Progress, Timings};
 
 /// A solve's output and what the pipeline decided on the way.
 pub struct Solved {
@@ -109,11 +110,39 @@ impl Session {
         Ok(Some(c))
     }
 
-    /// Solves `scene`, reusing what the previous solves kept.
-    pub fn solve(&mut self, scene: &Scene, progress: &dyn Progress) -> Result<Solved> {
+    /// Starts a frame: counts it, guards the scene, and builds `auto`'s pick for it.
+    fn begin(&mut self, scene: &Scene) -> Result<Option<Choice>> {
         self.state.begin_frame();
         guard::check_scene(scene)?;
-        let choice = self.pick(scene)?;
+        self.pick(scene)
+    }
+
+    /// Solves `scene`, reusing what the previous solves kept.
+    pub fn solve(&mut self, scene: &Scene, progress: &dyn Progress) -> Result<Solved> {
+        let choice = self.begin(scene)?;
+        self.run(scene, progress, choice)
+    }
+
+    /// One frame for an image: the solver's own image when it renders images (the path
+    /// tracer), else its solve (for the pipeline to composite). Guarded and picked once.
+    pub(crate) fn render_frame(&mut self, scene: &Scene, progress: &dyn Progress, transparent: bool) -> Result<Frame> {
+        let choice = self.begin(scene)?;
+        {
+            let Session { built, state, .. } = &mut *self;
+            let Some(built) = built.as_ref() else { unreachable!("a session's solver is built before it solves") };
+            let mut timings = Timings::default();
+            let mut ctx = SolveCtx::new(progress).in_session(state);
+            if let Some(image) = built.solver.render_image(scene, &mut ctx, transparent, &mut timings) {
+                let image = image?;
+                guard::check_finite(scene, "image", image.rgba.iter().map(|p| p.truncate()).chain(image.aovs.iter().flat_map(|a| a.1.iter().copied())))?;
+                return Ok(Frame::Image { image, timings, notes: scene.notes() });
+            }
+        }
+        self.run(scene, progress, choice).map(Frame::Solved)
+    }
+
+    /// The device step and the solve of a begun frame, and the check of its result.
+    fn run(&mut self, scene: &Scene, progress: &dyn Progress, choice: Option<Choice>) -> Result<Solved> {
         let Session { devices, built, state, .. } = self;
         // Built in `new` for every name but auto, and by `pick` for auto.
         let Some(built) = built.as_ref() else { unreachable!("a session's solver is built before it solves") };
@@ -140,13 +169,13 @@ impl Session {
     pub fn solver(&self) -> Option<&dyn Solver> {
         self.built.as_ref().map(|b| b.solver.as_ref())
     }
+}
 
-    /// The kept state and the solver, for the pipeline's render of an image-rendering solver.
-    pub(crate) fn parts(&mut self, scene: &Scene) -> Result<(&dyn Solver, &mut SessionState)> {
-        self.pick(scene)?;
-        let Some(built) = self.built.as_ref() else { unreachable!("a session's solver is built before it solves") };
-        Ok((built.solver.as_ref(), &mut self.state))
-    }
+/// What one frame of `render_frame` gave.
+pub(crate) enum Frame {
+    /// The solver's own image (checked finite), its stages' times and what loading the scene noted.
+    Image { image: Image, timings: Timings, notes: Vec<String> },
+    Solved(Solved),
 }
 
 #[cfg(test)]

@@ -41,7 +41,7 @@ pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_dire
 }
 
 /// `single_scattering_grid_cancellable` on a grid the caller has framed.
-pub fn single_scattering_onto(scene: &Scene, grid: &mut ScatteringGrid, dome_directions: u32, progress: &dyn Progress) -> Result<()> {
+pub(crate) fn single_scattering_onto(scene: &Scene, grid: &mut ScatteringGrid, dome_directions: u32, progress: &dyn Progress) -> Result<()> {
     single_scattering_onto_spaced(scene, grid, dome_directions, 1, progress)
 }
 
@@ -252,7 +252,7 @@ impl<'a> DirectLight<'a> {
 
 /// Whether the medium's extinction per unit density is the same in every channel (then every
 /// optical depth is grey, and one exp serves the three channels, to the bit).
-pub fn is_grey(medium: &Medium) -> bool {
+pub(crate) fn is_grey(medium: &Medium) -> bool {
     let k = medium.density_scale;
     k.x == k.y && k.y == k.z
 }
@@ -260,7 +260,7 @@ pub fn is_grey(medium: &Medium) -> bool {
 /// e^-tau per channel; `grey`: tau's channels are equal (`is_grey`), one exp for the three,
 /// and none for tau = 0 (e^-0 is 1 exactly: camera rays cross much empty space).
 #[inline]
-pub fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
+pub(crate) fn exp_neg(tau: Vec3, grey: bool) -> Vec3 {
     if grey {
         if tau.x == 0.0 {
             return Vec3::ONE;

@@ -307,10 +307,3 @@ impl Solver for Lpm {
         Ok(out.with_report(report))
     }
 }
-
-impl LpmSettings {
-    /// The settings of the shared upsampling stage (stages/upsample.rs).
-    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
-        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
-    }
-}

@@ -129,3 +129,11 @@ impl PopSettings {
         if self.merge_resolution == 0 { (2 * self.grid_resolution).min(1024) } else { self.merge_resolution }
     }
 }
+
+impl PopSettings {
+    /// The settings of the shared upsampling stage (stages/upsample.rs), declared here with the
+    /// same names and ranges as in every solver that upsamples.
+    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
+        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+    }
+}

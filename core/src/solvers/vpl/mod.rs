@@ -221,10 +221,3 @@ impl Solver for Vpl {
 
 #[cfg(test)]
 mod tests;
-
-impl VplSettings {
-    /// The settings of the shared upsampling stage (stages/upsample.rs).
-    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
-        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
-    }
-}

@@ -207,3 +207,11 @@ impl VplSettings {
         if self.walks_per_subset == 0 { 1 } else { (self.walks / self.walks_per_subset.max(1)).clamp(1, self.walks) }
     }
 }
+
+impl VplSettings {
+    /// The settings of the shared upsampling stage (stages/upsample.rs), declared here with the
+    /// same names and ranges as in every solver that upsamples.
+    pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
+        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+    }
+}
