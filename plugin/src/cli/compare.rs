@@ -163,6 +163,12 @@ pub fn run(args: CompareArgs) -> Result<()> {
         let t = Instant::now();
         let rendered = pipeline::render(&mut session, &scene, &CompositeOptions::default(), &progress)?;
         let image_seconds = t.elapsed().as_secs_f64();
+        if !args.quiet {
+            // The library never prints: what it has to say (a fall-back to the CPU, a light left out).
+            for note in &rendered.notes {
+                eprintln!("note: {name}: {note}");
+            }
+        }
         let mut phases = rendered.timings;
         let composite_seconds: f64 = phases.0.iter().filter(|(k, _)| k == "composite").map(|(_, v)| v).sum();
         let device = rendered.solved.as_ref().map(|s| s.device.clone()).unwrap_or(DeviceUsed::Cpu);
