@@ -2,9 +2,13 @@
 //! RGBA image, the way a host renders S as volume emission with the medium's density for
 //! extinction: L = integral T(0,t) S(x(t)) dt + T(0,inf) L_env(d), alpha = 1 - T.
 //!
+//! The medium's own emission seen directly, `integral T(0,t) e(x(t)) dt`, is part of the image
+//! (Cycles' image of a flame holds its glow): S carries only the light the emission sends to
+//! scattering points, so a host that renders the emission itself (Blender) takes S alone.
+//!
 //! AOVs, each only when asked for (`Aovs`): `single` (single scattering, computed here by ray
 //! marching shadow rays, independent of the solver), `multiple` (the rest of S), `background`
-//! (environment through the medium). The first two need the single-scattering grid, which costs
+//! (environment through the medium), `emission` (the emission seen directly). The first two need the single-scattering grid, which costs
 //! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
 
@@ -26,13 +30,14 @@ pub struct Aovs {
     pub single: bool,
     pub multiple: bool,
     pub background: bool,
+    pub emission: bool,
 }
 
 impl Aovs {
-    pub const NONE: Aovs = Aovs { single: false, multiple: false, background: false };
-    pub const ALL: Aovs = Aovs { single: true, multiple: true, background: true };
+    pub const NONE: Aovs = Aovs { single: false, multiple: false, background: false, emission: false };
+    pub const ALL: Aovs = Aovs { single: true, multiple: true, background: true, emission: true };
     /// The layer names, in image order.
-    pub const NAMES: [&'static str; 3] = ["single", "multiple", "background"];
+    pub const NAMES: [&'static str; 4] = ["single", "multiple", "background", "emission"];
 
     /// Whether the single-scattering grid must be computed: `multiple` is the scattered light
     /// minus its single part, so it needs the grid as much as `single` does.
@@ -47,7 +52,8 @@ impl Aovs {
             match name {
                 "single" => aovs.single = true,
                 "multiple" => aovs.multiple = true,
-                "background" => aovs.background = true,
+"background" => aovs.background = true,
+                "emission" => aovs.emission = true,
                 "all" => aovs = Aovs::ALL,
                 "none" => {}
                 other => {
@@ -67,6 +73,7 @@ impl Aovs {
             "single" => self.single,
             "multiple" => self.multiple,
             "background" => self.background,
+            "emission" => self.emission,
             _ => false,
         }
     }
@@ -147,12 +154,11 @@ struct CameraMarch<'a> {
 }
 
 impl CameraMarch<'_> {
-    /// Marches one camera ray; returns (in-scattered radiance from S, from S1, transmittance).
-    /// Without S1 (no AOV needs it) its integral is zero and it costs no lookups. The sample
-    /// points are those of the world-space march (t0 + (i + 1/2) h), each grid's carried by
-    /// its own index-space ray.
-    fn march(&self, o: Vec3, d: Vec3) -> (Vec3, Vec3, Vec3) {
-        let Some((t0, t1)) = ray_box(o, d, self.bounds.0, self.bounds.1) else { return (Vec3::ZERO, Vec3::ZERO, Vec3::ONE) };
+    /// Marches one camera ray. Without S1 (no AOV needs it) its integral is zero and it costs
+    /// no lookups. The sample points are those of the world-space march (t0 + (i + 1/2) h),
+    /// each grid's carried by its own index-space ray.
+    fn march(&self, o: Vec3, d: Vec3) -> Marched {
+        let Some((t0, t1)) = ray_box(o, d, self.bounds.0, self.bounds.1) else { return Marched { transmittance: Vec3::ONE, ..Default::default() } };
         let n = (((t1 - t0) / self.step).ceil() as u32).clamp(1, 8192);
         let h = (t1 - t0) / n as f32;
         let (dp, dd) = self.density.lattice_ray(o, d);
@@ -161,6 +167,8 @@ impl CameraMarch<'_> {
         let mut tr = Vec3::ONE;
         let mut l = Vec3::ZERO;
         let mut l1 = Vec3::ZERO;
+        let mut le = Vec3::ZERO;
+        let emission = self.medium.emission.as_ref();
         for i in 0..n {
             let t = t0 + (i as f32 + 0.5) * h;
             let sigma_t = self.medium.sigma_t(self.density.density_lattice(dp + dd * t));
@@ -174,14 +182,29 @@ impl CameraMarch<'_> {
             if let Some((s1, (p1, d1))) = &s1_ray {
                 l1 += tr * weight * s1.at_index(*p1 + *d1 * t);
             }
+            if let Some(e) = emission {
+                le += tr * weight * e.at(o + d * t);
+            }
             tr *= seg_t;
             if tr.max_element() < 1e-5 {
                 tr = Vec3::ZERO;
                 break;
             }
         }
-        (l, l1, tr)
+        Marched { scattered: l, single: l1, emitted: le, transmittance: tr }
     }
+}
+
+/// What one camera ray's march gathered.
+#[derive(Clone, Copy, Debug, Default)]
+struct Marched {
+    /// In-scattered radiance from S.
+    scattered: Vec3,
+    /// From the single-scattering grid S1 (zero without it).
+    single: Vec3,
+    /// The medium's emission.
+    emitted: Vec3,
+    transmittance: Vec3,
 }
 
 /// Renders the scattering grid `s` as seen by the scene's camera, with the AOVs `opts` asks for.
@@ -215,7 +238,14 @@ pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&
     let step = (medium.voxel_size_world().min_element() * opts.step_voxels.max(0.05)).max(1e-6);
     let (w, h) = (cam.width as usize, cam.height as usize);
     let k = opts.subpixels.clamp(1, 16);
-    let bounds = medium.world_bounds();
+    // The emission may reach past the density's box (a flame in clear air).
+    let bounds = match &medium.emission {
+        Some(e) => {
+            let (a, b) = (medium.world_bounds(), e.world_bounds());
+            (a.0.min(b.0), a.1.max(b.1))
+        }
+        None => medium.world_bounds(),
+    };
     // At most this many density lookups (every ray along the box's diagonal): what decides
     // whether the dense copy pays.
     let lookups = (w * h) as f64 * (k * k) as f64 * ((bounds.1 - bounds.0).length() / step).ceil().min(8192.0) as f64;
@@ -230,48 +260,62 @@ pub fn composite_with_single(scene: &Scene, s: &ScatteringGrid, single: Option<&
     };
     let env = scene.environment();
     let inv = 1.0 / (k * k) as f32;
-    let pixels: Vec<(Vec4, Vec3, Vec3)> = (0..w * h)
+    let pixels: Vec<Pixel> = (0..w * h)
         .into_par_iter()
         .map(|idx| {
             let (x, y) = ((idx % w) as f32, (idx / w) as f32);
-            let (mut l, mut l1, mut bg, mut tsum) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+            let (mut l, mut l1, mut le, mut bg, mut tsum) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
             for sy in 0..k {
                 for sx in 0..k {
                     let d = cam.ray_dir(x + (sx as f32 + 0.5) / k as f32, y + (sy as f32 + 0.5) / k as f32);
-                    let (a, b, tr) = cm.march(cam.position, d);
-                    l += a;
-                    l1 += b;
+                    let m = cm.march(cam.position, d);
+                    let tr = m.transmittance;
+                    l += m.scattered + m.emitted;
+                    l1 += m.single;
+                    le += m.emitted;
                     tsum += tr;
                     if let Some(env) = env {
                         bg += tr * env.radiance(d);
                     }
                 }
             }
-            let (l, l1, bg, tr) = (l * inv, l1 * inv, bg * inv, tsum * inv);
+            let (l, tr) = (l * inv, tsum * inv);
             let alpha = 1.0 - tr.dot(Vec3::splat(1.0 / 3.0));
-            let rgb = l + if opts.transparent { Vec3::ZERO } else { bg };
-            (rgb.extend(alpha.clamp(0.0, 1.0)), l1, bg)
+            let rgb = l + if opts.transparent { Vec3::ZERO } else { bg * inv };
+            Pixel { rgba: rgb.extend(alpha.clamp(0.0, 1.0)), single: l1 * inv, background: bg * inv, emission: le * inv }
         })
         .collect();
     Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent, opts.aovs))
 }
 
-/// The image and the AOVs in `aovs` from per-pixel (RGBA, single scattering, background) in row
-/// order: `multiple` is what was scattered minus its single part. Shared by the CPU and GPU
-/// compositors so that both define the AOVs the same way.
-pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = (Vec4, Vec3, Vec3)>, transparent: bool, aovs: Aovs) -> Image {
+/// One composited pixel and the parts its AOVs are made of.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Pixel {
+    pub rgba: Vec4,
+    /// Single scattering (zero when no AOV needs it).
+    pub single: Vec3,
+    /// The environment through the medium (in `rgba` unless transparent).
+    pub background: Vec3,
+    /// The medium's emission seen directly (in `rgba`).
+    pub emission: Vec3,
+}
+
+/// The image and the AOVs in `aovs` from its pixels in row order: `multiple` is what was
+/// scattered minus its single part. Shared by the CPU and GPU compositors so that both define
+/// the AOVs the same way.
+pub fn assemble_image(width: u32, height: u32, pixels: impl IntoIterator<Item = Pixel>, transparent: bool, aovs: Aovs) -> Image {
     let n = width as usize * height as usize;
     let mut img = Image::new(width, height);
-    let mut layers: [Vec<Vec3>; 3] = Default::default();
+    let mut layers: [Vec<Vec3>; 4] = Default::default();
     for (name, layer) in Aovs::NAMES.iter().zip(&mut layers) {
         if aovs.contains(name) {
             layer.reserve_exact(n);
         }
     }
-    for (i, (rgba, l1, bg)) in pixels.into_iter().take(n).enumerate() {
-        img.rgba[i] = rgba;
-        let scattered = rgba.truncate() - if transparent { Vec3::ZERO } else { bg };
-        for (value, (name, layer)) in [l1, scattered - l1, bg].into_iter().zip(Aovs::NAMES.iter().zip(&mut layers)) {
+    for (i, p) in pixels.into_iter().take(n).enumerate() {
+        img.rgba[i] = p.rgba;
+        let scattered = p.rgba.truncate() - p.emission - if transparent { Vec3::ZERO } else { p.background };
+        for (value, (name, layer)) in [p.single, scattered - p.single, p.background, p.emission].into_iter().zip(Aovs::NAMES.iter().zip(&mut layers)) {
             if aovs.contains(name) {
                 layer.push(value);
             }
@@ -370,14 +414,14 @@ mod tests {
         s.data.iter_mut().enumerate().for_each(|(i, v)| *v = Vec3::splat((i % 5) as f32 * 0.1));
         let all = composite(&scene, &s, &CompositeOptions::default()).unwrap();
         let names = |img: &Image| img.aovs.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
-        assert_eq!(names(&all), ["single", "multiple", "background"]);
+        assert_eq!(names(&all), ["single", "multiple", "background", "emission"]);
         let none = composite(&scene, &s, &CompositeOptions { aovs: Aovs::NONE, ..Default::default() }).unwrap();
         assert!(none.aovs.is_empty());
         assert_eq!(none.rgba, all.rgba);
         let single = composite(&scene, &s, &CompositeOptions { aovs: Aovs { single: true, ..Aovs::NONE }, ..Default::default() }).unwrap();
         assert_eq!(names(&single), ["single"]);
         assert_eq!(single.aov("single"), all.aov("single"));
-        assert_eq!(Aovs::parse("background, single").unwrap(), Aovs { single: true, multiple: false, background: true });
+        assert_eq!(Aovs::parse("background, single").unwrap(), Aovs { single: true, multiple: false, background: true, emission: false });
         assert_eq!(Aovs::parse("all").unwrap(), Aovs::ALL);
         assert_eq!(Aovs::parse("none").unwrap(), Aovs::NONE);
         assert!(Aovs::parse("singel").unwrap_err().to_string().contains("singel"));

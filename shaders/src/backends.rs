@@ -73,6 +73,9 @@ impl Accelerator for Gpu {
     }
 
     fn composite(&self, choice: DeviceChoice, scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Attempt<Image>> {
+        if scene.medium.emission.is_some() {
+            return Ok(Attempt::Declined("the GPU compositor does not march the medium's emission yet".into()));
+        }
         try_gpu(choice, |ctx| crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into))
     }
 }

@@ -173,7 +173,7 @@ fn c_host_renders_and_matches_the_rust_api() {
     let base = Path::new(".");
     let lights = vec![
         scene::build_light(&json::LightJson::Distant { direction: [-0.3, 0.5, -0.8], irradiance: json::Rgb::Rgb([4.0, 3.8, 3.5]), angle_deg: 0.0 }, "l", base).unwrap(),
-        scene::build_light(&json::LightJson::Point { position: [1.5, -1.0, 1.0], intensity: json::Rgb::Rgb([2.0, 1.5, 1.0]), radius: 0.0 }, "l", base).unwrap(),
+        scene::build_light(&json::LightJson::Point { position: [1.5, -1.0, 1.0], intensity: json::Rgb::Rgb([2.0, 1.5, 1.0]), radius: 0.0, interior: Default::default() }, "l", base).unwrap(),
         scene::build_light(&json::LightJson::Dome { color: Some(json::Rgb::Rgb([0.1, 0.15, 0.25])), texture: None, intensity: 1.0 }, "l", base).unwrap(),
         scene::build_light(
             &json::LightJson::Spot {

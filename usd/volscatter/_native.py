@@ -65,7 +65,7 @@ GRID_FORMAT_VDB = 2
 COMPOSITE_TRANSPARENT = 1
 
 #: ``VS_AOV_*`` bits of ``vs_result_composite_aovs``, by layer name (:meth:`Result.composite`).
-AOV_BITS = {"single": 1, "multiple": 2, "background": 4}
+AOV_BITS = {"single": 1, "multiple": 2, "background": 4, "emission": 8}
 
 #: ``vs_vdb_info_json`` flag: per-grid statistics too (:func:`vdb_info`).
 VDB_INFO_STATS = 1

@@ -216,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave the directly seen environment out (alpha from the medium only; PNG with alpha)")
     r.add_argument("--volume", metavar="PATH", help="which Volume to render when the stage has several")
     r.add_argument("--aov", default="background", metavar="LIST",
-                   help="AOV layers of the EXR, comma-separated: single, multiple, background, all or none "
+                   help="AOV layers of the EXR, comma-separated: single, multiple, background, emission, all or none "
                         "(default background: free; single and multiple cost a second light pass)")
     b = sub.add_parser("bake", help="solve and write the scattering grid into a USD layer + VDB")
     _common(b, "bake")

@@ -105,6 +105,26 @@ pub fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
     1.5 / (r * r * r * d) * (0.5 * (r * r - d * d) * ((r + d) / gap).ln() + d * r)
 }
 
+/// How a lamp of radius `lamp` lights a point at distance `d` from its centre, per W/sr of its
+/// intensity: the point lamp's 1/d^2; for a sphere lamp (docs/scene-format.md) the solid angle
+/// its surface subtends times its radiance 1/(pi r^2), inside it nothing (`lit` false) or that
+/// radiance from every direction (`lit`: 4/r^2). `near` > 0 spreads the field over a ball of
+/// that radius (a grid cell, a solver's near field); a lamp smaller than that is a ball too
+/// (`ball_mean_inverse_square`, which keeps the power: its inside cannot be resolved anyway).
+#[inline]
+pub fn lamp_inverse_square(d: f32, lamp: f32, near: f32, lit: bool) -> f32 {
+    if lamp <= near {
+        return ball_mean_inverse_square(d, (lamp * lamp + near * near).sqrt());
+    }
+    if d < lamp {
+        return if lit { 4.0 / (lamp * lamp) } else { 0.0 };
+    }
+    let sin2 = (lamp * lamp / (d * d)).min(1.0);
+    // 1 - cos of the subtended half-angle, by its series where it would cancel.
+    let one_minus_cos = if sin2 < 1e-3 { 0.5 * sin2 + 0.125 * sin2 * sin2 } else { 1.0 - (1.0 - sin2).sqrt() };
+    2.0 * one_minus_cos / (lamp * lamp)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,5 +158,20 @@ mod tests {
     fn near_field_radius_has_the_cell_volume() {
         let r = near_field_radius(&Affine3A::from_scale(Vec3::splat(0.1)));
         assert!((4.0 / 3.0 * std::f32::consts::PI * r * r * r - 1e-3).abs() < 1e-8, "{r}");
+    }
+
+    /// The sphere lamp's field: 1/d^2 far away, the half-space 2/r^2 on its surface, its
+    /// interior by model, and a lamp under `near` the ball mean.
+    #[test]
+    fn lamp_inverse_square_cases() {
+        let r = 0.5;
+        assert!((lamp_inverse_square(100.0, r, 0.0, false) * 1e4 - 1.0).abs() < 1e-4);
+        assert!((lamp_inverse_square(r, r, 0.0, false) - 2.0 / (r * r)).abs() < 1e-5);
+        assert_eq!(lamp_inverse_square(0.3, r, 0.0, false), 0.0);
+        assert!((lamp_inverse_square(0.3, r, 0.0, true) - 4.0 / (r * r)).abs() < 1e-5);
+        assert_eq!(lamp_inverse_square(2.0, 0.0, 0.0, true), 0.25);
+        assert!((lamp_inverse_square(0.3, 0.1, 0.2, false) - ball_mean_inverse_square(0.3, (0.05f32).sqrt())).abs() < 1e-5);
+        // Exact: 2 (1 - cos(asin(r/d))) / r^2 at d = 2r is (2 - sqrt 3) * 2 / r^2 = 2.1436.
+        assert!((lamp_inverse_square(1.0, r, 0.0, false) - 2.0 * (2.0 - 3f32.sqrt()) * 2.0 / 1.0).abs() < 1e-4);
     }
 }

@@ -171,7 +171,7 @@ mod tests {
         s.medium = Medium::new(s.medium.grid.clone(), glam::Affine3A::from_scale(Vec3::splat(1e-45)), Vec3::ONE, Vec3::ONE, 0.0);
         assert!(check_scene(&s).unwrap_err().to_string().contains("not invertible"));
         let mut s = Scene::default_scene();
-        s.lights = vec![Light::Point { position: Vec3::Z * 3.0, intensity: Vec3::ONE, radius: 1e-30 }];
+        s.lights = vec![Light::Point { position: Vec3::Z * 3.0, intensity: Vec3::ONE, radius: 1e-30, interior: Default::default() }];
         assert!(check_scene(&s).unwrap_err().to_string().contains("lights[0].radius"));
         let e = check_finite(&ok, "scattering grid", [Vec3::ONE, Vec3::NAN].into_iter()).unwrap_err().to_string();
         assert!(e.contains("1 non-finite values of 2"), "{e}");

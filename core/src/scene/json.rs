@@ -150,6 +150,19 @@ fn white() -> Rgb {
     Rgb::Grey(1.0)
 }
 
+/// What a sphere lamp gives points inside its sphere (`light::SphereInterior`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InteriorJson {
+    #[default]
+    Dark,
+    Lit,
+}
+
+fn is_dark(i: &InteriorJson) -> bool {
+    *i == InteriorJson::Dark
+}
+
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum LightJson {
@@ -160,12 +173,15 @@ pub enum LightJson {
         #[serde(default)]
         angle_deg: f32,
     },
-    /// Intensity in W/sr; `radius` > 0 makes a sphere light of the same total power.
+    /// Intensity in W/sr; `radius` > 0 makes a sphere light of the same total power, whose
+    /// `interior` is `dark` (the default: UsdLux) or `lit` (Cycles).
     Point {
         position: [f32; 3],
         intensity: Rgb,
         #[serde(default)]
         radius: f32,
+        #[serde(default, skip_serializing_if = "is_dark")]
+        interior: InteriorJson,
     },
     /// A point light aimed along `direction`: `intensity` (W/sr) on the axis, zero outside the
     /// cone of half-angle `cone_half_angle_deg`, blended over the outer `blend` fraction of

@@ -12,14 +12,28 @@ pub enum Light {
     /// (radians; 0 = a delta direction). The angle is kept, not its cosine: for the sun's
     /// 0.27 degrees, 1 - cos in f32 has a 1% error.
     Distant { direction: Vec3, irradiance: Vec3, half_angle: f32 },
-    /// Intensity in W/sr. With `radius` > 0: a sphere of uniform radiance I / (pi r^2), which has
-    /// the same power 4 pi I and looks the same from afar.
-    Point { position: Vec3, intensity: Vec3, radius: f32 },
+    /// Intensity in W/sr. With `radius` > 0: a sphere whose surface has the uniform radiance
+    /// I / (pi r^2) outwards, which has the same power 4 pi I and looks the same from afar;
+    /// `interior` says what points inside the sphere receive (docs/scene-format.md).
+    Point { position: Vec3, intensity: Vec3, radius: f32, interior: SphereInterior },
     /// A point (or sphere) light whose intensity is shaped by a cone: see `Spot`.
     Spot(Spot),
     /// A one-sided rectangle or disc of uniform radiance: see `AreaLight`.
     Area(AreaLight),
     Dome(Environment),
+}
+
+/// What a sphere lamp gives points inside its sphere. Outside, every model sees the surface's
+/// radiance I / (pi r^2) over the solid angle it subtends.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SphereInterior {
+    /// Nothing: the surface emits outwards only (UsdLux SphereLight, Mitsuba's sphere emitter),
+    /// so the lamp's power is exactly 4 pi I.
+    #[default]
+    Dark,
+    /// The surface's radiance from every direction, as Cycles lights points inside a point
+    /// lamp of non-zero radius (Blender exports this): light added inside the sphere.
+    Lit,
 }
 
 /// Intensity `intensity` (W/sr) along `axis`, I(w) = intensity * smoothstep(cos_outer,

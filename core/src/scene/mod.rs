@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 pub use camera::Camera;
 pub use environment::{Environment, LatLongMap};
 pub use json::SceneJson;
-pub use light::{AreaLight, AreaShape, Light, Spot};
+pub use light::{AreaLight, AreaShape, Light, SphereInterior, Spot};
 
 use crate::error::{excerpt, Error, Result};
 use crate::medium::{procedural, raw, GridLimits, Medium};
@@ -182,7 +182,7 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
                 half_angle: 0.5 * angle_deg.to_radians(),
             }
         }
-        json::LightJson::Point { position, intensity, radius } => {
+        json::LightJson::Point { position, intensity, radius, interior } => {
             if !(radius.is_finite() && *radius >= 0.0) {
                 return Err(Error::scene(format!("{field}.radius"), format!("must be finite and >= 0, got {radius}")));
             }
@@ -190,6 +190,10 @@ pub fn build_light(l: &json::LightJson, field: &str, base_dir: &Path) -> Result<
                 position: finite3(&format!("{field}.position"), *position)?,
                 intensity: non_negative(&format!("{field}.intensity"), *intensity)?,
                 radius: *radius,
+                interior: match interior {
+                    json::InteriorJson::Dark => light::SphereInterior::Dark,
+                    json::InteriorJson::Lit => light::SphereInterior::Lit,
+                },
             }
         }
         json::LightJson::Spot { position, direction, intensity, cone_half_angle_deg, blend, radius } => {

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use super::{Progress, ScatteringGrid};
 use crate::error::{Error, Result};
 use crate::medium::dense_march::Marcher;
-use crate::medium::{ball_mean_inverse_square, near_field_radius, Medium};
+use crate::medium::{near_field_radius, Medium};
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::translate::dome::dome_directions_of;
@@ -279,23 +279,24 @@ pub fn shadow_step(medium: &Medium, grid: &ScatteringGrid) -> f32 {
     crate::medium::min_spacing(&grid.index_to_world).max(medium.voxel_size_world().min_element())
 }
 
-/// One point emitter's single scattering at `x` (before sigma_s): I / d^2 * p * T, with 1/d^2
-/// replaced by its mean over a ball of radius sqrt(emitter radius^2 + near^2) (the emitter's
-/// own extent, translate::emission, convolved with the grid's cell: radii of convolved balls
-/// add roughly in squares). On the grid point itself the phase function's mean, 1/4 pi, is used.
+/// One point emitter's single scattering at `x` (before sigma_s): I * p * T times the emitter's
+/// field (`PointEmitter::inverse_square`: 1/d^2, a sphere lamp's, spread over `near`, the grid's
+/// cell). On the emitter's centre the phase function's mean, 1/4 pi, is used.
 #[inline]
 fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &impl Fn(Vec3, f32) -> Vec3) -> Vec3 {
     let to = e.position - x;
     let dist = to.length();
-    let r = (e.radius * e.radius + near * near).sqrt();
     if dist > 1e-6 {
         let w = to / dist;
         let intensity = e.intensity_towards(-w);
         if intensity.max_element() > 0.0 {
-            return intensity * ball_mean_inverse_square(dist, r) * hg(w.dot(view), g) * tr(w, dist);
+            let field = e.inverse_square(dist, near);
+            if field > 0.0 {
+                return intensity * field * hg(w.dot(view), g) * tr(w, dist);
+            }
         }
-    } else if e.profile == crate::translate::Profile::Isotropic && r > 0.0 {
-        return e.intensity * ball_mean_inverse_square(0.0, r) * (0.25 * std::f32::consts::FRAC_1_PI);
+    } else if e.profile == crate::translate::Profile::Isotropic && (e.radius > 0.0 || near > 0.0) {
+        return e.intensity * e.inverse_square(0.0, near) * (0.25 * std::f32::consts::FRAC_1_PI);
     }
     Vec3::ZERO
 }

@@ -6,7 +6,7 @@
 
 use glam::Vec3;
 
-use crate::scene::light::{AreaLight, Spot};
+use crate::scene::light::{AreaLight, SphereInterior, Spot};
 use super::emission;
 use crate::scene::{Light, Scene};
 
@@ -82,12 +82,20 @@ pub struct PointEmitter {
     pub intensity: Vec3,
     /// > 0: a sphere light of this radius (solvers may treat it as a point from outside it).
     pub radius: f32,
+    /// What points inside that sphere receive.
+    pub interior: SphereInterior,
     pub profile: Profile,
 }
 
 impl PointEmitter {
     pub fn intensity_towards(&self, w: Vec3) -> Vec3 {
         self.intensity * self.profile.factor(w)
+    }
+
+    /// `medium::lamp_inverse_square` for this emitter at distance `d`, spread over `near`.
+    #[inline]
+    pub fn inverse_square(&self, d: f32, near: f32) -> f32 {
+        crate::medium::lamp_inverse_square(d, self.radius, near, self.interior == SphereInterior::Lit)
     }
 
     pub fn power(&self) -> Vec3 {
@@ -100,6 +108,7 @@ pub fn spot_emitter(s: &Spot) -> PointEmitter {
         position: s.position,
         intensity: s.intensity,
         radius: s.radius,
+        interior: SphereInterior::Dark,
         profile: Profile::Cone { axis: s.axis, cos_outer: s.cos_outer, cos_inner: s.cos_inner },
     }
 }
@@ -114,7 +123,7 @@ pub fn area_vpls(a: &AreaLight, k: u32) -> Vec<PointEmitter> {
     for j in 0..k {
         for i in 0..k {
             let u = [(i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32];
-            out.push(PointEmitter { position: a.point(u), intensity: share, radius: 0.0, profile: Profile::Cosine { normal: a.normal } });
+            out.push(PointEmitter { position: a.point(u), intensity: share, radius: 0.0, interior: SphereInterior::Dark, profile: Profile::Cosine { normal: a.normal } });
         }
     }
     out
@@ -126,8 +135,8 @@ pub fn local_emitters(lights: &[Light], area_k: u32) -> Vec<PointEmitter> {
     let mut out = Vec::new();
     for light in lights {
         match light {
-            Light::Point { position, intensity, radius } => {
-                out.push(PointEmitter { position: *position, intensity: *intensity, radius: *radius, profile: Profile::Isotropic })
+            Light::Point { position, intensity, radius, interior } => {
+                out.push(PointEmitter { position: *position, intensity: *intensity, radius: *radius, interior: *interior, profile: Profile::Isotropic })
             }
             Light::Spot(s) => out.push(spot_emitter(s)),
             Light::Area(a) => out.extend(area_vpls(a, area_k)),

@@ -127,7 +127,7 @@ impl<'a> LightSampler<'a> {
                     (Source::Distant { direction: direction.normalize(), one_minus_cos }, fluence * sphere.disc_area())
                 }
                 Light::Dome(env) => (Source::Dome(env), dome_fluence(env) * sphere.disc_area()),
-                Light::Point { position, intensity, radius } => (Source::Point { position: *position, radius: *radius }, *intensity * (4.0 * PI)),
+                Light::Point { position, intensity, radius, .. } => (Source::Point { position: *position, radius: *radius }, *intensity * (4.0 * PI)),
                 Light::Spot(s) => (Source::Spot(*s), s.intensity * cone_profile(s).solid_angle()),
                 Light::Area(a) => (Source::Area(*a), a.power()),
             };

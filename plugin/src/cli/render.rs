@@ -46,7 +46,7 @@ pub struct RenderArgs {
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub settings: Vec<String>,
     /// AOV layers written to the EXR besides RGBA, comma-separated: single, multiple,
-    /// background, or all, or none. The default, background, is free (the march computes it for
+    /// background, emission, or all, or none. The default, background, is free (the march computes it for
     /// the image) and is what re-compositing over another backdrop needs; single and multiple
     /// cost the compositor a second light pass (more than pop's solve), so they are asked for.
     #[arg(long = "aov", value_name = "LIST", default_value = "background")]

@@ -32,8 +32,11 @@ pub const VS_AOV_MULTIPLE: u32 = 2;
 /// AOV bit for `vs_result_composite_aovs`: the `background` layer (the environment seen
 /// through the medium; free, the march computes it anyway).
 pub const VS_AOV_BACKGROUND: u32 = 4;
+/// AOV bit for `vs_result_composite_aovs`: the `emission` layer (the medium's own emission
+/// seen directly; free, the march computes it anyway; part of the RGBA image).
+pub const VS_AOV_EMISSION: u32 = 8;
 /// Every AOV bit: what `vs_result_composite` makes.
-pub const VS_AOV_ALL: u32 = VS_AOV_SINGLE | VS_AOV_MULTIPLE | VS_AOV_BACKGROUND;
+pub const VS_AOV_ALL: u32 = VS_AOV_SINGLE | VS_AOV_MULTIPLE | VS_AOV_BACKGROUND | VS_AOV_EMISSION;
 
 /// File formats for `vs_result_write_grid` (passed as `uint32_t`; other values are refused).
 #[repr(C)]
@@ -275,9 +278,14 @@ pub unsafe extern "C" fn vs_result_composite_aovs(
 /// The AOV set of a `VS_AOV_*` bit mask; unknown bits are refused, never ignored.
 fn aovs_from_bits(aovs: u32) -> FfiResult<Aovs> {
     if aovs & !VS_AOV_ALL != 0 {
-        return Err(FfiError::invalid(format!("aovs {aovs:#x}: unknown bits {:#x} (VS_AOV_SINGLE 1, VS_AOV_MULTIPLE 2, VS_AOV_BACKGROUND 4)", aovs & !VS_AOV_ALL)));
+        return Err(FfiError::invalid(format!("aovs {aovs:#x}: unknown bits {:#x} (VS_AOV_SINGLE 1, VS_AOV_MULTIPLE 2, VS_AOV_BACKGROUND 4, VS_AOV_EMISSION 8)", aovs & !VS_AOV_ALL)));
     }
-    Ok(Aovs { single: aovs & VS_AOV_SINGLE != 0, multiple: aovs & VS_AOV_MULTIPLE != 0, background: aovs & VS_AOV_BACKGROUND != 0 })
+    Ok(Aovs {
+        single: aovs & VS_AOV_SINGLE != 0,
+        multiple: aovs & VS_AOV_MULTIPLE != 0,
+        background: aovs & VS_AOV_BACKGROUND != 0,
+        emission: aovs & VS_AOV_EMISSION != 0,
+    })
 }
 
 unsafe fn composite_into(r: &ResultState, flags: u32, aovs: u32, subpixels: u32, step_voxels: f32, out: *mut *mut VsImage) -> FfiResult {

@@ -438,6 +438,7 @@ pub unsafe extern "C" fn vs_scene_add_point_light(scene: *mut VsScene, position:
             position: floats_arg(position, "position")?,
             intensity: rgb(floats_arg(intensity, "intensity")?),
             radius: finite_arg(radius, "radius")?,
+            interior: Default::default(),
         })
     })
 }

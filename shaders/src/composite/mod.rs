@@ -8,7 +8,7 @@ use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
 use crate::upload::{affine_rows, bricked_density, bricked_density_bytes, grid_dims, rgb_as_vec4};
-use volscatter_core::compositor::{assemble_image, CompositeOptions};
+use volscatter_core::compositor::{assemble_image, CompositeOptions, Pixel};
 use volscatter_core::{Image, ScatteringGrid, Scene};
 
 pub mod single;
@@ -146,7 +146,7 @@ pub fn composite_with_single(
         [cam.width.div_ceil(8), cam.height.div_ceil(8), 1],
     )?;
     let px: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-    let pixels = px.chunks_exact(3).map(|p| (Vec4::from(p[0]), Vec4::from(p[1]).truncate(), Vec4::from(p[2]).truncate()));
+    let pixels = px.chunks_exact(3).map(|p| Pixel { rgba: Vec4::from(p[0]), single: Vec4::from(p[1]).truncate(), background: Vec4::from(p[2]).truncate(), emission: Vec3::ZERO });
     Ok(assemble_image(cam.width, cam.height, pixels, opts.transparent, opts.aovs))
 }
 

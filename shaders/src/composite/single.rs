@@ -68,7 +68,7 @@ impl GpuLight {
             pos_or_dir: e.position.extend(1.0).to_array(),
             power: e.intensity.extend(kind).to_array(),
             axis: axis.extend(cos_outer).to_array(),
-            extra: [cos_inner, e.radius, 0.0, 0.0],
+            extra: [cos_inner, e.radius, (e.interior == volscatter_core::scene::SphereInterior::Lit) as u32 as f32, 0.0],
         }
     }
 }

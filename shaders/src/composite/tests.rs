@@ -65,7 +65,7 @@ fn gpu_single_scattering_grid_matches_cpu() {
         assert!(cpu.data.iter().any(|v| v.x > 0.0));
     };
     check(&scene, "sun + dome");
-    scene.lights = vec![volscatter_core::scene::Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0 }];
+    scene.lights = vec![volscatter_core::scene::Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0, interior: Default::default() }];
     check(&scene, "point light");
     // A spot with a blended cone and a disc light (8x8 VPLs with the cosine profile).
     use volscatter_core::scene::{AreaLight, AreaShape, Light, Spot};

@@ -56,7 +56,7 @@ fn recording<B>(inner: B) -> Recording<B> {
 pub(crate) fn plume_point_light() -> Scene {
     let mut sc = Scene::default_scene();
     let sphere = BoundingSphere::of(&sc.medium);
-    sc.lights = vec![Light::Point { position: sphere.center + Vec3::new(0.2, -0.1, 0.4) * sphere.radius, intensity: Vec3::new(4.0, 3.0, 2.0), radius: 0.0 }];
+    sc.lights = vec![Light::Point { position: sphere.center + Vec3::new(0.2, -0.1, 0.4) * sphere.radius, intensity: Vec3::new(4.0, 3.0, 2.0), radius: 0.0, interior: Default::default() }];
     sc
 }
 

@@ -81,7 +81,7 @@ fn gpu_tracing_matches_cpu_on_the_default_plume() {
 #[ignore = "needs a GPU adapter: run with --run-ignored only (scripts/test.sh does when one exists)"]
 fn gpu_tracing_matches_cpu_with_a_local_light() {
     let mut scene = Scene::default_scene();
-    scene.lights = vec![Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0 }];
+    scene.lights = vec![Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0, interior: Default::default() }];
     // Chromatic extinction and albedo: spectral tracking's weights.
     scene.medium.density_scale *= Vec3::new(1.0, 0.8, 0.6);
     scene.medium.albedo = Vec3::new(0.99, 0.95, 0.9);

@@ -37,3 +37,20 @@ fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
     let gap = max(abs(r - d), 1e-7 * r);
     return 1.5 / (r * r * r * d) * (0.5 * (r * r - d * d) * log((r + d) / gap) + d * r);
 }
+
+// medium::optics::lamp_inverse_square: a point lamp's 1/d^2, a sphere lamp's field (its interior
+// dark, or lit at 4/r^2), spread over a ball of radius `near`.
+fn lamp_inverse_square(d: f32, lamp: f32, near: f32, lit: bool) -> f32 {
+    if (lamp <= near) {
+        return ball_mean_inverse_square(d, sqrt(lamp * lamp + near * near));
+    }
+    if (d < lamp) {
+        return select(0.0, 4.0 / (lamp * lamp), lit);
+    }
+    let sin2 = min(lamp * lamp / (d * d), 1.0);
+    var one_minus_cos = 1.0 - sqrt(1.0 - sin2);
+    if (sin2 < 1e-3) {
+        one_minus_cos = 0.5 * sin2 + 0.125 * sin2 * sin2;
+    }
+    return 2.0 * one_minus_cos / (lamp * lamp);
+}

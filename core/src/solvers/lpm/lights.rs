@@ -148,8 +148,11 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                     if intensity.max_element() <= 0.0 {
                         continue;
                     }
-                    let r = (em.radius * em.radius + near * near).sqrt();
-                    let arriving = intensity * crate::medium::ball_mean_inverse_square(dist, r);
+                    let field = em.inverse_square(dist, near);
+                    if field <= 0.0 {
+                        continue;
+                    }
+                    let arriving = intensity * field;
                     let bin = dirs.bin_of(-towards);
                     add(cell, jv, p, sigma_s, -towards, arriving, grid.transmittance(p, towards, dist), &|d| table.storage_mean_from_bin(dirs, d, bin));
                 }

@@ -160,7 +160,7 @@ fn lpm_out_of_core_refusals() {
     let err = solve(&sun, s.clone(), Overrides::default(), None, &NoProgress).err().unwrap().to_string();
     assert!(err.contains("first_order") && err.contains("out_of_core"), "{err}");
     let mut lamp = case("plume");
-    lamp.lights = vec![Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE, radius: 0.0 }];
+    lamp.lights = vec![Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE, radius: 0.0, interior: Default::default() }];
     let err = solve(&lamp, LpmSettings { first_order: FirstOrder::Boundary, ..s.clone() }, Overrides::default(), None, &NoProgress).err().unwrap().to_string();
     assert!(err.contains("local light"), "{err}");
     let missing = PathBuf::from("/nonexistent/volscatter-scratch");

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::directions::phase_row;
 use super::particles::Particles;
-use crate::medium::{ball_mean_inverse_square, optical_depth, Medium};
+use crate::medium::{optical_depth, Medium};
 use crate::scene::{Light, Scene};
 use crate::stages::Progress;
 use crate::translate::dome::dome_directions_of;
@@ -70,9 +70,9 @@ fn incoming_direct(scene: &Scene, medium: &Medium, x: Vec3, ball: f32, dome: &[(
         }
         let w = to / dist;
         let intensity = e.intensity_towards(-w);
-        if intensity.max_element() > 0.0 {
-            let r = (e.radius * e.radius + ball * ball).sqrt();
-            out.push((-w, intensity * ball_mean_inverse_square(dist, r) * tr(w, dist)));
+        let field = e.inverse_square(dist, ball);
+        if intensity.max_element() > 0.0 && field > 0.0 {
+            out.push((-w, intensity * field * tr(w, dist)));
         }
     }
     out

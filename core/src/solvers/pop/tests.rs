@@ -309,7 +309,7 @@ fn cancellation_stops_the_solve() {
 #[test]
 fn unsupported_lights_warn_or_fail() {
     let mut sc = scene(cube(8, 2.0, 0.9, 0.5), 8, 4.0, 22.0);
-    sc.lights.push(Light::Point { position: Vec3::new(2.0, 0.0, 0.0), intensity: Vec3::ONE, radius: 0.0 });
+    sc.lights.push(Light::Point { position: Vec3::new(2.0, 0.0, 0.0), intensity: Vec3::ONE, radius: 0.0, interior: Default::default() });
     sc.lights.push(Light::Dome(crate::scene::Environment { color: Vec3::splat(0.1), map: None }));
     let no_dome = PopSettings { dome_ordinates: 0, ..test_settings() };
     let (_, rep) = Pop::new(no_dome.clone()).unwrap().solve(&sc, &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<PopReport>).unwrap();

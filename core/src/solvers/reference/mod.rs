@@ -48,7 +48,8 @@ impl Reference {
         Reference::new(parse_settings(map)?)
     }
 
-    /// Path-traces the image directly (RGBA + AOVs `single`, `multiple`, `background`).
+    /// Path-traces the image directly (RGBA + AOVs `single`, `multiple`, `background`,
+    /// `emission`).
     fn image(&self, scene: &Scene, progress: &dyn Progress, transparent: bool, timings: &mut Timings) -> Result<Image> {
         let s = &self.settings;
         let transparent = transparent || s.transparent;
@@ -63,13 +64,15 @@ impl Reference {
         let mut single = vec![Vec3::ZERO; w * h];
         let mut multiple = vec![Vec3::ZERO; w * h];
         let mut background = vec![Vec3::ZERO; w * h];
+        let mut emission = vec![Vec3::ZERO; w * h];
         timings.time("path tracing", || {
             rgba.par_chunks_mut(w)
                 .zip(single.par_chunks_mut(w))
                 .zip(multiple.par_chunks_mut(w))
                 .zip(background.par_chunks_mut(w))
+                .zip(emission.par_chunks_mut(w))
                 .enumerate()
-                .for_each(|(y, (((row, row1), row_m), row_bg))| {
+                .for_each(|(y, ((((row, row1), row_m), row_bg), row_e))| {
                     if cancelled.load(Ordering::Relaxed) {
                         return;
                     }
@@ -89,11 +92,12 @@ impl Reference {
                         }
                         let inv = 1.0 / s.spp as f32;
                         let alpha = 1.0 - (transmittance * inv).dot(Vec3::splat(1.0 / 3.0));
-                        let rgb = (acc.single + acc.multiple + if transparent { Vec3::ZERO } else { acc.background }) * inv;
+                        let rgb = (acc.single + acc.multiple + acc.emission + if transparent { Vec3::ZERO } else { acc.background }) * inv;
                         row[x] = rgb.extend(alpha.clamp(0.0, 1.0));
                         row1[x] = acc.single * inv;
                         row_m[x] = acc.multiple * inv;
                         row_bg[x] = acc.background * inv;
+                        row_e[x] = acc.emission * inv;
                     }
                     let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
                     if !progress.update("path tracing", done as f32 / h as f32) {
@@ -106,7 +110,7 @@ impl Reference {
         }
         let mut img = Image::new(cam.width, cam.height);
         img.rgba = rgba;
-        img.aovs = vec![("single".into(), single), ("multiple".into(), multiple), ("background".into(), background)];
+        img.aovs = vec![("single".into(), single), ("multiple".into(), multiple), ("background".into(), background), ("emission".into(), emission)];
         Ok(img)
     }
 

@@ -195,7 +195,7 @@ fn spot(position: Vec3, axis: Vec3, intensity: f32, half_angle_deg: f32) -> Ligh
 fn spot_with_full_cone_is_the_point_light() {
     let pos = Vec3::new(0.3, -0.2, 1.5);
     let s = thin_box_with(vec![spot(pos, -Vec3::Z, 2.0, 180.0)]);
-    let p = thin_box_with(vec![Light::Point { position: pos, intensity: Vec3::splat(2.0), radius: 0.0 }]);
+    let p = thin_box_with(vec![Light::Point { position: pos, intensity: Vec3::splat(2.0), radius: 0.0, interior: Default::default() }]);
     let x = Vec3::new(0.1, 0.0, -0.1);
     assert_eq!(in_scattered_mean(&s, x, Vec3::Y, 2000), in_scattered_mean(&p, x, Vec3::Y, 2000));
 }
@@ -207,7 +207,7 @@ fn spot_with_full_cone_is_the_point_light() {
 fn spot_cone_masks_single_scattering() {
     let pos = Vec3::new(0.0, 0.0, 2.0);
     let s = thin_box_with(vec![spot(pos, -Vec3::Z, 5.0, 10.0)]);
-    let p = thin_box_with(vec![Light::Point { position: pos, intensity: Vec3::splat(5.0), radius: 0.0 }]);
+    let p = thin_box_with(vec![Light::Point { position: pos, intensity: Vec3::splat(5.0), radius: 0.0, interior: Default::default() }]);
     let inside = in_scattered_mean(&s, Vec3::ZERO, Vec3::Y, 20_000).x / in_scattered_mean(&p, Vec3::ZERO, Vec3::Y, 20_000).x;
     // Inside: the same direct light; multiple scattering (~2% of the point light's) is less.
     assert!((inside - 1.0).abs() < 0.03, "inside the cone: spot / point = {inside}");
@@ -229,7 +229,7 @@ fn small_area_light_is_a_lambertian_point() {
     for a in [disk, rect] {
         let intensity = radiance * a.area() * tilt.dot(-Vec3::Z);
         let lit = thin_box_with(vec![Light::Area(a)]);
-        let point = thin_box_with(vec![Light::Point { position: a.center, intensity: Vec3::splat(intensity), radius: 0.0 }]);
+        let point = thin_box_with(vec![Light::Point { position: a.center, intensity: Vec3::splat(intensity), radius: 0.0, interior: Default::default() }]);
         let r = in_scattered_mean(&lit, Vec3::ZERO, Vec3::Y, 20_000).x / in_scattered_mean(&point, Vec3::ZERO, Vec3::Y, 20_000).x;
         assert!((r - 1.0).abs() < 0.03, "{:?}: area / point = {r}", a.shape);
         let back = thin_box_with(vec![Light::Area(AreaLight { normal: -tilt, ..a })]);

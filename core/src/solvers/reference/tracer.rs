@@ -8,8 +8,8 @@ use super::ReferenceSettings;
 use crate::medium::{ray_box, FreeFlight, MajorantGrid, Medium, Tracking};
 use crate::phase::{hg, HenyeyGreenstein};
 use crate::rng::Rng;
-use crate::sampling::uniform_cone;
-use crate::scene::{Environment, Light, Scene};
+use crate::sampling::{uniform_cone, uniform_sphere};
+use crate::scene::{Environment, Light, Scene, SphereInterior};
 
 /// Radiance reaching the camera along one path, split by scattering order.
 #[derive(Clone, Copy, Debug, Default)]
@@ -20,6 +20,8 @@ pub struct PathRadiance {
     pub multiple: Vec3,
     /// The environment seen through the medium, unscattered.
     pub background: Vec3,
+    /// The medium's emission seen directly (camera paths only).
+    pub emission: Vec3,
 }
 
 impl PathRadiance {
@@ -27,9 +29,10 @@ impl PathRadiance {
         self.single += o.single;
         self.multiple += o.multiple;
         self.background += o.background;
+        self.emission += o.emission;
     }
     pub fn total(&self) -> Vec3 {
-        self.single + self.multiple + self.background
+        self.single + self.multiple + self.background + self.emission
     }
 }
 
@@ -110,12 +113,14 @@ impl<'a> Tracer<'a> {
                     let ph = hg(wi.dot(d), self.phase.g);
                     sum += *irradiance * weight * ph * self.transmittance(x, wi, f32::INFINITY, rng);
                 }
-                Light::Point { position, intensity, radius } => sum += self.point_light(x, d, *position, *intensity, *radius, rng),
+                Light::Point { position, intensity, radius, interior } => {
+                    sum += self.point_light(x, d, *position, *intensity, *radius, *interior, rng)
+                }
                 Light::Spot(spot) => {
                     let from = x - spot.position;
                     let falloff = spot.falloff(from.normalize_or(spot.axis));
                     if falloff > 0.0 {
-                        sum += falloff * self.point_light(x, d, spot.position, spot.intensity, spot.radius, rng);
+                        sum += falloff * self.point_light(x, d, spot.position, spot.intensity, spot.radius, SphereInterior::Dark, rng);
                     }
                 }
                 Light::Area(area) => {
@@ -145,13 +150,16 @@ impl<'a> Tracer<'a> {
         sum
     }
 
-    /// Next-event estimate of a point (radius 0) or sphere light of intensity `intensity`.
-    fn point_light(&self, x: Vec3, d: Vec3, position: Vec3, intensity: Vec3, radius: f32, rng: &mut Rng) -> Vec3 {
+    /// Next-event estimate of a point (radius 0) or sphere light of intensity `intensity`: the
+    /// sphere's surface has radiance I / (pi r^2); from inside, `interior` decides
+    /// (docs/scene-format.md): nothing, or that radiance from every direction.
+    #[allow(clippy::too_many_arguments)]
+    fn point_light(&self, x: Vec3, d: Vec3, position: Vec3, intensity: Vec3, radius: f32, interior: SphereInterior, rng: &mut Rng) -> Vec3 {
         let to = position - x;
         let dist2 = to.length_squared();
         let dist = dist2.sqrt();
-        if radius > 0.0 && dist > radius * 1.0001 {
-            // Sphere of radiance I / (pi r^2) sampled uniformly in the cone it subtends.
+        if radius > 0.0 && dist > radius {
+            // Sampled uniformly in the cone the sphere subtends.
             let sin2 = (radius * radius / dist2).min(1.0);
             let cos_max = (1.0 - sin2).max(0.0).sqrt();
             let one_minus_cos = if sin2 < 1e-4 { 0.5 * sin2 + 0.125 * sin2 * sin2 } else { 1.0 - cos_max };
@@ -164,6 +172,16 @@ impl<'a> Tracer<'a> {
             let radiance = intensity / (PI * radius * radius);
             let ph = hg(wi.dot(d), self.phase.g);
             radiance * solid_angle * ph * self.transmittance(x, wi, t_hit.max(0.0), rng)
+        } else if radius > 0.0 {
+            if interior == SphereInterior::Dark {
+                return Vec3::ZERO;
+            }
+            // Inside a lit sphere: uniform over all directions, to the surface ahead.
+            let wi = uniform_sphere(rng.pair());
+            let b = wi.dot(to);
+            let t_hit = b + (b * b - dist2 + radius * radius).max(0.0).sqrt();
+            let radiance = intensity / (PI * radius * radius);
+            radiance * (4.0 * PI) * hg(wi.dot(d), self.phase.g) * self.transmittance(x, wi, t_hit, rng)
         } else if dist > 1e-6 {
             let wi = to / dist;
             let ph = hg(wi.dot(d), self.phase.g);
@@ -250,12 +268,13 @@ impl<'a> Tracer<'a> {
 
     /// Radiance along a camera ray from `o` in unit direction `d`.
     pub fn camera_path(&self, o: Vec3, d: Vec3, rng: &mut Rng) -> PathRadiance {
+        let emission = self.emission_along(o, d, rng);
         let mut beta = Vec3::ONE;
         match self.free_flight(o, d, &mut beta, rng) {
-            None => PathRadiance { background: beta * self.env.map_or(Vec3::ZERO, |e| e.radiance(d)), ..Default::default() },
+            None => PathRadiance { background: beta * self.env.map_or(Vec3::ZERO, |e| e.radiance(d)), emission, ..Default::default() },
             Some(t) => {
                 let (single, multiple) = self.walk(o + d * t, d, beta * self.medium.albedo, 1, rng);
-                PathRadiance { single, multiple, background: Vec3::ZERO }
+                PathRadiance { single, multiple, background: Vec3::ZERO, emission }
             }
         }
     }

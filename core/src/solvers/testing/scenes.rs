@@ -93,10 +93,10 @@ pub fn local_light_case(name: &str) -> Scene {
             let g = if name == "fig10_g0" { 0.0 } else { 0.8 };
             // On the axis through the light: the image is symmetric about its centre.
             let camera = Camera::look_at(Vec3::new(0.0, -12.0, 0.0), Vec3::ZERO, Vec3::Z, 28.0, SIZE, SIZE);
-            (sphere(32, 2.5, Vec3::new(0.8, 1.0, 1.3), g), Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE, radius: 0.0 }, camera)
+            (sphere(32, 2.5, Vec3::new(0.8, 1.0, 1.3), g), Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE, radius: 0.0, interior: Default::default() }, camera)
         }
-        "plume_point" => (local_plume(0.6), Light::Point { position: beside, intensity: Vec3::splat(4.0), radius: 0.0 }, cam(6.0, 25.0)),
-        "plume_sphere" => (local_plume(0.6), Light::Point { position: beside, intensity: Vec3::splat(4.0), radius: 0.4 }, cam(6.0, 25.0)),
+        "plume_point" => (local_plume(0.6), Light::Point { position: beside, intensity: Vec3::splat(4.0), radius: 0.0, interior: Default::default() }, cam(6.0, 25.0)),
+        "plume_sphere" => (local_plume(0.6), Light::Point { position: beside, intensity: Vec3::splat(4.0), radius: 0.4, interior: Default::default() }, cam(6.0, 25.0)),
         "plume_spot" => {
             let axis = (Vec3::new(0.0, 0.0, 0.1) - beside).normalize();
             let spot = Spot { position: beside, axis, intensity: Vec3::splat(8.0), radius: 0.0, cos_outer: 25f32.to_radians().cos(), cos_inner: 18f32.to_radians().cos() };

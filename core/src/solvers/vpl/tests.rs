@@ -180,7 +180,7 @@ fn vpl_power_is_a_over_one_minus_a_around_a_point_light() {
     let a = 0.5f32;
     let sc = Scene {
         medium: crate::solvers::testing::homogeneous_box(16, 1.0 / 16.0, 128.0, a, 0.3),
-        lights: vec![Light::Point { position: Vec3::ZERO, intensity: Vec3::splat(1.0), radius: 0.0 }],
+        lights: vec![Light::Point { position: Vec3::ZERO, intensity: Vec3::splat(1.0), radius: 0.0, interior: Default::default() }],
         camera: Camera::look_at(Vec3::new(0.0, -4.0, 0.0), Vec3::ZERO, Vec3::Z, 22.0, 8, 8),
         solver: Default::default(),
     };

@@ -108,7 +108,7 @@ fn distant_rays() {
 #[test]
 fn point_rays() {
     let (p, i) = (Vec3::new(1.0, 0.0, 1.0), Vec3::new(50.0, 40.0, 30.0));
-    let scene = scene_with(vec![Light::Point { position: p, intensity: i, radius: 0.0 }]);
+    let scene = scene_with(vec![Light::Point { position: p, intensity: i, radius: 0.0, interior: Default::default() }]);
     let rs = rays(&LightSampler::new(&scene), N, 2);
     assert_mean_power(&rs, i * 4.0 * PI, "point");
     assert!(rs.iter().all(|x| x.origin == p));
@@ -122,7 +122,7 @@ fn point_rays() {
 #[test]
 fn sphere_rays() {
     let (p, i, radius) = (Vec3::new(0.5, -0.2, 1.5), Vec3::splat(10.0), 0.3);
-    let scene = scene_with(vec![Light::Point { position: p, intensity: i, radius }]);
+    let scene = scene_with(vec![Light::Point { position: p, intensity: i, radius, interior: Default::default() }]);
     let rs = rays(&LightSampler::new(&scene), N, 3);
     assert_mean_power(&rs, i * 4.0 * PI, "sphere");
     let normals: Vec<Vec3> = rs.iter().map(|x| (x.origin - p) / radius).collect();
@@ -301,7 +301,7 @@ fn lights_are_chosen_by_power() {
     let area = AreaLight { center: Vec3::new(0.0, 0.0, 2.0), normal: -Vec3::Z, tangent: Vec3::X, shape: AreaShape::Disk { radius: 0.5 }, radiance: Vec3::new(4.0, 3.0, 2.0) };
     let mut scene = scene_with(vec![
         Light::Distant { direction: -Vec3::Z, irradiance: Vec3::new(3.0, 2.0, 1.0), half_angle: 0.01 },
-        Light::Point { position: Vec3::ONE, intensity: Vec3::splat(20.0), radius: 0.0 },
+        Light::Point { position: Vec3::ONE, intensity: Vec3::splat(20.0), radius: 0.0, interior: Default::default() },
         Light::Spot(spot),
         Light::Area(area),
         Light::Dome(Environment { color: Vec3::new(0.2, 0.3, 0.5), map: None }),

@@ -61,7 +61,7 @@ fn pop_cost_by_volume() {
             match extra {
                 Extra::None => {}
                 Extra::Sky => sc.lights.push(crate::scene::Light::Dome(crate::scene::Environment { color: Vec3::splat(0.3), map: None })),
-                Extra::Point | Extra::PointSky => sc.lights = vec![crate::scene::Light::Point { position: Vec3::new(1.5, -0.5, 0.5), intensity: Vec3::splat(10.0), radius: 0.0 }],
+                Extra::Point | Extra::PointSky => sc.lights = vec![crate::scene::Light::Point { position: Vec3::new(1.5, -0.5, 0.5), intensity: Vec3::splat(10.0), radius: 0.0, interior: Default::default() }],
             }
             // Blender's default world: a grey background of 0.05, exported as a dome.
             if let Extra::PointSky = extra {
