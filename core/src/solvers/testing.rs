@@ -13,6 +13,8 @@ pub mod cloud;
 mod coverage;
 #[cfg(test)]
 mod furnace;
+#[cfg(test)]
+mod lamp_probe;
 pub mod scenes;
 
 use crate::solvers::{SolveCtx, SolveOutput, Solver};

@@ -7,7 +7,8 @@ left out (unsupported lights, ignored shader inputs) is collected in `warnings`.
 
 Conventions (measured with Cycles, /work/shared/notes/blender-conventions.md):
 - sun: `strength` is irradiance (W/m^2) perpendicular to the beam; `angle` its diameter;
-- point of power P: intensity P / (4 pi) W/sr, radius = `shadow_soft_size`;
+- point of power P: intensity P / (4 pi) W/sr, radius = `shadow_soft_size`, its interior lit
+  (Cycles lights points inside the sphere with its surface's radiance from every direction);
 - spot of power P: the same axis intensity P / (4 pi) W/sr as a point of P watts (the cone
   masks, it does not concentrate: a Cycles 5.0.1 render of a visible spot of radius r shows
   radiance P / (4 pi^2 r^2) for any spot_size); cone half-angle spot_size / 2; `spot_blend` is
@@ -445,7 +446,7 @@ def lights(scene, depsgraph, warnings):
             if p <= 0:
                 continue
             out.append({"type": "point", "position": list(m.translation), "intensity": [c * p for c in col],
-                        "radius": max(float(light.shadow_soft_size), 0.0)})
+                        "radius": max(float(light.shadow_soft_size), 0.0), "interior": "lit"})
         elif light.type == 'SPOT':
             js = _spot(orig, light, m, col, warnings)
             if js:

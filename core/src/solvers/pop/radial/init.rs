@@ -33,6 +33,9 @@ pub struct Emitter {
     /// light arrives in the cone that patch subtends, and its inverse-square law stops there.
     /// 0 for a true point or sphere light.
     pub clamp_radius: f32,
+    /// A sphere light's interior is lit (docs/scene-format.md): inside it J is the surface's
+    /// radiance I / (pi radius^2) from every direction; else inside it J has no direct part.
+    pub lit_interior: bool,
 }
 
 impl Emitter {

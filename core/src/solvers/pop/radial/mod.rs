@@ -70,7 +70,7 @@ pub fn emission_sources(medium: &crate::medium::Medium, n: u32, first_index: usi
             light: first_index,
             kind: "emission VPL",
             position: e.position,
-            emitter: Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius: 0.0 },
+            emitter: Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius: 0.0, lit_interior: false },
         })
         .collect()
 }
@@ -103,7 +103,8 @@ pub fn sources(lights: &[Light], area_k: u32) -> Vec<RadialSource> {
             if !(e.intensity.is_finite() && e.position.is_finite()) || e.intensity.max_element() <= 0.0 {
                 continue;
             }
-            let emitter = Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius };
+            let lit_interior = e.interior == crate::scene::SphereInterior::Lit;
+            let emitter = Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius, lit_interior };
             out.push(RadialSource { light: i, kind, position: e.position, emitter });
         }
     }
@@ -145,11 +146,17 @@ pub struct RadialLight {
     pub j_direct: Vec<Vec3>,
     pub j_scattered: Vec<Vec3>,
     pub r_clamp: f32,
+    /// A sphere light's radius and its direct J inside it (zero for a dark interior).
+    pub interior: Option<(f32, Vec3)>,
 }
 
 impl RadialLight {
     pub fn sample(&self, w: Vec3) -> Vec3 {
-        self.grid.sample(&self.j_direct, w, true, self.r_clamp) + self.grid.sample(&self.j_scattered, w, false, 0.0)
+        let direct = match self.interior {
+            Some((radius, inside)) if (w - self.grid.centre).length() < radius => inside,
+            _ => self.grid.sample(&self.j_direct, w, true, self.r_clamp),
+        };
+        direct + self.grid.sample(&self.j_scattered, w, false, 0.0)
     }
 }
 
@@ -214,7 +221,12 @@ pub fn solve_sources(
         });
         // Inside a sphere light no further brightening (its surface is where the light starts).
         let r_clamp = e.clamp_radius.max(e.radius).max(CELL_MEAN_RADIUS * merged_spacing);
-        lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp });
+        // Inside a sphere light the radial grid has no cells: its interior is the light's model.
+        let interior = (e.radius > 0.0 && e.radius >= CELL_MEAN_RADIUS * merged_spacing).then(|| {
+            let lit = e.intensity / (std::f32::consts::PI * e.radius * e.radius);
+            (e.radius, if e.lit_interior { lit } else { Vec3::ZERO })
+        });
+        lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp, interior });
     }
     Ok((lights, reports))
 }
