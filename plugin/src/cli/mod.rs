@@ -2,6 +2,7 @@
 
 mod compare;
 mod gpu_info;
+mod mesa_env;
 mod progress;
 mod render;
 mod solvers;
@@ -45,8 +46,9 @@ enum Command {
     Render(render::RenderArgs),
     /// Render a scene with several solvers and print relative RMSE against the first.
     Compare(compare::CompareArgs),
-    /// List the solvers with their settings, lights and presets, as JSON.
-    Solvers,
+    /// List the solvers: what each is for, its lights and GPU (`--json`: the registry, with
+    /// every setting and preset).
+    Solvers(solvers::SolversArgs),
     /// Describe the GPU adapter volscatter would use (and whether it is a software one, which
     /// `--device auto` leaves for the CPU); exit code 1 when there is none.
     GpuInfo,
@@ -56,12 +58,13 @@ enum Command {
 
 /// Runs the CLI and returns the process exit code. Errors are printed, never panicked.
 pub fn main() -> i32 {
+    mesa_env::quiet_device_select();
     let cli = Cli::parse();
     volscatter_core::budget::set_budget(cli.memory_budget);
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Compare(args) => compare::run(args),
-        Command::Solvers => solvers::run(),
+        Command::Solvers(args) => solvers::run(args),
         Command::GpuInfo => gpu_info::run(),
         Command::VdbInfo(args) => vdb_info::run(args),
     };
