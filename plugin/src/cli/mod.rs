@@ -44,7 +44,8 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
 enum Command {
     /// Render a scene (or the embedded default scene) to EXR and optionally PNG.
     Render(render::RenderArgs),
-    /// Render a scene with several solvers and print relative RMSE against the first.
+    /// Render a scene with several solvers and print each one's relative RMSE against `reference`
+    /// (or, without it, the last solver).
     Compare(compare::CompareArgs),
     /// List the solvers: what each is for, its lights and GPU (`--json`: the registry, with
     /// every setting and preset).
