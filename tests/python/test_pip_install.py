@@ -61,3 +61,17 @@ def test_volscatter_usd_renders_after_pip_install(venv, tmp_path):
     assert out.stat().st_size > 0 and png.stat().st_size > 0
     # A successful render says what it did, and nothing alarming.
     assert "error:" not in r.stderr.lower() and "XDG_RUNTIME_DIR" not in r.stderr, r.stderr
+
+
+def test_a_missing_library_is_reported_as_such_not_as_a_bad_option(tmp_path):
+    """Before the install bundles it, `volscatter-usd render` without a library says so and how to
+    get one (exit 1), instead of blaming `--solver` (argparse's exit 2), which was never given."""
+    if list((ROOT / "usd" / "volscatter" / "lib").glob("*volscatter*")):
+        pytest.skip("a library was copied into usd/volscatter/lib/: the source tree is not library-less")
+    env = dict(_env(), PYTHONPATH=str(ROOT / "usd"), VOLSCATTER_LIB=str(tmp_path / "no-such-lib.so"))
+    stage = FIXTURE_STAGE if FIXTURE_STAGE.exists() else CORPUS_STAGE
+    r = subprocess.run([sys.executable, "-m", "volscatter", "render", str(stage), "--out", str(tmp_path / "o.exr")],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    assert r.returncode == 1, r.stderr
+    assert "libvolscatter not found" in r.stderr and "pip install ./usd" in r.stderr, r.stderr
+    assert "--solver" not in r.stderr, r.stderr
