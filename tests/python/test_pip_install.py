@@ -2,9 +2,12 @@
 with cargo and bundles it in the package), then `volscatter-usd render` on the fixture stage with no
 environment variable pointing at the library.
 
-The build reuses the workspace's cargo target folder (CARGO_TARGET_DIR, default <repo>/target), which
-scripts/test.sh has already built, so cargo finds the library fresh instead of compiling it twice.
-Skipped when cargo is not on PATH (the install needs it).
+The build uses the workspace's cargo target folder (CARGO_TARGET_DIR, default <repo>/target), so the
+dependencies scripts/test.sh compiled are reused where their features match. They do not all match:
+`cargo build --workspace --all-targets` unifies the tests' dev-dependency features (volscatter-core's
+`testing`, proptest's and cbindgen's std features of bitflags and indexmap) into the library's
+dependencies, and `-p volscatter` alone does not, so cargo compiles the library's own variant of the
+core, wgpu and their dependents once more here. Skipped when cargo is not on PATH.
 """
 
 import os
