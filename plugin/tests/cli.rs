@@ -134,6 +134,26 @@ fn gpu_probing_prints_no_wayland_error_headless() {
     assert!(!stderr(&o).contains("XDG_RUNTIME_DIR"), "{}", stderr(&o));
 }
 
+/// A successful render says each thing once and nothing alarming: where Mesa's software adapter is
+/// installed (CI), `--device auto` leaves it for the CPU and both the solve and the composite noted
+/// that, so the note was printed twice.
+#[test]
+fn a_successful_render_prints_each_note_once() {
+    let dir = tmp("notes");
+    let o = render_json(
+        &small_scene(),
+        &dir,
+        &["--solver", "pop", "--device", "auto", "--set", "grid_resolution=8", "--set", "output_resolution=16"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    let notes: Vec<&str> = e.lines().filter(|l| l.starts_with("note:")).collect();
+    for n in &notes {
+        assert_eq!(notes.iter().filter(|m| *m == n).count(), 1, "printed more than once: {n}\n{e}");
+    }
+    assert!(!e.to_lowercase().contains("error:"), "{e}");
+}
+
 /// `compare --device`: pop solves (and composites) on the device asked for, recorded per run in
 /// the JSON. No adapter is visible with WGPU_BACKEND=metal (none on Linux): `gpu` is then a
 /// device error (exit 1), `auto` runs on the CPU. Unknown solvers are refused with the
