@@ -140,11 +140,16 @@ fn gpu_probing_prints_no_wayland_error_headless() {
 #[test]
 fn a_successful_render_prints_each_note_once() {
     let dir = tmp("notes");
-    let o = render_json(
-        &small_scene(),
-        &dir,
-        &["--solver", "pop", "--device", "auto", "--set", "grid_resolution=8", "--set", "output_resolution=16"],
-    );
+    let path = dir.join("scene.json");
+    std::fs::write(&path, serde_json::to_string(&small_scene()).unwrap()).unwrap();
+    // Not -q: it leaves the notes out.
+    let o = bin()
+        .arg("render")
+        .arg(&path)
+        .args(["--out", dir.join("o.exr").to_str().unwrap(), "--solver", "pop", "--device", "auto"])
+        .args(["--set", "grid_resolution=8", "--set", "output_resolution=16"])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let e = stderr(&o);
     let notes: Vec<&str> = e.lines().filter(|l| l.starts_with("note:")).collect();
