@@ -39,6 +39,7 @@ import platform
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from pathlib import Path
 
@@ -376,14 +377,16 @@ def images_from(work: Path, meas: dict) -> dict:
 
 
 def readme_table(meas: dict) -> str:
-    """The README's "which solver for which scene" table: per solver and scene its preview run's
-    image error, time and speed-up over Cycles at that error (BENCHMARKS.md `solvers` has all)."""
+    """The README's "which solver for which scene" table: per solver (linked to its page in
+    docs/solvers/) and scene its preview run's image error, time and speed-up over Cycles at that
+    error (BENCHMARKS.md `solvers` has all). Lines stay under 200 characters (tests/python/test_docs.py)."""
     scenes = [s["name"] for s in meas["scenes"]]
     solvers = list(dict.fromkeys(r["solver"] for r in meas["runs"]))
-    lines = ["Which solver for which scene (`scripts/bench_solvers.py`, BENCHMARKS.md `solvers`, "
-             f"{meas['date']}): image relative RMSE against the converged reference at the `preview` preset, "
-             "its CPU time (solve + composite, 2 shared cores), and the speed-up over Cycles (CPU, 1024 volume "
-             "bounces) at the same error, its per-render sync cost included.", "",
+    caption = (f"Which solver for which scene ([BENCHMARKS.md](BENCHMARKS.md) *Solvers against Cycles*, {meas['date']}, "
+               "written by `scripts/bench_solvers.py`): image error (relative RMSE against a converged path-traced "
+               "reference) at the `preview` preset, CPU time (solve + composite, 2 shared cores), and the speed-up "
+               "over Cycles (CPU, 1024 volume bounces) at the same error, its per-render sync cost included.")
+    lines = [*textwrap.wrap(caption, 110, break_on_hyphens=False), "",
              "| solver | " + " | ".join(scenes) + " |", "|---|" + "---|" * len(scenes)]
     for solver in solvers:
         cells = []
@@ -396,11 +399,11 @@ def readme_table(meas: dict) -> str:
             t, mark = cycles_time_at(cyc, r["image_error"]) if cyc else (None, "")
             sp = "" if t is None else f", {mark}{t / r['seconds']:.1f}x"
             cells.append(f"{r['image_error']:.3f} in {r['seconds']:.1f} s{sp}")
-        lines.append(f"| `{solver}` | " + " | ".join(cells) + " |")
+        lines.append(f"| [`{solver}`](docs/solvers/{solver}.md) | " + " | ".join(cells) + " |")
     agree = [f"{c['scene']} {c['image_error']:.3f}" for c in meas["cycles"] if c["spp"] == max(CYCLES_SPP)]
     if agree:
-        lines += ["", "Cycles at 1024 spp against the same reference (both renderers' noise and any disagreement): "
-                  + ", ".join(agree) + "."]
+        lines += ["", *textwrap.wrap("Cycles at 1024 spp against the same reference (both renderers' noise and any "
+                                     "disagreement): " + ", ".join(agree) + ".", 110, break_on_hyphens=False)]
     return "\n".join(lines)
 
 

@@ -173,8 +173,8 @@ def runs_by_solver(doc: dict) -> dict[str, dict]:
 
 
 def solver_registry(binary: str | os.PathLike | None = None) -> list[dict]:
-    """`volscatter solvers`: each registered solver's entry (settings, presets, gpu)."""
-    out = subprocess.run([str(binary or volscatter_bin()), "solvers"], check=True, capture_output=True, text=True).stdout
+    """`volscatter solvers --json`: each registered solver's entry (settings, presets, gpu)."""
+    out = subprocess.run([str(binary or volscatter_bin()), "solvers", "--json"], check=True, capture_output=True, text=True).stdout
     doc = json.loads(out)
     return doc["solvers"] if isinstance(doc, dict) else doc
 

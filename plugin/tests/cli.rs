@@ -97,16 +97,66 @@ fn bad_scenes_fail_cleanly_naming_the_field() {
     assert_clean_failure(&o, "/nonexistent/scene.json");
 }
 
-/// `volscatter solvers` prints the registry, exactly the document of `registry::to_json` (and
-/// of `vs_solvers_json`).
+/// `volscatter solvers --json` prints the registry, exactly the document of `registry::to_json`
+/// (and of `vs_solvers_json`).
 #[test]
 fn solvers_prints_the_registry_as_json() {
-    let o = bin().arg("solvers").output().unwrap();
+    let o = bin().args(["solvers", "--json"]).output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is JSON");
     assert_eq!(doc, volscatter_core::solvers::registry::to_json());
     let names: Vec<&str> = doc["solvers"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
     assert_eq!(names, volscatter_core::solvers::registry::SOLVER_NAMES);
+}
+
+/// `volscatter solvers` is for people: one row per solver (name, GPU, lights, what it is for),
+/// not the registry's JSON.
+#[test]
+fn solvers_prints_a_table_for_people() {
+    let o = bin().arg("solvers").output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(serde_json::from_str::<serde_json::Value>(&text).is_err(), "a table, not JSON:\n{text}");
+    assert!(text.starts_with("solver "), "{text}");
+    for name in volscatter_core::solvers::registry::SOLVER_NAMES {
+        let row = text.lines().find(|l| l.starts_with(&format!("{name} "))).unwrap_or_else(|| panic!("no row for {name}:\n{text}"));
+        assert!(row.contains("yes") || row.contains("no"), "{row}");
+    }
+    assert!(text.lines().count() < 40, "{} lines", text.lines().count());
+}
+
+/// Headless (no XDG_RUNTIME_DIR), Mesa's Vulkan device-selection layer made libwayland print
+/// "error: XDG_RUNTIME_DIR is invalid or not set" at each adapter enumeration; the CLI switches
+/// the layer off there. Meaningful where Mesa's Vulkan drivers are installed (CI installs them).
+#[test]
+fn gpu_probing_prints_no_wayland_error_headless() {
+    let o = bin().arg("gpu-info").env_remove("XDG_RUNTIME_DIR").env_remove("NODEVICE_SELECT").env_remove("WAYLAND_DISPLAY").output().unwrap();
+    assert!(!stderr(&o).contains("XDG_RUNTIME_DIR"), "{}", stderr(&o));
+}
+
+/// A successful render says each thing once and nothing alarming: where Mesa's software adapter is
+/// installed (CI), `--device auto` leaves it for the CPU and both the solve and the composite noted
+/// that, so the note was printed twice.
+#[test]
+fn a_successful_render_prints_each_note_once() {
+    let dir = tmp("notes");
+    let path = dir.join("scene.json");
+    std::fs::write(&path, serde_json::to_string(&small_scene()).unwrap()).unwrap();
+    // Not -q: it leaves the notes out.
+    let o = bin()
+        .arg("render")
+        .arg(&path)
+        .args(["--out", dir.join("o.exr").to_str().unwrap(), "--solver", "pop", "--device", "auto"])
+        .args(["--set", "grid_resolution=8", "--set", "output_resolution=16"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    let notes: Vec<&str> = e.lines().filter(|l| l.starts_with("note:")).collect();
+    for n in &notes {
+        assert_eq!(notes.iter().filter(|m| *m == n).count(), 1, "printed more than once: {n}\n{e}");
+    }
+    assert!(!e.to_lowercase().contains("error:"), "{e}");
 }
 
 /// `compare --device`: pop solves (and composites) on the device asked for, recorded per run in

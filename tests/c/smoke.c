@@ -1,6 +1,8 @@
 /*
  * A C host of libvolscatter, built by tests/tests/c_smoke.rs with
- *   cc -std=c99 -Wall -Wextra -Werror -pedantic -I plugin/include smoke.c -lvolscatter
+ *   cc -std=c99 -Wall -Wextra -Werror -pedantic -I plugin/include tests/c/smoke.c -o smoke \
+ *      -L target/release -lvolscatter -lm -Wl,-rpath,$PWD/target/release
+ * (from the repository root; docs/c-api.md gives the same line).
  * It renders scenes through the C API and dumps the numbers; the Rust test computes the same
  * scenes through the Rust API and compares. It also checks a few failures from C.
  *

@@ -27,7 +27,7 @@ def volscatter_bin():
 
 
 def registry_entries():
-    out = subprocess.run([str(volscatter_bin()), "solvers"], check=True, capture_output=True, text=True).stdout
+    out = subprocess.run([str(volscatter_bin()), "solvers", "--json"], check=True, capture_output=True, text=True).stdout
     doc = json.loads(out)
     return doc["solvers"] if isinstance(doc, dict) else doc
 

@@ -64,6 +64,24 @@ def test_the_packed_addon_holds_the_same_binding(tmp_path):
         assert not [n for n in f.namelist() if n.endswith(".part")]
 
 
+def test_mesa_device_select_is_switched_off_only_without_a_compositor(tmp_path):
+    """Headless, Mesa's device-selection layer makes libwayland print "error: XDG_RUNTIME_DIR is
+    invalid" on every render; the binding switches the layer off there, and only there."""
+    sys.path.insert(0, str(ROOT / "usd"))
+    from volscatter import _native as N
+
+    def after(env):
+        N._quiet_mesa_device_select(env)
+        return env.get("NODEVICE_SELECT")
+
+    assert after({}) == "1"
+    assert after({"XDG_RUNTIME_DIR": str(tmp_path / "gone")}) == "1"
+    assert after({"XDG_RUNTIME_DIR": str(tmp_path)}) is None, "a desktop session keeps the layer"
+    assert after({"WAYLAND_DISPLAY": "/run/user/1/wayland-0"}) is None
+    assert after({"MESA_VK_DEVICE_SELECT": "10de:2330"}) is None, "the user picked a device"
+    assert after({"NODEVICE_SELECT": "0"}) == "0", "the user's own switch is kept"
+
+
 def test_both_hosts_import_the_same_module_source():
     """The USD host's module is the file the add-on's build copies."""
     from volscatter import _native

@@ -559,10 +559,10 @@ def test_ctrl_c_cancels_the_native_work(tmp_path):
 
 def test_solver_choices_and_lights_come_from_the_library(tmp_path, monkeypatch):
     """--solver and the light warnings read the library's registry (vs_solvers_json), the same
-    document `volscatter solvers` prints."""
+    document `volscatter solvers --json` prints."""
     from types import SimpleNamespace
     from volscatter import _native as N
-    doc = json.loads(subprocess.run([str(volscatter_bin()), "solvers"], capture_output=True, text=True, check=True).stdout)
+    doc = json.loads(subprocess.run([str(volscatter_bin()), "solvers", "--json"], capture_output=True, text=True, check=True).stdout)
     assert N.solvers() == doc
     assert N.solver_names() == [s["name"] for s in doc["solvers"]] and N.solver_names()[:2] == ["reference", "pop"]
     assert R.solver_lights() == {s["name"]: set(s["lights"]) for s in doc["solvers"]}

@@ -7,8 +7,8 @@ either host (no pxr, no bpy; numpy when present).
 Style: wasmtime-py / llvmlite. The library is loaded lazily, once, from
 
 1. the path in the environment variable ``VOLSCATTER_LIB`` when that file exists, else
-2. ``lib/libvolscatter.so`` (``.dylib``, ``volscatter.dll``) beside this file, where a wheel or
-   the add-on ships it,
+2. ``lib/libvolscatter.so`` (``.dylib``, ``volscatter.dll``) beside this file, where the add-on
+   ships it, or ``lib/libvolscatter.<python tag>.so``, where ``pip install ./usd`` puts it,
 
 and refused unless ``vs_abi_version() == ABI_VERSION``. Every C signature is declared in
 ``_SIGNATURES`` below and nowhere else. A failing call raises :class:`VolscatterError` carrying
@@ -25,6 +25,7 @@ grid (nz, ny, nx, 3), images (h, w, 4) and AOVs (h, w, 3), rows top to bottom.
 from __future__ import annotations
 
 import ctypes
+import glob
 import json
 import os
 import sys
@@ -234,7 +235,12 @@ def library_candidates() -> list:
     env = os.environ.get("VOLSCATTER_LIB")
     if env:
         out.append(env)
-    out.append(os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib", library_filename()))
+    lib_dir = os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib")
+    out.append(os.path.join(lib_dir, library_filename()))
+    # `pip install ./usd` (setuptools-rust) names it as a Python extension:
+    # libvolscatter.cpython-311-x86_64-linux-gnu.so.
+    stem, ext = os.path.splitext(library_filename())
+    out += sorted(glob.glob(os.path.join(glob.escape(lib_dir), f"{stem}.*{ext}")))
     return out
 
 
@@ -245,6 +251,19 @@ def library_path() -> str:
         return _lib_path
     cands = library_candidates()
     return next((c for c in cands if os.path.isfile(c)), cands[-1])
+
+
+def _quiet_mesa_device_select(env=os.environ):
+    """Mesa's Vulkan device-selection layer asks the Wayland compositor which GPU shows the
+    desktop; without one (headless, CI) libwayland prints "error: XDG_RUNTIME_DIR is invalid or
+    not set" at every adapter enumeration of a render that succeeds. With no compositor to ask
+    the layer has nothing to choose by, so it is switched off (``NODEVICE_SELECT=1``, its own
+    switch) unless the user steers it. As ``volscatter`` does (plugin/src/cli/mesa_env.rs)."""
+    if any(k in env for k in ("NODEVICE_SELECT", "MESA_VK_DEVICE_SELECT", "DRI_PRIME", "WAYLAND_SOCKET")):
+        return
+    if os.path.isabs(env.get("WAYLAND_DISPLAY", "")) or os.path.isdir(env.get("XDG_RUNTIME_DIR") or ""):
+        return
+    env["NODEVICE_SELECT"] = "1"
 
 
 def lib():
@@ -260,8 +279,9 @@ def lib():
         path = next((c for c in cands if os.path.isfile(c)), None)
         if path is None:
             raise LibraryNotFound(
-                f"libvolscatter not found (looked at: {', '.join(cands)}); set VOLSCATTER_LIB, reinstall the add-on, "
-                "or build it with `cargo build --release -p volscatter --lib` and copy it into lib/")
+                f"libvolscatter not found (looked at: {', '.join(cands)}): `pip install ./usd` builds and bundles it; "
+                "or set VOLSCATTER_LIB to a build of `cargo build --release -p volscatter --lib`; in Blender, reinstall the add-on")
+        _quiet_mesa_device_select()
         try:
             handle = ctypes.CDLL(path)
         except OSError as e:

@@ -1,6 +1,6 @@
 """``volscatter-usd``: render a USD stage with multiple scattering, or bake the scattering into USD.
 
-    volscatter-usd render STAGE.usda [--camera PATH] [--time T | --frames A-B] [--solver pop]
+    volscatter-usd render STAGE.usda [--camera PATH] [--time T | --frames A-B] [--solver NAME]
                           --out FILE.exr [--png FILE.png] [--width W] [--height H] ...
     volscatter-usd bake STAGE.usda --out-layer scatter.usda [--time T | --frames A-B] ...
     volscatter-usd info STAGE.usda [--json]
@@ -161,10 +161,13 @@ def _settings(args) -> dict:
 
 def _solver_arg(name: str) -> str:
     """--solver: one of the library's solvers (its registry), checked when the command line is
-    parsed so that a typo never reaches a stage read."""
-    from ._native import solver_names
+    parsed so that a typo never reaches a stage read. A library that cannot be loaded is not the
+    option's fault: the name passes, and the command reports the library (exit 1)."""
+    from ._native import LibraryNotFound, solver_names
     try:
         names = solver_names()
+    except LibraryNotFound:
+        return name
     except VolscatterError as e:
         raise argparse.ArgumentTypeError(f"cannot list the library's solvers: {e}")
     if name not in names:

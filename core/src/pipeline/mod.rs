@@ -92,6 +92,11 @@ pub fn render(session: &mut Session, scene: &Scene, opts: &CompositeOptions, pro
     let mut timings = solved.output.timings.clone();
     timings.0.extend(composited.timings.0);
     let mut notes = solved.notes.clone();
-    notes.extend(composited.notes);
+    // The solve and the composite each say so when they fall back to the CPU: one line is enough.
+    for note in composited.notes {
+        if !notes.contains(&note) {
+            notes.push(note);
+        }
+    }
     Ok(Rendered { image: composited.image, solved: Some(solved), device: composited.device, notes, timings })
 }

@@ -61,7 +61,7 @@ pub fn get(name: &str) -> Result<&'static SolverEntry> {
 }
 
 /// The registry as JSON: `{"format": 1, "solvers": [...], "light_types": [...]}` (the form of
-/// `volscatter solvers` and `vs_solvers_json`, documented in docs/solvers.md).
+/// `volscatter solvers --json` and `vs_solvers_json`, documented in docs/cli.md).
 pub fn to_json() -> Value {
     let lights: Vec<Value> = LightType::ALL.iter().map(|l| serde_json::json!({"name": l.name(), "help": l.help()})).collect();
     serde_json::json!({

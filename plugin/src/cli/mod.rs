@@ -2,6 +2,7 @@
 
 mod compare;
 mod gpu_info;
+mod mesa_env;
 mod progress;
 mod render;
 mod solvers;
@@ -43,10 +44,12 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
 enum Command {
     /// Render a scene (or the embedded default scene) to EXR and optionally PNG.
     Render(render::RenderArgs),
-    /// Render a scene with several solvers and print relative RMSE against the first.
+    /// Render a scene with several solvers and print each one's relative RMSE against `reference`
+    /// (or, without it, the last solver).
     Compare(compare::CompareArgs),
-    /// List the solvers with their settings, lights and presets, as JSON.
-    Solvers,
+    /// List the solvers: what each is for, its lights and GPU (`--json`: the registry, with
+    /// every setting and preset).
+    Solvers(solvers::SolversArgs),
     /// Describe the GPU adapter volscatter would use (and whether it is a software one, which
     /// `--device auto` leaves for the CPU); exit code 1 when there is none.
     GpuInfo,
@@ -56,12 +59,13 @@ enum Command {
 
 /// Runs the CLI and returns the process exit code. Errors are printed, never panicked.
 pub fn main() -> i32 {
+    mesa_env::quiet_device_select();
     let cli = Cli::parse();
     volscatter_core::budget::set_budget(cli.memory_budget);
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Compare(args) => compare::run(args),
-        Command::Solvers => solvers::run(),
+        Command::Solvers(args) => solvers::run(args),
         Command::GpuInfo => gpu_info::run(),
         Command::VdbInfo(args) => vdb_info::run(args),
     };

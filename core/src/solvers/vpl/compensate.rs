@@ -19,10 +19,8 @@
 //! (Fig. 4's middle strategy); at the last level (`compensation_depth`) the vertices take the
 //! VPLs with the ball kernel of radius R instead of the clamp ("stopping the compensation
 //! using the unclamped contribution", Sec. 4.4): its integral is that of 1/d^2, so nothing is
-//! left out at any depth, and it stays bounded (3/R^2). Measured: a ball limited to a quarter
-//! mean free path there (as `near_field: ball`) gave the dense cloud image rel. RMSE 4.4 (x2.6)
-//! for one seed, from single near VPLs behind two g 0.9 lobes; the radius-R ball 0.62, and
-//! the white furnace box 0.991 (a quarter mean free path: 0.993).
+//! left out at any depth, and it stays bounded (3/R^2). The radius is R, not `near_field:
+//! ball`'s quarter mean free path, which made the dense cloud heavy-tailed (docs/solvers/vpl.md).
 //!
 //! The estimate is made in two steps, `vertices` (every random number, the direct light) then
 //! `combine` over the vertices' connections to their VPLs, which use no random number: the

@@ -1,72 +1,21 @@
 //! `vpl`: instant multiple scattering with virtual point lights (paper 03).
 //!
-//! Pipeline: random walks from every light (walks.rs) leave anisotropic VPLs at their
-//! scattering vertices; the VPLs are gathered on a coarse grid over the medium, each point
-//! connecting to its own interleaved subset of walks with ray-marched transmittance
-//! (gather.rs), G clamped at a radius R of one gather cell and the clamped energy restored by
-//! the paper's bias compensation (compensate.rs, `near_field: compensate`; the default,
-//! `near_field: auto`, is the ball kernel on thin media and the attenuated top hat on dense
-//! ones, settings.rs says why); the
-//! gathered J (per unit sigma_s) is upsampled to the output grid by pop's density-guided joint
-//! bilateral filter (stages/upsample.rs), giving the multiple scattering; the single scattering
-//! is added exactly from the compositor's single-scattering grid, on the same output frame.
+//! Pipeline: random walks from every light (walks.rs) leave anisotropic VPLs at every collision
+//! in the medium; the VPLs are gathered on a coarse grid, each point connecting to its own
+//! interleaved subset of walks (gather.rs), with the near field handled by `near_field`
+//! (settings.rs: clamp + bias compensation, ball kernel or attenuated top hat); the gathered J is
+//! upsampled to the output grid by pop's density-guided filter, and the single scattering is added
+//! exactly from the compositor's grid.
 //!
-//! Departures from the paper (and from issue 16):
-//! - The compensation's last recursion level takes the VPLs with the project's ball kernel of
-//!   radius R (bounded, same integral as 1/d^2) instead of unclamped 1/d^2 (compensate.rs).
-//!   `near_field: ball` (the ball kernel alone, radius at most a quarter mean free path) and
-//!   `clamp` (no compensation) remain as options; measured in tests.rs.
-//! - `near_field: hat` (what `auto` takes on dense media): within the near-field radius a VPL
-//!   counts as a density estimate over the ball, with the ball's mean of the homogeneous
-//!   kernel e^{-sigma d} / d^2 at the point's extinction and the two lobes' mean over the
-//!   ball's directions (HG of g^2); T / d^2 beyond (gather.rs `Kernel::Hat`). Lossless at
-//!   any optical thickness of the ball, so the ball stays a gather cell where the ball kernel
-//!   must shrink to a quarter mean free path and turn heavy-tailed: the dense cloud 8 seeds
-//!   x1.080 +- 0.038 -> x0.998 +- 0.010, image errors 0.25-0.80 -> 0.14-0.23 (32768 walks).
-//! - The gather runs on a coarse grid and is upsampled, not per pixel (the project's
-//!   scattering-grid interface).
-//! - Transmittance to VPLs is ray marched (deterministic) at the gather grid's spacing but at
-//!   most half a mean free path of the densest voxel (gather::march_step), on a dense copy of
-//!   the density (march.rs: the march is ~90% of a solve; 2.8x faster than the sparse lookups,
-//!   same values to float rounding). By default (`transmittance: map`) only the connections
-//!   within two gather cells are marched: the farther ones look their optical depth up in a
-//!   per-point directional map (depth_map.rs): default scene 16384 walks gather 3.03 -> 0.51 s,
-//!   image error 0.0869 both (settings.rs).
-//! - `upsample_fit: linear` replaces the bilateral filter's weighted mean by a weighted local
-//!   linear fit (upsample.rs): the mean is J at the weights' centroid, which a medium's
-//!   surface pulls inwards (cube g 0 8 seeds x1.079 bright; the fit x1.013).
-//! - `near_refine` (off by default): the VPLs within a few gather cells of each output point
-//!   gathered there instead of upsampled (refine.rs): the coarse gather loses the correlation
-//!   between the density and the light of VPLs within a cell (local lights beside the plume
-//!   6-8% dark at 12-16 cells); noisier than the coarse near field at a few thousand walks.
-//! - `near_upsample: ratio` (off by default): the gather's ball kernel (radius ~ a gather
-//!   cell) corrected to the output cell's at each output point, from a density integral times
-//!   the near light's level upsampled as a ratio (near_ratio.rs): deterministic; +1-2% flux
-//!   everywhere (point light beside the plume x0.934 -> x0.950 at 32768 walks), a third of what
-//!   a finer gather gives there, and the cubes brighter, so not the default.
-//! - `normalize_energy` (on by default): the multiple scattering scaled so that the power it
-//!   scatters equals the walks' (energy.rs): the global share of the coarse gather's bias
-//!   (point light beside the plume x0.878 -> x0.926 at 4096 walks).
-//! - `phase_cone` (on by default): the ball kernel's two phase functions smoothed over the cone
-//!   of a ball of up to a quarter gather cell around the VPL (gather.rs `Kernel::Ball`): the
-//!   dense cloud's heavy tail, two g 0.9 lobes times 3 / r^2, gone (8 seeds x1.40 +- 0.83 ->
-//!   x0.97 +- 0.07).
-//! - The gather, upsampling and single scattering run on a backend (backend.rs): the CPU, or
-//!   the GPU (volscatter-gpu, shaders/src/vpl), where the connections to the VPLs (the gather
-//!   points' and the compensation vertices') run in WGSL; the walks, the compensation's vertex
-//!   sampling and the direct light at its vertices stay on the CPU on both.
-//! - A VPL sits at every collision of a walk in the medium, the first included: light from a
-//!   source to a point is the single scattering (exact, from the compositor), light from a
-//!   walk's first collision to a point is double scattering, and so on. (Counting the light
-//!   source as a walk's vertex 0, VPLs start at the walk's second vertex.)
-//!
-//! Measured (tests.rs, 4096 walks, 12-cell gather), image rel. RMSE with the defaults (ball
-//! kernel, `normalize_energy`, `phase_cone`, the depth map): cube g 0 0.069, cube g 0.7 0.148,
-//! plume g 0.9 0.327, point / spot / rect light beside it 0.111 / 0.093 / 0.147, dense cloud
-//! 0.707 with flux x1.04 (before the last two: 0.076, 0.153, 0.362, 0.166 / 0.145 / 0.192 and
-//! 0.75 with x0.66). With compensation (not normalized): cube g 0 0.093, cube g 0.7 0.138,
-//! plume 0.311, dense cloud 0.62 (x0.66). White furnace box S / sigma_s 0.991 compensated
-//! (clamp alone 0.695 at R = 2 cells).
+//! Departures from the paper, each because a measurement asked for it (the numbers are in
+//! docs/solvers/vpl.md): the gather runs on a coarse grid and is upsampled, not per pixel (the
+//! project's scattering-grid interface); transmittance is ray marched (deterministic), and beyond
+//! two gather cells read from a per-point optical-depth map (depth_map.rs); the compensation's
+//! last level uses the ball kernel instead of unclamped 1/d^2 (compensate.rs); `normalize_energy`
+//! and `phase_cone` fix the coarse gather's flux and the dense cloud's heavy tail; a VPL sits at
+//! every collision, the first included, since the single scattering comes from the compositor.
+//! The gather, upsampling and single scattering run on a backend (backend.rs: CPU or GPU); the
+//! walks and the compensation's vertex sampling stay on the CPU.
 
 pub mod backend;
 pub mod compensate;
