@@ -342,7 +342,7 @@ fn write_file(path: &Path, grids: &[(&str, FloatTree)], xf: Affine3A, o: &WriteO
     for ((_, tree), (unique, name)) in grids.iter().zip(unique_names(grids.iter().map(|g| g.0))?) {
         write_grid(&mut w, &unique, name, tree, GridMap::Single(xf), o);
     }
-    crate::io::files::write_file(path, &w.buf)
+    crate::io::files::write_file_atomic(path, &w.buf)
 }
 
 /// Checks the map and options, and writes the file header up to the grid count.
