@@ -170,10 +170,15 @@ def _dask():
 
 
 def test_local_cluster_bakes_what_a_serial_bake_bakes(serial, tmp_path):
+    """A LocalCluster of 2 worker processes started here, reached by its scheduler's address
+    (--scheduler, as a farm's client would); --workers is the same code with its own cluster
+    (the tests below)."""
     _dask()
+    from distributed import LocalCluster
     stage, _out, want = serial
     out = tmp_path / "dask" / "scatter.usda"
-    r = bake(stage, out, "--workers", "2", "--chunk", "3")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        r = bake(stage, out, "--scheduler", cluster.scheduler_address, "--chunk", "3")
     assert r.returncode == 0, r.stderr
     assert baked_frames(r.stderr) == list(range(1, 13)), r.stderr
     pids = set(re.findall(r"baked in .*\[pid (\d+) on tcp://", r.stderr))
@@ -261,15 +266,25 @@ def test_full_disk_leaves_the_earlier_file(serial, tmp_path):
             assert r.returncode == 0, r.stderr
             before = {p.name: p.read_bytes() for p in mnt.rglob("*") if p.is_file()}
             assert vdb(out, 3).read_bytes() == want[3]
-            st = os.statvfs(mnt)
-            free = st.f_bavail * st.f_frsize
-            (mnt / "filler").write_bytes(b"\0" * max(0, free - 4096))
+            with open(mnt / "filler", "wb") as f:  # every free block taken
+                try:
+                    while True:
+                        f.write(b"\0" * 65536)
+                        f.flush()
+                except OSError:
+                    pass
             r = bake(stage, out, "--force", "-q")
         finally:
             FRAMES = frames
         assert r.returncode == 1, r.stderr
         assert "No space left" in r.stderr or "ENOSPC" in r.stderr or "os error 28" in r.stderr, r.stderr
         assert "Traceback" not in r.stderr, r.stderr
+        # The layer itself (written after the frames): refused with a clear error, the old one kept.
+        from volscatter import VolscatterError, farm
+        from volscatter.manifest import BakeJob
+        job = BakeJob(stage=str(stage), out_layer=str(out), solver="pop", settings=dict(POP))
+        with pytest.raises(VolscatterError, match="layer could not be written"):
+            farm.write_layer(job)
         (mnt / "filler").unlink()
         after = {p.name: p.read_bytes() for p in mnt.rglob("*") if p.is_file()}
         assert after == before, "a failed write changed or left files: " + str(set(after) ^ set(before))

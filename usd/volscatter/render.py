@@ -384,12 +384,29 @@ def write_layer(stage_path, src_stage, out_layer, solver: str, per_volume: Dict[
     (path -> [(time, VDB file name, VolumeInfo, density copied)]), adds the scattering fields and
     the material. Written beside under a temporary name and renamed over ``out_layer``, so that a
     failed write leaves the previous layer as it was."""
-    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
-    out_layer = os.path.abspath(out_layer)
-    out_dir = os.path.dirname(out_layer)
+    from pxr import Sdf
+    final_layer = os.path.abspath(out_layer)
+    tmp = temp_beside(final_layer, keep_suffix=True)
+    try:
+        _compose_layer(stage_path, src_stage, tmp, solver, per_volume, animated)
+        os.replace(tmp, final_layer)
+    except VolscatterError:
+        raise
+    except Exception as e:  # pxr's Tf.ErrorException (a full disk, a denied folder), OSError
+        raise VolscatterError(f"{final_layer}: the layer could not be written: {str(e).strip()}", STATUS_IO) from e
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    # A layer of this path open in this process would keep its old content.
+    cached = Sdf.Layer.Find(final_layer)
+    if cached:
+        cached.Reload(force=True)
 
-    # the layer
-    final_layer, out_layer = out_layer, temp_beside(out_layer, keep_suffix=True)
+
+def _compose_layer(stage_path, src_stage, out_layer, solver: str, per_volume: Dict[str, List], animated: bool):
+    """write_layer's layer, saved at ``out_layer`` (a temporary beside the final name)."""
+    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
+    out_dir = os.path.dirname(out_layer)
     layer_stage = Usd.Stage.CreateNew(out_layer)
     root = layer_stage.GetRootLayer()
     rel = os.path.relpath(os.path.abspath(stage_path), out_dir)
@@ -459,15 +476,6 @@ def write_layer(stage_path, src_stage, out_layer, solver: str, per_volume: Dict[
             "extinction = density_scale * density per metre")
         UsdShade.MaterialBindingAPI.Apply(vprim).Bind(mat)
         vprim.CreateAttribute("volscatter:bakedSolver", Sdf.ValueTypeNames.String, custom=True).Set(solver)
-    try:
-        if not layer_stage.GetRootLayer().Save():
-            raise VolscatterError(f"{final_layer}: the layer could not be written", STATUS_IO)
-        os.replace(out_layer, final_layer)
-    finally:
-        if os.path.exists(out_layer):
-            os.remove(out_layer)
-    # A layer of this path open in this process would keep its old content.
-    cached = Sdf.Layer.Find(final_layer)
-    if cached:
-        cached.Reload(force=True)
+    if not layer_stage.GetRootLayer().Save():
+        raise VolscatterError(f"{out_layer}: the layer could not be written", STATUS_IO)
 

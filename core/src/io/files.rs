@@ -47,7 +47,11 @@ pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     if res.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    res
+    // The error names the file the caller asked for, not the temporary.
+    res.map_err(|e| match e {
+        Error::Io { source, .. } => Error::io(path, source),
+        other => other,
+    })
 }
 
 /// A fresh name for a temporary file beside `path` (same folder, so that a rename replaces
@@ -95,6 +99,8 @@ mod tests {
         let e = write_file(&missing, b"x").unwrap_err();
         assert!(matches!(&e, Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound), "{e:?}");
         assert!(e.to_string().contains("out.exr"), "{e}");
+        let e = write_file_atomic(&missing, b"x").unwrap_err();
+        assert!(matches!(&e, Error::Io { path, .. } if path == &missing), "the error names the target: {e:?}");
     }
 
     #[test]
