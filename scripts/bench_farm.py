@@ -3,11 +3,13 @@
 defaults), in this process with and without the session's reuse inside a chunk, and on a local
 Dask cluster of 1 and 2 worker processes; writes the "farm" section of BENCHMARKS.md.
 
-    python3 scripts/bench_farm.py [--frames 24] [--chunk 12]
+    python3 scripts/bench_farm.py [--frames 24] [--chunk 12] [--repeats 3]
 
 Needs the library (VOLSCATTER_LIB or target/release/libvolscatter.so), usd-core and, for the
 Dask rows, dask.distributed. Per-frame cost is each frame's time from its manifest record (solve
 plus VDB write plus hashing); wall time is the whole command, layer and cluster start included.
+The runs are interleaved over the repeats (so a change in the machine's load hits every row
+alike) and the table gives medians.
 """
 
 from __future__ import annotations
@@ -80,6 +82,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--chunk", type=int, default=12)
+    ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     n, c = args.frames, args.chunk
     lib = os.environ.setdefault("VOLSCATTER_LIB", str(ROOT / "target" / "release" / "libvolscatter.so"))
@@ -96,22 +99,29 @@ def main() -> None:
     if dask:
         runs += [("Dask, 1 local worker, chunks of %d" % c, ["--workers", "1", "--chunk", str(c)], c),
                  ("Dask, 2 local workers, chunks of %d" % c, ["--workers", "2", "--chunk", str(c)], c)]
-    rows = []
+    results = {i: [] for i in range(len(runs))}
+    loads = []
     with tempfile.TemporaryDirectory() as d:
         stage = make_stage(Path(d) / "stage", n)
-        for i, (label, extra, chunk) in enumerate(runs):
-            sys.stderr.write(f"{label} ...\n")
-            res = bake(stage, Path(d) / f"run{i}" / "scatter.usda", n, extra)
-            s = res["secs"]
-            firsts = [s[k] for k in s if (k - 1) % chunk == 0]
-            rest = [s[k] for k in s if (k - 1) % chunk != 0]
-            rows.append(f"| {label} | {res['wall']:.1f} | {statistics.mean(s.values()):.2f} | "
-                        f"{statistics.mean(firsts):.2f} | {statistics.mean(rest):.2f} |" if rest else
-                        f"| {label} | {res['wall']:.1f} | {statistics.mean(s.values()):.2f} | "
-                        f"{statistics.mean(firsts):.2f} | - |")
+        for rep in range(args.repeats):
+            for i, (label, extra, chunk) in enumerate(runs):
+                sys.stderr.write(f"repeat {rep + 1}/{args.repeats}: {label} ...\n")
+                loads.append(os.getloadavg()[0])
+                results[i].append(bake(stage, Path(d) / f"run{rep}-{i}" / "scatter.usda", n, extra))
+    rows = []
+    for i, (label, extra, chunk) in enumerate(runs):
+        med = statistics.median
+        wall = med(r["wall"] for r in results[i])
+        per = med(statistics.mean(r["secs"].values()) for r in results[i])
+        first = med(statistics.mean(s for k, s in r["secs"].items() if (k - 1) % chunk == 0) for r in results[i])
+        later = ([statistics.mean(s for k, s in r["secs"].items() if (k - 1) % chunk != 0) for r in results[i]]
+                 if chunk > 1 else [])
+        rows.append(f"| {label} | {wall:.1f} | {per:.2f} | {first:.2f} | {f'{med(later):.2f}' if later else '-'} |")
     lines = ["## Farm bakes: chunks, session reuse, local Dask workers (`scripts/bench_farm.py`)", "",
-             f"`python3 scripts/bench_farm.py --frames {n} --chunk {c}` on {today()}, {platform.machine()}, "
-             f"{os.cpu_count()} cores shared with other jobs (wall-clock, pessimistic). {n} frames of Blender's 40^3 "
+             f"`python3 scripts/bench_farm.py --frames {n} --chunk {c} --repeats {args.repeats}` on {today()}, "
+             f"{platform.machine()}, {os.cpu_count()} cores shared with other jobs (load average "
+             f"{min(loads):.1f}-{max(loads):.1f} during the runs: wall-clock, pessimistic; medians of "
+             f"{args.repeats} interleaved repeats). {n} frames of Blender's 40^3 "
              "noise cube under a sun turning 5 degrees a frame and a sky dome, pop at its defaults, one VDB per "
              "frame. Per-frame seconds are the manifest's (solve, VDB write, sha256); the first frame of a chunk "
              "starts its session, later ones reuse what the sun's move left valid (the density mip, the dome's "
