@@ -225,6 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     _common(b, "bake")
     b.add_argument("--out-layer", required=True, metavar="scatter.usda",
                    help="the layer to write (sublayers the stage); VDBs are written beside it")
+    from .farm_cli import add_arguments as _farm_arguments
+    _farm_arguments(b)
     i = sub.add_parser("info", help="print what volscatter reads from a stage")
     i.add_argument("stage")
     i.add_argument("--camera", metavar="PATH")
@@ -303,7 +305,13 @@ def _render_frame(args, R, stage, settings, bar, warn, sessions, t, k: int, n: i
 
 def cmd_bake(args) -> int:
     from . import render as R
+    from . import farm_cli
     settings = _settings(args)
+    farm_cli.check(args)
+    if args.frames:
+        # chunks, the manifest and Dask: docs/farm.md
+        return farm_cli.bake_frames(args, parse_frames(args.frames), settings, _medium_defaults(args),
+                                    ProgressBar(enabled=not args.quiet), _warn, run_cancellable)
     times = parse_frames(args.frames) if args.frames else [args.time]
     bar = ProgressBar(enabled=not args.quiet)
     try:

@@ -23,8 +23,9 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import stage as stage_mod
-from ._native import (STATUS_FORMAT, STATUS_UNSUPPORTED, Result, Scene, Session, VolscatterError, solvers,
+from ._native import (STATUS_FORMAT, STATUS_IO, STATUS_UNSUPPORTED, Result, Scene, Session, VolscatterError, solvers,
                       write_vdb)
+from .atomic import temp_beside, write_bytes_atomic
 
 Progress = Optional[Callable[[str, float], Optional[bool]]]
 
@@ -242,8 +243,7 @@ def write_png(path, rgba, width: int, height: int, exposure: float = 1.0, transp
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0))
     png += chunk(b"sRGB", b"\0") + chunk(b"IDAT", zlib.compress(rows, 6)) + chunk(b"IEND", b"")
-    with open(path, "wb") as f:
-        f.write(png)
+    write_bytes_atomic(path, png)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -274,7 +274,6 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         with FrameSessions() as own:
             return bake(stage_path, out_layer, times, camera, solver, settings, width, height, light_convention,
                         medium_defaults, progress, warn, own)
-    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
     src_stage = stage_mod.open_stage(stage_path)
     out_layer = os.path.abspath(out_layer)
     out_dir = os.path.dirname(out_layer)
@@ -283,69 +282,131 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         raise VolscatterError("--out-layer must not be the stage itself", 2)
     times = list(times) if times else [None]
     animated = len(times) > 1
-    stem = Path(out_layer).stem
     written: Dict[str, List[str]] = {}
     all_warnings: List[str] = []
     per_volume: Dict[str, List] = {}
     for t in times:
-        sc = stage_mod.read_stage(stage_path, time=t, camera=camera, light_convention=light_convention,
-                                  medium_defaults=medium_defaults, stage=src_stage)
-        warnings = list(sc.warnings) + solver_warnings(sc, solver)
-        if not sc.volumes:
-            raise VolscatterError(f"{stage_path}: the stage has no UsdVolVolume prim: nothing to bake", 5)
-        for w in warnings:
-            if w not in all_warnings:
-                all_warnings.append(w)
-                if warn:
-                    warn(w)
-        if sc.camera is None:
-            msg = ("the stage has no camera: the scattering is solved towards a camera on -Y looking at each volume "
-                   "(exact for g = 0; pass --camera for anisotropic media)")
-            if msg not in all_warnings:
-                all_warnings.append(msg)
-                if warn:
-                    warn(msg)
-        for vi, v in enumerate(sc.volumes):
-            if sc.camera is None:
-                o = [v.object_to_world[3], v.object_to_world[7], v.object_to_world[11]]
-                sc.camera = stage_mod.CameraInfo(path="(none)", position=[o[0], o[1] - 10.0, o[2]], look_at=o,
-                                                 up=[0.0, 0.0, 1.0], fov_deg=39.6, aspect=1.0, clipping=(0.0, 1e30))
-            doc = sc.scene_json(volume=vi, width=width, height=height)
-            name = f"{stem}.{_safe_name(v.path)}"
-            if animated and t is not None:
-                name += f".{int(t) if float(t).is_integer() else t}"
-            fname = f"{name}.vdb"
-            with native_scene(doc, solver, settings) as scene, sessions.solve(scene, progress, v.path) as result:
-                rgb = result.rgb()
-                i2w = np.asarray(result.index_to_world(), dtype=np.float64).reshape(4, 4)
-            # the grid in the Volume prim's local space (USD applies the prim's transform to
-            # its fields), with the density copied in: one file per Volume and frame
-            o2w = np.asarray(v.object_to_world, dtype=np.float64).reshape(4, 4)
-            i2l = np.linalg.solve(o2w, i2w)
-            grids = [("scatter", rgb), ("scattering_r", rgb[..., 0]), ("scattering_g", rgb[..., 1]),
-                     ("scattering_b", rgb[..., 2])]
-            i2l_flat = i2l.reshape(-1).tolist()
-            try:
-                write_vdb(os.path.join(out_dir, fname), grids, i2l_flat,
-                          copies=[("density", v.vdb_path, v.field_name or "density")])
-                copied = True
-            except VolscatterError as e:
-                if e.status not in (STATUS_FORMAT, STATUS_UNSUPPORTED):
-                    raise
-                write_vdb(os.path.join(out_dir, fname), grids, i2l_flat)
-                copied = False
-                msg = (f"volume {v.path}: its density grid ({v.vdb_path}) could not be copied into the bake's VDB "
-                       f"({e.message}); field:density keeps its own file (Blender's importer reads one file per "
-                       "Volume)")
-                all_warnings.append(msg)
-                if warn:
-                    warn(msg)
-            written.setdefault(v.path, []).append(os.path.join(out_dir, fname))
-            per_volume.setdefault(v.path, []).append((t, fname, v, bool(copied)))
+        for b in bake_frame(stage_path, src_stage, out_layer, t, animated, camera=camera, solver=solver,
+                            settings=settings, width=width, height=height, light_convention=light_convention,
+                            medium_defaults=medium_defaults, progress=progress, warn=warn, sessions=sessions,
+                            seen_warnings=all_warnings):
+            written.setdefault(b.volume.path, []).append(b.path)
+            per_volume.setdefault(b.volume.path, []).append((t, b.name, b.volume, b.copied))
+    write_layer(stage_path, src_stage, out_layer, solver, per_volume, animated)
+    return BakeResult(layer=out_layer, vdbs=written, warnings=all_warnings)
 
-    # the layer
-    if os.path.exists(out_layer):
-        os.remove(out_layer)
+
+@dataclass
+class BakedVolume:
+    """One Volume's VDB of one baked frame."""
+    volume: stage_mod.VolumeInfo
+    name: str          # the file's name, beside the layer
+    path: str          # its absolute path
+    copied: bool       # the density grid was copied into it
+
+
+def bake_file_name(out_layer, volume_path: str, t: Optional[float], animated: bool) -> str:
+    """``<layer stem>.<volume>[.<frame>].vdb``: the VDB of one Volume and frame, beside the layer."""
+    name = f"{Path(out_layer).stem}.{_safe_name(volume_path)}"
+    if animated and t is not None:
+        name += f".{int(t) if float(t).is_integer() else t}"
+    return f"{name}.vdb"
+
+
+def bake_frame(stage_path, src_stage, out_layer, t: Optional[float], animated: bool, camera: Optional[str] = None,
+               solver: str = "reference", settings: Optional[dict] = None, width: int = 320,
+               height: Optional[int] = None, light_convention: str = "auto", medium_defaults: Optional[dict] = None,
+               progress: Progress = None, warn: Optional[Callable[[str], None]] = None,
+               sessions: Optional[FrameSessions] = None,
+               seen_warnings: Optional[List[str]] = None) -> List[BakedVolume]:
+    """Solves every Volume of the stage at time ``t`` in ``sessions`` (one per volume) and writes
+    each one's VDB beside ``out_layer`` (atomically: the old file or the whole new one). Warnings
+    not yet in ``seen_warnings`` go to ``warn`` and are added to it."""
+    out_layer = os.path.abspath(out_layer)
+    out_dir = os.path.dirname(out_layer)
+    all_warnings = seen_warnings if seen_warnings is not None else []
+    baked: List[BakedVolume] = []
+    sc = stage_mod.read_stage(stage_path, time=t, camera=camera, light_convention=light_convention,
+                              medium_defaults=medium_defaults, stage=src_stage)
+    warnings = list(sc.warnings) + solver_warnings(sc, solver)
+    if not sc.volumes:
+        raise VolscatterError(f"{stage_path}: the stage has no UsdVolVolume prim: nothing to bake", 5)
+    for w in warnings:
+        if w not in all_warnings:
+            all_warnings.append(w)
+            if warn:
+                warn(w)
+    if sc.camera is None:
+        msg = ("the stage has no camera: the scattering is solved towards a camera on -Y looking at each volume "
+               "(exact for g = 0; pass --camera for anisotropic media)")
+        if msg not in all_warnings:
+            all_warnings.append(msg)
+            if warn:
+                warn(msg)
+    for vi, v in enumerate(sc.volumes):
+        if sc.camera is None:
+            o = [v.object_to_world[3], v.object_to_world[7], v.object_to_world[11]]
+            sc.camera = stage_mod.CameraInfo(path="(none)", position=[o[0], o[1] - 10.0, o[2]], look_at=o,
+                                             up=[0.0, 0.0, 1.0], fov_deg=39.6, aspect=1.0, clipping=(0.0, 1e30))
+        doc = sc.scene_json(volume=vi, width=width, height=height)
+        fname = bake_file_name(out_layer, v.path, t, animated)
+        with native_scene(doc, solver, settings) as scene, sessions.solve(scene, progress, v.path) as result:
+            rgb = result.rgb()
+            i2w = np.asarray(result.index_to_world(), dtype=np.float64).reshape(4, 4)
+        # the grid in the Volume prim's local space (USD applies the prim's transform to
+        # its fields), with the density copied in: one file per Volume and frame
+        o2w = np.asarray(v.object_to_world, dtype=np.float64).reshape(4, 4)
+        i2l = np.linalg.solve(o2w, i2w)
+        grids = [("scatter", rgb), ("scattering_r", rgb[..., 0]), ("scattering_g", rgb[..., 1]),
+                 ("scattering_b", rgb[..., 2])]
+        i2l_flat = i2l.reshape(-1).tolist()
+        try:
+            write_vdb(os.path.join(out_dir, fname), grids, i2l_flat,
+                      copies=[("density", v.vdb_path, v.field_name or "density")])
+            copied = True
+        except VolscatterError as e:
+            if e.status not in (STATUS_FORMAT, STATUS_UNSUPPORTED):
+                raise
+            write_vdb(os.path.join(out_dir, fname), grids, i2l_flat)
+            copied = False
+            msg = (f"volume {v.path}: its density grid ({v.vdb_path}) could not be copied into the bake's VDB "
+                   f"({e.message}); field:density keeps its own file (Blender's importer reads one file per "
+                   "Volume)")
+            all_warnings.append(msg)
+            if warn:
+                warn(msg)
+        baked.append(BakedVolume(volume=v, name=fname, path=os.path.join(out_dir, fname), copied=bool(copied)))
+    return baked
+
+
+def write_layer(stage_path, src_stage, out_layer, solver: str, per_volume: Dict[str, List], animated: bool):
+    """Writes the bake's layer: it sublayers the stage and, for each Volume of ``per_volume``
+    (path -> [(time, VDB file name, VolumeInfo, density copied)]), adds the scattering fields and
+    the material. Written beside under a temporary name and renamed over ``out_layer``, so that a
+    failed write leaves the previous layer as it was."""
+    from pxr import Sdf
+    final_layer = os.path.abspath(out_layer)
+    tmp = temp_beside(final_layer, keep_suffix=True)
+    try:
+        _compose_layer(stage_path, src_stage, tmp, solver, per_volume, animated)
+        os.replace(tmp, final_layer)
+    except VolscatterError:
+        raise
+    except Exception as e:  # pxr's Tf.ErrorException (a full disk, a denied folder), OSError
+        raise VolscatterError(f"{final_layer}: the layer could not be written: {str(e).strip()}", STATUS_IO) from e
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    # A layer of this path open in this process would keep its old content.
+    cached = Sdf.Layer.Find(final_layer)
+    if cached:
+        cached.Reload(force=True)
+
+
+def _compose_layer(stage_path, src_stage, out_layer, solver: str, per_volume: Dict[str, List], animated: bool):
+    """write_layer's layer, saved at ``out_layer`` (a temporary beside the final name)."""
+    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
+    out_dir = os.path.dirname(out_layer)
     layer_stage = Usd.Stage.CreateNew(out_layer)
     root = layer_stage.GetRootLayer()
     rel = os.path.relpath(os.path.abspath(stage_path), out_dir)
@@ -415,5 +476,6 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             "extinction = density_scale * density per metre")
         UsdShade.MaterialBindingAPI.Apply(vprim).Bind(mat)
         vprim.CreateAttribute("volscatter:bakedSolver", Sdf.ValueTypeNames.String, custom=True).Set(solver)
-    layer_stage.GetRootLayer().Save()
-    return BakeResult(layer=out_layer, vdbs=written, warnings=all_warnings)
+    if not layer_stage.GetRootLayer().Save():
+        raise VolscatterError(f"{out_layer}: the layer could not be written", STATUS_IO)
+

@@ -268,8 +268,8 @@ pub fn write_image(path: &Path, image: &Image) -> Result<()> {
     write_layer(path, layer)
 }
 
-/// Encodes one layer in memory, then writes it with [`super::files::write_file`]: a full disk
-/// or a missing folder is an `Error::Io`. (`exr`'s own `to_file` also deletes the path when a
+/// Encodes one layer in memory, then writes it with [`super::files::write_file_atomic`]: a full
+/// disk or a missing folder is an `Error::Io` and leaves the previous file as it was. (`exr`'s own `to_file` also deletes the path when a
 /// write fails, which must not happen to `/dev/full` or to a file the user pointed us at.)
 pub fn write_layer(path: &Path, layer: Layer<AnyChannels<FlatSamples>>) -> Result<()> {
     let mut bytes = std::io::Cursor::new(Vec::new());
@@ -277,7 +277,7 @@ pub fn write_layer(path: &Path, layer: Layer<AnyChannels<FlatSamples>>) -> Resul
         .write()
         .to_buffered(&mut bytes)
         .map_err(|e| Error::format(path, format!("encoding EXR failed: {e}")))?;
-    super::files::write_file(path, bytes.get_ref())
+    super::files::write_file_atomic(path, bytes.get_ref())
 }
 
 /// Reads back the RGBA of an EXR written by `write_image` (tests, `compare`).

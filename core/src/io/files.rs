@@ -30,13 +30,28 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 /// Writes `bytes` to a temporary file beside `path` ([`temp_beside`]) and renames it over
 /// `path`: `path` is either the old file or the whole new one. On any failure the temporary
 /// is removed and the error names the file at fault.
+/// A path that is a device or a FIFO (`/dev/null`, `/dev/full`, a pipe) is written in place: a
+/// rename would replace the device with a file. A symbolic link's target is replaced, not the
+/// link.
 pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let target = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+        _ => path.to_path_buf(),
+    };
+    if std::fs::metadata(&target).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return write_file(&target, bytes);
+    }
+    let path = target.as_path();
     let tmp = temp_beside(path);
     let res = write_file(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
     if res.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    res
+    // The error names the file the caller asked for, not the temporary.
+    res.map_err(|e| match e {
+        Error::Io { source, .. } => Error::io(path, source),
+        other => other,
+    })
 }
 
 /// A fresh name for a temporary file beside `path` (same folder, so that a rename replaces
@@ -84,6 +99,8 @@ mod tests {
         let e = write_file(&missing, b"x").unwrap_err();
         assert!(matches!(&e, Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound), "{e:?}");
         assert!(e.to_string().contains("out.exr"), "{e}");
+        let e = write_file_atomic(&missing, b"x").unwrap_err();
+        assert!(matches!(&e, Error::Io { path, .. } if path == &missing), "the error names the target: {e:?}");
     }
 
     #[test]
@@ -102,5 +119,28 @@ mod tests {
         assert_eq!(names.len(), 2, "{names:?}");
         assert!(sub.join("x").is_dir());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn atomic_write_keeps_devices_and_links() {
+        // A device is written in place (a rename would put a file where /dev/full was).
+        if Path::new("/dev/full").exists() {
+            assert!(matches!(write_file_atomic(Path::new("/dev/full"), b"x"), Err(Error::Io { .. })));
+            assert!(!std::fs::metadata("/dev/full").unwrap().is_file(), "/dev/full must stay a device");
+        } else {
+            eprintln!("skipped the /dev/full half: /dev/full does not exist on this system");
+        }
+        #[cfg(unix)]
+        {
+            let dir = std::env::temp_dir().join(format!("vs-atomic-link-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let (target, link) = (dir.join("target.bin"), dir.join("link.bin"));
+            std::fs::write(&target, b"old").unwrap();
+            std::os::unix::fs::symlink(&target, &link).unwrap();
+            write_file_atomic(&link, b"new").unwrap();
+            assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+            assert_eq!(std::fs::read(&target).unwrap(), b"new");
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
     }
 }

@@ -34,5 +34,5 @@ pub fn write_png(path: &Path, image: &Image, exposure: f32, transparent: bool) -
     let mut w = enc.write_header().map_err(|e| Error::format(path, e.to_string()))?;
     w.write_image_data(&data).map_err(|e| Error::format(path, e.to_string()))?;
     w.finish().map_err(|e| Error::format(path, e.to_string()))?;
-    super::files::write_file(path, &bytes)
+    super::files::write_file_atomic(path, &bytes)
 }

@@ -122,6 +122,7 @@ pub fn write_grids(path: &Path, grids: &[GridSource<'_>], index_to_world: DMat4,
             }
         }
     }
+    super::writer::stamp_content_uuid(&mut w.buf);
     crate::io::files::write_file_atomic(path, &w.buf)
 }
 

@@ -182,3 +182,23 @@ fn copies_refused_and_nothing_left_behind() {
     assert_eq!(names_in(&d), ["folder.vdb", "old.vdb", "out.vdb", "src.vdb"], "no temporary left");
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The same grids give the same bytes wherever and whenever they are written (a farm's re-run
+/// frame equals the first: the UUID comes from the content), and other values another UUID.
+#[test]
+fn same_grids_same_bytes_other_grids_other_uuid() {
+    let d = dir("uuid");
+    let dims = [5, 4, 3];
+    let (a, b) = (dense(dims, 3, 1), dense(dims, 3, 2));
+    let write = |name: &str, values: &[f32]| {
+        let p = d.join(name);
+        write_grids(&p, &[GridSource::Vec3s(DenseVec3s { name: "scatter", dims, values })], map(), &WriteOptions::default()).unwrap();
+        std::fs::read(p).unwrap()
+    };
+    let (first, again, other) = (write("a.vdb", &a), write("a_again.vdb", &a), write("b.vdb", &b));
+    assert_eq!(first, again, "the same grids written twice differ");
+    let uuid = |f: &[u8]| f[21..57].to_vec();
+    assert_ne!(uuid(&first), uuid(&other), "other grids kept the same UUID");
+    assert!(VdbFile::open(&d.join("a.vdb"), u64::MAX).is_ok(), "a stamped file must still read");
+    std::fs::remove_dir_all(&d).unwrap();
+}

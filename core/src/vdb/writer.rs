@@ -342,7 +342,8 @@ fn write_file(path: &Path, grids: &[(&str, FloatTree)], xf: Affine3A, o: &WriteO
     for ((_, tree), (unique, name)) in grids.iter().zip(unique_names(grids.iter().map(|g| g.0))?) {
         write_grid(&mut w, &unique, name, tree, GridMap::Single(xf), o);
     }
-    crate::io::files::write_file(path, &w.buf)
+    stamp_content_uuid(&mut w.buf);
+    crate::io::files::write_file_atomic(path, &w.buf)
 }
 
 /// Checks the map and options, and writes the file header up to the grid count.
@@ -379,6 +380,24 @@ pub(super) fn unique_names<'a>(names: impl Iterator<Item = &'a str>) -> Result<V
         used.push(name);
     }
     Ok(out)
+}
+
+/// Where the 36-character UUID sits in a file: after the magic (8), three versions (12) and
+/// the grid-offsets flag (1).
+const UUID_AT: usize = 21;
+
+/// Replaces the file's UUID with one made from its other bytes (two FNV-1a hashes), so that the
+/// same grids give the same file byte for byte, whichever process or machine wrote it (a farm's
+/// re-run frame equals the first), while files with other content still differ in UUID.
+pub(super) fn stamp_content_uuid(buf: &mut [u8]) {
+    let fnv = |basis: u64| {
+        let rest = buf[..UUID_AT].iter().chain(&buf[UUID_AT + 36..]);
+        rest.fold(basis, |h, &b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
+    };
+    let (a, b) = (fnv(0xcbf2_9ce4_8422_2325), fnv(0x6c62_272e_07bb_0142));
+    let s = format!("{a:016x}{b:016x}");
+    let text = format!("{}-{}-{}-{}-{}", &s[0..8], &s[8..12], &s[12..16], &s[16..20], &s[20..32]);
+    buf[UUID_AT..UUID_AT + 36].copy_from_slice(text.as_bytes());
 }
 
 /// 36 characters in UUID form; unique enough to tell files apart.

@@ -85,10 +85,16 @@ def volume_vdb(obj, depsgraph, out_dir, frame, grid_hint=None):
                           "or generate the volume with Geometry Nodes)" % obj.name)
     os.makedirs(out_dir, exist_ok=True)
     path = os.path.join(out_dir, "%s_input_%04d.vdb" % (bpy.path.clean_name(obj.name), frame))
+    # saved beside under a temporary name, then renamed: a failed save leaves no partial file
+    tmp = os.path.join(out_dir, ".%s.%d.tmp.vdb" % (os.path.basename(path), os.getpid()))
     try:
-        ok = grids.save(filepath=path)
+        ok = grids.save(filepath=tmp)
+        if ok is not False and os.path.isfile(tmp):
+            os.replace(tmp, path)
     except Exception as e:  # RuntimeError with Blender's message
         raise ExportError("Volume '%s': cannot write its generated grids to %s: %s" % (obj.name, path, e))
+    finally:
+        _remove(tmp)
     if ok is False or not os.path.isfile(path):
         raise ExportError("Volume '%s': writing its generated grids to %s failed" % (obj.name, path))
     return path, names, True

@@ -251,7 +251,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         }
-        volscatter_core::io::files::write_file(path, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
+        volscatter_core::io::files::write_file_atomic(path, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
     }
     Ok(())
 }

@@ -175,7 +175,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             doc["auto"] = serde_json::to_value(c).unwrap_or(serde_json::Value::Null);
         }
         ensure_parent(report)?;
-        volscatter_core::io::files::write_file(report, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
+        volscatter_core::io::files::write_file_atomic(report, serde_json::to_string_pretty(&doc).unwrap().as_bytes())?;
     }
     Ok(())
 }
