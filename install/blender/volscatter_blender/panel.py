@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import lpm_offer, mantaflow, operators, preview_dome, properties
+from . import lpm_offer, mantaflow, operators, preview_dome, properties, results
 
 
 def preset_rows(s):
@@ -49,6 +49,8 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         s = context.object.volscatter
+        for w in results.missing_warnings(context.object):
+            layout.label(text=w, icon='ERROR')
         col = layout.column()
         col.prop(s, "solver")
         col.prop(s, "quality")
@@ -108,6 +110,7 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("volscatter.compute_scattering", icon='OUTLINER_DATA_VOLUME')
         row.operator("volscatter.render_preview", icon='RENDER_STILL')
+        layout.operator("volscatter.clean_up_results", icon='TRASH')
 
 
 classes = (VOLSCATTER_PT_volume,)
