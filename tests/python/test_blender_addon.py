@@ -781,7 +781,8 @@ def test_panel_draws_existing_properties_and_operators(fresh):
         ob.volscatter.solver = solver
         panel.VOLSCATTER_PT_volume.draw(SimpleNamespace(layout=Layout()), SimpleNamespace(object=ob))
     assert {"solver", "quality", "grid_resolution", "iterations", "samples", "device", "use_frame_range"} <= set(seen["props"])
-    assert set(seen["ops"]) == {"volscatter.compute_scattering", "volscatter.render_preview"}
+    assert set(seen["ops"]) == {"volscatter.compute_scattering", "volscatter.render_preview",
+                                "volscatter.clean_up_results"}
     cam = bs.camera()
     assert not panel.VOLSCATTER_PT_volume.poll(SimpleNamespace(object=cam))
 

@@ -95,15 +95,36 @@ def _unkey_visibility(ob):
 
 
 def device_note(solver, device):
-    """What the Device menu's choice does for `solver`, when it is not what the menu says: a
-    GPU asked of a solver with no GPU backend (the registry's `gpu` flag) runs on the CPU."""
+    """What Device GPU does for `solver` when it is not what the menu says: a solver with no
+    GPU backend (the registry's `gpu` flag) runs on the CPU. None otherwise (Device Auto
+    promises the GPU only where one is used; Automatic picks a solver, said in the Device line)."""
     entry = native.solver(solver)
-    if device == 'CPU' or entry is None or entry.get("gpu"):
+    if device != 'GPU' or solver == "auto" or entry is None or entry.get("gpu"):
         return None
     gpu = [s["label"] for s in native.solvers()["solvers"] if s.get("gpu")]
-    return ("volscatter: the %s solver has no GPU backend (%s: %s), so Device %s runs it on the CPU"
+    return ("volscatter: the %s solver has no GPU backend (%s: %s), so Device GPU runs it on the CPU"
             % (entry["label"], "the solvers with one" if len(gpu) != 1 else "the one with one",
-               ", ".join(gpu) or "none", device.title()))
+               ", ".join(gpu) or "none"))
+
+
+def device_line(s):
+    """The panel's line saying what Compute Scattering will run, and where: "Auto -> vpl draft
+    on the CPU (last run)", "Principal Ordinates on a hardware GPU if one works, else the CPU"."""
+    entry = native.solver(s.solver)
+    label = entry["label"] if entry else s.solver
+    last = s.last_solver == s.solver and s.last_device
+    if s.solver == "auto":
+        if not last or not s.last_choice.startswith("auto picked "):
+            return "Auto -> a solver picked for the scene when you compute"
+        picked = s.last_choice[len("auto picked "):].split(":")[0]
+        return "Auto -> %s on the %s (last run)" % (picked, s.last_device)
+    if last:
+        return "%s on the %s (last run)" % (label, s.last_device)
+    if s.device == 'CPU' or not (entry and entry.get("gpu")):
+        return "%s on the CPU%s" % (label, "" if s.device == 'CPU' else " (no GPU backend)")
+    if s.device == 'GPU':
+        return "%s on the GPU (the CPU if none works)" % label
+    return "%s on a hardware GPU if one works, else the CPU" % label
 
 
 def _solve_on(sc, device, progress, notes, job=None):
@@ -215,7 +236,9 @@ class _JobOperator:
         keeps the last pick for the panel."""
         seen = []
         for c in getattr(self, "_choices", []):
-            line = "volscatter: auto picked %s %s: %s" % (c["solver"], c["quality"], c["why"])
+            pick = "%s %s" % (c["solver"], c["quality"])
+            why = c["why"][len(pick) + 2:] if c["why"].startswith(pick + ": ") else c["why"]  # said once
+            line = "volscatter: auto picked %s: %s" % (pick, why)
             if line not in seen:
                 seen.append(line)
                 self.report({'INFO'}, line)
@@ -341,6 +364,7 @@ class _JobOperator:
             self.finish(context, self._values)
         except Exception as e:
             return self._fail(context, e)
+        self._settings.last_solver, self._settings.last_device = self._settings.solver, self.ran_on()
         for p in self._inputs:
             try:
                 os.remove(p)
@@ -403,8 +427,11 @@ class _JobOperator:
         n = len(self._frames)
         total = (self._index + min(max(frac, 0.0), 1.0)) / n
         context.window_manager.progress_update(int(total * 1000))
-        text = "volscatter: frame %d (%d/%d) %s %3.0f%%  -  Esc to cancel" % (
-            self._frames[self._index], self._index + 1, n, stage, 100.0 * frac)
+        # The stage and its fraction as the library reports them, and the seconds running: a
+        # stage that reports no fraction still shows time moving.
+        text = "volscatter: frame %d (%d/%d): %s %.0f%% (%.0f s)  -  Esc to cancel" % (
+            self._frames[self._index], self._index + 1, n, (stage or "starting").capitalize(), 100.0 * frac,
+            time.monotonic() - self._t0)
         if context.workspace is not None:
             context.workspace.status_text_set(text)
         if self._area is not None:
@@ -757,13 +784,23 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
 
     def _note_resolution(self):
         """Records the result's resolution for the panel and says when the solver capped it
-        below the one asked for (at the source's voxels)."""
+        below the one asked for, naming the cause: Max Resolution, or the source's voxels."""
         got = max(self._dims) if self._dims else 0
         asked = self._requested_resolution()
-        self._settings.last_resolution, self._settings.last_requested = got, asked
+        s = self._settings
+        s.last_resolution, s.last_requested = got, asked
+        s.last_max_resolution = s.max_resolution
         if 0 < got < asked:
             self.report({'INFO'}, "volscatter: the result grid has %d cells along its longest side, not the %d "
-                        "asked: a solver computes no finer than the source's voxels" % (got, asked))
+                        "asked: %s" % (got, asked, cap_cause(s.max_resolution, got)))
+
+
+def cap_cause(max_resolution, got):
+    """Why a result grid is coarser than asked: Max Resolution when it is set and the grid is
+    within a few cells of it (the solver's padding), else the source's voxels."""
+    if 0 < max_resolution and got <= max_resolution + 4:
+        return "Max Resolution reads the source at %d voxels at most (set it higher or to 0)" % max_resolution
+    return "a solver computes no finer than the source's voxels"
 
 
 def _fcurves(ob):
