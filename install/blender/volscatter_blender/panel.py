@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import lpm_offer, mantaflow, operators, preview_dome, properties, results
+from . import live, lpm_offer, mantaflow, operators, preview_dome, properties, results
 
 
 def preset_rows(s):
@@ -106,6 +106,11 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
             for line in lpm_offer.lines(*offer):
                 box.label(text=line, icon='INFO')
             box.operator("volscatter.use_lpm_streamed", icon='MOD_REMESH')
+        row = layout.row(align=True)
+        row.prop(s, "live", toggle=True, icon='PLAY' if not s.live else 'PAUSE')
+        line = live.status(context.object) if s.live else ""
+        if line:
+            row.label(text=line)
         row = layout.row(align=True)
         row.operator("volscatter.compute_scattering", icon='OUTLINER_DATA_VOLUME')
         row.operator("volscatter.render_preview", icon='RENDER_STILL')

@@ -140,6 +140,11 @@ def solver_settings(s):
     return out
 
 
+def _live_toggled(settings, context):
+    from . import live  # imported here: live imports this module
+    live.set_live(context, settings.id_data, settings.live)
+
+
 class VolscatterSettings(bpy.types.PropertyGroup):
     solver: EnumProperty(name="Solver", items=_solver_items, default=AUTO_NUMBER, update=_show_preset)
     # default 1: the registry's second preset, "preview" (the Custom fields' defaults below are
@@ -167,6 +172,9 @@ class VolscatterSettings(bpy.types.PropertyGroup):
                            description="Last frame to compute (the scene's end until set)")
     output_dir: StringProperty(name="Output", subtype='DIR_PATH', default="//volscatter/", options=_BLEND_RELATIVE,
                                description="Folder for the scattering VDB files (unsaved files: the temp folder)")
+    live: BoolProperty(name="Live", default=False, update=_live_toggled,
+                       description="Solve again in the background whenever the lights, world, camera, volume or "
+                                   "frame change")
     hide_original: BoolProperty(name="Hide Original", default=True,
                                 description="Hide the source volume in renders once its scattering volume exists "
                                             "(the new volume carries its extinction)")
