@@ -63,6 +63,7 @@ class _LiveVolume:
         self.files = []  # files this live volume wrote that its result no longer reads, to delete
         self.current = None  # the file the result reads now (written by live)
         self.solves = 0  # finished solves applied
+        self.applied = []  # (quality, time.monotonic()) of each applied solve: for benchmarks
         self.status = ""
         self.g = 0.0  # the medium's anisotropy at the last export
 
@@ -163,6 +164,7 @@ class _LiveVolume:
             if quality == "preview":
                 self.preview_s = seconds
             self.solves += 1
+            self.applied.append((quality, time.monotonic()))
             self.status = "%s on the %s in %.2f s" % (quality.capitalize(), device, seconds)
         if not job.thread.is_alive():
             job.thread.join()
