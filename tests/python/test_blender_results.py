@@ -233,3 +233,37 @@ def test_reopen_after_a_crash_mid_run(fresh, installed):
     bpy.ops.wm.open_mainfile(filepath=str(proj / "shot.blend"))
     assert _result_path() == saved
     assert _render_result_only(str(fresh / "after.exr")) == pytest.approx(light, rel=0.01)
+
+
+def test_frame_range_keys_only_its_frames_and_keeps_the_artists_toggles(fresh):
+    """A frame range keys visibility (the result holds those frames only), and outside them
+    the original has the toggles the artist gave it (here: off in renders, kept for a
+    comparison), not forced on; computing one frame afterwards removes those keys and gives the
+    toggles back. A one-frame compute keys nothing (test_blender_addon.py)."""
+    ops = _mod("operators")
+    ob = bs.noise_volume(res=6)
+    bs.principled_material(ob)
+    bs.sun()
+    bs.camera()
+    _tiny(ob, fresh, solver="pop")
+    ob.hide_render = True  # the artist's own toggle
+    s = ob.volscatter
+    s.use_frame_range, s.frame_start, s.frame_end = True, 2, 3
+    bpy.context.scene.frame_set(1)
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    res = _result()
+    for frame, inside in ((1, False), (2, True), (3, True), (4, False)):
+        bpy.context.scene.frame_set(frame)
+        assert ob.hide_render is True, frame  # hidden inside (the result renders), the artist's outside
+        assert ob.hide_viewport == inside and res.hide_render == (not inside), frame
+    keyed = sorted({int(k.co[0]) for fc in ops._fcurves(ob) for k in fc.keyframe_points})
+    assert keyed == [1, 2, 4], keyed
+    s.use_frame_range = False
+    bpy.context.scene.frame_set(2)  # inside the range: the keys have the original disabled in viewports
+    ob.volscatter.hide_original = False
+    assert _run(bpy.ops.volscatter.compute_scattering, ob) == {'FINISHED'}
+    # the range's keys are gone and the toggles are the ones the artist had before them
+    assert not [fc for fc in ops._fcurves(ob) if fc.data_path.startswith("hide_")]
+    assert ob.hide_render is True and ob.hide_viewport is False
+    bpy.context.scene.frame_set(3)
+    assert ob.hide_render is True
