@@ -135,3 +135,22 @@ def test_camera_restarts_only_an_anisotropic_medium(fresh, live_off):
         assert live._live["Smoke"].pending is expect, g
         live.wait()
         live.stop_all()
+
+
+def test_frame_change_restarts_and_live_off_stops(fresh, live_off):
+    """A new frame solves again; turning Live off cancels, closes the sessions and leaves no
+    thread."""
+    live = _live()
+    ob = _scene(fresh)
+    ob.volscatter.live = True
+    live.wait()
+    state = live._live["Smoke"]
+    n = len(state.applied)
+    bpy.context.scene.frame_set(2)
+    assert state.pending
+    live.step()
+    assert state.job is not None or len(state.applied) > n
+    ob.volscatter.live = False
+    assert "Smoke" not in live._live and not state.sessions
+    live.wait()
+    assert not _live_threads()
