@@ -6,8 +6,6 @@ the Automatic pick is said once, a cap names its cause, progress moves through t
 
 import sys
 
-import pytest
-
 from test_blender_addon import (MODULE, _UIContext, _drive, _modal_harness, _run, _tiny, bpy, bs, fresh,  # noqa: F401
                                 installed, zip_path)
 

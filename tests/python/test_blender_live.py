@@ -4,7 +4,6 @@ the library is missing). Headless Blender runs no timers: the test calls `live.s
 `live.wait`, what Blender's timer calls in the UI.
 """
 
-import math
 import os
 import sys
 import threading

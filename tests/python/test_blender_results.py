@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from test_blender_addon import (MODULE, SCATTER_GRIDS, _USER, _run, _tiny, _vdbs, bpy, bs, fresh,  # noqa: F401
+from test_blender_addon import (MODULE, SCATTER_GRIDS, _USER, _run, _tiny, bpy, bs, fresh,  # noqa: F401
                                 installed, zip_path)
 
 
@@ -117,7 +117,6 @@ def test_result_renders_without_its_source(fresh):
     shutil.move(str(proj), str(moved))
     bpy.ops.wm.open_mainfile(filepath=str(moved / "shot.blend"))
     assert os.path.isfile(_result_path()) and _result_path().startswith(str(moved))
-    assert _render_result_only(str(fresh / "moved.exr")) == pytest.approx(before, rel=0.01)
     os.remove(str(moved / "smoke.vdb"))
     assert "density" in _grids(_result()), "the result's density came from the source"
     assert _render_result_only(str(fresh / "no-source.exr")) == pytest.approx(before, rel=0.01)
