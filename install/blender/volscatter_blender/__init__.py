@@ -9,15 +9,15 @@ as an extension); the native library is loaded on first use, not at registration
 
 if "bpy" in locals():  # script reload (F8 / Reload Scripts)
     import importlib
-    from . import native, scene_export, mantaflow, properties, operators, lpm_offer, panel, eevee
-    for _m in (native, scene_export, mantaflow, properties, operators, lpm_offer, panel, eevee):
+    from . import native, scene_export, world_bake, mantaflow, properties, results, operators, cleanup, live, lpm_offer, panel, eevee
+    for _m in (native, scene_export, world_bake, mantaflow, properties, results, operators, cleanup, live, lpm_offer, panel, eevee):
         importlib.reload(_m)
 else:
-    from . import native, scene_export, mantaflow, properties, operators, lpm_offer, panel, eevee
+    from . import native, scene_export, world_bake, mantaflow, properties, results, operators, cleanup, live, lpm_offer, panel, eevee
 
 import bpy  # noqa: E402
 
-_modules = (properties, operators, lpm_offer, panel, eevee)  # eevee after panel: its sub-panel needs the parent
+_modules = (properties, operators, cleanup, live, lpm_offer, panel, eevee)  # eevee after panel: its sub-panel needs the parent
 
 
 def register():

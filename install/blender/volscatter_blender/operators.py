@@ -19,12 +19,14 @@ import bpy
 import mathutils
 from bpy.props import StringProperty
 
-from . import mantaflow, native, preview_dome, properties, scene_export
+from . import mantaflow, native, preview_dome, properties, results, scene_export
+from .results import RESULT_TAG
 from .scene_export import ExportError
 
-RESULT_TAG = "volscatter_source"
 #: Custom property on an object whose visibility volscatter keyed: the frames it keyed.
 KEYED_TAG = "volscatter_keyed_frames"
+#: Custom property: the object's own hide_render / hide_viewport before volscatter keyed them.
+OWN_VISIBILITY_TAG = "volscatter_own_visibility"
 
 
 def owner_of(ob):
@@ -75,16 +77,54 @@ def _unique_name(base, folder=None):
     return name
 
 
+def _unkey_visibility(ob):
+    """Removes the visibility keys an earlier run put on `ob` and gives it back the toggles it
+    had before them."""
+    for f in ob.get(KEYED_TAG, ()):
+        for prop in ("hide_render", "hide_viewport"):
+            try:
+                ob.keyframe_delete(prop, frame=f)
+            except RuntimeError:  # no such key (the user removed it)
+                pass
+    own = ob.get(OWN_VISIBILITY_TAG)
+    if own is not None:
+        ob.hide_render, ob.hide_viewport = bool(own[0]), bool(own[1])
+    for tag in (KEYED_TAG, OWN_VISIBILITY_TAG):
+        if tag in ob:
+            del ob[tag]
+
+
 def device_note(solver, device):
-    """What the Device menu's choice does for `solver`, when it is not what the menu says: a
-    GPU asked of a solver with no GPU backend (the registry's `gpu` flag) runs on the CPU."""
+    """What Device GPU does for `solver` when it is not what the menu says: a solver with no
+    GPU backend (the registry's `gpu` flag) runs on the CPU. None otherwise (Device Auto
+    promises the GPU only where one is used; Automatic picks a solver, said in the Device line)."""
     entry = native.solver(solver)
-    if device == 'CPU' or entry is None or entry.get("gpu"):
+    if device != 'GPU' or solver == "auto" or entry is None or entry.get("gpu"):
         return None
     gpu = [s["label"] for s in native.solvers()["solvers"] if s.get("gpu")]
-    return ("volscatter: the %s solver has no GPU backend (%s: %s), so Device %s runs it on the CPU"
+    return ("volscatter: the %s solver has no GPU backend (%s: %s), so Device GPU runs it on the CPU"
             % (entry["label"], "the solvers with one" if len(gpu) != 1 else "the one with one",
-               ", ".join(gpu) or "none", device.title()))
+               ", ".join(gpu) or "none"))
+
+
+def device_line(s):
+    """The panel's line saying what Compute Scattering will run, and where: "Auto -> vpl draft
+    on the CPU (last run)", "Principal Ordinates on a hardware GPU if one works, else the CPU"."""
+    entry = native.solver(s.solver)
+    label = entry["label"] if entry else s.solver
+    last = s.last_solver == s.solver and s.last_device
+    if s.solver == "auto":
+        if not last or not s.last_choice.startswith("auto picked "):
+            return "Auto -> a solver picked for the scene when you compute"
+        picked = s.last_choice[len("auto picked "):].split(":")[0]
+        return "Auto -> %s on the %s (last run)" % (picked, s.last_device)
+    if last:
+        return "%s on the %s (last run)" % (label, s.last_device)
+    if s.device == 'CPU' or not (entry and entry.get("gpu")):
+        return "%s on the CPU%s" % (label, "" if s.device == 'CPU' else " (no GPU backend)")
+    if s.device == 'GPU':
+        return "%s on the GPU (the CPU if none works)" % label
+    return "%s on a hardware GPU if one works, else the CPU" % label
 
 
 def _solve_on(sc, device, progress, notes, job=None):
@@ -196,7 +236,9 @@ class _JobOperator:
         keeps the last pick for the panel."""
         seen = []
         for c in getattr(self, "_choices", []):
-            line = "volscatter: auto picked %s %s: %s" % (c["solver"], c["quality"], c["why"])
+            pick = "%s %s" % (c["solver"], c["quality"])
+            why = c["why"][len(pick) + 2:] if c["why"].startswith(pick + ": ") else c["why"]  # said once
+            line = "volscatter: auto picked %s: %s" % (pick, why)
             if line not in seen:
                 seen.append(line)
                 self.report({'INFO'}, line)
@@ -213,9 +255,18 @@ class _JobOperator:
         scene = context.scene
         if scene.frame_current != frame:
             scene.frame_set(frame)
-        doc, warnings, generated = scene_export.export(context, self._obj, self._out, frame, self._solver,
-                                                       size=self.image_size(context),
-                                                       max_resolution=self._settings.max_resolution)
+        # A source that a frame range's keys disable in viewports is not evaluated there: shown
+        # for the export (its result holds its density, nothing else evaluates it).
+        disabled = self._obj.hide_viewport
+        if disabled:
+            self._obj.hide_viewport = False
+        try:
+            doc, warnings, generated = scene_export.export(context, self._obj, self._out, frame, self._solver,
+                                                           size=self.image_size(context),
+                                                           max_resolution=self._settings.max_resolution)
+        finally:
+            if disabled:
+                self._obj.hide_viewport = True
         self._files.extend(generated)
         self._inputs.extend(generated)
         for w in warnings:
@@ -313,6 +364,7 @@ class _JobOperator:
             self.finish(context, self._values)
         except Exception as e:
             return self._fail(context, e)
+        self._settings.last_solver, self._settings.last_device = self._settings.solver, self.ran_on()
         for p in self._inputs:
             try:
                 os.remove(p)
@@ -375,8 +427,11 @@ class _JobOperator:
         n = len(self._frames)
         total = (self._index + min(max(frac, 0.0), 1.0)) / n
         context.window_manager.progress_update(int(total * 1000))
-        text = "volscatter: frame %d (%d/%d) %s %3.0f%%  -  Esc to cancel" % (
-            self._frames[self._index], self._index + 1, n, stage, 100.0 * frac)
+        # The stage and its fraction as the library reports them, and the seconds running: a
+        # stage that reports no fraction still shows time moving.
+        text = "volscatter: frame %d (%d/%d): %s %.0f%% (%.0f s)  -  Esc to cancel" % (
+            self._frames[self._index], self._index + 1, n, (stage or "starting").capitalize(), 100.0 * frac,
+            time.monotonic() - self._t0)
         if context.workspace is not None:
             context.workspace.status_text_set(text)
         if self._area is not None:
@@ -530,7 +585,10 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
 
     def _setup(self, context):
         _JobOperator._setup(self, context)  # explicit: the job methods are also driven outside bpy in tests
-        self._name = _unique_name(self._obj.name + "_scattering", self._out)
+        self._name = _unique_name(self._obj.name + "_scattering")
+        self._run = results.new_run_id()  # every run writes files of its own
+        self._media = {}  # scene frame -> the medium exported for it (the density to copy, the transform)
+        self._self_contained = True  # every file holds its density
         self._grid = None
         self._density_scale = None
         self._cache_frames = {}  # scene frame -> the number of the source's file read for it
@@ -541,6 +599,7 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         if self._grid is None:
             self._grid = doc["medium"]["grid"]
             self._density_scale = doc["medium"]["density_scale"]
+        self._media[frame] = doc["medium"]
         m = re.search(r"(\d+)\.vdb$", os.path.basename(doc["medium"]["vdb"]))
         if m and getattr(self._obj.data, "is_sequence", False):
             self._cache_frames[frame] = int(m.group(1))
@@ -551,9 +610,12 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         # A range is a sequence numbered by scene frame (the volume maps frames to files); a
         # single frame of a cache sequence is named after the cache file it was computed from.
         number = frame if len(self._frames) > 1 else self._cache_frames.get(frame, frame)
-        path = os.path.join(self._out, "%s_%04d.vdb" % (bpy.path.clean_name(self._name), number))
+        path = results.result_path(self._out, self._obj.name + "_scattering", self._run, number)
         self._files.append(path)
-        result.write_grid(path, native.GRID_FORMAT_VDB)
+        medium = self._media[frame]
+        # in the source's space, with its density: the file renders right without the source
+        if not results.write_self_contained(path, result, medium["transform"], medium["vdb"], medium["grid"]):
+            self._self_contained = False
         if self._dims is None:
             self._dims = tuple(result.dims())
         return path
@@ -585,12 +647,11 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         return [o for o in bpy.data.objects if o is not new and o.get(RESULT_TAG) == self._obj.name and o.type == 'VOLUME']
 
     def _remove_result(self, ob):
-        """Deletes an earlier result of the same source: its object, volume, material, density
-        node group and the VDB files it reads (files volscatter wrote: <name>_<frame>.vdb)."""
+        """Deletes an earlier result of the same source from the .blend: its object, volume,
+        material and density node group (not its files: a saved .blend may read them)."""
         vol = ob.data
         mats = [m for m in vol.materials if m is not None]
         groups = [m.node_group for m in ob.modifiers if m.type == 'NODES' and m.node_group is not None]
-        path = bpy.path.abspath(vol.filepath)
         bpy.data.objects.remove(ob)
         if vol.users == 0:
             bpy.data.volumes.remove(vol)
@@ -600,33 +661,20 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         for g in groups:
             if g.users == 0:
                 bpy.data.node_groups.remove(g)
-        folder, base = os.path.split(path)
-        m = re.match(r"(.*_)\d+\.vdb$", base)
-        if m and os.path.isdir(folder):
-            pattern = re.compile(re.escape(m.group(1)) + r"\d+\.vdb$")
-            for f in os.listdir(folder):
-                p = os.path.join(folder, f)
-                if pattern.match(f) and p not in self._values:
-                    try:
-                        os.remove(p)
-                    except OSError:
-                        pass
 
-    def _key_visibility(self, context, ob, hidden_inside, frames):
-        """Keys hide_render and hide_viewport of `ob`: `hidden_inside` within [first, last] of
-        `frames`, the opposite outside (constant: booleans step). Replaces keys an earlier run
-        made."""
-        for f in ob.get(KEYED_TAG, ()):
-            for prop in ("hide_render", "hide_viewport"):
-                try:
-                    ob.keyframe_delete(prop, frame=f)
-                except RuntimeError:  # no such key (the user removed it)
-                    pass
+    def _key_visibility(self, context, ob, hidden_inside, frames, own=None):
+        """Keys hide_render and hide_viewport of `ob`: `hidden_inside` over [first, last] of
+        `frames`, and outside it the object's own values (`own`, else the values it has now,
+        kept to restore when the keys go) (constant: booleans step)."""
+        _unkey_visibility(ob)
+        own = own if own is not None else (bool(ob.hide_render), bool(ob.hide_viewport))
+        if own is not None and OWN_VISIBILITY_TAG not in ob:
+            ob[OWN_VISIBILITY_TAG] = [int(v) for v in own]
         first, last = frames[0], frames[-1]
-        keys = ((first - 1, not hidden_inside), (first, hidden_inside), (last + 1, not hidden_inside))
+        keys = ((first - 1, None), (first, hidden_inside), (last + 1, None))
         for f, hidden in keys:
-            for prop in ("hide_render", "hide_viewport"):
-                setattr(ob, prop, hidden)
+            for prop, mine in zip(("hide_render", "hide_viewport"), own):
+                setattr(ob, prop, mine if hidden is None else hidden)
                 ob.keyframe_insert(prop, frame=f)
         ob[KEYED_TAG] = [f for f, _ in keys]
 
@@ -649,15 +697,22 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
             vol.materials.append(mat)
             ob = bpy.data.objects.new(self._name, vol)
             created.append((bpy.data.objects, ob))
+            self._place(ob)
             has_density = True
-            try:
-                ng = build_density_nodes(self._name + "_density", self._obj, self._grid)
-            except RuntimeError:  # Blender < 5.0: grid nodes are experimental or missing
-                has_density = False
-            else:
-                created.append((bpy.data.node_groups, ng))
-                mod = ob.modifiers.new("volscatter density", 'NODES')
-                mod.node_group = ng
+            if not self._self_contained:
+                # A density that could not be copied into the files (not an OpenVDB 224 file):
+                # read from the source through Geometry Nodes, as long as the source is there.
+                self.report({'WARNING'}, "volscatter: the density of '%s' could not be copied into the result "
+                            "files, so '%s' reads it from '%s' (keep that file where it is)"
+                            % (self._obj.name, ob.name, self._obj.name))
+                try:
+                    ng = build_density_nodes(self._name + "_density", self._obj, self._grid)
+                except RuntimeError:  # Blender < 5.0: grid nodes are experimental or missing
+                    has_density = False
+                else:
+                    created.append((bpy.data.node_groups, ng))
+                    mod = ob.modifiers.new("volscatter density", 'NODES')
+                    mod.node_group = ng
             ob[RESULT_TAG] = self._obj.name
             cols = list(self._obj.users_collection) or [context.scene.collection]
             for c in cols:
@@ -674,7 +729,8 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
                     pass
             raise
         self._files = [p for p in self._files if p in self._inputs]  # the results belong to the new volume now
-        # Computing again replaces the earlier result of this source (never two stacked).
+        # Computing again replaces the earlier result of this source (never two stacked); its
+        # files stay (a saved .blend or the undo stack may read them: Clean Up Unused Results).
         previous = self._previous_results(ob)
         for old in previous:
             self._remove_result(old)
@@ -684,12 +740,13 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
                 idb.name = base
             self.report({'INFO'}, "volscatter: replaced the earlier result of '%s'" % self._obj.name)
         original = self._owner
-        # The result shows only over the frames it holds, where the source is animated (a range,
-        # or a single frame of a sequence): outside them the original is visible again.
-        animated = len(self._frames) > 1 or getattr(self._obj.data, "is_sequence", False)
+        # Only a frame range keys visibility (the result holds those frames only; outside them
+        # the original shows as the artist had it). A single frame sets the original's toggles
+        # once, which the artist may flip back: nothing keyed fights them.
         hide_original = has_density and self._settings.hide_original
-        if animated:
-            self._key_visibility(context, ob, False, self._frames)
+        _unkey_visibility(original)
+        if len(self._frames) > 1:
+            self._key_visibility(context, ob, False, self._frames, own=(True, True))
             if hide_original:
                 self._key_visibility(context, original, True, self._frames)
             context.scene.frame_set(context.scene.frame_current)  # apply the keys at this frame
@@ -710,15 +767,56 @@ class VOLSCATTER_OT_compute_scattering(_JobOperator, bpy.types.Operator):
         self.report({'INFO'}, "volscatter: '%s' holds the scattering of '%s' (%d frame%s, solved on the %s, %s)"
                     % (ob.name, self._obj.name, len(paths), "" if len(paths) == 1 else "s", self.ran_on(), self._out))
 
+    def _place(self, ob):
+        """The result object takes the source's transform at each computed frame (its files
+        are in the source's space): set once, or keyed per frame where the source moves."""
+        ms = [mathutils.Matrix([self._media[f]["transform"][r * 4:r * 4 + 4] for r in range(4)]) for f in self._frames]
+        ob.matrix_world = ms[0]
+        if all(m == ms[0] for m in ms[1:]):
+            return
+        for f, m in zip(self._frames, ms):
+            ob.matrix_world = m
+            for path in ("location", "rotation_euler", "scale"):
+                ob.keyframe_insert(path, frame=f)
+        for fc in _fcurves(ob):
+            for k in fc.keyframe_points:
+                k.interpolation = 'CONSTANT'  # one file per frame: no blend between them
+
     def _note_resolution(self):
         """Records the result's resolution for the panel and says when the solver capped it
-        below the one asked for (at the source's voxels)."""
+        below the one asked for, naming the cause: Max Resolution, or the source's voxels."""
         got = max(self._dims) if self._dims else 0
         asked = self._requested_resolution()
-        self._settings.last_resolution, self._settings.last_requested = got, asked
+        s = self._settings
+        s.last_resolution, s.last_requested = got, asked
+        s.last_max_resolution = s.max_resolution
         if 0 < got < asked:
             self.report({'INFO'}, "volscatter: the result grid has %d cells along its longest side, not the %d "
-                        "asked: a solver computes no finer than the source's voxels" % (got, asked))
+                        "asked: %s" % (got, asked, cap_cause(s.max_resolution, got)))
+
+
+def cap_cause(max_resolution, got):
+    """Why a result grid is coarser than asked: Max Resolution when it is set and the grid is
+    within a few cells of it (the solver's padding), else the source's voxels."""
+    if 0 < max_resolution and got <= max_resolution + 4:
+        return "Max Resolution reads the source at %d voxels at most (set it higher or to 0)" % max_resolution
+    return "a solver computes no finer than the source's voxels"
+
+
+def _fcurves(ob):
+    """The F-curves of `ob`'s action (Blender 5 keeps them in channelbags, 4.x on the action)."""
+    ad = ob.animation_data
+    act = ad.action if ad else None
+    if act is None:
+        return []
+    if hasattr(act, "fcurves"):
+        return list(act.fcurves)
+    out = []
+    for layer in act.layers:
+        for strip in layer.strips:
+            for bag in strip.channelbags:
+                out.extend(bag.fcurves)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import lpm_offer, mantaflow, operators, preview_dome, properties
+from . import live, lpm_offer, mantaflow, operators, preview_dome, properties, results
 
 
 def preset_rows(s):
@@ -29,7 +29,9 @@ def cap_note(s):
     """The panel's line about the last result's grid when the solver capped it below the
     resolution asked for (at the source's voxels), else None."""
     if 0 < s.last_resolution < s.last_requested:
-        return "Last result: %d cells (asked %d; capped at the source's voxels)" % (s.last_resolution, s.last_requested)
+        cause = ("capped by Max Resolution" if operators.cap_cause(s.last_max_resolution, s.last_resolution)
+                 .startswith("Max Resolution") else "capped at the source's voxels")
+        return "Last result: %d cells (asked %d; %s)" % (s.last_resolution, s.last_requested, cause)
     return None
 
 
@@ -49,6 +51,8 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         s = context.object.volscatter
+        for w in results.missing_warnings(context.object):
+            layout.label(text=w, icon='ERROR')
         col = layout.column()
         col.prop(s, "solver")
         col.prop(s, "quality")
@@ -78,11 +82,11 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         col.prop(s, "max_resolution")
         col.prop(s, "device")
         try:
-            note = operators.device_note(s.solver, s.device)
+            line = operators.device_line(s)
         except Exception:  # no library: the operators say why
-            note = None
-        if note:
-            col.label(text=note.replace("volscatter: ", "").capitalize(), icon='INFO')
+            line = None
+        if line:
+            col.label(text=line, icon='INFO')
         col.separator()
         col.prop(s, "use_frame_range")
         sub = col.column(align=True)
@@ -93,9 +97,6 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
         note = cap_note(s)
         if note:
             col.label(text=note, icon='INFO')
-        if s.solver == "auto" and s.last_choice:
-            # The pick's first clause ("auto picked pop preview: ...") fits a panel line.
-            col.label(text=s.last_choice.split(":")[0], icon='INFO')
         col.prop(s, "hide_original")
         offer = lpm_offer.offer(context.object, context)
         if offer:
@@ -106,8 +107,14 @@ class VOLSCATTER_PT_volume(bpy.types.Panel):
                 box.label(text=line, icon='INFO')
             box.operator("volscatter.use_lpm_streamed", icon='MOD_REMESH')
         row = layout.row(align=True)
+        row.prop(s, "live", toggle=True, icon='PLAY' if not s.live else 'PAUSE')
+        line = live.status(context.object) if s.live else ""
+        if line:
+            row.label(text=line)
+        row = layout.row(align=True)
         row.operator("volscatter.compute_scattering", icon='OUTLINER_DATA_VOLUME')
         row.operator("volscatter.render_preview", icon='RENDER_STILL')
+        layout.operator("volscatter.clean_up_results", icon='TRASH')
 
 
 classes = (VOLSCATTER_PT_volume,)

@@ -3,7 +3,7 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
 
-from . import native, scene_export
+from . import native
 
 # Blender 5 warns about "//" paths in properties that do not declare support for them (the
 # option does not exist in older versions).
@@ -19,6 +19,13 @@ _ITEMS = {}
 CUSTOM_FIELDS = (("grid_resolution", "grid_resolution"), ("iterations", "max_iterations"),
                  ("samples", "grid_spp"))
 CUSTOM = 'CUSTOM'
+
+
+def one_sentence(text):
+    """A registry help string as a tooltip: its first sentence, capitalised (not lower-casing
+    the rest, which holds names), without the closing full stop Blender adds."""
+    text = (text or "").strip().split(". ")[0].rstrip(".")
+    return text[:1].upper() + text[1:]
 
 
 def _registry_items(key, build):
@@ -40,7 +47,7 @@ def _solver_items(self, context):
     # In the registry's order; numbered as AUTO_NUMBER says.
     def build(solvers):
         rest = [s["name"] for s in solvers if s["name"] != "auto"]
-        return [(s["name"], s["label"], "%s (%s)" % (s["help"], scene_export.lights_note(s["lights"])),
+        return [(s["name"], s["label"], one_sentence(s["help"]),
                  AUTO_NUMBER if s["name"] == "auto" else rest.index(s["name"]))
                 for s in solvers]
     return _registry_items("solvers", build)
@@ -51,7 +58,7 @@ def _quality_items(self, context):
     # Custom after them.
     def build(solvers):
         presets = solvers[0]["presets"]
-        return [(p["name"].upper(), p["name"].title(), p["help"].capitalize(), i) for i, p in enumerate(presets)] + [
+        return [(p["name"].upper(), p["name"].title(), one_sentence(p["help"]), i) for i, p in enumerate(presets)] + [
             (CUSTOM, "Custom", "Use the values below", 100)]
     return _registry_items("quality", build)
 
@@ -133,6 +140,11 @@ def solver_settings(s):
     return out
 
 
+def _live_toggled(settings, context):
+    from . import live  # imported here: live imports this module
+    live.set_live(context, settings.id_data, settings.live)
+
+
 class VolscatterSettings(bpy.types.PropertyGroup):
     solver: EnumProperty(name="Solver", items=_solver_items, default=AUTO_NUMBER, update=_show_preset)
     # default 1: the registry's second preset, "preview" (the Custom fields' defaults below are
@@ -147,9 +159,8 @@ class VolscatterSettings(bpy.types.PropertyGroup):
     seed: IntProperty(name="Seed", default=0, min=0)
     device: EnumProperty(
         name="Device",
-        items=[('AUTO', "Auto", "A hardware GPU when one works, else the CPU (never a software GPU such as "
-                                "lavapipe, which is slower than the CPU)"),
-               ('GPU', "GPU", "Solve on the GPU, any adapter; if it fails, solve on the CPU with a warning"),
+        items=[('AUTO', "Auto", "A hardware GPU when one works, else the CPU"),
+               ('GPU', "GPU", "The GPU, any adapter, falling back to the CPU with a warning"),
                ('CPU', "CPU", "Solve on the CPU")],
         default='AUTO',
     )
@@ -161,6 +172,9 @@ class VolscatterSettings(bpy.types.PropertyGroup):
                            description="Last frame to compute (the scene's end until set)")
     output_dir: StringProperty(name="Output", subtype='DIR_PATH', default="//volscatter/", options=_BLEND_RELATIVE,
                                description="Folder for the scattering VDB files (unsaved files: the temp folder)")
+    live: BoolProperty(name="Live", default=False, update=_live_toggled,
+                       description="Solve again in the background whenever the lights, world, camera, volume or "
+                                   "frame change")
     hide_original: BoolProperty(name="Hide Original", default=True,
                                 description="Hide the source volume in renders once its scattering volume exists "
                                             "(the new volume carries its extinction)")
@@ -183,6 +197,12 @@ class VolscatterSettings(bpy.types.PropertyGroup):
     last_requested: IntProperty(name="Requested Resolution", default=0, options={'HIDDEN'})
     last_choice: StringProperty(name="Last Pick", default="", options={'HIDDEN'},
                                 description="What the Automatic solver picked for the last result, and why")
+    last_max_resolution: IntProperty(name="Max Resolution Used", default=0, options={'HIDDEN'},
+                                     description="Max Resolution when the last result was computed")
+    last_solver: StringProperty(name="Last Solver", default="", options={'HIDDEN'},
+                                description="The solver menu's choice for the last result")
+    last_device: StringProperty(name="Last Device", default="", options={'HIDDEN'},
+                                description="Where the last result was solved (CPU, GPU)")
 
     def solver_settings(self):
         """`solver_settings` of these settings: what Compute Scattering runs."""

@@ -487,15 +487,9 @@ def world_lights(scene, warnings):
     if not outs or not outs[0].inputs["Surface"].is_linked:
         return []
     node = outs[0].inputs["Surface"].links[0].from_node
-    if node.type != 'BACKGROUND':
-        warnings.append("world '%s': shader '%s' is not a Background node; the world light was left out"
-                        % (world.name, node.name))
-        return []
+    if node.type != 'BACKGROUND' or node.inputs["Strength"].is_linked:
+        return _baked_world(world, warnings)
     strength = node.inputs["Strength"]
-    if strength.is_linked:
-        warnings.append("world '%s': Background Strength is driven by a node; the world light was left out"
-                        % world.name)
-        return []
     s = float(strength.default_value)
     colsock = node.inputs["Color"]
     if s <= 0:
@@ -509,11 +503,22 @@ def world_lights(scene, warnings):
             path = _abs(img.filepath, img.library)
             if os.path.isfile(path):
                 return [{"type": "dome", "texture": path, "intensity": s}]
-        warnings.append("world '%s': only a constant colour or an unmapped equirectangular EXR environment "
-                        "texture is understood; the world light was left out" % world.name)
-        return []
+        return _baked_world(world, warnings)
     c = [float(v) * s for v in _rgb(colsock)]
     return [{"type": "dome", "color": c}] if max(c) > 0 else []
+
+
+def _baked_world(world, warnings):
+    """A world built from nodes (a Sky Texture, ...): rendered alone into a map for the dome
+    light, its sun disc as a distant light (world_bake.py)."""
+    from . import world_bake
+    try:
+        lights, _ = world_bake.bake(world)
+    except Exception as e:  # a bake that fails leaves the world out, said
+        warnings.append("world '%s': baking its nodes to an environment map failed (%s); the world light was "
+                        "left out" % (world.name, e))
+        return []
+    return lights
 
 
 def render_size(scene):
