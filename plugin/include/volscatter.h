@@ -83,9 +83,15 @@
 #define VS_AOV_BACKGROUND 4
 
 /**
+ * AOV bit for `vs_result_composite_aovs`: the `emission` layer (the medium's own emission
+ * seen directly; free, the march computes it anyway; part of the RGBA image).
+ */
+#define VS_AOV_EMISSION 8
+
+/**
  * Every AOV bit: what `vs_result_composite` makes.
  */
-#define VS_AOV_ALL ((VS_AOV_SINGLE | VS_AOV_MULTIPLE) | VS_AOV_BACKGROUND)
+#define VS_AOV_ALL (((VS_AOV_SINGLE | VS_AOV_MULTIPLE) | VS_AOV_BACKGROUND) | VS_AOV_EMISSION)
 
 /**
  * `vs_vdb_info_json` flag: also read every grid's tree for its statistics (bounding box,
