@@ -20,6 +20,7 @@ Used by test_agreement.py and by scripts/bench_reference.py.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import time
@@ -104,7 +105,7 @@ def cloud_density(n: int = 32) -> tuple:
 
 
 def scenes() -> dict:
-    """The three agreement scenes, keyed by name."""
+    """The agreement scenes, keyed by name."""
     sph, sv, s0 = sphere_density(32)
     cloud, cv, c0 = cloud_density(32)
     grid_cam = {"position": [0.3, -4.2, 0.6], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1],
@@ -114,6 +115,17 @@ def scenes() -> dict:
             name="sphere_point", density=sph, origin=(s0, s0, s0), voxel=sv,
             density_scale=2.5, albedo=[0.9, 0.75, 0.5], g=0.3,
             lights=[{"type": "point", "position": [0.3, -0.1, 0.2], "intensity": [3.0, 3.0, 3.0]}],
+            camera={"position": [0.0, -4.0, 0.0], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1],
+                    "fov_deg": 35.0, "width": 48, "height": 48},
+            spp_ours=1024, spp_mitsuba=1024),
+        # A sphere lamp inside the medium, its interior dark: Mitsuba's one-sided sphere emitter
+        # (docs/scene-format.md "Sphere lamps"). The pixels that see the lamp are masked
+        # (`lamp_mask`): Mitsuba draws it, volscatter's images do not.
+        "sphere_lamp": SceneSpec(
+            name="sphere_lamp", density=sph, origin=(s0, s0, s0), voxel=sv,
+            density_scale=2.5, albedo=[0.9, 0.75, 0.5], g=0.3,
+            lights=[{"type": "point", "position": [0.3, -0.1, 0.2], "intensity": [3.0, 3.0, 3.0],
+                     "radius": 0.25, "interior": "dark"}],
             camera={"position": [0.0, -4.0, 0.0], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1],
                     "fov_deg": 35.0, "width": 48, "height": 48},
             spp_ours=1024, spp_mitsuba=1024),
@@ -243,12 +255,21 @@ def mitsuba_dict(spec: SceneSpec, spp: int | None = None, max_depth: int = 1000)
                      "rfilter": {"type": "box"}, "pixel_format": "rgb"},
             "sampler": {"type": "independent", "sample_count": spp or spec.spp_mitsuba},
         },
+        "medium": medium,
         "medium_box": {"type": "cube", "to_world": cube_to_world, "bsdf": {"type": "null"},
-                       "interior": medium},
+                       "interior": {"type": "ref", "id": "medium"}},
     }
     for i, light in enumerate(spec.lights):
         if light["type"] == "distant":
             e = {"type": "directional", "direction": light["direction"], "irradiance": _rgb(light["irradiance"])}
+        elif light["type"] == "point" and light.get("radius", 0.0) > 0.0:
+            if light.get("interior", "dark") != "dark":
+                raise ValueError("Mitsuba's sphere emitter is one-sided: only a dark interior")
+            r = float(light["radius"])
+            # A transparent sphere in the medium whose surface emits I / (pi r^2) outwards.
+            e = {"type": "sphere", "center": light["position"], "radius": r, "bsdf": {"type": "null"},
+                 "interior": {"type": "ref", "id": "medium"}, "exterior": {"type": "ref", "id": "medium"},
+                 "emitter": {"type": "area", "radiance": _rgb([c / (math.pi * r * r) for c in light["intensity"]])}}
         elif light["type"] == "point":
             e = {"type": "point", "position": light["position"], "intensity": _rgb(light["intensity"])}
         elif light["type"] == "dome":
@@ -257,6 +278,36 @@ def mitsuba_dict(spec: SceneSpec, spp: int | None = None, max_depth: int = 1000)
             raise ValueError(f"no Mitsuba equivalent for light {light}")
         d[f"light_{i}"] = e
     return d
+
+
+def lamp_mask(spec: SceneSpec) -> np.ndarray:
+    """[height][width] True where a pixel may see a sphere lamp (its centre ray passes within the
+    lamp's radius plus two pixels' footprint): Mitsuba draws the lamp, volscatter does not."""
+    cam = spec.camera
+    w, h = cam["width"], cam["height"]
+    pos = np.array(cam["position"], dtype=np.float64)
+    fwd = np.array(cam["look_at"], dtype=np.float64) - pos
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, np.array(cam["up"], dtype=np.float64))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    t = math.tan(math.radians(cam["fov_deg"]) / 2.0)
+    ys, xs = np.mgrid[0:h, 0:w]
+    u = (2.0 * (xs + 0.5) / w - 1.0) * t
+    v = (1.0 - 2.0 * (ys + 0.5) / h) * t * h / w
+    d = fwd[None, None] + u[..., None] * right + v[..., None] * up
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    mask = np.zeros((h, w), dtype=bool)
+    for light in spec.lights:
+        r = light.get("radius", 0.0)
+        if light["type"] != "point" or r <= 0.0:
+            continue
+        c = np.array(light["position"], dtype=np.float64) - pos
+        along = d @ c
+        miss = np.linalg.norm(c[None, None] - along[..., None] * d, axis=-1)
+        pixel = 2.0 * t / w * np.linalg.norm(c)
+        mask |= miss < r + 2.0 * pixel
+    return mask
 
 
 def render_mitsuba(spec: SceneSpec, seed: int, spp: int | None = None, max_depth: int = 1000) -> np.ndarray:

@@ -91,7 +91,12 @@ def renders(workdir):
             ours = [layers["single"] + layers["background"] for layers in _cache[key]]
         else:
             ours = [layers["rgb"] for layers in _cache[key]]
-        return ours, _cache[key_m]
+        theirs = _cache[key_m]
+        mask = ms.lamp_mask(spec)
+        if mask.any():
+            ours = [np.where(mask[..., None], 0.0, img) for img in ours]
+            theirs = [np.where(mask[..., None], 0.0, img) for img in theirs]
+        return ours, theirs
 
     return get
 
