@@ -67,6 +67,11 @@ fn gpu_single_scattering_grid_matches_cpu() {
     check(&scene, "sun + dome");
     scene.lights = vec![volscatter_core::scene::Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.0, interior: Default::default() }];
     check(&scene, "point light");
+    // Sphere lamps inside the medium, both interiors (docs/scene-format.md "Sphere lamps").
+    for interior in [volscatter_core::scene::SphereInterior::Dark, volscatter_core::scene::SphereInterior::Lit] {
+        scene.lights = vec![volscatter_core::scene::Light::Point { position: Vec3::new(0.1, -0.2, 0.0), intensity: Vec3::new(3.0, 2.0, 1.0), radius: 0.3, interior }];
+        check(&scene, &format!("sphere lamp, {interior:?} interior"));
+    }
     // A spot with a blended cone and a disc light (8x8 VPLs with the cosine profile).
     use volscatter_core::scene::{AreaLight, AreaShape, Light, Spot};
     scene.lights = vec![
