@@ -281,13 +281,11 @@ def gpu_note() -> str:
 
 #: What a reader of a scene's table needs to know beyond its numbers.
 SCENE_NOTES = {
-    "smoke_point": "The camera sees the lamp's sphere in one pixel: our reference draws it, the solvers' "
-                   "composites do not, so that pixel is part of every solver's error. Every solver is darker than "
-                   "the reference here (docs/bench_strip_smoke_point.png), and so is Cycles (with Blender's soft "
-                   "falloff off, as the export assumes): how the reference treats a sphere lamp inside the medium is "
-                   "not yet checked against Mitsuba.",
-    "fire_smoke": "Cycles' error stops falling near 0.26: it and our reference disagree on this emission-lit scene "
-                  "(Cycles brighter), so the speed-ups here are bounds against Cycles' plateau.",
+    "smoke_point": "The lamp's interior is `lit`, as Cycles lights it and the add-on exports it (docs/scene-format.md "
+                   "\"Sphere lamps\"); the reference with a `dark` interior agrees with Mitsuba 3's one-sided sphere "
+                   "(BENCHMARKS.md `mitsuba-bench`). No renderer here draws the lamp itself.",
+    "fire_smoke": "Images hold the emission seen directly on both sides (the compositor, the reference and Cycles), "
+                  "so the errors compare like with like.",
 }
 
 
@@ -322,8 +320,7 @@ def markdown(meas: dict, note_gpu: str) -> str:
              f"up to {EXTRAPOLATE}x above its highest (16 spp) error; `>` where the solver's error is below its lowest, so "
              "only a bound (Cycles at 1024 spp is that much slower and still worse); `<` where it is higher "
              "still (Cycles at 16 spp is already better); `-` where a time cannot be said) / the solver's time; "
-             "above 1 the solver is faster. Where Cycles' error stops falling (dense_cloud: fireflies; "
-             "fire_smoke and smoke_point: it disagrees with our reference, its flux is 1.11x and 0.89x ours) "
+             "above 1 the solver is faster. Where Cycles' error stops falling (dense_cloud: fireflies) "
              "the speed-ups measure against that plateau. Grid error: relative RMSE of the solver's "
              "scattering grid against the reference's (`volscatter compare`, 32 cells along the longest side, "
              "128 paths per cell: its own noise is in it), at the preview preset only (`--grid preview`, a second "

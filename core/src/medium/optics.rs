@@ -107,8 +107,8 @@ pub fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
 
 /// How a lamp of radius `lamp` lights a point at distance `d` from its centre, per W/sr of its
 /// intensity: the point lamp's 1/d^2; for a sphere lamp (docs/scene-format.md) the solid angle
-/// its surface subtends times its radiance 1/(pi r^2), inside it nothing (`lit` false) or that
-/// radiance from every direction (`lit`: 4/r^2). `near` > 0 spreads the field over a ball of
+/// its surface subtends times its radiance 1/(pi r^2), inside it nothing (`lit` false) or its
+/// surface's value 2/r^2 (`lit`: half that radiance from every direction, as Cycles lights it). `near` > 0 spreads the field over a ball of
 /// that radius (a grid cell, a solver's near field); a lamp smaller than that is a ball too
 /// (`ball_mean_inverse_square`, which keeps the power: its inside cannot be resolved anyway).
 #[inline]
@@ -117,7 +117,7 @@ pub fn lamp_inverse_square(d: f32, lamp: f32, near: f32, lit: bool) -> f32 {
         return ball_mean_inverse_square(d, (lamp * lamp + near * near).sqrt());
     }
     if d < lamp {
-        return if lit { 4.0 / (lamp * lamp) } else { 0.0 };
+        return if lit { 2.0 / (lamp * lamp) } else { 0.0 };
     }
     let sin2 = (lamp * lamp / (d * d)).min(1.0);
     // 1 - cos of the subtended half-angle, by its series where it would cancel.
@@ -168,7 +168,7 @@ mod tests {
         assert!((lamp_inverse_square(100.0, r, 0.0, false) * 1e4 - 1.0).abs() < 1e-4);
         assert!((lamp_inverse_square(r, r, 0.0, false) - 2.0 / (r * r)).abs() < 1e-5);
         assert_eq!(lamp_inverse_square(0.3, r, 0.0, false), 0.0);
-        assert!((lamp_inverse_square(0.3, r, 0.0, true) - 4.0 / (r * r)).abs() < 1e-5);
+        assert!((lamp_inverse_square(0.3, r, 0.0, true) - 2.0 / (r * r)).abs() < 1e-5);
         assert_eq!(lamp_inverse_square(2.0, 0.0, 0.0, true), 0.25);
         assert!((lamp_inverse_square(0.3, 0.1, 0.2, false) - ball_mean_inverse_square(0.3, (0.05f32).sqrt())).abs() < 1e-5);
         // Exact: 2 (1 - cos(asin(r/d))) / r^2 at d = 2r is (2 - sqrt 3) * 2 / r^2 = 2.1436.

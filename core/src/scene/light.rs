@@ -31,8 +31,9 @@ pub enum SphereInterior {
     /// so the lamp's power is exactly 4 pi I.
     #[default]
     Dark,
-    /// The surface's radiance from every direction, as Cycles lights points inside a point
-    /// lamp of non-zero radius (Blender exports this): light added inside the sphere.
+    /// Half the surface's radiance from every direction (fluence 2 I / r^2, the surface's own
+    /// value): what Cycles gives points inside a point lamp of non-zero radius (measured on the
+    /// benchmark's smoke_point; Blender exports this). Light added inside the sphere.
     Lit,
 }
 

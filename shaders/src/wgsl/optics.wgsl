@@ -39,13 +39,13 @@ fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
 }
 
 // medium::optics::lamp_inverse_square: a point lamp's 1/d^2, a sphere lamp's field (its interior
-// dark, or lit at 4/r^2), spread over a ball of radius `near`.
+// dark, or lit at its surface's 2/r^2), spread over a ball of radius `near`.
 fn lamp_inverse_square(d: f32, lamp: f32, near: f32, lit: bool) -> f32 {
     if (lamp <= near) {
         return ball_mean_inverse_square(d, sqrt(lamp * lamp + near * near));
     }
     if (d < lamp) {
-        return select(0.0, 4.0 / (lamp * lamp), lit);
+        return select(0.0, 2.0 / (lamp * lamp), lit);
     }
     let sin2 = min(lamp * lamp / (d * d), 1.0);
     var one_minus_cos = 1.0 - sqrt(1.0 - sin2);

@@ -152,7 +152,7 @@ impl<'a> Tracer<'a> {
 
     /// Next-event estimate of a point (radius 0) or sphere light of intensity `intensity`: the
     /// sphere's surface has radiance I / (pi r^2); from inside, `interior` decides
-    /// (docs/scene-format.md): nothing, or that radiance from every direction.
+    /// (docs/scene-format.md): nothing, or half that radiance from every direction.
     #[allow(clippy::too_many_arguments)]
     fn point_light(&self, x: Vec3, d: Vec3, position: Vec3, intensity: Vec3, radius: f32, interior: SphereInterior, rng: &mut Rng) -> Vec3 {
         let to = position - x;
@@ -176,11 +176,12 @@ impl<'a> Tracer<'a> {
             if interior == SphereInterior::Dark {
                 return Vec3::ZERO;
             }
-            // Inside a lit sphere: uniform over all directions, to the surface ahead.
+            // Inside a lit sphere: half the surface's radiance from every direction (fluence
+            // 2 I / r^2, the surface's own value), uniform over directions, to the surface ahead.
             let wi = uniform_sphere(rng.pair());
             let b = wi.dot(to);
             let t_hit = b + (b * b - dist2 + radius * radius).max(0.0).sqrt();
-            let radiance = intensity / (PI * radius * radius);
+            let radiance = intensity / (2.0 * PI * radius * radius);
             radiance * (4.0 * PI) * hg(wi.dot(d), self.phase.g) * self.transmittance(x, wi, t_hit, rng)
         } else if dist > 1e-6 {
             let wi = to / dist;

@@ -2,7 +2,7 @@
 //! a lamp of radius R, its S at distances inside and outside the sphere against the closed
 //! form of docs/scene-format.md ("Sphere lamps"): S = sigma_s I q(d) / 4 pi (g = 0) with q
 //! the solid angle of the surface times 1/(pi R^2) outside, and inside nothing (`dark`) or
-//! 4/R^2 (`lit`), times the transmittance along the way.
+//! 2/R^2 (`lit`), times the transmittance along the way.
 
 use glam::Vec3;
 
@@ -61,7 +61,7 @@ fn probed_solvers() -> Vec<&'static crate::solvers::settings_table::SolverEntry>
 /// Bounds, the same for every solver (measured: inside within 0.006 of the model for all six,
 /// both interiors; shells 0.3-8% high): ~2-3% of S is multiple scattering, which the closed
 /// form leaves out; the near shell is within 1.5 coarse cells of the surface, where a grid's
-/// interpolation mixes in the interior (2/R^2 outside against 4/R^2 or 0 inside).
+/// interpolation mixes in the interior (from 2/R^2 at the surface to 0 inside, when dark).
 const INSIDE_TOLERANCE: f64 = 0.03;
 const NEAR_TOLERANCE: f64 = 0.10;
 const FAR_TOLERANCE: f64 = 0.05;

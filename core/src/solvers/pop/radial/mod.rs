@@ -223,7 +223,7 @@ pub fn solve_sources(
         let r_clamp = e.clamp_radius.max(e.radius).max(CELL_MEAN_RADIUS * merged_spacing);
         // Inside a sphere light the radial grid has no cells: its interior is the light's model.
         let interior = (e.radius > 0.0 && e.radius >= CELL_MEAN_RADIUS * merged_spacing).then(|| {
-            let lit = e.intensity / (std::f32::consts::PI * e.radius * e.radius);
+            let lit = e.intensity / (2.0 * std::f32::consts::PI * e.radius * e.radius);
             (e.radius, if e.lit_interior { lit } else { Vec3::ZERO })
         });
         lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp, interior });
