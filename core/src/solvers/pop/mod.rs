@@ -190,7 +190,7 @@ impl Pop {
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
                     let weights = if s.dome_importance {
-                        let build = || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction);
+                        let build = || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction, progress);
                         Some(timings.time("pop importance", || match (reuse.as_deref_mut(), &key) {
                             (Some(r), Some(k)) => r.importance(k, scene.camera.position, s.diffusion_correction, build),
                             _ => build().map(std::sync::Arc::new),
@@ -230,6 +230,10 @@ impl Pop {
             _ => None,
         };
         for (direction, fluence, a0, resolution) in distant {
+            // Each ordinate's grid and sweep take a core tenths of a second at high resolutions.
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             if fluence.max_element() <= 0.0 {
                 continue;
             }
@@ -295,6 +299,9 @@ impl Pop {
             timings.0.push(("pop residuum".into(), t0.elapsed().as_secs_f64()));
             report.residuum = Some(rep);
             lights.push((grid, light));
+        }
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
         }
         let mut merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
         // --- local lights (radial/) ---
