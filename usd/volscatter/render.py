@@ -107,7 +107,8 @@ class FrameSessions:
 def frame_path(pattern: str, frame: float) -> str:
     """``out.####.exr`` -> ``out.0012.exr``; ``out_{frame}.exr`` / ``out_{frame:04d}.exr`` ->
     Python formatting with the (integer when whole) frame number."""
-    f = int(frame) if float(frame).is_integer() else frame
+    # An int stays exact (a float would name frame 2**63 - 1 ...808).
+    f = frame if isinstance(frame, int) else int(frame) if float(frame).is_integer() else frame
     if "{frame" in pattern:
         return pattern.format(frame=f)
     m = re.search(r"#+", pattern)
@@ -278,9 +279,52 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
     src_stage = stage_mod.open_stage(stage_path)
     out_layer = os.path.abspath(out_layer)
     out_dir = os.path.dirname(out_layer)
-    os.makedirs(out_dir, exist_ok=True)
+    _check_layer_path(out_layer, Sdf)
+    _ensure_dir(out_dir, "--out-layer")
     if os.path.abspath(stage_path) == out_layer:
         raise VolscatterError("--out-layer must not be the stage itself", 2)
+    # Every VDB this bake writes is removed again if the bake fails or is cancelled before its
+    # layer is saved: a VDB no layer points to is only clutter.
+    made: List[str] = []
+    try:
+        return _bake_into(stage_path, src_stage, out_layer, out_dir, times, camera, solver, settings, width, height,
+                          light_convention, medium_defaults, progress, warn, sessions, made)
+    except BaseException:
+        for f in made:
+            try:
+                os.remove(f)
+            except OSError:
+                pass
+        raise
+
+
+def _check_layer_path(out_layer: str, Sdf):
+    """Before anything is solved: a layer format USD writes, at a path that can be a file."""
+    ext = os.path.splitext(out_layer)[1].lstrip(".")
+    if not ext or not Sdf.FileFormat.FindByExtension(ext) or ext == "usdz":
+        raise VolscatterError(f"--out-layer {out_layer}: not a USD layer USD can write (.usda, .usdc or .usd)", 2)
+    if os.path.exists(out_layer) and not os.path.isfile(out_layer):
+        raise VolscatterError(f"--out-layer {out_layer}: exists and is not a regular file", 2)
+
+
+def _ensure_dir(d: str, what: str):
+    """Creates folder ``d`` (and its parents) or says, naming it, why it cannot: a file on the
+    way, or no permission to create or write in it."""
+    for a in [d, *Path(d).parents]:
+        if os.path.exists(a) and not os.path.isdir(a):
+            raise VolscatterError(f"{what}: {a} is a file, not a folder", 2)
+    try:
+        os.makedirs(d, exist_ok=True)
+    except OSError as e:
+        raise VolscatterError(f"{what}: cannot create the folder {d}: {e.strerror}", 6)
+    if not os.access(d, os.W_OK):
+        raise VolscatterError(f"{what}: the folder {d} is not writable", 6)
+
+
+def _bake_into(stage_path, src_stage, out_layer, out_dir, times, camera, solver, settings, width, height,
+               light_convention, medium_defaults, progress, warn, sessions, made: List[str]) -> BakeResult:
+    """``bake``'s solves and writes, after its checks; appends each file it writes to ``made``."""
+    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
     times = list(times) if times else [None]
     animated = len(times) > 1
     stem = Path(out_layer).stem
@@ -313,7 +357,7 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             doc = sc.scene_json(volume=vi, width=width, height=height)
             name = f"{stem}.{_safe_name(v.path)}"
             if animated and t is not None:
-                name += f".{int(t) if float(t).is_integer() else t}"
+                name += f".{t if isinstance(t, int) else int(t) if float(t).is_integer() else t}"
             fname = f"{name}.vdb"
             with native_scene(doc, solver, settings) as scene, sessions.solve(scene, progress, v.path) as result:
                 rgb = result.rgb()
@@ -325,6 +369,7 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             grids = [("scatter", rgb), ("scattering_r", rgb[..., 0]), ("scattering_g", rgb[..., 1]),
                      ("scattering_b", rgb[..., 2])]
             i2l_flat = i2l.reshape(-1).tolist()
+            made.append(os.path.join(out_dir, fname))
             try:
                 write_vdb(os.path.join(out_dir, fname), grids, i2l_flat,
                           copies=[("density", v.vdb_path, v.field_name or "density")])
@@ -343,7 +388,20 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             written.setdefault(v.path, []).append(os.path.join(out_dir, fname))
             per_volume.setdefault(v.path, []).append((t, fname, v, bool(copied)))
 
-    # the layer
+    # the layer: built in memory, then saved (a failed save is an error naming the file, and
+    # the bake's VDBs are removed by `bake`)
+    try:
+        return _write_layer(stage_path, src_stage, out_layer, out_dir, solver, per_volume, animated, written,
+                            all_warnings)
+    except Exception as e:  # pxr raises Tf.ErrorException; the file system OSError
+        if isinstance(e, VolscatterError):
+            raise
+        msg = str(e).strip().splitlines()[-1].strip() if str(e).strip() else type(e).__name__
+        raise VolscatterError(f"--out-layer {out_layer}: could not write the layer: {msg}", 6) from None
+
+
+def _write_layer(stage_path, src_stage, out_layer, out_dir, solver, per_volume, animated, written, all_warnings):
+    from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdVol
     if os.path.exists(out_layer):
         os.remove(out_layer)
     layer_stage = Usd.Stage.CreateNew(out_layer)
@@ -415,5 +473,6 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
             "extinction = density_scale * density per metre")
         UsdShade.MaterialBindingAPI.Apply(vprim).Bind(mat)
         vprim.CreateAttribute("volscatter:bakedSolver", Sdf.ValueTypeNames.String, custom=True).Set(solver)
-    layer_stage.GetRootLayer().Save()
+    if not layer_stage.GetRootLayer().Save():
+        raise VolscatterError(f"--out-layer {out_layer}: USD could not save the layer", 6)
     return BakeResult(layer=out_layer, vdbs=written, warnings=all_warnings)

@@ -4,6 +4,7 @@ mod compare;
 mod gpu_info;
 mod progress;
 mod render;
+mod signals;
 mod solvers;
 mod vdb_info;
 
@@ -58,6 +59,7 @@ enum Command {
 pub fn main() -> i32 {
     let cli = Cli::parse();
     volscatter_core::budget::set_budget(cli.memory_budget);
+    signals::install();
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Compare(args) => compare::run(args),
@@ -65,6 +67,11 @@ pub fn main() -> i32 {
         Command::GpuInfo => gpu_info::run(),
         Command::VdbInfo(args) => vdb_info::run(args),
     };
+    if let Some(sig) = signals::received() {
+        // The command stopped at the signal (its solve cancelled, no output begun after it).
+        eprintln!("\nvolscatter: stopped by {}", signals::name(sig));
+        return signals::exit_status(sig);
+    }
     match result {
         Ok(()) => 0,
         Err(e) => {

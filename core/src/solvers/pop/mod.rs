@@ -211,9 +211,7 @@ impl Pop {
         }
         let mut local = radial::sources(&scene.lights, s.area_vpls);
         local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
-        if distant.is_empty() && local.is_empty() {
-            return Err(Error::InvalidArgument("pop: the scene has no light pop can propagate (distant, dome with ordinates, point, spot, area, or an emissive medium)".into()));
-        }
+        // No light: black, as every other solver returns (the merge of no lights is zero).
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);
         }
