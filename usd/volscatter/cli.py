@@ -42,7 +42,7 @@ class ProgressBar:
         self.cancelled = False
 
     def __call__(self, stage: str, fraction: float):
-        if self.cancelled:
+        if self.cancelled or _STOPPED_BY:
             return False
         if not self.enabled:
             return True
@@ -90,8 +90,12 @@ def run_cancellable(fn, bar: ProgressBar):
     t = threading.Thread(target=work, name="volscatter-usd", daemon=True)
     t.start()
     try:
-        while not done.wait(0.2):
-            pass
+        _WAITING.set()
+        try:
+            while not done.wait(0.2):
+                pass
+        finally:
+            _WAITING.clear()
     except KeyboardInterrupt:
         # The next progress callback answers "stop". The library calls it at least every
         # 100 ms, so the worker normally returns at once; if it does not within
@@ -388,15 +392,29 @@ class Stopped(KeyboardInterrupt):
         self.signum = signum
 
 
+#: the signals received (first first): every progress callback then cancels, even when the
+#: exception the handler raised was swallowed (by an import inside pxr, say)
+_STOPPED_BY: List[int] = []
+
+
+#: whether the main thread is only waiting for the worker (run_cancellable): the one place a
+#: signal's exception is raised. Elsewhere it could land inside pxr's C++ (an import, a stage
+#: read), which aborts on a Python exception; there the flag alone cancels at the next callback.
+_WAITING = threading.Event()
+
+
 def _raise_stopped(signum, _frame):
-    raise Stopped(signum)
+    _STOPPED_BY.append(signum)
+    if _WAITING.is_set():
+        raise Stopped(signum)
 
 
 def _install_signals():
     import signal
     if threading.current_thread() is not threading.main_thread():
         return  # handlers can only be set from the main thread (a host calling main() elsewhere)
-    for name in ("SIGTERM", "SIGHUP"):
+    # SIGINT too: a shell starts background jobs with it ignored, and a farm may send it.
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), _raise_stopped)
 
@@ -405,17 +423,26 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     _install_signals()
     try:
-        return {"render": cmd_render, "bake": cmd_bake, "info": cmd_info}[args.command](args)
+        code = {"render": cmd_render, "bake": cmd_bake, "info": cmd_info}[args.command](args)
     except VolscatterError as e:
+        if _STOPPED_BY:  # the solve was cancelled by a signal whose exception did not reach here
+            return _interrupted(_STOPPED_BY[0])
         sys.stderr.write(f"{PROG}: error: {e.message}\n")
         # Bad input (arguments, settings) exits 2 as argparse's usage errors do; others 1.
         return 2 if e.status == STATUS_INVALID_ARGUMENT else 1
     except KeyboardInterrupt as e:
-        # 128 + the signal's number, as a shell reports a process the signal ended.
         import signal
-        signum = getattr(e, "signum", signal.SIGINT)
-        sys.stderr.write(f"{PROG}: interrupted by {signal.Signals(signum).name}\n")
-        return 128 + int(signum)
+        return _interrupted(getattr(e, "signum", signal.SIGINT))
+    if _STOPPED_BY:  # a signal whose exception was swallowed, after the work ended
+        return _interrupted(_STOPPED_BY[0])
+    return code
+
+
+def _interrupted(signum: int) -> int:
+    """128 + the signal's number, as a shell reports a process the signal ended."""
+    import signal
+    sys.stderr.write(f"{PROG}: interrupted by {signal.Signals(signum).name}\n")
+    return 128 + int(signum)
 
 
 if __name__ == "__main__":  # pragma: no cover
