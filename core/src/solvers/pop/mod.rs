@@ -212,7 +212,8 @@ impl Pop {
         let mut local = radial::sources(&scene.lights, s.area_vpls);
         local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
         // The cost guard: a radial grid per source, so thousands are merged (radial/cluster.rs).
-        let (local, merged_note) = radial::cluster::cluster(local, radial::cluster::MAX_SOURCES);
+        let (mlo, mhi) = medium.world_bounds();
+        let (local, merged_note) = radial::cluster::cluster(local, radial::cluster::MAX_SOURCES, |p| p.cmpge(mlo).all() && p.cmple(mhi).all());
         report.warnings.extend(merged_note);
         // No light: black, as every other solver returns (the merge of no lights is zero).
         if !progress.update("pop setup", 0.0) {

@@ -13,10 +13,16 @@ use glam::{UVec3, Vec3};
 use super::RadialSource;
 use crate::translate::emitters::Profile;
 
-/// Radial sources a solve propagates one by one; more are merged. At pop's defaults a source
-/// costs about as much as a distant light's ordinate (docs/solvers/pop.md), so 64 keeps a
-/// scene within ~10x its preset's median (BENCHMARKS.md, "Cost guard").
-pub const MAX_SOURCES: usize = 64;
+/// The radial work a solve takes on before merging, in sources outside the medium. At pop's
+/// defaults on a 32^3 plume such a source costs about a quarter of the plume's whole solve
+/// under a sun, so 24 keeps a scene within ~10x its preset's median (BENCHMARKS.md, "Cost
+/// guard on extreme scenes").
+pub const MAX_SOURCES: usize = 24;
+
+/// A source inside the medium's box costs this many outside ones: its grid's shells cross
+/// the whole medium from within, and the light diffuses through them for many more
+/// iterations (measured: 64 point lights inside the plume took over 90 s, 64 above it 18 s).
+pub const INSIDE_COST: usize = 6;
 
 /// The fraction of a source's power an isotropic emitter of the same intensity would emit.
 fn power_fraction(p: &Profile) -> f32 {
@@ -30,38 +36,40 @@ fn power_fraction(p: &Profile) -> f32 {
     }
 }
 
-/// `sources`, merged into at most `max` when there are more (see the module docs), and the
+/// `sources`, merged when their cost (one a source, `INSIDE_COST` for one where `inside` says
+/// so) is over `max` into groups whose cost is at most `max` (see the module docs), and the
 /// note saying what was done (None when nothing was merged).
-pub fn cluster(sources: Vec<RadialSource>, max: usize) -> (Vec<RadialSource>, Option<String>) {
+pub fn cluster(sources: Vec<RadialSource>, max: usize, inside: impl Fn(Vec3) -> bool) -> (Vec<RadialSource>, Option<String>) {
     let max = max.max(1);
-    if sources.len() <= max {
+    let cost = |p: Vec3| if inside(p) { INSIDE_COST } else { 1 };
+    if sources.iter().map(|s| cost(s.position)).sum::<usize>() <= max {
         return (sources, None);
     }
     let (lo, hi) = sources.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), s| (l.min(s.position), h.max(s.position)));
     let extent = (hi - lo).max(Vec3::splat(1e-6));
     // The finest grid (cells per axis, the same cell size on every axis) that leaves at most
     // `max` occupied cells; occupancy grows with the resolution, so bisect on it.
-    let cells_of = |n: u32| -> Vec<u32> {
+    // The cost of the groups at `n` cells along the longest axis: a merged group sits at its
+    // centroid, which is inside when most of its power is.
+    let cost_at = |n: u32| -> usize {
         let h = extent.max_element() / n as f32;
         let dims = (extent / h).ceil().as_uvec3().max(UVec3::ONE);
-        let mut keys: Vec<u32> = sources
-            .iter()
-            .map(|s| {
-                let c = ((s.position - lo) / h).floor().as_uvec3().min(dims - 1);
-                c.x + dims.x * (c.y + dims.y * c.z)
-            })
-            .collect();
-        keys.sort_unstable();
-        keys.dedup();
-        keys
+        let mut groups: std::collections::BTreeMap<u32, (Vec3, usize)> = std::collections::BTreeMap::new();
+        for s in &sources {
+            let c = ((s.position - lo) / h).floor().as_uvec3().min(dims - 1);
+            let g = groups.entry(c.x + dims.x * (c.y + dims.y * c.z)).or_insert((Vec3::ZERO, 0));
+            g.0 += s.position;
+            g.1 += 1;
+        }
+        groups.values().map(|(sum, k)| cost(*sum / *k as f32)).sum()
     };
     let (mut good, mut bad) = (1u32, 1024u32);
-    if cells_of(bad).len() <= max {
+    if cost_at(bad) <= max {
         good = bad;
     }
     while bad - good > 1 {
         let mid = (good + bad) / 2;
-        if cells_of(mid).len() <= max {
+        if cost_at(mid) <= max {
             good = mid;
         } else {
             bad = mid;
@@ -126,7 +134,7 @@ mod tests {
         let lights: Vec<RadialSource> = (0..10_000).map(|k| point(Vec3::new((k % 100) as f32 * 0.1, (k / 100) as f32 * 0.1, 2.0), 1.0 + (k % 7) as f32)).collect();
         let power: Vec3 = lights.iter().map(|s| s.emitter.intensity).sum();
         let centre: Vec3 = lights.iter().map(|s| s.position * s.emitter.intensity.x).sum::<Vec3>() / power.x;
-        let (out, note) = cluster(lights, MAX_SOURCES);
+        let (out, note) = cluster(lights, MAX_SOURCES, |_| false);
         assert!(out.len() <= MAX_SOURCES && out.len() >= MAX_SOURCES / 4, "{} sources", out.len());
         assert!(note.unwrap().contains("10000 local light sources"));
         let p2: Vec3 = out.iter().map(|s| s.emitter.intensity).sum();
@@ -136,8 +144,11 @@ mod tests {
         assert!(c2.distance(centre) < 1e-3, "{c2} vs {centre}");
         assert!(out.iter().all(|s| s.emitter.clamp_radius > 0.0 && s.emitter.clamp_radius < 2.0));
         let few: Vec<RadialSource> = (0..MAX_SOURCES).map(|k| point(Vec3::splat(k as f32), 1.0)).collect();
-        let (same, note) = cluster(few, MAX_SOURCES);
+        let (same, note) = cluster(few.clone(), MAX_SOURCES, |_| false);
         assert_eq!(same.len(), MAX_SOURCES);
         assert!(note.is_none());
+        // The same lights inside the medium cost INSIDE_COST each: merged to fit.
+        let (inside, note) = cluster(few, MAX_SOURCES, |_| true);
+        assert!(inside.len() * INSIDE_COST <= MAX_SOURCES && note.is_some(), "{} sources", inside.len());
     }
 }
