@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchlib import camera, log, publish, require_volscatter, table, usable_cores, utc_now
+from benchlib import camera, log, publish, read_section, require_volscatter, table, usable_cores, utc_now
 
 CAM = camera([0, -4.5, 0.4], 40, 128, 128)
 SUN = {"type": "distant", "direction": [-0.5, 0.6, -0.62], "irradiance": 4.0}
@@ -111,6 +111,10 @@ def main() -> None:
                 ratio = f"> {args.limit / median:.0f}" if t is None else f"{t / median:.1f}"
                 flag = "" if t is not None and t <= 10 * median else " **over 10x**"
                 rows.append(f"| `{solver}` | {name} | {median:.1f} | {shown} | {ratio}{flag} | {notes[:160] or '-'} |")
+    # Rows of solvers not run this time are kept from the last run (--solvers reruns some).
+    old = read_section("cost-guard") or ""
+    kept = [r for r in old.splitlines() if r.startswith("| `") and r.split("`")[1] not in solvers]
+    rows = kept + rows
     lines = [f"Each solver at its default settings, `--device cpu`, 128 x 128 pixels, media of at most 32^3 voxels; "
              f"written by `scripts/bench_cost_guard.py` on {utc_now()} ({usable_cores()} cores, shared). The median is "
              f"over the ordinary scenes ({', '.join(ORDINARY)}); the aim is every extreme scene within 10x of it. "
