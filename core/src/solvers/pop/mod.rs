@@ -209,12 +209,12 @@ impl Pop {
                 )),
             }
         }
-        let mut local = radial::sources(&scene.lights, s.area_vpls);
-        local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
-        // The cost guard: a radial grid per source, so thousands are merged (radial/cluster.rs).
+        // The cost guard: a radial grid per source, so thousands of the scene's are merged
+        // (radial/cluster.rs); the emission VPLs are as many as the settings ask for.
         let (mlo, mhi) = medium.world_bounds();
-        let (local, merged_note) = radial::cluster::cluster(local, radial::cluster::MAX_SOURCES, |p| p.cmpge(mlo).all() && p.cmple(mhi).all());
+        let (mut local, merged_note) = radial::cluster::cluster(radial::sources(&scene.lights, s.area_vpls), radial::cluster::MAX_SOURCES, |p| p.cmpge(mlo).all() && p.cmple(mhi).all());
         report.warnings.extend(merged_note);
+        local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
         // No light: black, as every other solver returns (the merge of no lights is zero).
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);
