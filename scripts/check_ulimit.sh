@@ -2,7 +2,10 @@
 # Issue 22's acceptance check: under `ulimit -v 4194304` (4 GiB of address space) no input of
 # under 1 MB may make the CLI (or the USD host) abort, panic or hang. Runs every file of
 # tests/corpus, plus the compute-side cases of the issue built here as scenes, each in its own
-# process with a wall-clock limit, and prints one line per case:
+# process with a wall-clock limit; then SIGINT, SIGTERM and SIGHUP sent to the CLI and the USD
+# host mid-solve (each must exit 128 + n with no output and no scratch file left: verdicts
+# EXIT(rc), OUTPUT, LEFTOVERS), and a session whose progress callback reads its frame count and
+# solves on its own session (must answer VS_STATUS_BUSY, never hang). One line per case:
 #   ok       exit 0
 #   error    exit 1, or 2 for bad arguments (a clean refusal: the message's first line is shown)
 #   PANIC    exit 101 (a Rust panic reached main)
@@ -55,7 +58,7 @@ run() {
         124) verdict=TIMEOUT ;;
         *) if [ $rc -gt 128 ]; then verdict="ABORT(signal $((rc - 128)))"; else verdict="exit $rc"; fi ;;
     esac
-    # The USD host exits 1 on a clean error and 130 on Ctrl-C; a traceback is never clean.
+    # The USD host exits 1 on a clean error, 2 on bad arguments; a traceback is never clean.
     if [ "$verdict" = error ] && grep -q '^Traceback' "$out"; then verdict=TRACEBACK; fi
     case $verdict in ok | error) ;; *) BAD=1 ;; esac
     printf '%-10s %-45s %s\n' "$verdict" "$name" "$first"
