@@ -2,9 +2,12 @@
 # Issue 22's acceptance check: under `ulimit -v 4194304` (4 GiB of address space) no input of
 # under 1 MB may make the CLI (or the USD host) abort, panic or hang. Runs every file of
 # tests/corpus, plus the compute-side cases of the issue built here as scenes, each in its own
-# process with a wall-clock limit, and prints one line per case:
+# process with a wall-clock limit; then SIGINT, SIGTERM and SIGHUP sent to the CLI and the USD
+# host mid-solve (each must exit 128 + n with no output and no scratch file left: verdicts
+# EXIT(rc), OUTPUT, LEFTOVERS), and a session whose progress callback reads its frame count and
+# solves on its own session (must answer VS_STATUS_BUSY, never hang). One line per case:
 #   ok       exit 0
-#   error    exit 1 (a clean refusal: the message's first line is shown)
+#   error    exit 1, or 2 for bad arguments (a clean refusal: the message's first line is shown)
 #   PANIC    exit 101 (a Rust panic reached main)
 #   ABORT    killed by a signal (allocation failure aborts with SIGABRT; SIGSEGV, SIGKILL)
 #   TIMEOUT  still running after the limit (a hang, or work that cannot end)
@@ -50,12 +53,12 @@ run() {
     local verdict
     case $rc in
         0) verdict=ok ;;
-        1) verdict=error ;;
+        1 | 2) verdict=error ;;
         101) verdict=PANIC ;;
         124) verdict=TIMEOUT ;;
         *) if [ $rc -gt 128 ]; then verdict="ABORT(signal $((rc - 128)))"; else verdict="exit $rc"; fi ;;
     esac
-    # The USD host exits 1 on a clean error and 130 on Ctrl-C; a traceback is never clean.
+    # The USD host exits 1 on a clean error, 2 on bad arguments; a traceback is never clean.
     if [ "$verdict" = error ] && grep -q '^Traceback' "$out"; then verdict=TRACEBACK; fi
     case $verdict in ok | error) ;; *) BAD=1 ;; esac
     printf '%-10s %-45s %s\n' "$verdict" "$name" "$first"
@@ -113,6 +116,77 @@ if [ $USD = 1 ]; then
     else
         echo "skipped     (pxr is not importable by $PY)"
     fi
+fi
+
+# signal NAME SIG N TMP OUT CMD...: starts CMD (TMPDIR=TMP) under the limits, sends SIG after
+# 2 s, and expects exit 128 + N within 20 s, OUT not written and TMP empty (scratch files).
+signal_case() {
+    local name=$1 sig=$2 n=$3 tmp=$4 outfile=$5
+    shift 5
+    mkdir -p "$tmp"
+    (ulimit -v 4194304; TMPDIR="$tmp" exec "$@") >/dev/null 2>"$WORK/stderr" </dev/null &
+    local pid=$!
+    sleep 2
+    kill "-$sig" $pid 2>/dev/null
+    local waited=0
+    while kill -0 $pid 2>/dev/null && [ $waited -lt 200 ]; do sleep 0.1; waited=$((waited + 1)); done
+    local verdict rc
+    if kill -0 $pid 2>/dev/null; then
+        kill -KILL $pid 2>/dev/null
+        wait $pid 2>/dev/null
+        verdict=TIMEOUT
+    else
+        wait $pid
+        rc=$?
+        if [ $rc -ne $((128 + n)) ]; then verdict="EXIT($rc)"
+        elif [ -n "$(ls -A "$tmp")" ]; then verdict=LEFTOVERS
+        elif [ -e "$outfile" ]; then verdict=OUTPUT
+        elif grep -q '^Traceback\|panicked' "$WORK/stderr"; then verdict=TRACEBACK
+        else verdict=ok; fi
+    fi
+    [ "$verdict" = ok ] || BAD=1
+    printf '%-10s %-45s %s\n' "$verdict" "$name" "$(grep -v XDG_RUNTIME_DIR "$WORK/stderr" | tail -n 1 | head -c 200)"
+}
+
+echo "# signals during a solve: cancelled, exit 128 + n, no output, no scratch file"
+LONG_OOC=$(scene long_ooc "{\"format\": 1, \"medium\": {\"procedural\": \"plume\", \"dims\": [48], \"density_scale\": 10, \"albedo\": 0.99}, \"lights\": [$SUN], $SMALL, \"solver\": {\"name\": \"lpm\", \"out_of_core\": true, \"first_order\": \"boundary\", \"grid_resolution\": 48, \"max_orders\": 100000, \"epsilon\": 1e-12}}")
+for s in "INT 2" "TERM 15" "HUP 1"; do
+    set -- $s
+    signal_case "CLI lpm out of core, SIG$1" "$1" "$2" "$WORK/tmp-$1" "$WORK/sig.exr" "$BIN" render "$LONG_OOC" --out "$WORK/sig.exr" -q --device cpu
+done
+if [ $USD = 1 ] && "$PY" -c "import pxr" 2>/dev/null; then
+    for s in "INT 2" "TERM 15" "HUP 1"; do
+        set -- $s
+        signal_case "USD host reference, SIG$1" "$1" "$2" "$WORK/tmp-usd-$1" "$WORK/usd-sig.exr" env PYTHONPATH="$ROOT/usd" VOLSCATTER_LIB="${VOLSCATTER_LIB:-$(dirname "$BIN")/libvolscatter.so}" "$PY" -m volscatter render tests/corpus/usd/base.usda --solver reference --spp 1000000 --width 64 --out "$WORK/usd-sig.exr" -q
+    done
+fi
+
+echo "# sessions: a progress callback that reads its own session's frame count and solves on it"
+if [ $USD = 1 ]; then
+    cat >"$WORK/session.py" <<'PYEOF'
+import sys
+import volscatter
+from volscatter import Scene, Session, VolscatterError
+scene = Scene.from_json({"format": 1, "medium": {"procedural": "plume", "dims": [16]},
+                         "lights": [{"type": "distant", "direction": [0, 0, -1], "irradiance": 1}],
+                         "camera": {"position": [0, -6, 0.2], "look_at": [0, 0, 0], "width": 16, "height": 12},
+                         "solver": {"name": "pop", "grid_resolution": 12}})
+seen = []
+with Session(scene) as session:
+    def progress(stage, fraction):
+        seen.append(session.frame_count)
+        try:
+            session.solve(scene).close()
+            seen.append("nested solve ran")
+        except VolscatterError as e:
+            seen.append(e.status)
+        return True
+    session.solve(scene, progress).close()
+    assert seen and all(x in (1, 13) for x in seen), seen
+    assert session.frame_count == 1, session.frame_count
+print("ok", len(seen))
+PYEOF
+    run "session: callback reads and solves its own session" env PYTHONPATH="$ROOT/usd" VOLSCATTER_LIB="${VOLSCATTER_LIB:-$(dirname "$BIN")/libvolscatter.so}" "$PY" "$WORK/session.py"
 fi
 
 if [ $BAD = 0 ]; then echo "all cases ended cleanly"; else echo "SOME CASES DID NOT END CLEANLY"; fi

@@ -163,6 +163,11 @@ typedef enum {
    * instead and are not reported. Retrying with `VS_DEVICE_CPU` works.
    */
   VS_STATUS_DEVICE = 12,
+  /**
+   * The session is solving, and the call came from a progress callback, which cannot wait
+   * for the solve it reports on. Call again after that solve returns.
+   */
+  VS_STATUS_BUSY = 13,
 } VsStatus;
 
 /**
@@ -252,7 +257,8 @@ typedef struct {
  * possibly from a thread other than the caller's, and never after the call that was given it
  * returned. It must not unwind (C++ exceptions, longjmp) through the library. It may call
  * functions on other handles, and on the scene being solved (the solve works on a snapshot
- * taken when it started).
+ * taken when it started); on the session being solved, `vs_session_frame_count` answers and
+ * `vs_session_solve` returns `VS_STATUS_BUSY` (it never waits inside a callback).
  */
 typedef int32_t (*VsProgressCallback)(void *user, const char *stage, float fraction);
 
@@ -773,7 +779,9 @@ const char *vs_session_last_error(const VsSession *session);
  * Errors (including the scene's: no medium, NULL or dead scene handle) are on the session.
  *
  * Thread safety: any thread. Calls on one session are serialised (a frame waits for the one
- * before); the scene is not kept locked during the solve.
+ * before); the scene is not kept locked during the solve. Called from inside a progress
+ * callback (of any solve) while this session is solving, it returns `VS_STATUS_BUSY` at once
+ * instead of waiting for a solve that waits for the callback.
  */
 VsStatus vs_session_solve(VsSession *session,
                           const VsScene *scene,
@@ -782,10 +790,12 @@ VsStatus vs_session_solve(VsSession *session,
                           VsResult **out);
 
 /**
- * Writes the number of solves run in this session so far (failed and cancelled ones
- * included) to `*out`.
+ * Writes the number of solves run in this session so far to `*out`: every
+ * `vs_session_solve` call on it, including the one running now and those that failed (bad
+ * arguments, a scene without a medium) or were cancelled; not those refused with
+ * `VS_STATUS_BUSY`.
  *
- * Thread safety: any thread; waits for a solve running on the session.
+ * Thread safety: any thread, a progress callback included; never waits for a solve.
  */
 VsStatus vs_session_frame_count(const VsSession *session, uint64_t *out);
 

@@ -326,7 +326,7 @@ def test_cli_frames_time_sampled(tmp_path):
     a, b = (tmp_path / "o.0001.exr"), (tmp_path / "o.0002.exr")
     assert a.exists() and b.exists() and a.read_bytes() != b.read_bytes()
     r = cli("render", path, "--frames", "1-2", "--out", tmp_path / "o.exr")
-    assert r.returncode == 1 and "needs a frame pattern" in r.stderr
+    assert r.returncode == 2 and "needs a frame pattern" in r.stderr
 
 
 @pytest.mark.parametrize("case", ["missing_vdb", "no_volume", "malformed", "bad_camera", "missing_stage", "bad_grid"])
@@ -352,7 +352,8 @@ def test_cli_bad_input(tmp_path, case):
         stage.Save()
     for cmd in (["render", path, "--out", tmp_path / "x.exr"], ["bake", path, "--out-layer", tmp_path / "x.usda"]):
         r = cli(*cmd, *extra, "-q")
-        assert r.returncode == 1, (case, r.stdout, r.stderr)
+        # A bad argument (the camera asked for) exits 2, as argparse's errors; a bad stage 1.
+        assert r.returncode == (2 if case == "bad_camera" else 1), (case, r.stdout, r.stderr)
         assert expect in r.stderr and "Traceback" not in r.stderr, r.stderr
         assert not (tmp_path / "x.exr").exists()
 

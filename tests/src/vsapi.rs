@@ -24,7 +24,8 @@ pub mod status {
     pub const CANCELLED: i32 = 10;
     pub const INTERNAL: i32 = 11;
     pub const DEVICE: i32 = 12;
-    pub const ALL: [(&str, i32); 13] = [
+    pub const BUSY: i32 = 13;
+    pub const ALL: [(&str, i32); 14] = [
         ("VS_STATUS_OK", OK),
         ("VS_STATUS_NULL_ARGUMENT", NULL_ARGUMENT),
         ("VS_STATUS_INVALID_ARGUMENT", INVALID_ARGUMENT),
@@ -38,6 +39,7 @@ pub mod status {
         ("VS_STATUS_CANCELLED", CANCELLED),
         ("VS_STATUS_INTERNAL", INTERNAL),
         ("VS_STATUS_DEVICE", DEVICE),
+        ("VS_STATUS_BUSY", BUSY),
     ];
 }
 

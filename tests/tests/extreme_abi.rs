@@ -51,6 +51,9 @@ fn extreme_scenes_end_in_ok_and_finite_or_a_clear_error() {
             } else {
                 let (_, data) = a.grid(r);
                 assert!(data.iter().all(|v| v.is_finite()), "{name}: status OK with non-finite values in the grid");
+                if name.starts_with("no lights") {
+                    assert!(data.iter().all(|v| *v == 0.0), "{name}: no light, yet a lit grid");
+                }
                 // And its composite: OK and finite, or an error on the result.
                 let mut img: Img = null_mut();
                 let st = unsafe { (a.vs_result_composite)(r, 0, 1, 0.5, &mut img) };
@@ -78,6 +81,10 @@ fn extreme_scenes_end_in_ok_and_finite_or_a_clear_error() {
         if must_fail.iter().any(|w| name.contains(w)) && !name.contains("empty") && !name.contains("dome colour 1e30") {
             assert_ne!(st, OK, "{name}: must be refused");
         }
+        // Every solver returns black for a scene without lights (pop refused it before issue 40).
+        if name.starts_with("no lights") {
+            assert_eq!(st, OK, "{name}: {msg}");
+        }
         if name.contains("over the budget") {
             assert_eq!(st, TOO_LARGE, "{name}: {msg}");
             assert!(msg.contains("budget") && msg.contains("1.0 GiB"), "{name}: the refusal names the budget: {msg}");
@@ -93,29 +100,60 @@ struct Beats {
     start: Instant,
     calls: Vec<Instant>,
     cancel_after: Duration,
+    /// The process's CPU time when the callback first asked to stop.
+    cpu_at_cancel: Option<Duration>,
 }
 
 unsafe extern "C" fn record(user: *mut c_void, _stage: *const c_char, _fraction: f32) -> i32 {
     let beats = &mut *(user as *mut Beats);
     let now = Instant::now();
     beats.calls.push(now);
-    i32::from(now - beats.start < beats.cancel_after)
+    let go_on = now - beats.start < beats.cancel_after;
+    if !go_on && beats.cpu_at_cancel.is_none() {
+        beats.cpu_at_cancel = process_cpu();
+    }
+    i32::from(go_on)
 }
 
-/// Runs `call` with the recording callback (cancelling after `cancel_after`), returns its
-/// status, the largest gap between the start, the calls and the return, and the time from
-/// the cancel to the return.
-fn run_with_beats(cancel_after: Duration, call: impl FnOnce(*mut c_void) -> i32) -> (i32, Duration, Duration) {
-    let mut beats = Beats { start: Instant::now(), calls: Vec::new(), cancel_after };
-    let st = call(&mut beats as *mut Beats as *mut c_void);
+/// CPU time (user + system) of this process, all threads, from /proc (Linux; None elsewhere).
+fn process_cpu() -> Option<Duration> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) in parentheses: utime and stime
+    // are the 12th and 13th, in clock ticks of 1/100 s on Linux (USER_HZ).
+    let rest = stat.rsplit_once(')')?.1;
+    let f: Vec<u64> = rest.split_whitespace().skip(11).take(2).map(|v| v.parse().ok()).collect::<Option<_>>()?;
+    Some(Duration::from_millis(10 * (f.first()? + f.get(1)?)))
+}
+
+/// How a call ended after a cancel: its status, the largest gap between the start, the
+/// callbacks and the return, the wall-clock time from the cancel to the return, and the CPU
+/// time all threads spent in it (None where it cannot be read).
+struct Ended {
+    status: i32,
+    gap: Duration,
+    cancel: Duration,
+    cpu_after_cancel: Option<Duration>,
+}
+
+/// Runs `call` with the recording callback (cancelling after `cancel_after`).
+fn run_ended(cancel_after: Duration, call: impl FnOnce(*mut c_void) -> i32) -> Ended {
+    let mut beats = Beats { start: Instant::now(), calls: Vec::new(), cancel_after, cpu_at_cancel: None };
+    let status = call(&mut beats as *mut Beats as *mut c_void);
     let end = Instant::now();
+    let cpu_after_cancel = beats.cpu_at_cancel.zip(process_cpu()).map(|(a, b)| b.saturating_sub(a));
     let mut times = vec![beats.start];
     times.extend(&beats.calls);
     times.push(end);
     let gap = times.windows(2).map(|w| w[1] - w[0]).max().unwrap_or_default();
-    let cancel_to_return = end.saturating_duration_since(beats.start + cancel_after);
-    eprintln!("{} callbacks, longest silence {gap:?}, cancel to return {cancel_to_return:?}", beats.calls.len());
-    (st, gap, cancel_to_return)
+    let cancel = end.saturating_duration_since(beats.start + cancel_after);
+    eprintln!("{} callbacks, longest silence {gap:?}, cancel to return {cancel:?}, CPU after the cancel {cpu_after_cancel:?}", beats.calls.len());
+    Ended { status, gap, cancel, cpu_after_cancel }
+}
+
+/// `run_ended`'s status, longest silence and cancel-to-return time.
+fn run_with_beats(cancel_after: Duration, call: impl FnOnce(*mut c_void) -> i32) -> (i32, Duration, Duration) {
+    let e = run_ended(cancel_after, call);
+    (e.status, e.gap, e.cancel)
 }
 
 /// A scene whose reference solve and render take minutes (2^20 paths per pixel and per grid
@@ -188,11 +226,23 @@ fn heavy_settings(name: &str) -> &'static str {
     }
 }
 
-/// A cancel must end a solve within this. The solvers read the flag at a stride of about
-/// 10 ms of work on one core (issue 22 asks for 100 ms); 500 ms is 5x the contract, slack for
-/// a two-core CI machine running other tests, where a worker may wait a time slice or two
-/// before it sees the flag, and for dropping the solver's buffers.
-const SOLVER_CANCEL_LIMIT: Duration = Duration::from_millis(500);
+/// The work a solve may do after a cancel, in CPU time per worker thread: the solvers read
+/// the flag at a stride of about 10 ms of work on one core (issue 22 asks for 100 ms), and the
+/// worker that reads it last stops within one stride; freeing the solver's buffers adds a
+/// little. CPU time, unlike the wall clock, does not grow when other processes load the
+/// machine (a worker waiting for a core spends none), so the bound holds on a loaded CI
+/// machine; 100 ms is 10x the stride. Before issue 40, pop spent 0.4 s of it in its dome
+/// importance and photon-grid 0.4-0.8 s summing batch caches after a cancel.
+const CANCEL_CPU_PER_WORKER: Duration = Duration::from_millis(100);
+
+/// A wall-clock bound that only a hang (a loop that never reads the flag) exceeds, even on a
+/// machine loaded many times over.
+const CANCEL_HANG_LIMIT: Duration = Duration::from_secs(10);
+
+/// Rayon's worker threads in this process (RAYON_NUM_THREADS, else one per core).
+fn workers() -> u32 {
+    std::env::var("RAYON_NUM_THREADS").ok().and_then(|v| v.parse().ok()).filter(|n| *n > 0).unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get() as u32))
+}
 
 /// When the callback cancels: early (set-up, first walks or photons), later (propagation,
 /// gather, iterations) and later still (lpm's and network's first order, after seconds of
@@ -202,7 +252,8 @@ const CANCEL_POINTS: [Duration; 3] = [Duration::from_millis(50), Duration::from_
 
 /// Every registered solver, started with settings that take seconds to minutes and cancelled
 /// from the callback after 50 ms, 400 ms and 1.5 s (one solve each), returns VS_STATUS_CANCELLED
-/// within SOLVER_CANCEL_LIMIT, with no result. Measured here (2 loaded cores): 6-185 ms.
+/// with no result, having spent at most CANCEL_CPU_PER_WORKER of CPU per worker after the
+/// cancel (where the CPU time can be read; else the wall clock, 500 ms).
 #[test]
 fn every_solver_cancels_within_500ms() {
     let a = api();
@@ -227,10 +278,21 @@ fn every_solver_cancels_within_500ms() {
         for &after in points {
             let mut r: Res = null_mut();
             eprintln!("solver {name}, cancel after {after:?} (test at {:?})", t0.elapsed());
-            let (st, gap, cancel) = run_with_beats(after, |user| unsafe { (a.vs_scene_solve)(s, Some(record), user, &mut r) });
-            // The heartbeat stops at the cancel, so the silence after it is the cancel's own time.
-            if st != CANCELLED || !r.is_null() || cancel >= SOLVER_CANCEL_LIMIT || gap >= GAP_LIMIT.max(SOLVER_CANCEL_LIMIT) {
-                failures.push(format!("{name} cancelled after {after:?}: status {st} ({}), cancel took {cancel:?}, longest silence {gap:?}", a.scene_error(s)));
+            let e = run_ended(after, |user| unsafe { (a.vs_scene_solve)(s, Some(record), user, &mut r) });
+            let slow = match e.cpu_after_cancel {
+                Some(cpu) => cpu > CANCEL_CPU_PER_WORKER * workers() || e.cancel >= CANCEL_HANG_LIMIT,
+                None => e.cancel >= Duration::from_millis(500),
+            };
+            if e.status != CANCELLED || !r.is_null() || slow {
+                failures.push(format!(
+                    "{name} cancelled after {after:?}: status {} ({}), cancel took {:?} and {:?} of CPU ({} workers), longest silence {:?}",
+                    e.status,
+                    a.scene_error(s),
+                    e.cancel,
+                    e.cpu_after_cancel,
+                    workers(),
+                    e.gap
+                ));
             }
             if !r.is_null() {
                 unsafe { (a.vs_result_destroy)(r) };

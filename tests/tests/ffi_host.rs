@@ -677,7 +677,9 @@ fn sessions_refuse_nulls_and_dead_handles() {
         assert_eq!(a.session_error(sess), "");
         let mut frames = 0u64;
         assert_eq!((a.vs_session_frame_count)(sess, &mut frames), OK);
-        assert_eq!(frames, 1, "refused calls are not frames");
+        // As the header says: every solve call on the live session counts, failed ones too
+        // (NULL out, NULL scene, a session as scene, no medium, a dead scene, then the good one).
+        assert_eq!(frames, 6, "failed solves are frames");
         assert_eq!((a.vs_session_destroy)(sess), OK);
         assert_eq!((a.vs_session_destroy)(sess), INVALID_HANDLE, "double destroy");
         assert_eq!((a.vs_session_solve)(sess, s, None, null_mut(), &mut null_mut()), INVALID_HANDLE);
@@ -690,6 +692,75 @@ fn sessions_refuse_nulls_and_dead_handles() {
         assert_eq!((a.vs_scene_destroy)(s), OK);
         assert_eq!((a.vs_session_new)(s, &mut sess2), INVALID_HANDLE);
         assert!(sess2.is_null());
+    }
+}
+
+/// What a hostile progress callback saw when it called back into its own session.
+struct Reentrant {
+    session: Sess,
+    scene: Scene,
+    calls: AtomicUsize,
+    /// Frame counts read inside the callback, and the statuses of the nested calls.
+    counts: std::sync::Mutex<Vec<(i32, u64)>>,
+    nested: std::sync::Mutex<Vec<(i32, bool)>>,
+}
+
+unsafe extern "C" fn call_own_session(user: *mut c_void, _stage: *const c_char, _fraction: f32) -> i32 {
+    let st = &*(user as *const Reentrant);
+    let a = api();
+    if st.calls.fetch_add(1, Ordering::SeqCst) < 3 {
+        let mut n = u64::MAX;
+        let status = (a.vs_session_frame_count)(st.session, &mut n);
+        st.counts.lock().unwrap().push((status, n));
+        let mut r: Res = std::ptr::dangling_mut::<c_void>();
+        let status = (a.vs_session_solve)(st.session, st.scene, None, null_mut(), &mut r);
+        st.nested.lock().unwrap().push((status, r.is_null()));
+    }
+    1
+}
+
+/// A progress callback that reads its own session's frame count (as a UI showing "frame N"
+/// does) and starts another solve on it: the count answers (the running frame included) and
+/// the nested solve returns `VS_STATUS_BUSY` at once; neither waits for the solve that waits
+/// for the callback. The solve runs on a thread with a deadline, so a hang fails the test.
+#[test]
+fn harden_a_progress_callback_calling_its_own_session_never_blocks() {
+    let a = api();
+    unsafe {
+        let s = small_scene();
+        let mut sess: Sess = null_mut();
+        assert_eq!((a.vs_session_new)(s, &mut sess), OK, "{}", a.scene_error(s));
+        let st = Reentrant { session: sess, scene: s, calls: AtomicUsize::new(0), counts: Default::default(), nested: Default::default() };
+        let (send, recv) = std::sync::mpsc::channel();
+        let user = &st as *const Reentrant as usize;
+        let (sess_n, s_n) = (sess as usize, s as usize);
+        let solver = std::thread::spawn(move || {
+            let mut r: Res = null_mut();
+            let status = (api().vs_session_solve)(sess_n as Sess, s_n as Scene, Some(call_own_session), user as *mut c_void, &mut r);
+            send.send((status, r as usize)).unwrap();
+        });
+        // A deadlock never returns: fail instead of hanging the test run (the small scene
+        // solves in well under a second; 120 s allows a loaded machine).
+        let (status, r) = recv.recv_timeout(std::time::Duration::from_secs(120)).expect("vs_session_solve deadlocked in its own progress callback");
+        solver.join().unwrap();
+        assert_eq!(status, OK, "{}", a.session_error(sess));
+        let counts = st.counts.lock().unwrap().clone();
+        assert!(!counts.is_empty(), "the callback was called");
+        assert!(counts.iter().all(|c| *c == (OK, 1)), "frame counts read inside the callback: {counts:?}");
+        let nested = st.nested.lock().unwrap().clone();
+        assert!(nested.iter().all(|n| *n == (BUSY, true)), "nested solves: {nested:?}");
+        let mut frames = 0u64;
+        assert_eq!((a.vs_session_frame_count)(sess, &mut frames), OK);
+        assert_eq!(frames, 1, "busy refusals are not frames");
+        // Outside a callback the session solves again as before.
+        let mut r2: Res = null_mut();
+        assert_eq!((a.vs_session_solve)(sess, s, None, null_mut(), &mut r2), OK, "{}", a.session_error(sess));
+        assert_eq!(a.status_message(BUSY).contains("busy"), true);
+        for r in [r as Res, r2] {
+            assert_eq!((a.vs_result_destroy)(r), OK);
+        }
+        assert_eq!((a.vs_session_destroy)(sess), OK);
+        assert_eq!((a.vs_scene_destroy)(s), OK);
     }
 }
 

@@ -21,7 +21,7 @@ import threading
 import time as _time
 from typing import List, Optional
 
-from ._native import VolscatterError
+from ._native import STATUS_INVALID_ARGUMENT, VolscatterError
 
 PROG = "volscatter-usd"
 
@@ -42,7 +42,7 @@ class ProgressBar:
         self.cancelled = False
 
     def __call__(self, stage: str, fraction: float):
-        if self.cancelled:
+        if self.cancelled or _STOPPED_BY:
             return False
         if not self.enabled:
             return True
@@ -90,8 +90,12 @@ def run_cancellable(fn, bar: ProgressBar):
     t = threading.Thread(target=work, name="volscatter-usd", daemon=True)
     t.start()
     try:
-        while not done.wait(0.2):
-            pass
+        _WAITING.set()
+        try:
+            while not done.wait(0.2):
+                pass
+        finally:
+            _WAITING.clear()
     except KeyboardInterrupt:
         # The next progress callback answers "stop". The library calls it at least every
         # 100 ms, so the worker normally returns at once; if it does not within
@@ -130,14 +134,42 @@ def parse_frames(text: str) -> List[float]:
     m = re.fullmatch(r"\s*(-?\d+(?:\.\d*)?)\s*(?:-|\.\.)\s*(-?\d+(?:\.\d*)?)\s*(?::\s*(\d+(?:\.\d*)?))?\s*", text)
     if not m:
         raise VolscatterError(f"--frames {text!r}: expected A-B (e.g. 1-24) or A-B:STEP", 2)
-    a, b = float(m.group(1)), float(m.group(2))
-    step = float(m.group(3)) if m.group(3) else 1.0
+    # Whole numbers stay Python ints (exact at any size: frame 2**63 - 1 is named as such, not
+    # rounded through a double); fractional ranges are floats.
+    num = (lambda g: int(g) if "." not in g else float(g))
+    a, b = num(m.group(1)), num(m.group(2))
+    step = num(m.group(3)) if m.group(3) else 1
     if step <= 0 or b < a:
         raise VolscatterError(f"--frames {text!r}: need A <= B and a positive step", 2)
-    n = int(math.floor((b - a) / step + 1e-9)) + 1
+    n = (b - a) // step + 1 if all(isinstance(x, int) for x in (a, b, step)) else int(math.floor((b - a) / step + 1e-9)) + 1
     if n > 100000:
         raise VolscatterError(f"--frames {text!r}: {n} frames is too many", 2)
     return [a + i * step for i in range(n)]
+
+
+def _time_arg(text: str) -> float:
+    """--time: a finite time code (NaN and infinities read no sample of anything)."""
+    try:
+        t = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number")
+    if not math.isfinite(t):
+        raise argparse.ArgumentTypeError(f"{text!r}: the time code must be finite")
+    return t
+
+
+def _check_pattern(opt: str, pattern: Optional[str]):
+    """A frame pattern that formats (``{frame:q}``, ``{0}`` and ``{x}`` are refused before any
+    frame is solved, not after the first)."""
+    if not pattern:
+        return
+    from . import render as R
+    for probe in (1, 1.5):
+        try:
+            R.frame_path(pattern, probe)
+        except (ValueError, KeyError, IndexError, AttributeError, TypeError) as e:
+            raise VolscatterError(f"{opt} {pattern}: not a frame pattern Python can format ({type(e).__name__}: {e}); "
+                                  "use # (out.####.exr) or {frame} / {frame:04d}", 2)
 
 
 def _settings(args) -> dict:
@@ -183,7 +215,7 @@ def _common(p: argparse.ArgumentParser, what: str):
     p.add_argument("stage", help="the USD stage (.usd, .usda, .usdc, .usdz)")
     p.add_argument("--camera", metavar="PATH", help="camera prim path (default: the first Camera of the stage)")
     t = p.add_mutually_exclusive_group()
-    t.add_argument("--time", type=float, metavar="T",
+    t.add_argument("--time", type=_time_arg, metavar="T",
                    help="time code to read (default: the stage's start time code, else the default time)")
     t.add_argument("--frames", metavar="A-B", help=f"{what} every frame A..B (inclusive; A-B:STEP for a step)")
     p.add_argument("--solver", default="auto", type=_solver_arg,
@@ -230,7 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="print what volscatter reads from a stage")
     i.add_argument("stage")
     i.add_argument("--camera", metavar="PATH")
-    i.add_argument("--time", type=float)
+    i.add_argument("--time", type=_time_arg)
     i.add_argument("--light-convention", choices=["auto", "usdlux", "blender"], default="auto")
     i.add_argument("--json", action="store_true", help="print the scene JSON (format 1) instead of the summary")
     i.add_argument("--width", type=int, default=320)
@@ -262,6 +294,9 @@ def cmd_render(args) -> int:
         for opt, val in (("--out", args.out), ("--png", args.png)):
             if val and not R.has_frame_pattern(val):
                 raise VolscatterError(f"{opt} {val}: with --frames it needs a frame pattern (# or {{frame}})", 2)
+    if args.frames:
+        _check_pattern("--out", args.out)
+        _check_pattern("--png", args.png)
     stage = S.open_stage(args.stage)
     bar = ProgressBar(enabled=not args.quiet)
     seen = set()
@@ -274,17 +309,39 @@ def cmd_render(args) -> int:
             _warn(w)
 
     # The whole range goes through one session per volume (the solver reuses across frames).
-    with R.FrameSessions() as sessions:
-        for k, t in enumerate(frames):
-            _render_frame(args, R, stage, settings, bar, warn, sessions, t, k, len(frames))
+    # A frame that fails does not stop the others; the end says which were written.
+    written, failed, status = [], [], 1
+    try:
+        with R.FrameSessions() as sessions:
+            for k, t in enumerate(frames):
+                try:
+                    _render_frame(args, R, stage, settings, bar, warn, sessions, t, k, len(frames))
+                    written.append(t)
+                except VolscatterError as e:
+                    if len(frames) == 1:
+                        raise
+                    failed.append(t)
+                    status = e.status
+                    _warn(f"frame {_frame_list([t])}: {e.message}")
+    except BaseException:
+        if len(frames) > 1:
+            sys.stderr.write(f"{PROG}: frames written before it stopped: {_frame_list(written)}\n")
+        raise
+    if failed:
+        raise VolscatterError(f"{len(failed)} of {len(frames)} frames failed ({_frame_list(failed)}); "
+                              f"written: {_frame_list(written)}", status)
     return 0
+
+
+def _frame_list(frames) -> str:
+    return ", ".join(f"{t:g}" if isinstance(t, float) else str(t) for t in frames) or "none"
 
 
 def _render_frame(args, R, stage, settings, bar, warn, sessions, t, k: int, n: int):
     """Renders frame ``t`` (the ``k``-th of ``n``) of ``cmd_render``'s range in ``sessions``."""
     out = R.frame_path(args.out, t) if t is not None else args.out
     png = (R.frame_path(args.png, t) if t is not None else args.png) if args.png else None
-    bar.prefix = f"frame {t:g} ({k + 1}/{n}) " if n > 1 else ""
+    bar.prefix = f"frame {_frame_list([t])} ({k + 1}/{n}) " if n > 1 else ""
     try:
         res = run_cancellable(lambda: R.render(
             args.stage, out, png=png, time=t, camera=args.camera, solver=args.solver, settings=settings,
@@ -337,16 +394,66 @@ def cmd_info(args) -> int:
     return 0
 
 
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP (what `timeout`, farm managers and a closed terminal send), raised in
+    the main thread like Ctrl-C's KeyboardInterrupt, so that it cancels the solve the same way."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+#: the signals received (first first): every progress callback then cancels, even when the
+#: exception the handler raised was swallowed (by an import inside pxr, say)
+_STOPPED_BY: List[int] = []
+
+
+#: whether the main thread is only waiting for the worker (run_cancellable): the one place a
+#: signal's exception is raised. Elsewhere it could land inside pxr's C++ (an import, a stage
+#: read), which aborts on a Python exception; there the flag alone cancels at the next callback.
+_WAITING = threading.Event()
+
+
+def _raise_stopped(signum, _frame):
+    _STOPPED_BY.append(signum)
+    if _WAITING.is_set():
+        raise Stopped(signum)
+
+
+def _install_signals():
+    import signal
+    if threading.current_thread() is not threading.main_thread():
+        return  # handlers can only be set from the main thread (a host calling main() elsewhere)
+    # SIGINT too: a shell starts background jobs with it ignored, and a farm may send it.
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), _raise_stopped)
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
+    _install_signals()
     try:
-        return {"render": cmd_render, "bake": cmd_bake, "info": cmd_info}[args.command](args)
+        code = {"render": cmd_render, "bake": cmd_bake, "info": cmd_info}[args.command](args)
     except VolscatterError as e:
+        if _STOPPED_BY:  # the solve was cancelled by a signal whose exception did not reach here
+            return _interrupted(_STOPPED_BY[0])
         sys.stderr.write(f"{PROG}: error: {e.message}\n")
-        return 1
-    except KeyboardInterrupt:
-        sys.stderr.write(f"{PROG}: interrupted\n")
-        return 130
+        # Bad input (arguments, settings) exits 2 as argparse's usage errors do; others 1.
+        return 2 if e.status == STATUS_INVALID_ARGUMENT else 1
+    except KeyboardInterrupt as e:
+        import signal
+        return _interrupted(getattr(e, "signum", signal.SIGINT))
+    if _STOPPED_BY:  # a signal whose exception was swallowed, after the work ended
+        return _interrupted(_STOPPED_BY[0])
+    return code
+
+
+def _interrupted(signum: int) -> int:
+    """128 + the signal's number, as a shell reports a process the signal ended."""
+    import signal
+    sys.stderr.write(f"{PROG}: interrupted by {signal.Signals(signum).name}\n")
+    return 128 + int(signum)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -108,7 +108,8 @@ class FrameSessions:
 def frame_path(pattern: str, frame: float) -> str:
     """``out.####.exr`` -> ``out.0012.exr``; ``out_{frame}.exr`` / ``out_{frame:04d}.exr`` ->
     Python formatting with the (integer when whole) frame number."""
-    f = int(frame) if float(frame).is_integer() else frame
+    # An int stays exact (a float would name frame 2**63 - 1 ...808).
+    f = frame if isinstance(frame, int) else int(frame) if float(frame).is_integer() else frame
     if "{frame" in pattern:
         return pattern.format(frame=f)
     m = re.search(r"#+", pattern)
@@ -274,10 +275,12 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
         with FrameSessions() as own:
             return bake(stage_path, out_layer, times, camera, solver, settings, width, height, light_convention,
                         medium_defaults, progress, warn, own)
+    from pxr import Sdf
     src_stage = stage_mod.open_stage(stage_path)
     out_layer = os.path.abspath(out_layer)
     out_dir = os.path.dirname(out_layer)
-    os.makedirs(out_dir, exist_ok=True)
+    _check_layer_path(out_layer, Sdf)
+    _ensure_dir(out_dir, "--out-layer")
     if os.path.abspath(stage_path) == out_layer:
         raise VolscatterError("--out-layer must not be the stage itself", 2)
     times = list(times) if times else [None]
@@ -285,15 +288,50 @@ def bake(stage_path, out_layer, times: Optional[Sequence[Optional[float]]] = Non
     written: Dict[str, List[str]] = {}
     all_warnings: List[str] = []
     per_volume: Dict[str, List] = {}
-    for t in times:
-        for b in bake_frame(stage_path, src_stage, out_layer, t, animated, camera=camera, solver=solver,
-                            settings=settings, width=width, height=height, light_convention=light_convention,
-                            medium_defaults=medium_defaults, progress=progress, warn=warn, sessions=sessions,
-                            seen_warnings=all_warnings):
-            written.setdefault(b.volume.path, []).append(b.path)
-            per_volume.setdefault(b.volume.path, []).append((t, b.name, b.volume, b.copied))
-    write_layer(stage_path, src_stage, out_layer, solver, per_volume, animated)
+    # Every VDB this bake writes is removed again if the bake fails or is cancelled before its
+    # layer is saved: a VDB no layer points to is only clutter.
+    made: List[str] = []
+    try:
+        for t in times:
+            for b in bake_frame(stage_path, src_stage, out_layer, t, animated, camera=camera, solver=solver,
+                                settings=settings, width=width, height=height, light_convention=light_convention,
+                                medium_defaults=medium_defaults, progress=progress, warn=warn, sessions=sessions,
+                                seen_warnings=all_warnings):
+                made.append(b.path)
+                written.setdefault(b.volume.path, []).append(b.path)
+                per_volume.setdefault(b.volume.path, []).append((t, b.name, b.volume, b.copied))
+        write_layer(stage_path, src_stage, out_layer, solver, per_volume, animated)
+    except BaseException:
+        for f in made:
+            try:
+                os.remove(f)
+            except OSError:
+                pass
+        raise
     return BakeResult(layer=out_layer, vdbs=written, warnings=all_warnings)
+
+
+def _check_layer_path(out_layer: str, Sdf):
+    """Before anything is solved: a layer format USD writes, at a path that can be a file."""
+    ext = os.path.splitext(out_layer)[1].lstrip(".")
+    if not ext or not Sdf.FileFormat.FindByExtension(ext) or ext == "usdz":
+        raise VolscatterError(f"--out-layer {out_layer}: not a USD layer USD can write (.usda, .usdc or .usd)", 2)
+    if os.path.exists(out_layer) and not os.path.isfile(out_layer):
+        raise VolscatterError(f"--out-layer {out_layer}: exists and is not a regular file", 2)
+
+
+def _ensure_dir(d: str, what: str):
+    """Creates folder ``d`` (and its parents) or says, naming it, why it cannot: a file on the
+    way, or no permission to create or write in it."""
+    for a in [d, *Path(d).parents]:
+        if os.path.exists(a) and not os.path.isdir(a):
+            raise VolscatterError(f"{what}: {a} is a file, not a folder", 2)
+    try:
+        os.makedirs(d, exist_ok=True)
+    except OSError as e:
+        raise VolscatterError(f"{what}: cannot create the folder {d}: {e.strerror}", 6)
+    if not os.access(d, os.W_OK):
+        raise VolscatterError(f"{what}: the folder {d} is not writable", 6)
 
 
 @dataclass

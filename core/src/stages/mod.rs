@@ -11,4 +11,4 @@ pub mod single_scattering;
 pub mod upsample;
 
 pub use grid::{ScatteringGrid, MAX_SCATTERING_GRID_POINTS};
-pub use progress::{NoProgress, Progress, Timings};
+pub use progress::{CancelOnly, NoProgress, Progress, Timings};

@@ -22,6 +22,18 @@ impl Progress for NoProgress {
     }
 }
 
+/// Passes a host's cancel through and none of its progress: for a sub-computation (an
+/// importance map before the solve proper) whose own stage names would mislead the host.
+pub struct CancelOnly<'a>(pub &'a dyn Progress);
+impl Progress for CancelOnly<'_> {
+    fn update(&self, _: &str, _: f32) -> bool {
+        !self.0.cancelled()
+    }
+    fn cancelled(&self) -> bool {
+        self.0.cancelled()
+    }
+}
+
 /// Wall-clock time of each phase, in seconds, in order.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Timings(pub Vec<(String, f64)>);

@@ -198,21 +198,29 @@ impl tree::Visitor for Accumulate<'_> {
     }
 }
 
-/// The factor and coarse lattice (first cell, cells) for `max_resolution` cells along the
-/// box's longest side. Every value fits i32: the box spans at most 2^32 voxels, so `f` is
-/// below 2^31 for `max_resolution` >= 2 (`MaxResolution::RANGE`) and the coarse indices are
-/// the fine ones over `f`.
-fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: MaxResolution) -> (i64, I64Vec3, I64Vec3) {
+/// The factor and coarse lattice (first cell, cells) for at most `max_resolution` cells along
+/// the box's longest side. The cells are aligned to multiples of `f`, so a box that does not
+/// start on one straddles a cell more than extent / f: then `f` grows to extent / (m - 1),
+/// which leaves at most m. The coarse indices (the fine ones over `f`) fit i32; `f` itself may
+/// reach 2^32 (m = 2 on the widest box).
+pub(crate) fn lattice(lo: I64Vec3, hi: I64Vec3, max_resolution: MaxResolution) -> (i64, I64Vec3, I64Vec3) {
     let extent = (hi - lo).max_element().max(1);
     let m = max_resolution.cells() as i64;
-    let f = (extent + m - 1) / m;
-    let c0 = lo.div_euclid(I64Vec3::splat(f));
-    let c1 = (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f));
-    (f, c0, c1 - c0 + I64Vec3::ONE)
+    let cells = |f: i64| {
+        let c0 = lo.div_euclid(I64Vec3::splat(f));
+        let c1 = (hi - I64Vec3::ONE).div_euclid(I64Vec3::splat(f));
+        (c0, c1 - c0 + I64Vec3::ONE)
+    };
+    let mut f = (extent + m - 1) / m;
+    if cells(f).1.max_element() > m {
+        f = (extent + m - 2) / (m - 1);
+    }
+    let (c0, dims) = cells(f);
+    (f, c0, dims)
 }
 
 /// Coarse cell c covers fine voxels c f .. c f + f - 1: its centre is c f + (f - 1) / 2.
-fn coarse_to_fine(f: i32) -> Affine3A {
+fn coarse_to_fine(f: i64) -> Affine3A {
     Affine3A::from_translation(Vec3::splat(0.5 * (f - 1) as f32)) * Affine3A::from_scale(Vec3::splat(f as f32))
 }
 
@@ -251,7 +259,7 @@ impl VdbFile {
             None => (1, extent.lo, extent.hi - extent.lo, fine_xf),
             Some(n) => {
                 let (f, c0, dims) = lattice(extent.lo, extent.hi, n);
-                (f, c0, dims, fine_xf * coarse_to_fine(f as i32))
+                (f, c0, dims, fine_xf * coarse_to_fine(f))
             }
         };
         let xf = self.checked_transform(i, &head, xf)?; // as the load will
@@ -278,15 +286,15 @@ impl VdbFile {
         }
         let (f, c0, dims) = lattice(extent.lo, extent.hi, max_resolution);
         // Before pass 2 reads every leaf: a transform the medium cannot use fails at once.
-        let xf = self.checked_transform(i, &head, fine_xf * coarse_to_fine(f as i32))?;
+        let xf = self.checked_transform(i, &head, fine_xf * coarse_to_fine(f))?;
         let cells = crate::budget::checked_product("filtered density grid", &[dims.x as u64, dims.y as u64, dims.z as u64])?;
         crate::budget::check_elements::<f64>("filtered density grid (coarse sums)", cells)?;
         let mut acc = Accumulate { f, c0, dims, sums: vec![0.0; cells as usize], clamped_negative: 0, path: &self.path };
         let (_, window2) = self.visit_tree_windowed(i, ValueKind::FLOAT, &mut acc, None).map_err(in_grid)?;
         let volume = (f as f64).powi(3);
         let means: Vec<f32> = acc.sums.iter().map(|s| (s / volume) as f32).collect();
-        let (f, c0, dims) = (f as i32, c0.as_ivec3(), dims.as_ivec3());
-        report.factor = f;
+        let (c0, dims) = (c0.as_ivec3(), dims.as_ivec3());
+        report.factor = i32::try_from(f).unwrap_or(i32::MAX);
         report.fine_box = (extent.lo, extent.hi);
         report.coarse_dims = dims;
         report.accumulator_bytes = cells * 8;

@@ -205,3 +205,15 @@ fn truncated_files_are_clear_errors_when_filtered() {
     assert!(e.contains("past the end of the file"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// At most `max_resolution` cells along every axis, for boxes that do not start on a multiple
+/// of the factor: max_resolution 2 on a 2^31-wide box starting at 8 gave 3 cells (issue 40).
+#[test]
+fn harden_the_lattice_never_exceeds_max_resolution() {
+    use glam::I64Vec3;
+    for (lo, width, m) in [(8i64, 1i64 << 31, 2u32), (8, (1 << 32) - 16, 2), (-5, 1 << 31, 3), (1, 1000, 7), (-3, 64, 4), (0, 64, 4), (7, 7, 2)] {
+        let (f, _, dims) = super::filter::lattice(I64Vec3::splat(lo), I64Vec3::splat(lo + width), super::filter::MaxResolution::new(m).unwrap());
+        assert!(dims.max_element() <= m as i64 && dims.min_element() >= 1, "lo {lo} width {width} m {m}: {dims} cells of {f}");
+        assert!(f * dims.x >= width, "the cells cover the box");
+    }
+}

@@ -5,6 +5,7 @@ mod gpu_info;
 mod mesa_env;
 mod progress;
 mod render;
+mod signals;
 mod solvers;
 mod vdb_info;
 
@@ -62,6 +63,7 @@ pub fn main() -> i32 {
     mesa_env::quiet_device_select();
     let cli = Cli::parse();
     volscatter_core::budget::set_budget(cli.memory_budget);
+    signals::install();
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Compare(args) => compare::run(args),
@@ -69,6 +71,11 @@ pub fn main() -> i32 {
         Command::GpuInfo => gpu_info::run(),
         Command::VdbInfo(args) => vdb_info::run(args),
     };
+    if let Some(sig) = signals::received() {
+        // The command stopped at the signal (its solve cancelled, no output begun after it).
+        eprintln!("\nvolscatter: stopped by {}", signals::name(sig));
+        return signals::exit_status(sig);
+    }
     match result {
         Ok(()) => 0,
         Err(e) => {

@@ -23,6 +23,9 @@ impl StderrProgress {
 
 impl Progress for StderrProgress {
     fn update(&self, stage: &str, fraction: f32) -> bool {
+        if self.cancelled() {
+            return false;
+        }
         if self.quiet {
             return true;
         }
@@ -38,5 +41,10 @@ impl Progress for StderrProgress {
             st.1 = stage.to_string();
         }
         true
+    }
+
+    /// A signal (cli/signals.rs) cancels the solve.
+    fn cancelled(&self) -> bool {
+        super::signals::received().is_some()
     }
 }

@@ -86,12 +86,36 @@ pub fn solver_settings(scene: &Scene, name: &str, args: &RenderArgs) -> Result<s
 
 fn ensure_parent(path: &std::path::Path) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        // The OS says only "File exists" when a folder on the way is a file: name it.
+        if let Some(file) = dir.ancestors().find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir()) {
+            return Err(Error::InvalidArgument(format!("{}: {} is a file, not a folder", path.display(), file.display())));
+        }
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
     Ok(())
 }
 
+/// Refuses, before anything runs, an output under a file (as if it were a folder) and two
+/// outputs naming the same file (one would silently overwrite the other): compared as
+/// absolute paths, and as the same existing file.
+fn distinct_outputs(outputs: &[(&str, Option<&std::path::Path>)]) -> Result<()> {
+    let key = |p: &std::path::Path| std::fs::canonicalize(p).or_else(|_| std::path::absolute(p)).unwrap_or_else(|_| p.to_path_buf());
+    for path in outputs.iter().filter_map(|(_, p)| *p) {
+        if let Some(file) = path.parent().into_iter().flat_map(|d| d.ancestors()).find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir()) {
+            return Err(Error::InvalidArgument(format!("{}: {} is a file, not a folder", path.display(), file.display())));
+        }
+    }
+    let named: Vec<(&str, std::path::PathBuf)> = outputs.iter().filter_map(|(flag, p)| p.map(|p| (*flag, key(p)))).collect();
+    for (i, (a, pa)) in named.iter().enumerate() {
+        if let Some((b, _)) = named[..i].iter().find(|(_, pb)| pb == pa) {
+            return Err(Error::InvalidArgument(format!("{b} and {a} name the same file {}: give each its own", pa.display())));
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: RenderArgs) -> Result<()> {
+    distinct_outputs(&[("--out", Some(&args.out)), ("--out-vdb", args.out_vdb.as_deref()), ("--png", args.png.as_deref()), ("--report", args.report.as_deref())])?;
     let start = Instant::now();
     let mut timings = Timings::default();
     let scene = timings.time("load scene", || match &args.scene {
@@ -119,6 +143,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
     }
     timings.0.extend(rendered.timings.0.iter().cloned());
+    // A signal after the solve: no output is begun.
+    if volscatter_core::Progress::cancelled(&progress) {
+        return Err(Error::Cancelled);
+    }
     if let (Some(path), Some(solved)) = (&args.out_vdb, &rendered.solved) {
         ensure_parent(path)?;
         let s = &solved.output.scattering;

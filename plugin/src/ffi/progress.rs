@@ -22,8 +22,34 @@ use super::handle::lock;
 /// possibly from a thread other than the caller's, and never after the call that was given it
 /// returned. It must not unwind (C++ exceptions, longjmp) through the library. It may call
 /// functions on other handles, and on the scene being solved (the solve works on a snapshot
-/// taken when it started).
+/// taken when it started); on the session being solved, `vs_session_frame_count` answers and
+/// `vs_session_solve` returns `VS_STATUS_BUSY` (it never waits inside a callback).
 pub type VsProgressCallback = Option<unsafe extern "C" fn(user: *mut c_void, stage: *const c_char, fraction: f32) -> i32>;
+
+thread_local! {
+    /// Progress callbacks running on this thread now (a callback may start another solve).
+    static IN_CALLBACK: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+}
+
+/// Whether this thread is inside a host's progress callback: such a caller must never wait
+/// for a solve, which may be waiting for the callback to return.
+pub(crate) fn in_callback() -> bool {
+    IN_CALLBACK.with(|c| c.get() > 0)
+}
+
+/// Marks this thread as inside a callback for as long as it lives (a drop: unwinding counts too).
+struct InCallback;
+impl InCallback {
+    fn enter() -> Self {
+        IN_CALLBACK.with(|c| c.set(c.get() + 1));
+        InCallback
+    }
+}
+impl Drop for InCallback {
+    fn drop(&mut self) {
+        IN_CALLBACK.with(|c| c.set(c.get().saturating_sub(1)));
+    }
+}
 
 /// The host hears from a solve at least this often.
 pub(crate) const HEARTBEAT: Duration = Duration::from_millis(100);
@@ -58,6 +84,7 @@ impl CProgress {
     fn call(&self, last: &mut Last) -> bool {
         let Some(cb) = self.callback else { return true };
         last.at = Instant::now();
+        let _inside = InCallback::enter();
         // SAFETY: the host gave this function pointer and user pointer for this call.
         let go_on = unsafe { cb(self.user as *mut c_void, last.c_stage.as_ptr(), last.fraction) };
         if go_on == 0 {

@@ -3,6 +3,8 @@
 //! (`volscatter_core::solvers::session`). Thin over `Session` and the GPU dispatch.
 
 use std::ffi::{c_char, c_void};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, TryLockError};
 
 use volscatter_core::pipeline::Session;
 use volscatter_gpu::DeviceChoice;
@@ -10,7 +12,7 @@ use volscatter_gpu::DeviceChoice;
 use super::guard::{self, clear_out, on_handle, write_out};
 use super::handle::lock;
 use super::handle::Registry;
-use super::progress::{CProgress, VsProgressCallback};
+use super::progress::{in_callback, CProgress, VsProgressCallback};
 use super::result::{ResultState, VsResult, RESULTS};
 use super::scene::{VsScene, SCENES};
 use super::status::{FfiError, VsStatus};
@@ -20,9 +22,22 @@ pub struct VsSession {
     _private: [u8; 0],
 }
 
-pub(crate) struct SessionState {
-    session: Session,
+/// The handle's mutex is held only to clone this `Arc`, never through a solve: the count is
+/// read without waiting, and a solve's own lock (`session`) is the one a frame waits on.
+pub(crate) struct SessionState(Arc<Shared>);
+
+struct Shared {
+    session: Mutex<Session>,
     device: DeviceChoice,
+    /// Calls of `vs_session_solve` on this session (failed and cancelled ones included, busy
+    /// refusals not): atomic, so that a progress callback may read it mid-solve.
+    frames: AtomicU64,
+}
+
+impl SessionState {
+    fn shared(h: &super::handle::Handle<SessionState>) -> Arc<Shared> {
+        Arc::clone(&lock(&h.state).0)
+    }
 }
 
 pub(crate) static SESSIONS: Registry<SessionState, VsSession> = Registry::new("VsSession");
@@ -46,7 +61,8 @@ pub unsafe extern "C" fn vs_session_new(scene: *const VsScene, out: *mut *mut Vs
             (st.scene.clone(), st.device)
         };
         let session = Session::for_scene(&scene, volscatter_gpu::devices(device))?;
-        write_out(out, SESSIONS.insert(SessionState { session, device })?, "out")
+        let shared = Shared { session: Mutex::new(session), device, frames: AtomicU64::new(0) };
+        write_out(out, SESSIONS.insert(SessionState(Arc::new(shared)))?, "out")
     })
 }
 
@@ -81,7 +97,9 @@ pub unsafe extern "C" fn vs_session_last_error(session: *const VsSession) -> *co
 /// Errors (including the scene's: no medium, NULL or dead scene handle) are on the session.
 ///
 /// Thread safety: any thread. Calls on one session are serialised (a frame waits for the one
-/// before); the scene is not kept locked during the solve.
+/// before); the scene is not kept locked during the solve. Called from inside a progress
+/// callback (of any solve) while this session is solving, it returns `VS_STATUS_BUSY` at once
+/// instead of waiting for a solve that waits for the callback.
 #[no_mangle]
 pub unsafe extern "C" fn vs_session_solve(
     session: *mut VsSession,
@@ -91,12 +109,23 @@ pub unsafe extern "C" fn vs_session_solve(
     out: *mut *mut VsResult,
 ) -> VsStatus {
     on_handle(&SESSIONS, session, |h| {
-        clear_out(out, "out")?;
+        let shared = SessionState::shared(h);
+        let cleared = clear_out(out, "out");
+        let mut st = match shared.session.try_lock() {
+            Ok(st) => st,
+            Err(TryLockError::Poisoned(p)) => p.into_inner(),
+            Err(TryLockError::WouldBlock) if in_callback() => {
+                return Err(FfiError::new(VsStatus::Busy, "busy: this session is solving, and a progress callback cannot wait for the solve it reports on"));
+            }
+            Err(TryLockError::WouldBlock) => lock(&shared.session),
+        };
+        // Counted once it is this session's frame, before anything can fail.
+        shared.frames.fetch_add(1, Ordering::SeqCst);
+        cleared?;
         let snapshot = lock(&SCENES.get(scene)?.state).snapshot()?;
         let progress = CProgress::new(progress, user);
-        let mut st = lock(&h.state);
-        let device = st.device;
-        let solved = progress.with_heartbeat(|| st.session.solve(&snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
+        let device = shared.device;
+        let solved = progress.with_heartbeat(|| st.solve(&snapshot, &progress))?; // a GPU failure is Error::Device: VS_STATUS_DEVICE
         if progress.cancelled() {
             return Err(FfiError::new(VsStatus::Cancelled, "cancelled"));
         }
@@ -105,11 +134,13 @@ pub unsafe extern "C" fn vs_session_solve(
     })
 }
 
-/// Writes the number of solves run in this session so far (failed and cancelled ones
-/// included) to `*out`.
+/// Writes the number of solves run in this session so far to `*out`: every
+/// `vs_session_solve` call on it, including the one running now and those that failed (bad
+/// arguments, a scene without a medium) or were cancelled; not those refused with
+/// `VS_STATUS_BUSY`.
 ///
-/// Thread safety: any thread; waits for a solve running on the session.
+/// Thread safety: any thread, a progress callback included; never waits for a solve.
 #[no_mangle]
 pub unsafe extern "C" fn vs_session_frame_count(session: *const VsSession, out: *mut u64) -> VsStatus {
-    on_handle(&SESSIONS, session, |h| write_out(out, lock(&h.state).session.frames(), "out"))
+    on_handle(&SESSIONS, session, |h| write_out(out, SessionState::shared(h).frames.load(Ordering::SeqCst), "out"))
 }

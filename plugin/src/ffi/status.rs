@@ -42,10 +42,13 @@ pub enum VsStatus {
     /// of device memory, a lost device. Under `VS_DEVICE_AUTO` such failures run on the CPU
     /// instead and are not reported. Retrying with `VS_DEVICE_CPU` works.
     Device = 12,
+    /// The session is solving, and the call came from a progress callback, which cannot wait
+    /// for the solve it reports on. Call again after that solve returns.
+    Busy = 13,
 }
 
 impl VsStatus {
-    pub(crate) const ALL: [VsStatus; 13] = [
+    pub(crate) const ALL: [VsStatus; 14] = [
         VsStatus::Ok,
         VsStatus::NullArgument,
         VsStatus::InvalidArgument,
@@ -59,6 +62,7 @@ impl VsStatus {
         VsStatus::Cancelled,
         VsStatus::Internal,
         VsStatus::Device,
+        VsStatus::Busy,
     ];
 
     /// Converts a C integer, never by transmute: unknown values give `None`.
@@ -82,6 +86,7 @@ impl VsStatus {
             VsStatus::Cancelled => c"cancelled",
             VsStatus::Internal => c"internal error",
             VsStatus::Device => c"the GPU device failed (no adapter, out of memory, or lost)",
+            VsStatus::Busy => c"busy: the session is solving (called from its progress callback)",
         }
     }
 }

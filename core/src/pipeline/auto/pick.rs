@@ -55,7 +55,13 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64, pr
         let reason = if preds.is_empty() {
             "no measurements to pick from".to_string()
         } else {
-            format!("no measured scene has a {} light", missing.join(" or "))
+            // The classes as a sentence names them ("a local light outside light" before).
+            let phrase = |n: &str| match n {
+                "distant" | "dome" => format!("a {n} light"),
+                "emission" => "an emissive medium".to_string(),
+                other => format!("a {other} the medium"),
+            };
+            format!("no measured scene has {}", missing.iter().map(|n| phrase(n)).collect::<Vec<_>>().join(" or "))
         };
         return fallback(f, target_error, time_budget, &reason, preset);
     }

@@ -143,7 +143,7 @@ fn unmeasured_light_types_fall_back_to_the_default_with_the_reason() {
     f.lights.local_outside = true;
     let c = pick(model, &f, 0.1, 0.0, registry::preset_settings);
     assert!(c.fallback && (c.solver.as_str(), c.quality.as_str()) == FALLBACK, "{c:?}");
-    assert!(c.why.contains("local light outside") && c.predicted_error.is_none(), "{}", c.why);
+    assert!(c.why.contains("has a local light outside the medium") && !c.why.contains("outside light") && c.predicted_error.is_none(), "{}", c.why);
     // Settings of the fallback are its registry preset, which builds.
     crate::solvers::registry::build(&c.solver, &c.settings).unwrap();
     // No measurements at all: the same default.

@@ -27,6 +27,7 @@
 //! `memory_budget`, not only the sweeps.
 
 mod collect;
+pub mod cost;
 pub mod delta_m;
 pub mod directions;
 pub mod estimate;
@@ -79,6 +80,8 @@ pub struct LpmReport {
     pub max_u: Vec<f32>,
     /// Propagations after the first order's (each gives J one more order).
     pub orders: usize,
+    /// What the user should hear (the cost guard's prediction), passed on as the solve's notes.
+    pub notes: Vec<String>,
     pub layers: [usize; FACES],
     pub sweep: stream::SweepStats,
     /// Bytes of the per-cell arrays (density, sigma_t, two U, J).
@@ -158,6 +161,15 @@ impl Lpm {
         let mut grid = timings.time("lpm grid", || LpmGrid::new(medium, s.grid_resolution, &mip))?;
         report.grid_dims = grid.dims;
         let dirs = Directions::new(s.lattice_side() as usize, s.storage_per_face as usize);
+        // The cost guard (cost.rs): a solve of hundreds of orders says so before they run.
+        let (orders, tau) = cost::predicted_orders(&grid, medium.albedo, medium.g, s.epsilon, s.max_orders);
+        let slow = cost::note(orders, tau, medium.albedo, grid.len(), dirs.len());
+        if let Some(n) = &slow {
+            if !progress.update(&format!("lpm: about {orders} orders, minutes (see the note)"), 0.0) {
+                return Err(Error::Cancelled);
+            }
+            report.notes.push(n.clone());
+        }
         let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
         let delta = delta_m::DeltaM::new(s.delta_m, medium.g, medium.albedo);
         let scaled_table = if delta.active() { Some(timings.time("lpm phase table", || delta.table(&dirs, &table))?) } else { None };
@@ -303,7 +315,8 @@ impl Solver for Lpm {
     /// on the CPU).
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let backend: &dyn stream::SweepBackend = ctx.backend::<dyn stream::SweepBackend>().unwrap_or(&stream::CpuSweeps);
-        let (out, report) = self.run(scene, ctx.progress(), backend)?;
+        let (mut out, report) = self.run(scene, ctx.progress(), backend)?;
+        out.notes.extend(report.notes.iter().cloned());
         Ok(out.with_report(report))
     }
 }

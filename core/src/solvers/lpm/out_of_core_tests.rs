@@ -305,3 +305,36 @@ fn lpm_estimate_matches_the_solves_plan() {
     assert!(super::estimate::memory(lo, hi, &LpmSettings { directions: 7, ..base }).is_err(), "invalid settings are refused");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Counts the scratch files that have a name in `dir` each time the cancel flag is read.
+#[cfg(unix)]
+struct WatchDir<'a> {
+    dir: &'a PathBuf,
+    most: AtomicUsize,
+}
+
+#[cfg(unix)]
+impl Progress for WatchDir<'_> {
+    fn update(&self, _: &str, _: f32) -> bool {
+        !self.cancelled()
+    }
+    fn cancelled(&self) -> bool {
+        self.most.fetch_max(files_in(self.dir), Ordering::Relaxed);
+        false
+    }
+}
+
+/// While an out-of-core solve runs, its scratch files have no name (unlinked once open), so
+/// nothing is left behind when the process dies mid-solve (SIGKILL, the OOM killer, a crash),
+/// where no drop runs. Looked at every time the solve reads its cancel flag.
+#[cfg(unix)]
+#[test]
+fn harden_lpm_out_of_core_scratch_files_are_nameless_while_solving() {
+    let sc = case("plume");
+    let dir = scratch("nameless");
+    let s = LpmSettings { grid_resolution: 16, directions: 9, max_orders: 3, output_resolution: 16, out_of_core: true, first_order: FirstOrder::Boundary, ..Default::default() };
+    let watch = WatchDir { dir: &dir, most: AtomicUsize::new(0) };
+    solve(&sc, s, Overrides { layers: Some(4), ..Default::default() }, Some(&dir), &watch).unwrap();
+    assert_eq!(watch.most.load(Ordering::Relaxed), 0, "scratch files with a name in {} during the solve", dir.display());
+    let _ = std::fs::remove_dir_all(&dir);
+}

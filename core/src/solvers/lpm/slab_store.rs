@@ -8,8 +8,10 @@
 //! slab cost as few system calls as their layout allows.
 //!
 //! The file is created new (never an existing one), sized sparse (unwritten cells read as
-//! zero: a fresh store is a zeroed array without writing it), and removed when the store is
-//! dropped: on success, on an error and on a cancel alike.
+//! zero: a fresh store is a zeroed array without writing it). On Unix its name is unlinked
+//! right after it is opened, so that nothing is left behind whatever ends the process
+//! (SIGKILL, a crash, the OOM killer): the space goes back when the descriptor closes.
+//! Elsewhere it is removed when the store is dropped: on success, an error or a cancel.
 
 use std::fs::{File, OpenOptions};
 use std::path::{Path, PathBuf};
@@ -39,7 +41,12 @@ impl SlabStore {
     pub fn create(dir: &Path, what: &str, dims: [usize; 3], k: usize) -> Result<Self> {
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let path = dir.join(format!("volscatter-lpm-{}-{n}-{what}.bin", std::process::id()));
-        let file = OpenOptions::new().read(true).write(true).create_new(true).open(&path).map_err(|e| Error::io(&path, e))?;
+        let file = OpenOptions::new().read(true).write(true).create_new(true).open(&path).map_err(|e| {
+            Error::io(&path, std::io::Error::new(e.kind(), format!("{e} (lpm out-of-core scratch file; set TMPDIR to an existing folder with room)")))
+        })?;
+        // Anonymous from here on (Unix): no name to leave behind.
+        #[cfg(unix)]
+        let _ = std::fs::remove_file(&path);
         let store = SlabStore { file, path, dims, k };
         let bytes = (dims.iter().product::<usize>() as u64) * (k * VALUE_BYTES) as u64;
         store.file.set_len(bytes).map_err(|e| store.error(e))?;
@@ -117,6 +124,7 @@ impl Drop for SlabStore {
     fn drop(&mut self) {
         // Nothing to report to: a scratch file that cannot be removed is left for the OS's
         // temp cleaning.
+        #[cfg(not(unix))]
         let _ = std::fs::remove_file(&self.path);
     }
 }
@@ -203,7 +211,8 @@ mod tests {
                 assert_eq!(v, fill(lo, hi), "axis {axis} box {lo:?}..{hi:?}");
             }
         }
-        assert!(path.exists());
+        // Unlinked once open (nothing survives a SIGKILL); elsewhere removed on drop.
+        assert_eq!(path.exists(), !cfg!(unix));
         drop(s);
         assert!(!path.exists());
     }
@@ -212,6 +221,6 @@ mod tests {
     #[test]
     fn slab_store_in_a_missing_directory_is_an_error() {
         let err = SlabStore::create(Path::new("/nonexistent/volscatter"), "u", [2, 2, 2], 1).err().unwrap().to_string();
-        assert!(err.contains("volscatter-lpm"), "{err}");
+        assert!(err.contains("volscatter-lpm") && err.contains("TMPDIR"), "the file and the hint: {err}");
     }
 }

@@ -131,7 +131,9 @@ impl PhotonGrid {
             return Err(Error::Cancelled);
         }
         let medium = &scene.medium;
-        let tallies = timings.time("cache", || ring.total().each_ref().map(|t| cache::Tallies::from_fixed(medium, ring.cache(), t)));
+        let lobe = |t| if progress.cancelled() { Err(Error::Cancelled) } else { Ok(cache::Tallies::from_fixed(medium, ring.cache(), t)) };
+        let [first, second] = ring.total();
+        let tallies = timings.time("cache", || Ok::<_, Error>([lobe(first)?, lobe(second)?]))?;
         let res = self.settings.output_dim(medium);
         // The backend sizes its grid from `output_resolution`: give it the voxel-aligned one.
         let out = PhotonGridSettings { output_resolution: res, ..self.settings.clone() };

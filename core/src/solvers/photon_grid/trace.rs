@@ -113,6 +113,8 @@ impl Tracer<'_> {
     pub fn run_generation(&self, sampler: &LightSampler, empty: &Cache, generation: u64, count: u32, total: u32) -> ([FixedTallies; 2], EnergyReport) {
         let results: Vec<([Cache; 2], EnergyReport)> = (0..BATCHES)
             .into_par_iter()
+            // A batch started after a cancel allocates nothing (two caches of the whole grid).
+            .filter(|_| !self.progress.cancelled())
             .map(|b| {
                 let mut cache = [empty.empty_like(), empty.empty_like()];
                 let mut report = EnergyReport::default();
@@ -133,7 +135,11 @@ impl Tracer<'_> {
         for (_, r) in &results {
             report.add(r);
         }
-        let lobe = |l: usize| FixedTallies::sum_of(&results.iter().map(|(c, _)| &c[l]).collect::<Vec<_>>());
+        // Cut short: the caller discards the tallies, so none are summed.
+        if self.progress.cancelled() {
+            return ([FixedTallies::zeros(0), FixedTallies::zeros(0)], report);
+        }
+        let lobe = |l: usize| FixedTallies::sum_of_cancellable(&results.iter().map(|(c, _)| &c[l]).collect::<Vec<_>>(), self.progress);
         ([lobe(0), lobe(1)], report)
     }
 

@@ -33,7 +33,7 @@ use super::accumulate;
 use crate::error::Result;
 use crate::medium::Medium;
 use crate::scene::{Camera, LatLongMap};
-use crate::stages::NoProgress;
+use crate::stages::{CancelOnly, Progress};
 use crate::translate::dome::DirectionalMap;
 
 /// The paper's resolutions (Sec. 5.2: 16^3 and 32 x 16).
@@ -45,8 +45,9 @@ const MAX_ITERATIONS: u32 = 64;
 const MU_NODES: [f32; 6] = [-1.0, -0.3, 0.3, 0.7, 0.9, 1.0];
 
 /// The directional importance map of the medium seen from `camera`, normalised to mean 1
-/// over the sphere. `diffusion_correction` as in `PopSettings`.
-pub fn directional_importance(medium: &Medium, mip: &MediumMip, camera: &Camera, diffusion_correction: bool) -> Result<DirectionalMap> {
+/// over the sphere. `diffusion_correction` as in `PopSettings`. Reads `progress`'s cancel flag
+/// in its propagations and per texel (`Error::Cancelled`); reports no progress of its own.
+pub fn directional_importance(medium: &Medium, mip: &MediumMip, camera: &Camera, diffusion_correction: bool, progress: &dyn Progress) -> Result<DirectionalMap> {
     let (lo, hi) = medium.world_bounds();
     let view = (0.5 * (lo + hi) - camera.position).normalize_or(Vec3::Y);
     let grid = LightGrid::new(medium, mip, view, GRID_RESOLUTION)?;
@@ -60,7 +61,7 @@ pub fn directional_importance(medium: &Medium, mip: &MediumMip, camera: &Camera,
             let mut j = vec![Vec3::ZERO; grid.len()];
             accumulate::add_direct(&initial.direct, &mu, 1.0, g, &mut j);
             let prop = Propagation { grid: &grid, g, mu: &mu, diffusion_correction, max_iterations: MAX_ITERATIONS, residual_threshold: 1e-2 };
-            prop.run(&initial, g, &mut j, &NoProgress)?;
+            prop.run(&initial, g, &mut j, &CancelOnly(progress))?;
             Ok(j)
         })
         .collect::<Result<_>>()?;
@@ -69,6 +70,9 @@ pub fn directional_importance(medium: &Medium, mip: &MediumMip, camera: &Camera,
     let texels: Vec<f32> = (0..MAP_WIDTH * MAP_HEIGHT)
         .into_par_iter()
         .map(|t| {
+            if progress.cancelled() {
+                return 0.0;
+            }
             let (x, r) = (t % MAP_WIDTH, t / MAP_WIDTH);
             let w = LatLongMap::uv_to_direction([(x as f32 + 0.5) / MAP_WIDTH as f32, 1.0 - (r as f32 + 0.5) / MAP_HEIGHT as f32]);
             let mu = view.dot(w);
@@ -96,6 +100,9 @@ pub fn directional_importance(medium: &Medium, mip: &MediumMip, camera: &Camera,
             (sum * (lg.h as f64).powi(3)) as f32
         })
         .collect();
+    if progress.cancelled() {
+        return Err(crate::error::Error::Cancelled);
+    }
     // Normalise to mean 1 per solid angle.
     Ok(DirectionalMap::from_texels(MAP_WIDTH, MAP_HEIGHT, &texels))
 }

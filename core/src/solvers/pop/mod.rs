@@ -190,7 +190,7 @@ impl Pop {
                 }
                 Light::Dome(env) if s.dome_ordinates > 0 => {
                     let weights = if s.dome_importance {
-                        let build = || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction);
+                        let build = || importance::directional_importance(medium, &mip, &scene.camera, s.diffusion_correction, progress);
                         Some(timings.time("pop importance", || match (reuse.as_deref_mut(), &key) {
                             (Some(r), Some(k)) => r.importance(k, scene.camera.position, s.diffusion_correction, build),
                             _ => build().map(std::sync::Arc::new),
@@ -209,11 +209,13 @@ impl Pop {
                 )),
             }
         }
-        let mut local = radial::sources(&scene.lights, s.area_vpls);
+        // The cost guard: a radial grid per source, so thousands of the scene's are merged
+        // (radial/cluster.rs); the emission VPLs are as many as the settings ask for.
+        let (mlo, mhi) = medium.world_bounds();
+        let (mut local, merged_note) = radial::cluster::cluster(radial::sources(&scene.lights, s.area_vpls), radial::cluster::MAX_SOURCES, |p| p.cmpge(mlo).all() && p.cmple(mhi).all());
+        report.warnings.extend(merged_note);
         local.extend(radial::emission_sources(medium, s.emission_vpls, scene.lights.len()));
-        if distant.is_empty() && local.is_empty() {
-            return Err(Error::InvalidArgument("pop: the scene has no light pop can propagate (distant, dome with ordinates, point, spot, area, or an emissive medium)".into()));
-        }
+        // No light: black, as every other solver returns (the merge of no lights is zero).
         if !progress.update("pop setup", 0.0) {
             return Err(Error::Cancelled);
         }
@@ -230,6 +232,10 @@ impl Pop {
             _ => None,
         };
         for (direction, fluence, a0, resolution) in distant {
+            // Each ordinate's grid and sweep take a core tenths of a second at high resolutions.
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             if fluence.max_element() <= 0.0 {
                 continue;
             }
@@ -295,6 +301,9 @@ impl Pop {
             timings.0.push(("pop residuum".into(), t0.elapsed().as_secs_f64()));
             report.residuum = Some(rep);
             lights.push((grid, light));
+        }
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
         }
         let mut merged = timings.time("pop merge", || backend.merge(medium, &mip, &lights, s.merge_resolution()))?;
         // --- local lights (radial/) ---

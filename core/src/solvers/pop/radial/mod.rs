@@ -28,6 +28,7 @@
 //! Point lights get the same lookup clamp at the radius where 1/r^2 equals its mean over one
 //! merged cell (0.36 cell), since the merged grid holds cell values, not point values.
 
+pub mod cluster;
 pub mod grid;
 pub mod init;
 pub mod propagate;

@@ -84,7 +84,7 @@ fn moved_camera_picks_neighbouring_ordinates() {
     let mip = MediumMip::new(&sc.medium, 1.0);
     let Light::Dome(env) = &sc.lights[0] else { unreachable!() };
     let ords = |s: &Scene| {
-        let map = importance::directional_importance(&s.medium, &mip, &s.camera, true).unwrap();
+        let map = importance::directional_importance(&s.medium, &mip, &s.camera, true, &crate::stages::NoProgress).unwrap();
         dome::select_ordinates(env, 64, Some(&map))
     };
     let (a, b) = (ords(&sc), ords(&moved));
