@@ -46,10 +46,10 @@ def bake(stage, out, *extra, timeout=300):
                           capture_output=True, text=True, env=_env(), timeout=timeout)
 
 
-def bake_popen(stage, out, *extra):
+def bake_popen(stage, out, *extra, env=None):
     return subprocess.Popen([sys.executable, "-m", "volscatter", "bake", str(stage), "--frames", FRAMES,
                              "--solver", "pop", *SETS, "--out-layer", str(out), *map(str, extra)],
-                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=_env())
+                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env={**_env(), **(env or {})})
 
 
 def make_sequence(folder: Path) -> Path:
@@ -225,7 +225,8 @@ def test_interrupted_client_rerun_bakes_only_missing_frames(serial, tmp_path):
     _dask()
     stage, _out, want = serial
     out = tmp_path / "interrupted" / "scatter.usda"
-    proc = bake_popen(stage, out, "--workers", "2", "--chunk", "2")
+    # Frames of this size take ~0.1 s: paused after each, they cannot all finish before the signal.
+    proc = bake_popen(stage, out, "--workers", "2", "--chunk", "2", env={"VOLSCATTER_FARM_FRAME_PAUSE_S": "0.5"})
     lines, some = [], threading.Event()
     t = threading.Thread(target=_watch, args=(proc, lines, some, 3), daemon=True)
     t.start()

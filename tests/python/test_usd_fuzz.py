@@ -150,7 +150,7 @@ def test_harden_bake_that_cannot_save_its_layer_leaves_no_vdb(tmp_path, monkeypa
 
     def fail(*a, **k):
         raise OSError(28, "No space left on device")
-    monkeypatch.setattr(R, "_write_layer", fail)
+    monkeypatch.setattr(R, "_compose_layer", fail)
     with pytest.raises(VolscatterError) as e:
         R.bake(str(stage), str(out / "b.usda"), solver="pop", settings={"grid_resolution": 8, "output_resolution": 12},
                width=16, height=12)

@@ -67,7 +67,14 @@ def bake_frames(args, frames, settings, medium_defaults, bar, warn, run_cancella
                                on_frame=on_frame, warn=warn)
 
     if args.workers or args.scheduler:
-        res = run()  # Ctrl-C reaches the waiting main thread; the cluster is closed on the way out
+        # The main thread only waits on the cluster: a signal's exception may land here (as
+        # Ctrl-C's always did), and the cluster is closed on the way out.
+        from . import cli
+        cli._WAITING.set()
+        try:
+            res = run()
+        finally:
+            cli._WAITING.clear()
     else:
         try:
             res = run_cancellable(run, bar)
