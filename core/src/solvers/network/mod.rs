@@ -46,7 +46,7 @@ use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput, Visibility
 
 use crate::medium::key::MediumKey;
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
-use crate::stages::{Progress, Timings};
+use crate::stages::{Counters, Progress, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::translate::sampling::BoundingSphere;
@@ -117,13 +117,11 @@ impl Network {
     /// (exact key: every voxel's bits, transform and material); I is kept as is when the direct
     /// light is bit-identical to a remembered one (a camera move: S is exactly the one-off
     /// solve's), else iterated from zero.
-    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, kept: &mut KeptNetwork) -> Result<(SolveOutput, NetworkReport)> {
+    /// `scattering` is the single scattering, timed in `timings` and counted in `counters`.
+    #[allow(clippy::too_many_arguments)]
+    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, kept: &mut KeptNetwork, mut scattering: crate::stages::ScatteringGrid, mut timings: Timings, counters: &mut Counters) -> Result<(SolveOutput, NetworkReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
-        let mut timings = Timings::default();
-        let mut scattering = timings.time("network single scattering", || {
-            crate::stages::single_scattering::single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
-        })?;
         let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
             // Nothing scatters twice: S is its single scattering.
@@ -134,8 +132,12 @@ impl Network {
         crate::budget::check_elements::<[glam::Vec3; 4]>("network arrays (solver.particles x solver.directions)", s.particles as u64 * s.directions as u64)?;
         let key = timings.time("network medium key", || MediumKey::of(medium));
         let mut net = match kept.0.take().filter(|k| k.medium == key) {
-            Some(k) => k,
+            Some(k) => {
+                counters.kept("network visibility");
+                k
+            }
             None => {
+                counters.computed("network visibility");
                 let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
                 if p.mean_sigma_t <= 0.0 {
                     return Ok((SolveOutput::new(finished(medium, scattering), timings), report));
@@ -160,10 +162,12 @@ impl Network {
         };
         let remembered = net.answers.iter().position(|(f, _)| same_bits(f, &first));
         if let Some(k) = remembered {
+            counters.kept("network iterate");
             report.start = Start::Kept;
             let answer = net.answers.remove(k);
             net.answers.push(answer);
         } else {
+            counters.computed("network iterate");
             report.start = Start::Cold;
             let input = IterationInput { links: &net.links, phase: &net.phase, first: &first, albedo: medium.albedo, max_iterations: s.max_iterations, threshold: s.residual_threshold };
             let it = match timings.time("network iterate", || backend.iterate(&input, None, progress)) {
@@ -214,12 +218,16 @@ impl Solver for Network {
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let backend: &dyn NetworkBackend = ctx.backend::<dyn NetworkBackend>().unwrap_or(&CpuBackend);
         let progress = ctx.progress();
+        let s = &self.settings;
+        let mut counters = Counters::default();
+        let mut timings = Timings::default();
+        let single = timings.time("network single scattering", || ctx.single_scattering(scene, s.output_resolution, s.dome_directions, 1, &mut counters))?;
         let mut one_off = KeptNetwork(None);
         let kept = match ctx.session() {
             Some(state) => state.kept(KeptNetwork::default),
             None => &mut one_off,
         };
-        let (out, report) = self.solve_keeping(scene, progress, backend, kept)?;
-        Ok(out.with_report(report))
+        let (out, report) = self.solve_keeping(scene, progress, backend, kept, single, timings, &mut counters)?;
+        Ok(out.with_counters(counters).with_report(report))
     }
 }

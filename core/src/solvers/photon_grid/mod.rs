@@ -213,6 +213,17 @@ impl Solver for PhotonGrid {
     fn name(&self) -> &'static str {
         "photon-grid"
     }
+    /// Camera-weighted photons (`angular = camera`) depend on the camera at any g.
+    fn view_independent(&self, scene: &Scene) -> bool {
+        scene.medium.g == 0.0 && self.settings.angular != Angular::Camera
+    }
+
+    /// The ring (generations > 1) averages the last frames' photons: a repeated scene traces
+    /// another generation.
+    fn repeatable(&self) -> bool {
+        self.settings.generations == 1
+    }
+
     /// S with the energy report (`PhotonGridReport`) attached; the tracing on the device's
     /// `PhotonBackend` when the context carries one; in a session, the ring of partial caches.
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
