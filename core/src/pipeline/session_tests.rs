@@ -92,6 +92,7 @@ fn session_frames_reuse_what_did_not_change_and_equal_one_off_solves() {
 /// `view_independent` (the claim `Session` relies on), at its `test` preset.
 #[test]
 fn view_independent_solvers_give_the_same_s_from_any_camera() {
+    let mut wrong = Vec::new();
     for &name in SOLVER_NAMES.iter().filter(|&&n| n != crate::pipeline::auto::NAME) {
         let mut settings = registry::preset_settings(name, "test");
         settings.insert("name".into(), name.into());
@@ -102,13 +103,18 @@ fn view_independent_solvers_give_the_same_s_from_any_camera() {
             eprintln!("{name}: not view-independent at g 0");
             continue;
         }
-        assert_eq!(bits(&one_off(&a)), bits(&one_off(&b)), "{name}: S at g 0 from two cameras");
+        let differ = bits(&one_off(&a)).iter().zip(bits(&one_off(&b))).filter(|(x, y)| *x != y).count();
+        if differ > 0 {
+            wrong.push(format!("{name}: S at g 0 from two cameras differs at {differ} points"));
+            continue;
+        }
         let mut session = Session::for_scene(&a, Devices::cpu()).unwrap();
         session.solve(&a, &NoProgress).unwrap();
         let moved = session.solve(&b, &NoProgress).unwrap();
         assert!(moved.diff.camera_only() && moved.diff.camera);
         assert!(moved.output.counters.was_reused("solve"), "{name}: {:?}", moved.output.counters);
-        assert_eq!(bits(&moved.output), bits(&one_off(&b)), "{name}: a camera move in a session");
+        assert!(bits(&moved.output) == bits(&one_off(&b)), "{name}: a camera move in a session");
         assert!(moved.output.scattering.data.iter().any(|v| *v != Vec3::ZERO), "{name}: lit");
     }
+    assert!(wrong.is_empty(), "{wrong:#?}");
 }

@@ -305,6 +305,12 @@ impl Solver for Lpm {
         "lpm"
     }
 
+    /// Its collect bins the direction to the camera (collect.rs), and the phase table's rows differ
+    /// in their last bits between bins even at g 0.
+    fn view_independent(&self, _scene: &Scene) -> bool {
+        false
+    }
+
     /// S with what the solve did (`LpmReport`) attached; the sweeps (propagate and collect,
     /// every order) on the device's `SweepBackend` when the context carries one (out of core:
     /// on the CPU).

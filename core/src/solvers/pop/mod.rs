@@ -370,6 +370,12 @@ impl Solver for Pop {
     fn name(&self) -> &'static str {
         "pop"
     }
+
+    /// Its importance and its merge weigh ordinates by the view (accumulate.rs `view_cosines`) at any g.
+    fn view_independent(&self, _scene: &Scene) -> bool {
+        false
+    }
+
     /// S with the per-light energy report (`PopReport`) attached; on the device's backend when
     /// the context carries one, reusing the session's kept stages when it is a session.
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
