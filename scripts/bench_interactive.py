@@ -1,4 +1,4 @@
-"""Interactive sessions (issue 37): N-frame sessions on the bench scenes — the sun orbiting, the
+"""Interactive sessions (issue 37) and lpm's interactive preset: N-frame sessions on the bench scenes — the sun orbiting, the
 camera orbiting, the medium changing every frame (a VDB sequence's stand-in) — per frame the
 session's time (median, p95, the first frame apart), the one-off solve's, and the session
 frames' error against their one-off solves; writes the "interactive" (CPU) or
@@ -10,6 +10,12 @@ frames' error against their one-off solves; writes the "interactive" (CPU) or
 
 Runs shaders/examples/bench_interactive.rs (`cargo run --release`; on a lent GPU machine the
 prebuilt binary through scripts/device/cargo, as scripts/bench_device.sh sets up).
+
+    python3 scripts/bench_interactive.py --lpm-draft [--repeats 5] [--threads 2]
+
+lpm's `draft` preset on the default scene (the 64^3 plume, sun and sky) against the path
+tracer at 2048 spp, 64 x 64 pixels (`volscatter compare`): solve time (median of the repeats)
+and image error; writes the "lpm-draft" section.
 """
 
 from __future__ import annotations
@@ -17,10 +23,43 @@ from __future__ import annotations
 import argparse
 import os
 
-from benchlib import REPO_ROOT, cargo_example_benches, publish, table, written_line
+import statistics
+import tempfile
+from pathlib import Path
+
+from benchlib import REPO_ROOT, cargo_example_benches, compare, publish, require_volscatter, set_args, solver_registry, table, written_line
 
 SCENES = ["thin_smoke", "smoke_point", "fire_smoke", "overcast", "dense_cloud"]
 SOLVERS = ["pop", "photon-grid", "network", "vpl", "lpm"]
+
+
+def lpm_draft(repeats: int, threads: int) -> None:
+    """lpm `draft` against the converged path tracer on the default scene (see the docstring)."""
+    require_volscatter()
+    os.environ["RAYON_NUM_THREADS"] = str(threads)
+    entry = next(e for e in solver_registry() if e["name"] == "lpm")
+    draft = next(p for p in entry["presets"] if p["name"] == "draft")["settings"]
+    variants = ",".join(f"lpm#r{k}" for k in range(repeats))
+    with tempfile.TemporaryDirectory() as tmp:
+        doc = compare(None, Path(tmp) / "c.json", variants + ",reference",
+                      ["--set", "reference.spp=2048", "--width", "64", "--height", "64", "--no-grid"]
+                      + [x for k in range(repeats) for x in set_args(draft, f"lpm#r{k}.")])
+    runs = [r for r in doc["runs"] if r["solver"].startswith("lpm")]
+    solve = statistics.median(r["grid_seconds"] for r in runs)
+    error = statistics.median(r["image_relative_rmse"] for r in runs)
+    phases = {k: statistics.median(r["phases_seconds"].get(k, 0.0) for r in runs) for k in runs[0]["phases_seconds"] if k.startswith("lpm")}
+    lines = [
+        "## lpm draft (interactive)",
+        "",
+        written_line(f"python3 scripts/bench_interactive.py --lpm-draft --repeats {repeats} --threads {threads}"),
+        f"Default scene (64^3 plume, sun and sky), 64 x 64 pixels, {threads} worker threads; lpm at its `draft` preset"
+        f" {runs[0]['settings']}; the baseline is the path tracer at 2048 spp. Median of {repeats} solves."
+        " Aim (issue 37): under 0.15 s at 15% image error or less.",
+        "",
+        *table("| solve s | image rel. RMSE | " + " | ".join(phases) + " |",
+               [f"| {solve:.3f} | {error:.3f} | " + " | ".join(f"{v:.3f}" for v in phases.values()) + " |"]),
+    ]
+    publish("lpm-draft", lines)
 
 
 def main() -> None:
@@ -32,7 +71,12 @@ def main() -> None:
     ap.add_argument("--preset", default="preview")
     ap.add_argument("--device", default="cpu", choices=["cpu", "gpu"])
     ap.add_argument("--threads", type=int, default=2, help="CPU worker threads (RAYON_NUM_THREADS)")
+    ap.add_argument("--lpm-draft", action="store_true", help="measure lpm's draft preset instead of sessions")
+    ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
+    if args.lpm_draft:
+        lpm_draft(args.repeats, args.threads)
+        return
     rows = []
     for scene in args.scenes.split(","):
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
