@@ -182,7 +182,7 @@ impl PhotonGrid {
             return self.solve_generations(scene, self.first, progress, backend, kept, counters);
         }
         // The ring's frames keep no single scattering (their S is not the one-off's anyway).
-        let kept = on_cpu.then_some(None);
+        let single = on_cpu.then_some(None);
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
             return Err(Error::Cancelled);
@@ -200,7 +200,7 @@ impl PhotonGrid {
             None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress, backend)?),
         }
         match kept.0.as_ref() {
-            Some(ring) => self.finish(scene, ring, timings, progress, backend, kept, counters),
+            Some(ring) => self.finish(scene, ring, timings, progress, backend, single, counters),
             None => unreachable!("the ring was set just above"),
         }
     }

@@ -85,7 +85,7 @@ pub mod walks;
 use crate::stages::mip::MediumMip;
 use crate::stages::upsample::Merged;
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
-use crate::stages::{Counters, Progress, ScatteringGrid, Timings};
+use crate::stages::{Counters, ScatteringGrid, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
