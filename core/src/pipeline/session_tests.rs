@@ -74,6 +74,18 @@ fn session_frames_reuse_what_did_not_change_and_equal_one_off_solves() {
         assert_eq!(bits(&out.output), bits(&one_off(&sc)), "frame {f}");
     }
 
+    // pop keeps its density mip and the sky's importance across a sun move (pop/reuse.rs).
+    let settings = serde_json::json!({"name": "pop", "grid_resolution": 12, "output_resolution": 24, "dome_ordinates": 4});
+    let mut session = Session::for_scene(&scene(16, 0.6, 0.0, 0.0, &settings), Devices::cpu()).unwrap();
+    for (f, sun) in [0.0f32, 0.4].into_iter().enumerate() {
+        let sc = scene(16, 0.6, sun, 0.0, &settings);
+        let out = session.solve(&sc, &NoProgress).unwrap();
+        let c = &out.output.counters;
+        assert_eq!((c.was_reused("pop mip"), c.was_computed("pop mip")), (f > 0, f == 0), "pop frame {f}: {c:?}");
+        assert!(c.was_computed("pop ordinate"), "pop frame {f}: the sun's ordinate is solved: {c:?}");
+        assert_eq!(bits(&out.output), bits(&one_off(&sc)), "pop frame {f}");
+    }
+
     let settings = serde_json::json!({"name": "network", "particles": 512, "directions": 24, "output_resolution": 16});
     let mut session = Session::for_scene(&scene(16, 0.6, 0.0, 0.0, &settings), Devices::cpu()).unwrap();
     for (f, sun) in [0.0f32, 0.4, 0.0].into_iter().enumerate() {
