@@ -19,13 +19,13 @@
 # copy the GPU sections of OUT/BENCHMARKS.md into BENCHMARKS.md (`merge OUT/BENCHMARKS.md`).
 #
 # `--quick`: the scripts' small sizes, to try the whole run on lavapipe before spending device time.
-# `--only`: just the named steps (vpl, pop, photon-grid, network, lpm, local-lights, solvers, gpu-tests).
+# `--only`: just the named steps (vpl, pop, photon-grid, network, lpm, local-lights, solvers, interactive, gpu-tests).
 set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
 # The sections the GPU benchmarks write (benchlib.py's write_section markers).
-GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm solvers-gpu pop-local-lights)
+GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm solvers-gpu pop-local-lights interactive-gpu)
 
 stage() {
     set -e
@@ -35,9 +35,11 @@ stage() {
         python3 -c 'import json,sys; print([j["executable"] for j in map(json.loads, sys.stdin) if j.get("executable")][-1])')
     rm -rf .devbin && mkdir -p .devbin
     cp target/release/volscatter target/release/examples/bench_pop target/release/examples/bench_vpl \
-        target/release/examples/bench_photon_grid_gpu target/release/examples/bench_network_gpu .devbin/
+        target/release/examples/bench_photon_grid_gpu target/release/examples/bench_network_gpu \
+        target/release/examples/bench_interactive .devbin/
     cp "$lib" .devbin/volscatter-gpu-lib
-    strip .devbin/volscatter .devbin/bench_pop .devbin/bench_vpl .devbin/bench_photon_grid_gpu .devbin/bench_network_gpu .devbin/volscatter-gpu-lib
+    strip .devbin/volscatter .devbin/bench_pop .devbin/bench_vpl .devbin/bench_photon_grid_gpu .devbin/bench_network_gpu \
+        .devbin/bench_interactive .devbin/volscatter-gpu-lib
     # The one shared fixture a GPU test reads (solve_tests.rs: ../../shared from the crate).
     mkdir -p .devbin/shared/fixtures/blender_noise_cube/volumes
     cp ../shared/fixtures/blender_noise_cube/volumes/Volume.vdb .devbin/shared/fixtures/blender_noise_cube/volumes/
@@ -111,6 +113,7 @@ run() {
         step photon-grid 120 python3 scripts/bench_photon_grid.py --gpu --quick
         step network 120 python3 scripts/bench_network.py --gpu-only --quick
         step lpm 300 python3 scripts/bench_lpm.py --paper-only --quick
+        step interactive 120 python3 scripts/bench_interactive.py --device gpu --frames 3 --scenes thin_smoke --threads "$(nproc)"
     else
         # vpl first (issue 16 asks for its H100 timings); its rows go to a file as they come, one
         # scene at a time, so a cut-off run keeps the configurations it finished.
@@ -124,6 +127,8 @@ run() {
         step lpm 75 python3 scripts/bench_lpm.py --paper-only
         step solvers 120 python3 scripts/bench_solvers_gpu.py --presets preview,final --repeat 2
         step local-lights 120 python3 scripts/bench_local_lights.py --gpu
+        # Issue 37: 30-frame sessions (sun orbit, camera orbit, changing medium) per frame on the GPU.
+        step interactive 150 python3 scripts/bench_interactive.py --device gpu --frames 30 --scenes thin_smoke,dense_cloud --threads "$(nproc)"
         # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees). One at a
         # time: in one process (nextest gives each its own) a test that destroys the shared
         # device would reopen it under another that checks it is never reopened.

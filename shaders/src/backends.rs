@@ -23,7 +23,7 @@ use volscatter_core::solvers::photon_grid::backend::PhotonBackend;
 use volscatter_core::solvers::pop::PopDevice;
 use volscatter_core::solvers::vpl::backend::VplBackend;
 use volscatter_core::solvers::SolveOutput;
-use volscatter_core::stages::ScatteringGrid;
+use volscatter_core::stages::{Counters, ScatteringGrid};
 use volscatter_core::{Result, Scene};
 
 /// Residual checks of the GPU propagation happen every this many iterations (one readback).
@@ -43,7 +43,7 @@ pub const GPU_BACKENDS: &[(&str, MakeBackend)] = &[
     ("vpl", |c| Box::new(Box::new(crate::vpl::GpuBackend::new(c)) as Box<dyn VplBackend>)),
 ];
 
-fn backend_for(name: &str) -> Option<MakeBackend> {
+pub(crate) fn backend_for(name: &str) -> Option<MakeBackend> {
     GPU_BACKENDS.iter().find(|(n, _)| *n == name).map(|(_, make)| *make)
 }
 
@@ -65,7 +65,15 @@ impl Accelerator for Gpu {
 
     fn solve(&self, choice: DeviceChoice, name: &str, job: &mut dyn FnMut(&dyn Any) -> Result<SolveOutput>) -> Result<Attempt<SolveOutput>> {
         let Some(make) = backend_for(name) else { return Ok(Attempt::Declined(format!("`{name}` has no GPU backend"))) };
-        try_gpu(choice, |ctx| job(make(ctx).as_ref()))
+        try_gpu(choice, |ctx| {
+            // What the device did for this solve: the context's totals across it (one solve
+            // at a time holds the shared context).
+            let before = ctx.counts();
+            let mut out = job(make(ctx).as_ref())?;
+            let after = ctx.counts();
+            out.counters.add(&device_delta(&before, &after));
+            Ok(out)
+        })
     }
 
     fn single_for(&self, choice: DeviceChoice, scene: &Scene, opts: &CompositeOptions) -> Result<Attempt<Option<ScatteringGrid>>> {
@@ -77,6 +85,18 @@ impl Accelerator for Gpu {
             return Ok(Attempt::Declined("the GPU compositor does not march the medium's emission yet".into()));
         }
         try_gpu(choice, |ctx| crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into))
+    }
+}
+
+/// `after` less `before`, the device's counts only.
+fn device_delta(before: &Counters, after: &Counters) -> Counters {
+    Counters {
+        bytes_uploaded: after.bytes_uploaded - before.bytes_uploaded,
+        bytes_read_back: after.bytes_read_back - before.bytes_read_back,
+        pipelines_created: after.pipelines_created - before.pipelines_created,
+        buffers_created: after.buffers_created - before.buffers_created,
+        submissions: after.submissions - before.submissions,
+        ..Counters::default()
     }
 }
 

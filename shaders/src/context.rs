@@ -2,7 +2,9 @@
 
 use std::any::Any;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use volscatter_core::stages::Counters;
 use wgpu::util::DeviceExt;
 
 #[derive(Debug, thiserror::Error)]
@@ -51,6 +53,24 @@ pub struct GpuContext {
     pipelines: Mutex<HashMap<(&'static str, &'static str), Arc<wgpu::ComputePipeline>>>,
     /// Other device objects built once per context (see `cached`).
     objects: Mutex<HashMap<&'static str, Arc<dyn Any + Send + Sync>>>,
+    /// What this context's helpers created and moved so far (`counts`).
+    counts: DeviceCounts,
+}
+
+/// Running totals of what a context's helpers did: a solve's counters are the difference
+/// across it (`GpuContext::counts`). Work that bypasses the helpers (a kernel calling
+/// `device.create_buffer` itself) is not counted.
+#[derive(Default)]
+struct DeviceCounts {
+    bytes_uploaded: AtomicU64,
+    bytes_read_back: AtomicU64,
+    pipelines_created: AtomicU64,
+    buffers_created: AtomicU64,
+    submissions: AtomicU64,
+}
+
+fn bump(c: &AtomicU64, by: u64) {
+    c.fetch_add(by, Ordering::Relaxed);
 }
 
 /// The process's context (see `GpuContext::with_shared`).
@@ -117,7 +137,7 @@ impl GpuContext {
                 }
             });
         }
-        Ok(GpuContext { device, queue, info, limits, errors, lost, pipelines: Mutex::new(HashMap::new()), objects: Mutex::new(HashMap::new()) })
+        Ok(GpuContext { device, queue, info, limits, errors, lost, pipelines: Mutex::new(HashMap::new()), objects: Mutex::new(HashMap::new()), counts: DeviceCounts::default() })
     }
 
     /// Runs `f` on the process's context, opened on first use (opening costs tens of
@@ -187,6 +207,7 @@ impl GpuContext {
             return Err(GpuError::Internal(format!("{label}: {e}")));
         }
         let pipeline = Arc::new(pipeline);
+        bump(&self.counts.pipelines_created, 1);
         cache.insert((label, entry), pipeline.clone());
         Ok(pipeline)
     }
@@ -210,6 +231,8 @@ impl GpuContext {
 
     /// A uniform buffer holding `bytes` (a kernel's parameters).
     pub fn uniform(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        bump(&self.counts.buffers_created, 1);
+        bump(&self.counts.bytes_uploaded, bytes.len() as u64);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage: wgpu::BufferUsages::UNIFORM })
     }
 
@@ -217,12 +240,29 @@ impl GpuContext {
     /// checked against the adapter's limits first.
     pub fn zeroed_storage(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
         self.check_storage_size(label, bytes)?;
+        bump(&self.counts.buffers_created, 1);
         Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: bytes.max(16),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false, // wgpu zero-initialises buffers
         }))
+    }
+
+    /// What this context's helpers created and moved so far: a solve's share is the
+    /// difference across it (`Counters::add` of `since`). A read-back's staging buffer counts
+    /// as bytes read back, not as a buffer created.
+    pub fn counts(&self) -> Counters {
+        let c = &self.counts;
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        Counters {
+            bytes_uploaded: get(&c.bytes_uploaded),
+            bytes_read_back: get(&c.bytes_read_back),
+            pipelines_created: get(&c.pipelines_created),
+            buffers_created: get(&c.buffers_created),
+            submissions: get(&c.submissions),
+            ..Counters::default()
+        }
     }
 
     /// Records one compute pass: `pipeline` with bind group 0 = `buffers` at bindings 0, 1, ...
@@ -239,6 +279,7 @@ impl GpuContext {
     /// Submits `enc`, waits for the device to finish and reports any error it raised (so a
     /// stage's wall time is its GPU time, and its errors are its own).
     pub fn submit_and_wait(&self, enc: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        bump(&self.counts.submissions, 1);
         self.queue.submit([enc.finish()]);
         self.device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
         self.check()
@@ -292,6 +333,8 @@ impl GpuContext {
         } else {
             data
         };
+        bump(&self.counts.buffers_created, 1);
+        bump(&self.counts.bytes_uploaded, contents.len() as u64);
         Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
             contents,
@@ -309,6 +352,8 @@ impl GpuContext {
         });
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(src, 0, &staging, 0, bytes);
+        bump(&self.counts.submissions, 1);
+        bump(&self.counts.bytes_read_back, bytes);
         self.queue.submit([enc.finish()]);
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();

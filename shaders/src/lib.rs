@@ -23,6 +23,8 @@ pub mod vpl;
 mod wgsl;
 
 #[cfg(test)]
+mod session_counters_tests;
+#[cfg(test)]
 mod test_support;
 
 pub use context::{GpuContext, GpuError};

@@ -11,6 +11,8 @@ pub mod auto;
 pub mod device;
 pub mod guard;
 pub mod session;
+#[cfg(test)]
+mod session_tests;
 
 use std::time::Instant;
 

@@ -10,9 +10,17 @@
 //! device (the accelerator's backend, or the CPU with a note saying why), solve, guard again
 //! (the result is finite).
 //!
+//! Each frame starts with a scene diff (stages/diff.rs: the medium, each light, the camera,
+//! by exact keys), which the solver reads from its state and which decides here: a frame whose
+//! scene did not change, or changed only in its camera where the solver's S does not depend on
+//! it (`Solver::view_independent`: an isotropic medium), hands back the last frame's S without
+//! solving. Below that, the single scattering keeps each light's part while that light, the
+//! medium and the camera stay (stages/single_scattering.rs), and each solver what it keeps.
+//! Every result's `counters` say what was computed and what was kept.
+//!
 //! The scene may change in any way between solves. A solver keeps only what it can key on the
-//! part of the scene it came from, so a session's answer is the one-off answer (tests below
-//! and in pop/reuse.rs). One declared exception, by the user's choice: `photon-grid` with
+//! part of the scene it came from, so a session's answer is the one-off answer, bit for bit
+//! (tests below, in pop/reuse.rs and network/session_tests.rs). One declared exception, by the user's choice: `photon-grid` with
 //! `generations` m > 1 keeps the paper's temporal ring (photon_grid/ring.rs), whose frames
 //! average the last m frames' photons: its first frame is the one-off answer, later ones lag
 //! the scene by up to m - 1 frames for 1 / m of the cost.
@@ -29,13 +37,16 @@ use crate::scene::Scene;
 use crate::solvers::session::SessionState;
 use crate::solvers::{registry, SolveCtx, SolveOutput, Solver};
 use crate::image::Image;
-use crate::stages::{Progress, Timings};
+use crate::stages::diff::SceneKeys;
+use crate::stages::{Progress, SceneDiff, ScatteringGrid, Timings};
 
 /// A solve's output and what the pipeline decided on the way.
 pub struct Solved {
     pub output: SolveOutput,
     /// What `auto` picked and why (None when a solver was named).
     pub choice: Option<Choice>,
+    /// What changed since the session's previous frame (everything on the first).
+    pub diff: SceneDiff,
     pub device: DeviceUsed,
     /// What the host should tell the user (a fall-back to the CPU, ...): library code never
     /// prints.
@@ -63,6 +74,9 @@ pub struct Session {
     devices: Devices,
     built: Option<Built>,
     state: SessionState,
+    /// The last frame's scene keys, and its S and notes while the frame succeeded (None after
+    /// a failed or cancelled frame: the next one solves).
+    last: Option<(SceneKeys, Option<(ScatteringGrid, Vec<String>, DeviceUsed)>)>,
 }
 
 impl Session {
@@ -75,7 +89,7 @@ impl Session {
         } else {
             Some(Built::new(name, settings)?)
         };
-        Ok(Session { name: name.to_string(), settings: settings.clone(), devices, built, state: SessionState::new() })
+        Ok(Session { name: name.to_string(), settings: settings.clone(), devices, built, state: SessionState::new(), last: None })
     }
 
     /// A session of the solver `scene` names (default "reference"), with its settings.
@@ -106,27 +120,40 @@ impl Session {
         let c = auto::choose(scene, &self.settings, registry::preset_settings)?;
         if !self.built.as_ref().is_some_and(|b| b.name == c.solver && b.settings == c.settings) {
             self.built = Some(Built::new(&c.solver, &c.settings)?);
+            // Another solver: nothing of the last frame's S carries over.
+            self.last = None;
         }
         Ok(Some(c))
     }
 
-    /// Starts a frame: counts it, guards the scene, and builds `auto`'s pick for it.
-    fn begin(&mut self, scene: &Scene) -> Result<Option<Choice>> {
+    /// Starts a frame: counts it, guards the scene, builds `auto`'s pick for it, and tells the
+    /// solver's state what changed since the last frame.
+    fn begin(&mut self, scene: &Scene) -> Result<(Option<Choice>, SceneDiff)> {
         self.state.begin_frame();
+        let last = self.last.take();
         guard::check_scene(scene)?;
-        self.pick(scene)
+        let choice = self.pick(scene)?;
+        let keys = SceneKeys::of(scene);
+        let (diff, kept) = match (last, &self.last) {
+            // `pick` left `last` empty: the same solver as the last frame.
+            (Some((before, kept)), None) => (SceneDiff::between(&before, &keys), kept),
+            _ => (SceneDiff::first(scene.lights.len()), None),
+        };
+        self.state.set_diff(diff.clone());
+        self.last = Some((keys, kept));
+        Ok((choice, diff))
     }
 
     /// Solves `scene`, reusing what the previous solves kept.
     pub fn solve(&mut self, scene: &Scene, progress: &dyn Progress) -> Result<Solved> {
-        let choice = self.begin(scene)?;
-        self.run(scene, progress, choice)
+        let (choice, diff) = self.begin(scene)?;
+        self.run(scene, progress, choice, diff)
     }
 
     /// One frame for an image: the solver's own image when it renders images (the path
     /// tracer), else its solve (for the pipeline to composite). Guarded and picked once.
     pub(crate) fn render_frame(&mut self, scene: &Scene, progress: &dyn Progress, transparent: bool) -> Result<Frame> {
-        let choice = self.begin(scene)?;
+        let (choice, diff) = self.begin(scene)?;
         {
             let Session { built, state, .. } = &mut *self;
             let Some(built) = built.as_ref() else { unreachable!("a session's solver is built before it solves") };
@@ -138,14 +165,25 @@ impl Session {
                 return Ok(Frame::Image { image, timings, notes: scene.notes() });
             }
         }
-        self.run(scene, progress, choice).map(Frame::Solved)
+        self.run(scene, progress, choice, diff).map(Frame::Solved)
     }
 
     /// The device step and the solve of a begun frame, and the check of its result.
-    fn run(&mut self, scene: &Scene, progress: &dyn Progress, choice: Option<Choice>) -> Result<Solved> {
-        let Session { devices, built, state, .. } = self;
+    fn run(&mut self, scene: &Scene, progress: &dyn Progress, choice: Option<Choice>, diff: SceneDiff) -> Result<Solved> {
+        let Session { devices, built, state, last, .. } = self;
         // Built in `new` for every name but auto, and by `pick` for auto.
         let Some(built) = built.as_ref() else { unreachable!("a session's solver is built before it solves") };
+        let Some((_, kept)) = last.as_mut() else { unreachable!("`begin` keeps the frame's keys") };
+        let same_s = diff.nothing() || (diff.camera_only() && built.solver.view_independent(scene));
+        match kept.take() {
+            Some((s, notes, device)) if same_s && built.solver.repeatable() => {
+                let mut output = SolveOutput::new(s.clone(), Timings(vec![("reuse S".into(), 0.0)]));
+                output.counters.kept("solve");
+                *kept = Some((s, notes.clone(), device.clone()));
+                return Ok(Solved { output, choice, diff, device, notes });
+            }
+            _ => {}
+        }
         let mut notes = scene.notes();
         let mut solve = |backend: Option<&dyn Any>| {
             let ctx = SolveCtx::new(progress).in_session(state);
@@ -162,7 +200,10 @@ impl Session {
         })?;
         notes.extend(output.notes.iter().cloned());
         guard::check_finite(scene, "scattering grid", output.scattering.data.iter().copied())?;
-        Ok(Solved { output, choice, device, notes })
+        if built.solver.repeatable() {
+            *kept = Some((output.scattering.clone(), notes.clone(), device.clone()));
+        }
+        Ok(Solved { output, choice, diff, device, notes })
     }
 
     /// The solver built for the last frame (for `auto`, its last pick), if any.

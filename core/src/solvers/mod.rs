@@ -22,7 +22,7 @@ use std::any::Any;
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::scene::Scene;
-use crate::stages::{Progress, ScatteringGrid, Timings};
+use crate::stages::{Counters, Progress, ScatteringGrid, Timings};
 use session::SessionState;
 
 /// What a solver returns: the scattering grid, the time each stage took, and what the solver
@@ -32,12 +32,21 @@ pub struct SolveOutput {
     pub timings: Timings,
     /// What the host should tell the user (a light left out, ...): library code never prints.
     pub notes: Vec<String>,
+    /// What the solve computed and what it kept from earlier frames of its session, and on a
+    /// device what it created, uploaded, read back and submitted.
+    pub counters: Counters,
     report: Option<Box<dyn Any + Send + Sync>>,
 }
 
 impl SolveOutput {
     pub fn new(scattering: ScatteringGrid, timings: Timings) -> Self {
-        SolveOutput { scattering, timings, notes: Vec::new(), report: None }
+        SolveOutput { scattering, timings, notes: Vec::new(), counters: Counters::default(), report: None }
+    }
+
+    /// This output with `counters` (the solve's own).
+    pub fn with_counters(mut self, counters: Counters) -> Self {
+        self.counters = counters;
+        self
     }
 
     /// This output with the solver's report attached (PopReport, VplReport, ...).
@@ -95,6 +104,20 @@ impl<'a> SolveCtx<'a> {
         self.state.as_deref_mut()
     }
 
+    /// The single-scattering grid of `scene` (stages/single_scattering.rs), in a session from
+    /// the parts kept from the last frame where their inputs did not change; what it computed
+    /// and kept goes to `counters`.
+    pub fn single_scattering(&mut self, scene: &Scene, max_dim: u32, dome_directions: u32, dome_spacing: u32, counters: &mut Counters) -> Result<ScatteringGrid> {
+        let progress = self.progress;
+        let cache = self.session().map(|s| s.single());
+        crate::stages::single_scattering::single_scattering_kept(scene, max_dim, dome_directions, dome_spacing, progress, cache, counters)
+    }
+
+    /// Whether this solve runs on a device's backend (else on the CPU).
+    pub fn on_device(&self) -> bool {
+        self.backend.is_some()
+    }
+
     /// The device's backend of trait `B` (`dyn PopBackend`, ...), None on the CPU.
     pub fn backend<B: ?Sized + 'static>(&self) -> Option<&'a B> {
         let any: &'a dyn Any = self.backend?;
@@ -109,6 +132,21 @@ pub trait Solver: Send + Sync {
     /// what it kept from earlier frames and keep more, but returns exactly what a one-off solve
     /// would for this scene unless its documentation says otherwise (session.rs).
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput>;
+
+    /// Whether this solver's S for `scene` is the same wherever the camera is: then a session
+    /// whose scene changed only in its camera hands back the last frame's S (pipeline/session.rs).
+    /// The camera enters S through the phase function towards it, a constant in an isotropic
+    /// medium (g = 0); a solver whose S depends on the camera otherwise says so
+    /// (`view_independent_solvers_give_the_same_s_from_any_camera` checks every claim).
+    fn view_independent(&self, scene: &Scene) -> bool {
+        scene.medium.g == 0.0
+    }
+
+    /// Whether a session's frame of an unchanged scene is the last frame's S (a solver whose
+    /// frames average over time, photon-grid's ring, says no).
+    fn repeatable(&self) -> bool {
+        true
+    }
 
     /// The camera's image rendered directly (RGBA and the AOVs `single`, `multiple`,
     /// `background`), for a solver that renders images rather than scattering grids to

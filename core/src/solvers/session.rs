@@ -1,7 +1,11 @@
 //! What a solver keeps between the frames of a session (pipeline/session.rs says what a
-//! session promises): one value of the solver's own type, and the frame count.
+//! session promises): one value of the solver's own type, the single-scattering parts that
+//! several solvers share, what changed since the previous frame, and the frame count.
 
 use std::any::Any;
+
+use crate::stages::single_scattering::SingleCache;
+use crate::stages::SceneDiff;
 
 
 /// What a solver keeps between the solves of one session: one value of a type the solver
@@ -11,6 +15,8 @@ use std::any::Any;
 pub struct SessionState {
     frame: u64,
     kept: Option<Box<dyn Any + Send>>,
+    single: SingleCache,
+    diff: Option<SceneDiff>,
 }
 
 impl SessionState {
@@ -47,6 +53,22 @@ impl SessionState {
     /// Drops what the solver kept (the frame count stays).
     pub fn clear(&mut self) {
         self.kept = None;
+        self.single = SingleCache::default();
+    }
+
+    /// The single-scattering parts kept from the last frame (stages/single_scattering.rs).
+    pub fn single(&mut self) -> &mut SingleCache {
+        &mut self.single
+    }
+
+    /// What changed since the previous frame, when the session's driver said (Session::solve).
+    pub fn diff(&self) -> Option<&SceneDiff> {
+        self.diff.as_ref()
+    }
+
+    /// Set by whoever drives the solves, before the frame's solve.
+    pub fn set_diff(&mut self, diff: SceneDiff) {
+        self.diff = Some(diff);
     }
 }
 

@@ -5,9 +5,11 @@
 
 use glam::{Affine3A, UVec3, Vec3};
 use rayon::prelude::*;
+use std::ops::Range;
 use std::sync::Arc;
 
-use super::{Progress, ScatteringGrid};
+use super::diff::{light_key, medium_key, Bits};
+use super::{Counters, Progress, ScatteringGrid};
 use crate::error::{Error, Result};
 use crate::medium::dense_march::Marcher;
 use crate::medium::{near_field_radius, Medium};
@@ -66,37 +68,171 @@ pub fn single_scattering_grid_dome_spaced(scene: &Scene, max_dim: u32, dome_dire
 pub const MIN_DOME_POINTS: u32 = 32;
 
 fn single_scattering_onto_spaced(scene: &Scene, grid: &mut ScatteringGrid, dome_directions: u32, dome_spacing: u32, progress: &dyn Progress) -> Result<()> {
+    single_scattering_by_parts(scene, grid, dome_directions, dome_spacing, progress, None, &mut Counters::default())
+}
+
+/// `single_scattering_grid_dome_spaced` in a session: the parts of the sum (each light, the
+/// dome, the medium's emission) whose inputs did not change since the frame `cache` kept are
+/// taken from it, bit for bit what a one-off solve computes (the same terms added in the same
+/// order); `counters` says which parts were computed and which kept.
+pub fn single_scattering_kept(
+    scene: &Scene,
+    max_dim: u32,
+    dome_directions: u32,
+    dome_spacing: u32,
+    progress: &dyn Progress,
+    cache: Option<&mut SingleCache>,
+    counters: &mut Counters,
+) -> Result<ScatteringGrid> {
+    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
+    single_scattering_by_parts(scene, &mut grid, dome_directions, dome_spacing, progress, cache, counters)?;
+    Ok(grid)
+}
+
+/// The grid point's S1 = sigma_s * (the parts' terms summed in order, from zero), each part's
+/// term from `cache` when kept there under the same keys.
+fn single_scattering_by_parts(
+    scene: &Scene,
+    grid: &mut ScatteringGrid,
+    dome_directions: u32,
+    dome_spacing: u32,
+    progress: &dyn Progress,
+    cache: Option<&mut SingleCache>,
+    counters: &mut Counters,
+) -> Result<()> {
     let medium = &scene.medium;
-    let direct = DirectLight::new(scene, shadow_step(medium, grid), dome_directions, near_field_radius(&grid.index_to_world));
+    let step = shadow_step(medium, grid);
+    let near = near_field_radius(&grid.index_to_world);
+    let direct = DirectLight::new(scene, step, dome_directions, near);
     let frame = grid.index_to_world;
-    let [nx, ny, _] = grid.dims;
+    let [nx, ny, nz] = grid.dims;
     // At most the spacing that leaves `MIN_DOME_POINTS` coarse points along the longest side.
     let dome_spacing = dome_spacing.min(grid.dims.iter().max().copied().unwrap_or(1) / MIN_DOME_POINTS).max(1);
-    let coarse = if dome_spacing > 1 && direct.has_dome() { Some(CoarseDome::new(scene, &direct, grid, dome_spacing, progress)?) } else { None };
-    grid.data.par_chunks_mut((nx * ny) as usize).enumerate().for_each(|(k, slab)| {
-        for j in 0..ny {
-            if progress.cancelled() {
-                return;
-            }
-            for i in 0..nx {
-                let x = frame.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
-                let dens = medium.density_world(x);
-                if dens <= 0.0 {
-                    continue;
-                }
-                let view = (x - scene.camera.position).normalize_or(Vec3::Z);
-                let dome = coarse.as_ref().and_then(|c| c.at(UVec3::new(i, j, k as u32)));
-                slab[(i + nx * j) as usize] = medium.sigma_s(dens) * match dome {
-                    Some(dome) => direct.inscattered_parts(x, view, false) + dome,
-                    None => direct.inscattered(x, view),
-                };
-            }
-        }
+    let parts = direct.parts();
+    let points = (nx * ny * nz) as usize;
+    let keys = cache.as_ref().map(|_| {
+        let frame_key = Bits::new()
+            .debug(&crate::medium::key::MediumKey::of(medium))
+            .f32s(scene.camera.position.to_array())
+            .debug(&(grid.dims, grid.index_to_world, dome_directions, dome_spacing))
+            .f32s([step, near])
+            .finish();
+        (frame_key, parts.iter().map(|p| direct.part_key(*p)).collect::<Vec<u64>>())
     });
+    // Kept only while every part fits (each a value per grid point).
+    let keep = keys.is_some() && parts.len().saturating_mul(points) <= SingleCache::MAX_VALUES;
+    let reused: Vec<Option<Arc<Vec<Vec3>>>> = match (&cache, &keys) {
+        (Some(c), Some((frame_key, part_keys))) if keep && c.frame == Some(*frame_key) => {
+            part_keys.iter().map(|k| c.parts.iter().find(|(kk, _)| kk == k).map(|(_, v)| v.clone())).collect()
+        }
+        _ => vec![None; parts.len()],
+    };
+    // Parts this frame computes, and where each sits among them.
+    let fresh: Vec<usize> = (0..parts.len()).filter(|&i| reused[i].is_none()).collect();
+    let k = if keep { fresh.len() } else { 0 };
+    let dome_fresh = parts.iter().zip(&reused).any(|(p, r)| matches!(p, Part::Domes) && r.is_none());
+    let coarse = if dome_spacing > 1 && dome_fresh { Some(CoarseDome::new(scene, &direct, grid, dome_spacing, progress)?) } else { None };
+    let slab = (nx * ny) as usize;
+    let fresh_slabs: Vec<Vec<Vec3>> = grid
+        .data
+        .par_chunks_mut(slab)
+        .enumerate()
+        .map(|(kz, out)| {
+            let mut kept = vec![Vec3::ZERO; slab * k];
+            for j in 0..ny {
+                if progress.cancelled() {
+                    break;
+                }
+                for i in 0..nx {
+                    let x = frame.transform_point3(Vec3::new(i as f32, j as f32, kz as f32));
+                    let dens = medium.density_world(x);
+                    if dens <= 0.0 {
+                        continue;
+                    }
+                    let view = (x - scene.camera.position).normalize_or(Vec3::Z);
+                    let at = (i + nx * j) as usize;
+                    let mut sum = Vec3::ZERO;
+                    let mut f = 0;
+                    for (part, kept_part) in parts.iter().zip(&reused) {
+                        let term = match kept_part {
+                            Some(values) => values[kz * slab + at],
+                            None => {
+                                let dome = || coarse.as_ref().and_then(|c| c.at(UVec3::new(i, j, kz as u32)));
+                                let t = direct.part_term(*part, x, view, dome);
+                                if k > 0 {
+                                    kept[at * k + f] = t;
+                                }
+                                f += 1;
+                                t
+                            }
+                        };
+                        sum += term;
+                    }
+                    out[at] = medium.sigma_s(dens) * sum;
+                }
+            }
+            kept
+        })
+        .collect();
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
+    for (p, r) in parts.iter().zip(&reused) {
+        let name = direct.part_name(*p);
+        if r.is_some() {
+            counters.kept(name);
+        } else {
+            counters.computed(name);
+        }
+    }
+    if let (Some(c), Some((frame_key, part_keys))) = (cache, keys) {
+        if !keep {
+            *c = SingleCache::default();
+            return Ok(());
+        }
+        let mut fresh_values = fresh.iter().map(|_| Vec::with_capacity(points)).collect::<Vec<Vec<Vec3>>>();
+        for values in &fresh_slabs {
+            for point in values.chunks_exact(k.max(1)) {
+                for (f, v) in point.iter().enumerate() {
+                    fresh_values[f].push(*v);
+                }
+            }
+        }
+        let mut fresh_values = fresh_values.into_iter();
+        let parts = part_keys
+            .into_iter()
+            .zip(reused)
+            .map(|(key, r)| (key, r.unwrap_or_else(|| Arc::new(fresh_values.next().unwrap_or_default()))))
+            .collect();
+        *c = SingleCache { frame: Some(frame_key), parts };
+    }
     Ok(())
+}
+
+/// What a session keeps of its last single-scattering grid: each part's term (before sigma_s)
+/// at every grid point, keyed by the part's inputs (a light's every parameter), under a key of
+/// what all parts share (the medium, the camera's position, the grid, the quadrature).
+#[derive(Default)]
+pub struct SingleCache {
+    frame: Option<u64>,
+    parts: Vec<(u64, Arc<Vec<Vec3>>)>,
+}
+
+impl SingleCache {
+    /// The most values (parts x grid points) kept: 32 M, 384 MB (a 128^3 grid with 16 lights);
+    /// above it nothing is kept.
+    pub const MAX_VALUES: usize = 32 << 20;
+}
+
+/// A part of the single-scattering sum that a session keeps on its own.
+#[derive(Clone, Copy, Debug)]
+enum Part {
+    /// The scene's light of this index (not a dome): a sun, or a local light's emitters.
+    Light(usize),
+    /// Every dome light together (as `DirectLight::dome_inscattered`).
+    Domes,
+    /// The medium's emission VPLs.
+    Emission,
 }
 
 /// The dome's in-scattered light (before sigma_s) on the points of a fine grid `spacing` of
@@ -179,6 +315,10 @@ pub struct DirectLight<'a> {
     step: f32,
     dome: Vec<(Vec3, Vec3)>,
     emitters: Vec<crate::translate::PointEmitter>,
+    /// The range of `emitters` each light made (empty for suns and domes), then the medium's
+    /// emission's.
+    light_emitters: Vec<Range<usize>>,
+    emission_emitters: Range<usize>,
     /// Near-field radius of the local emitters (`emitter_single`).
     near: f32,
 }
@@ -192,8 +332,82 @@ impl<'a> DirectLight<'a> {
     /// already: a second dense copy of the density would cost its memory again.
     pub fn with_march(scene: &'a Scene, step: f32, dome_directions: u32, near: f32, march: Arc<Marcher<'a>>) -> Self {
         let dome = dome_directions_of(scene, dome_directions);
-        let emitters = crate::translate::scene_emitters(scene, AREA_VPLS_PER_SIDE);
-        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, near }
+        // `scene_emitters`' list, with the range each light made.
+        let mut emitters = Vec::new();
+        let mut light_emitters = Vec::with_capacity(scene.lights.len());
+        for light in &scene.lights {
+            let start = emitters.len();
+            emitters.extend(crate::translate::local_emitters(std::slice::from_ref(light), AREA_VPLS_PER_SIDE));
+            light_emitters.push(start..emitters.len());
+        }
+        let start = emitters.len();
+        if let Some(e) = &scene.medium.emission {
+            emitters.extend(crate::translate::emission::emission_vpls(&scene.medium, e.vpl_count).emitters);
+        }
+        let emission_emitters = start..emitters.len();
+        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, light_emitters, emission_emitters, near }
+    }
+
+    /// The parts of the sum in the order the grid adds them: the lights but domes, in the
+    /// scene's order, then the domes, then the medium's emission.
+    fn parts(&self) -> Vec<Part> {
+        let mut parts: Vec<Part> = (0..self.scene.lights.len()).filter(|&i| !matches!(self.scene.lights[i], Light::Dome(_))).map(Part::Light).collect();
+        if self.has_dome() {
+            parts.push(Part::Domes);
+        }
+        if !self.emission_emitters.is_empty() {
+            parts.push(Part::Emission);
+        }
+        parts
+    }
+
+    /// A part's key: its light's every parameter (the domes' together, the emission's).
+    fn part_key(&self, part: Part) -> u64 {
+        match part {
+            Part::Light(i) => Bits::new().u64(0).u64(light_key(&self.scene.lights[i])).finish(),
+            Part::Domes => {
+                let mut h = Bits::new();
+                h.u64(1);
+                for l in self.scene.lights.iter().filter(|l| matches!(l, Light::Dome(_))) {
+                    h.u64(light_key(l));
+                }
+                h.finish()
+            }
+            Part::Emission => Bits::new().u64(2).u64(medium_key(&self.scene.medium).1).finish(),
+        }
+    }
+
+    fn part_name(&self, part: Part) -> String {
+        match part {
+            Part::Light(i) => format!("single scattering: light {i}"),
+            Part::Domes => "single scattering: dome".into(),
+            Part::Emission => "single scattering: emission".into(),
+        }
+    }
+
+    /// A part's term at `x` towards `view` (before sigma_s); `coarse_dome` the dome's value
+    /// blended from a coarse grid where there is one.
+    fn part_term(&self, part: Part, x: Vec3, view: Vec3, coarse_dome: impl FnOnce() -> Option<Vec3>) -> Vec3 {
+        let g = self.scene.medium.g;
+        let tr = |w: Vec3, t_max: f32| exp_neg(self.march.optical_depth(x, w, t_max, self.step, 512), self.grey);
+        let emitters = |range: &Range<usize>| {
+            let mut sum = Vec3::ZERO;
+            for e in &self.emitters[range.clone()] {
+                sum += emitter_single(e, x, view, g, self.near, &tr);
+            }
+            sum
+        };
+        match part {
+            Part::Light(i) => match &self.scene.lights[i] {
+                Light::Distant { direction, irradiance, .. } => {
+                    let w = -*direction;
+                    *irradiance * hg(w.dot(view), g) * tr(w, f32::INFINITY)
+                }
+                _ => emitters(&self.light_emitters[i]),
+            },
+            Part::Domes => coarse_dome().unwrap_or_else(|| self.dome_inscattered(x, view)),
+            Part::Emission => emitters(&self.emission_emitters),
+        }
     }
 
     /// p * L * T summed over the lights at `x`; `view` is the direction from the viewer to `x`

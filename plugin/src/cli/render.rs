@@ -155,6 +155,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let image = rendered.image;
     let solve_device = rendered.solved.as_ref().map(|s| s.device.clone()).unwrap_or(DeviceUsed::Cpu);
     let device_used = rendered.device;
+    let counters = rendered.solved.as_ref().map(|s| s.output.counters.clone());
     let choice = rendered.solved.and_then(|s| s.choice);
     ensure_parent(&args.out)?;
     timings.time("write", || -> Result<()> {
@@ -198,6 +199,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "total_seconds": start.elapsed().as_secs_f64(),
             "image": stats,
         });
+        // What the solve computed and kept, and on a device what it created and moved.
+        if let Some(c) = &counters {
+            doc["counters"] = serde_json::to_value(c).unwrap_or(serde_json::Value::Null);
+        }
         // What `auto` picked and why (solver, quality, settings, predictions, the sentence).
         if let Some(c) = &choice {
             doc["auto"] = serde_json::to_value(c).unwrap_or(serde_json::Value::Null);

@@ -81,7 +81,7 @@ pub(crate) struct ResultState {
 
 impl ResultState {
     pub fn new(solved: Solved, scene: Arc<Scene>, device: DeviceChoice) -> FfiResult<Self> {
-        let Solved { output, choice, device: used, notes } = solved;
+        let Solved { output, choice, device: used, notes, .. } = solved;
         let g = &output.scattering;
         let count = g.dims.iter().map(|&d| d as u64).product::<u64>();
         if count != g.data.len() as u64 {

@@ -52,7 +52,7 @@ use crate::stages::upsample::{footprint, Merged};
 use crate::stages::mip::MediumMip;
 use crate::stages::upsample::upsample;
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
-use crate::stages::{Progress, Timings};
+use crate::stages::{Counters, Progress, Timings};
 use crate::stages::single_scattering::single_scattering_grid_cancellable;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -138,9 +138,10 @@ impl Lpm {
         Lpm { overrides: ov, ..self.clone() }
     }
 
-    fn run(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn stream::SweepBackend) -> Result<(SolveOutput, LpmReport)> {
+    fn run(&self, scene: &Scene, ctx: &mut SolveCtx, backend: &dyn stream::SweepBackend, counters: &mut Counters) -> Result<(SolveOutput, LpmReport)> {
         let ov = self.overrides;
         let s = &self.settings;
+        let progress = ctx.progress();
         if s.out_of_core {
             // The CPU's: the GPU's sweeps keep their arrays on the device.
             let dir = self.scratch_dir.clone().unwrap_or_else(std::env::temp_dir);
@@ -149,7 +150,13 @@ impl Lpm {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = LpmReport::default();
-        let (out_probe, single) = output_start(s, scene, progress, ov, &mut timings)?;
+        let out_probe = crate::stages::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
+        // In a session, the parts of the single scattering whose lights did not change are kept.
+        let single = if ov.j_only {
+            out_probe.clone()
+        } else {
+            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_resolution, s.dome_directions, 1, counters))?
+        };
         if !scatters(scene) {
             return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
         }
@@ -310,13 +317,20 @@ impl Solver for Lpm {
         "lpm"
     }
 
+    /// Its collect bins the direction to the camera (collect.rs), and the phase table's rows differ
+    /// in their last bits between bins even at g 0.
+    fn view_independent(&self, _scene: &Scene) -> bool {
+        false
+    }
+
     /// S with what the solve did (`LpmReport`) attached; the sweeps (propagate and collect,
     /// every order) on the device's `SweepBackend` when the context carries one (out of core:
     /// on the CPU).
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let backend: &dyn stream::SweepBackend = ctx.backend::<dyn stream::SweepBackend>().unwrap_or(&stream::CpuSweeps);
-        let (mut out, report) = self.run(scene, ctx.progress(), backend)?;
+        let mut counters = Counters::default();
+        let (mut out, report) = self.run(scene, ctx, backend, &mut counters)?;
         out.notes.extend(report.notes.iter().cloned());
-        Ok(out.with_report(report))
+        Ok(out.with_counters(counters).with_report(report))
     }
 }

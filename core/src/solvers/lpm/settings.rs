@@ -84,7 +84,9 @@ pub const ENTRY: SolverEntry = SolverEntry {
     defaults: defaults_of::<LpmSettings>,
     lights: &LightType::ALL,
     presets: &[
-        Preset::draft(r#"{"grid_resolution": 16, "directions": 9, "output_resolution": 48}"#),
+        // The interactive preset: under 0.15 s a frame for the 64^3 plume on 2 cores at 7% image
+        // error (BENCHMARKS.md, "lpm draft (interactive)").
+        Preset::draft(r#"{"grid_resolution": 12, "directions": 4, "output_resolution": 24, "dome_directions": 8}"#),
         Preset::preview(r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"#),
         Preset::final_(r#"{"grid_resolution": 64, "directions": 49, "output_resolution": 128}"#),
     ],

@@ -15,9 +15,11 @@
 //! (directions.rs), grid splatting instead of camera-facing splats (splat.rs).
 //!
 //! In a session (session.rs) the network is kept while the medium stays, and so is its
-//! radiance I[particle, direction]: a camera move re-splats it without iterating (exactly the
-//! one-off answer), a change of the lights iterates from it (warm start: the same fixed point to
-//! the residual threshold, not bit for bit).
+//! radiance I[particle, direction] for the last few lights: a camera move, or a return to a
+//! light still remembered, re-splats it without iterating; another light iterates from zero as
+//! a one-off solve does. Every frame is bit-identical to its one-off solve. (A warm start from
+//! the previous I was dropped: it stopped at another point within the residual threshold, up to
+//! 2.2e-3 away in S, and a return to an earlier light did not return to its answer.)
 //!
 //! The stages over every (particle, direction) pair and every output cell (the visibility
 //! network's binning, sorting and opacities, the iteration, the splat) run through a
@@ -44,7 +46,7 @@ use backend::{CpuBackend, IterationInput, NetworkBackend, SplatInput, Visibility
 
 use crate::medium::key::MediumKey;
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
-use crate::stages::{Progress, Timings};
+use crate::stages::{Counters, Progress, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::translate::sampling::BoundingSphere;
@@ -59,14 +61,11 @@ pub struct Network {
 /// How a solve came by its network radiance I[particle, direction].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Start {
-    /// Iterated from zero (a one-off solve, or the medium changed).
+    /// Iterated from zero (a one-off solve, new lights, or the medium changed).
     #[default]
     Cold,
-    /// Iterated from the previous frame's I (same medium, other lights): the same fixed point
-    /// to the residual threshold, in fewer iterations when the light changed little.
-    Warm,
-    /// The previous frame's I as it was: same medium and bit-identical direct light, so the
-    /// iteration would give it again (a camera move only re-splats).
+    /// A kept I: same medium and a bit-identical direct light (this frame's or a remembered
+    /// earlier one's), so the iteration would give it again (a camera move only re-splats).
     Kept,
 }
 
@@ -87,9 +86,17 @@ struct Kept {
     links: Vec<visibility::DirectionLinks>,
     phase: Vec<f32>,
     window: u32,
-    /// The direct light's first scattering I was iterated with, and I.
-    first: Vec<glam::Vec3>,
-    radiance: Vec<glam::Vec3>,
+    /// The last few direct lights' first scattering and the I iterated from each, newest
+    /// last (at most `REMEMBERED_LIGHTS`).
+    answers: Vec<(Vec<glam::Vec3>, Vec<glam::Vec3>)>,
+}
+
+/// How many lights' I a session remembers: enough to toggle between a few lights or key
+/// frames without iterating, at N x D x 24 bytes each (a 4096 x 128 network: 12 MB).
+const REMEMBERED_LIGHTS: usize = 4;
+
+fn same_bits(a: &[glam::Vec3], b: &[glam::Vec3]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits))
 }
 
 #[derive(Default)]
@@ -108,15 +115,13 @@ impl Network {
     /// The solve with the network kept in `kept` (a one-off solve passes an empty one): the
     /// network (particles, visibility links, phase matrix) is kept while the medium is the same
     /// (exact key: every voxel's bits, transform and material); I is kept as is when the direct
-    /// light is bit-identical too (a camera move: S is exactly the one-off solve's), else
-    /// iterated from the previous I.
-    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, kept: &mut KeptNetwork) -> Result<(SolveOutput, NetworkReport)> {
+    /// light is bit-identical to a remembered one (a camera move: S is exactly the one-off
+    /// solve's), else iterated from zero.
+    /// `scattering` is the single scattering, timed in `timings` and counted in `counters`.
+    #[allow(clippy::too_many_arguments)]
+    fn solve_keeping(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, kept: &mut KeptNetwork, mut scattering: crate::stages::ScatteringGrid, mut timings: Timings, counters: &mut Counters) -> Result<(SolveOutput, NetworkReport)> {
         let s = &self.settings;
         let medium = &scene.medium;
-        let mut timings = Timings::default();
-        let mut scattering = timings.time("network single scattering", || {
-            crate::stages::single_scattering::single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress)
-        })?;
         let mut report = NetworkReport { window: 0, residuals: Vec::new(), start: Start::Cold };
         if medium.grid.is_empty() || medium.albedo.max_element() <= 0.0 {
             // Nothing scatters twice: S is its single scattering.
@@ -127,8 +132,12 @@ impl Network {
         crate::budget::check_elements::<[glam::Vec3; 4]>("network arrays (solver.particles x solver.directions)", s.particles as u64 * s.directions as u64)?;
         let key = timings.time("network medium key", || MediumKey::of(medium));
         let mut net = match kept.0.take().filter(|k| k.medium == key) {
-            Some(k) => k,
+            Some(k) => {
+                counters.kept("network visibility");
+                k
+            }
             None => {
+                counters.computed("network visibility");
                 let p = timings.time("network particles", || particles::sample(medium, s.particles, s.seed));
                 if p.mean_sigma_t <= 0.0 {
                     return Ok((SolveOutput::new(finished(medium, scattering), timings), report));
@@ -139,7 +148,7 @@ impl Network {
                 let input = VisibilityInput { medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window, opacity: s.opacity };
                 let links = timings.time("network visibility", || backend.visibility(&input, progress))?;
                 let phase = directions::phase_matrix(&dirs, medium.g, self.normalise_phase);
-                Kept { medium: key, particles: p, dirs, links, phase, window, first: Vec::new(), radiance: Vec::new() }
+                Kept { medium: key, particles: p, dirs, links, phase, window, answers: Vec::new() }
             }
         };
         report.window = net.window;
@@ -151,32 +160,38 @@ impl Network {
             kept.0 = Some(net);
             return Err(Error::Cancelled);
         };
-        let same_light = first.len() == net.first.len() && first.iter().zip(&net.first).all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits));
-        if same_light && !net.radiance.is_empty() {
+        let remembered = net.answers.iter().position(|(f, _)| same_bits(f, &first));
+        if let Some(k) = remembered {
+            counters.kept("network iterate");
             report.start = Start::Kept;
+            let answer = net.answers.remove(k);
+            net.answers.push(answer);
         } else {
-            let start = (!net.radiance.is_empty()).then(|| std::mem::take(&mut net.radiance));
-            report.start = if start.is_some() { Start::Warm } else { Start::Cold };
+            counters.computed("network iterate");
+            report.start = Start::Cold;
             let input = IterationInput { links: &net.links, phase: &net.phase, first: &first, albedo: medium.albedo, max_iterations: s.max_iterations, threshold: s.residual_threshold };
-            let it = match timings.time("network iterate", || backend.iterate(&input, start, progress)) {
+            let it = match timings.time("network iterate", || backend.iterate(&input, None, progress)) {
                 Ok(it) => it,
                 Err(e) => {
-                    // The network itself is whole (I is dropped: the next solve iterates cold).
+                    // The network itself is whole, and so are the remembered answers.
                     kept.0 = Some(net);
                     return Err(e);
                 }
             };
             report.residuals = it.residuals;
-            net.radiance = it.radiance;
-            net.first = first;
+            if net.answers.len() >= REMEMBERED_LIGHTS {
+                net.answers.remove(0);
+            }
+            net.answers.push((first, it.radiance));
         }
         if !progress.update("network iterate", 0.9) {
             return Err(Error::Cancelled);
         }
+        let Some((_, radiance)) = net.answers.last() else { unreachable!("an answer was just found or pushed") };
         let input = SplatInput {
             medium,
             particles: &net.particles,
-            radiance: &net.radiance,
+            radiance,
             dirs: &net.dirs,
             camera: scene.camera.position,
             kernel_radius: s.kernel_radius,
@@ -203,12 +218,16 @@ impl Solver for Network {
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let backend: &dyn NetworkBackend = ctx.backend::<dyn NetworkBackend>().unwrap_or(&CpuBackend);
         let progress = ctx.progress();
+        let s = &self.settings;
+        let mut counters = Counters::default();
+        let mut timings = Timings::default();
+        let single = timings.time("network single scattering", || ctx.single_scattering(scene, s.output_resolution, s.dome_directions, 1, &mut counters))?;
         let mut one_off = KeptNetwork(None);
         let kept = match ctx.session() {
             Some(state) => state.kept(KeptNetwork::default),
             None => &mut one_off,
         };
-        let (out, report) = self.solve_keeping(scene, progress, backend, kept)?;
-        Ok(out.with_report(report))
+        let (out, report) = self.solve_keeping(scene, progress, backend, kept, single, timings, &mut counters)?;
+        Ok(out.with_counters(counters).with_report(report))
     }
 }

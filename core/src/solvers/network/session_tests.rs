@@ -10,15 +10,7 @@ use crate::scene::{Camera, Environment, Light};
 use crate::solvers::testing::{errors_against_fixture, homogeneous_box, s_over_sigma_s};
 use crate::stages::NoProgress;
 
-fn rel_diff(a: &[Vec3], b: &[Vec3]) -> f64 {
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (x, y) in a.iter().zip(b) {
-        num += (*x - *y).as_dvec3().length_squared();
-        den += y.as_dvec3().length_squared();
-    }
-    (num / den.max(1e-300)).sqrt()
-}
-
+#[allow(dead_code)]
 fn frame(net: &Network, sc: &Scene, state: &mut SessionState) -> (SolveOutput, NetworkReport) {
     state.begin_frame();
     net.solve(sc, &mut SolveCtx::new(&NoProgress).in_session(state)).map(SolveOutput::split::<NetworkReport>).unwrap()
@@ -43,14 +35,13 @@ fn network_camera_move_in_a_session_equals_a_full_solve() {
     }
 }
 
-/// A warm start from another light (the sun turned by 60 degrees) converges to the one-off
-/// answer: both stop at residual 1e-5, and their S differ by less than 1e-3 (rel. RMS; the
-/// stopping error of each is about the residual over one minus the convergence rate, measured
-/// in the print). The warm start takes fewer iterations for a small turn (printed).
+/// A light that changes and comes back (the sun turned by 60 and by 2 degrees, then back):
+/// every frame is bit for bit its one-off solve (the issue-40 finding: a warm start from the
+/// previous I differed by 2.2e-3 and a return did not return), and the return re-splats the
+/// remembered I without iterating.
 #[test]
-fn network_warm_start_from_another_light_converges_to_the_same_answer() {
-    let s = NetworkSettings { residual_threshold: 1e-5, ..small() };
-    let net = Network::new(s).unwrap();
+fn network_light_changes_in_a_session_equal_one_off_solves() {
+    let net = Network::new(small()).unwrap();
     let turned = |deg: f32| {
         let mut sc = cube_scene(0.7, 0.9);
         for l in &mut sc.lights {
@@ -60,18 +51,12 @@ fn network_warm_start_from_another_light_converges_to_the_same_answer() {
         }
         sc
     };
-    for deg in [60.0f32, 2.0] {
-        let mut state = SessionState::new();
-        frame(&net, &turned(0.0), &mut state);
-        let (warm, rep) = frame(&net, &turned(deg), &mut state);
-        let (cold, cold_rep) = net.solve(&turned(deg), &mut SolveCtx::new(&NoProgress)).map(SolveOutput::split::<NetworkReport>).unwrap();
-        let d = rel_diff(&warm.scattering.data, &cold.scattering.data);
-        eprintln!("sun turned {deg} deg: warm start {} iterations, cold {}: S differ by {d:.2e}", rep.residuals.len(), cold_rep.residuals.len());
-        assert_eq!(rep.start, Start::Warm);
-        assert!(d < 1e-3, "turn {deg}: {d}");
-        if deg < 10.0 {
-            assert!(rep.residuals.len() < cold_rep.residuals.len(), "a small turn warm-starts faster");
-        }
+    let mut state = SessionState::new();
+    for (deg, start) in [(0.0f32, Start::Cold), (60.0, Start::Cold), (2.0, Start::Cold), (0.0, Start::Kept), (60.0, Start::Kept)] {
+        let (kept, rep) = frame(&net, &turned(deg), &mut state);
+        let one_off = net.solve(&turned(deg), &mut SolveCtx::new(&NoProgress)).unwrap();
+        assert_eq!(rep.start, start, "sun at {deg} degrees");
+        assert_eq!(kept.scattering.data, one_off.scattering.data, "sun at {deg} degrees");
     }
 }
 

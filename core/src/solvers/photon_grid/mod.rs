@@ -39,13 +39,13 @@ pub use settings::{Angular, PhotonGridSettings, Similarity, SingleScattering, Up
 pub use trace::EnergyReport;
 
 use crate::stages::single_scattering::DOME_DIRECTIONS;
-use crate::stages::single_scattering::dome_directions_for;
+use crate::stages::single_scattering::{dome_directions_for, single_scattering_kept, SingleCache};
 use crate::error::{Error, Result};
 use crate::medium::MajorantGrid;
 use crate::scene::Scene;
 use crate::solvers::session::SessionState;
 use crate::solvers::{parse_settings, SolveCtx, SolveOutput, Solver};
-use crate::stages::{Progress, Timings};
+use crate::stages::{Counters, Progress, Timings};
 use backend::{CpuBackend, PhotonBackend, TraceJob};
 use ring::{Generation, KeptRing, Ring};
 use crate::translate::LightSampler;
@@ -126,7 +126,9 @@ impl PhotonGrid {
     }
 
     /// S from the ring's cache: its lobes towards the camera, plus exact single scattering.
-    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
+    /// `kept`: the session's single-scattering parts, used on the CPU (None on a device).
+    #[allow(clippy::too_many_arguments)]
+    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
         }
@@ -140,7 +142,10 @@ impl PhotonGrid {
         let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &out, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, DOME_DIRECTIONS);
-            let single = timings.time("single scattering", || backend.single_scattering(scene, res, dirs, progress))?;
+            let single = timings.time("single scattering", || match kept {
+                Some(cache) => single_scattering_kept(scene, res, dirs, 1, progress, cache, counters),
+                None => backend.single_scattering(scene, res, dirs, progress),
+            })?;
             // Same medium, same max_dim (`output_dim`): the same frame. Checked, not assumed: a
             // backend that sized its grid from `output_resolution` alone would pair the wrong points.
             if single.dims != s.dims {
@@ -160,22 +165,26 @@ impl PhotonGrid {
         PhotonGrid { first, settings: self.settings.clone() }
     }
 
-    fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
+    #[allow(clippy::too_many_arguments)]
+    fn solve_generations(&self, scene: &Scene, first: u64, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
             return Err(Error::Cancelled);
         }
         let ring = self.fresh_ring(scene, first, &mut timings, progress, backend)?;
-        self.finish(scene, &ring, timings, progress, backend)
+        self.finish(scene, &ring, timings, progress, backend, kept, counters)
     }
 
     /// One frame of a session: the first frame (or one after the settings changed) fills the
     /// ring, each later one traces a single new generation into it (ring.rs). With one
     /// generation, the one-off solve.
-    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend) -> Result<(SolveOutput, PhotonGridReport)> {
+    fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend, on_cpu: bool, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if self.settings.generations == 1 {
-            return self.solve_generations(scene, self.first, progress, backend);
+            let kept = on_cpu.then(|| Some(state.single()));
+            return self.solve_generations(scene, self.first, progress, backend, kept, counters);
         }
+        // The ring's frames keep no single scattering (their S is not the one-off's anyway).
+        let single = on_cpu.then_some(None);
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
             return Err(Error::Cancelled);
@@ -193,7 +202,7 @@ impl PhotonGrid {
             None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress, backend)?),
         }
         match kept.0.as_ref() {
-            Some(ring) => self.finish(scene, ring, timings, progress, backend),
+            Some(ring) => self.finish(scene, ring, timings, progress, backend, single, counters),
             None => unreachable!("the ring was set just above"),
         }
     }
@@ -215,15 +224,28 @@ impl Solver for PhotonGrid {
     fn name(&self) -> &'static str {
         "photon-grid"
     }
+    /// Camera-weighted photons (`angular = camera`) depend on the camera at any g.
+    fn view_independent(&self, scene: &Scene) -> bool {
+        scene.medium.g == 0.0 && self.settings.angular != Angular::Camera
+    }
+
+    /// The ring (generations > 1) averages the last frames' photons: a repeated scene traces
+    /// another generation.
+    fn repeatable(&self) -> bool {
+        self.settings.generations == 1
+    }
+
     /// S with the energy report (`PhotonGridReport`) attached; the tracing on the device's
     /// `PhotonBackend` when the context carries one; in a session, the ring of partial caches.
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let backend: &dyn PhotonBackend = ctx.backend::<dyn PhotonBackend>().unwrap_or(&CpuBackend);
         let progress = ctx.progress();
+        let on_cpu = !ctx.on_device();
+        let mut counters = Counters::default();
         let (out, report) = match ctx.session() {
-            Some(state) => self.solve_in_session(scene, progress, state, backend)?,
-            None => self.solve_generations(scene, self.first, progress, backend)?,
+            Some(state) => self.solve_in_session(scene, progress, state, backend, on_cpu, &mut counters)?,
+            None => self.solve_generations(scene, self.first, progress, backend, on_cpu.then_some(None), &mut counters)?,
         };
-        Ok(out.with_report(report))
+        Ok(out.with_counters(counters).with_report(report))
     }
 }

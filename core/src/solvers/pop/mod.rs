@@ -379,14 +379,33 @@ impl Solver for Pop {
     fn name(&self) -> &'static str {
         "pop"
     }
+
+    /// Its importance and its merge weigh ordinates by the view (accumulate.rs `view_cosines`) at any g.
+    fn view_independent(&self, _scene: &Scene) -> bool {
+        false
+    }
+
     /// S with the per-light energy report (`PopReport`) attached; on the device's backend when
     /// the context carries one, reusing the session's kept stages when it is a session.
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let device: &dyn PopDevice = ctx.backend::<dyn PopDevice>().unwrap_or(&backend::CpuBackend);
         let progress = ctx.progress();
+        let before = ctx.session().map(|state| state.kept(reuse::PopReuse::default).counts);
         let reuse = ctx.session().map(|state| state.kept(reuse::PopReuse::default));
         let (mut out, report) = device.solve(self, scene, progress, reuse)?;
         out.notes.extend(report.warnings.iter().cloned());
+        // The session's reuse counts across this frame, as the frame's counters.
+        if let (Some(b), Some(a)) = (before, ctx.session().map(|state| state.kept(reuse::PopReuse::default).counts)) {
+            let stages = [
+                ("pop mip", a.mip_reused - b.mip_reused, a.mip_built - b.mip_built),
+                ("pop importance", a.importance_reused - b.importance_reused, a.importance_built - b.importance_built),
+                ("pop ordinate", a.lights_reused - b.lights_reused, a.lights_solved - b.lights_solved),
+            ];
+            for (stage, kept, built) in stages {
+                (0..kept).for_each(|_| out.counters.kept(stage));
+                (0..built).for_each(|_| out.counters.computed(stage));
+            }
+        }
         Ok(out.with_report(report))
     }
 }

@@ -221,6 +221,11 @@ impl Solver for Reference {
     fn name(&self) -> &'static str {
         "reference"
     }
+
+    /// Its paths start towards the camera, so their random numbers depend on it at any g.
+    fn view_independent(&self, _scene: &Scene) -> bool {
+        false
+    }
     /// With `output_resolution`, S on the medium's voxels (`scattering_on_voxels`), the grid a
     /// host renders next to the medium's own extinction; without, the point estimate on the
     /// `grid_resolution` grid (`scattering_grid`, what the solver fixtures store).

@@ -34,7 +34,7 @@ pub mod walks;
 use crate::stages::mip::MediumMip;
 use crate::stages::upsample::Merged;
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
-use crate::stages::{Progress, ScatteringGrid, Timings};
+use crate::stages::{Counters, ScatteringGrid, Timings};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 pub use backend::{CpuBackend, VplBackend};
@@ -78,7 +78,8 @@ impl Vpl {
         Vpl { max_orders, settings: self.settings.clone() }
     }
 
-    fn run(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn VplBackend) -> Result<(SolveOutput, VplReport)> {
+    fn run(&self, scene: &Scene, ctx: &mut SolveCtx, backend: &dyn VplBackend, counters: &mut Counters) -> Result<(SolveOutput, VplReport)> {
+        let progress = ctx.progress();
         let max_orders = self.max_orders;
         let medium = &scene.medium;
         let s = &VplSettings { near_field: self.near_field_for(medium)?, ..self.settings.clone() };
@@ -130,7 +131,11 @@ impl Vpl {
         } else {
             None
         };
-        let single = timings.time("vpl single scattering", || backend.single_scattering(scene, s, progress))?;
+        // On the CPU, in a session, the parts of the single scattering whose lights did not change are kept.
+        let single = timings.time("vpl single scattering", || match ctx.on_device() {
+            true => backend.single_scattering(scene, s, progress),
+            false => ctx.single_scattering(scene, s.output_resolution, s.dome_directions, s.dome_spacing, counters),
+        })?;
         debug_assert_eq!(single.dims, scattering.dims);
         for (a, b) in scattering.data.iter_mut().zip(&single.data) {
             *a += *b;
@@ -163,8 +168,9 @@ impl Solver for Vpl {
     /// scattering on the device's `VplBackend` when the context carries one.
     fn solve(&self, scene: &Scene, ctx: &mut SolveCtx) -> Result<SolveOutput> {
         let backend: &dyn VplBackend = ctx.backend::<dyn VplBackend>().unwrap_or(&CpuBackend);
-        let (out, report) = self.run(scene, ctx.progress(), backend)?;
-        Ok(out.with_report(report))
+        let mut counters = Counters::default();
+        let (out, report) = self.run(scene, ctx, backend, &mut counters)?;
+        Ok(out.with_counters(counters).with_report(report))
     }
 }
 

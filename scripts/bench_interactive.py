@@ -1,0 +1,116 @@
+"""Interactive sessions (issue 37) and lpm's interactive preset: N-frame sessions on the bench scenes — the sun orbiting, the
+camera orbiting, the medium changing every frame (a VDB sequence's stand-in) — per frame the
+session's time (median, p95, the first frame apart), the one-off solve's, and the session
+frames' error against their one-off solves; writes the "interactive" (CPU) or
+"interactive-gpu" section of BENCHMARKS.md.
+
+    python3 scripts/bench_interactive.py [--frames 30] [--scenes thin_smoke,...]
+        [--solvers pop,photon-grid,network,vpl,lpm] [--preset preview] [--device cpu|gpu]
+        [--threads 2]
+
+Runs shaders/examples/bench_interactive.rs (`cargo run --release`; on a lent GPU machine the
+prebuilt binary through scripts/device/cargo, as scripts/bench_device.sh sets up).
+
+    python3 scripts/bench_interactive.py --lpm-draft [--repeats 5] [--threads 2]
+
+lpm's `draft` preset on the default scene (the 64^3 plume, sun and sky) against the path
+tracer at 2048 spp, 64 x 64 pixels (`volscatter compare`): solve time (median of the repeats)
+and image error; writes the "lpm-draft" section.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+import statistics
+import tempfile
+from pathlib import Path
+
+from benchlib import REPO_ROOT, cargo_example_benches, compare, publish, require_volscatter, set_args, solver_registry, table, written_line
+
+SCENES = ["thin_smoke", "smoke_point", "fire_smoke", "overcast", "dense_cloud"]
+SOLVERS = ["pop", "photon-grid", "network", "vpl", "lpm"]
+
+
+def lpm_draft(repeats: int, threads: int) -> None:
+    """lpm `draft` against the converged path tracer on the default scene (see the docstring)."""
+    require_volscatter()
+    os.environ["RAYON_NUM_THREADS"] = str(threads)
+    entry = next(e for e in solver_registry() if e["name"] == "lpm")
+    draft = next(p for p in entry["presets"] if p["name"] == "draft")["settings"]
+    variants = ",".join(f"lpm#r{k}" for k in range(repeats))
+    with tempfile.TemporaryDirectory() as tmp:
+        doc = compare(None, Path(tmp) / "c.json", variants + ",reference",
+                      ["--set", "reference.spp=2048", "--width", "64", "--height", "64", "--no-grid"]
+                      + [x for k in range(repeats) for x in set_args(draft, f"lpm#r{k}.")])
+    runs = [r for r in doc["runs"] if r["solver"].startswith("lpm")]
+    solve = statistics.median(r["grid_seconds"] for r in runs)
+    error = statistics.median(r["image_relative_rmse"] for r in runs)
+    phases = {k: statistics.median(r["phases_seconds"].get(k, 0.0) for r in runs) for k in runs[0]["phases_seconds"] if k.startswith("lpm")}
+    lines = [
+        "## lpm draft (interactive)",
+        "",
+        written_line(f"python3 scripts/bench_interactive.py --lpm-draft --repeats {repeats} --threads {threads}"),
+        f"Default scene (64^3 plume, sun and sky), 64 x 64 pixels, {threads} worker threads; lpm at its `draft` preset"
+        f" {runs[0]['settings']}; the baseline is the path tracer at 2048 spp. Median of {repeats} solves."
+        " Aim (issue 37): under 0.15 s at 15% image error or less.",
+        "",
+        *table("| solve s | image rel. RMSE | " + " | ".join(phases) + " |",
+               [f"| {solve:.3f} | {error:.3f} | " + " | ".join(f"{v:.3f}" for v in phases.values()) + " |"]),
+    ]
+    publish("lpm-draft", lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--solvers", default=",".join(SOLVERS))
+    ap.add_argument("--motions", default="light,camera,sequence")
+    ap.add_argument("--preset", default="preview")
+    ap.add_argument("--device", default="cpu", choices=["cpu", "gpu"])
+    ap.add_argument("--threads", type=int, default=2, help="CPU worker threads (RAYON_NUM_THREADS)")
+    ap.add_argument("--lpm-draft", action="store_true", help="measure lpm's draft preset instead of sessions")
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    if args.lpm_draft:
+        lpm_draft(args.repeats, args.threads)
+        return
+    rows = []
+    for scene in args.scenes.split(","):
+        path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
+        found = cargo_example_benches("volscatter-gpu", "bench_interactive",
+                                      [str(path), "--solvers", args.solvers, "--preset", args.preset, "--frames", str(args.frames),
+                                       "--motions", args.motions, "--device", args.device],
+                                      env={"RAYON_NUM_THREADS": str(args.threads)})
+        for d in found.values():
+            ratio = d["frame_median_seconds"] / d["one_off_median_seconds"] if d["one_off_median_seconds"] else float("nan")
+            c = d.get("second_frame_counters") or {}
+            kept = ", ".join(c.get("reused", [])) or "-"
+            rows.append(f"| {scene} | {d['solver']} | {d['motion']} | {d['device']} | {d['first_frame_seconds']:.3f} |"
+                        f" {d['frame_median_seconds']:.3f} | {d['frame_p95_seconds']:.3f} | {d['one_off_median_seconds']:.3f} |"
+                        f" {ratio:.2f} | {d['bit_identical_frames']}/{d['frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {kept} |")
+    cmd = "python3 scripts/bench_interactive.py " + " ".join(
+        f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
+                                  ("motions", args.motions), ("preset", args.preset), ("device", args.device), ("threads", args.threads)])
+    gpu = args.device == "gpu"
+    lines = [
+        "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads"),
+        "",
+        written_line(cmd),
+        f"Each scene at its stored resolution, solver at its `{args.preset}` preset; {args.frames} frames a session:"
+        " `light` turns every distant light 3 degrees a frame about the vertical, `camera` the camera 3 degrees a frame"
+        " about the medium's centre, `sequence` steps the density scale 1% a frame (every voxel changes, as in a VDB"
+        " sequence). Frame times are the later frames' (the first fills the session); `one-off` is the same frame solved"
+        " alone; `ratio` = session median / one-off median; `identical` counts frames bit for bit the one-off S;"
+        " `kept` is what the second frame reused (its counters).",
+        "",
+        *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | identical | rel. RMSE | kept |", rows),
+    ]
+    publish("interactive-gpu" if gpu else "interactive", lines)
+
+
+if __name__ == "__main__":
+    os.chdir(REPO_ROOT)
+    main()

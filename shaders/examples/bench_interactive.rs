@@ -1,0 +1,134 @@
+//! Measurements for `scripts/bench_interactive.py` (it times, never asserts): sessions of N
+//! frames on a bench scene — the sun orbiting, the camera orbiting, the medium changing every
+//! frame (a VDB sequence's stand-in: the density scale stepped) — each frame solved in one
+//! session and, for its error, as a one-off solve. Prints one line `BENCH_JSON {...}` a
+//! (scene, solver, motion) with the per-frame times, the one-off times, the session frames'
+//! relative RMSE against the one-off S, and the counters of the second frame.
+//!
+//! cargo run --release -p volscatter-gpu --example bench_interactive -- SCENE.json
+//!     [--solvers pop,lpm] [--preset preview] [--frames 30] [--motions light,camera,sequence]
+//!     [--device cpu|gpu]
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::Quat;
+use serde_json::json;
+use volscatter_core::image::relative_rmse;
+use volscatter_core::pipeline::{self, DeviceChoice, Session};
+use volscatter_core::scene::{Light, Scene};
+use volscatter_core::solvers::registry;
+use volscatter_core::stages::NoProgress;
+
+struct Args {
+    scene: PathBuf,
+    solvers: Vec<String>,
+    preset: String,
+    frames: usize,
+    motions: Vec<String>,
+    device: DeviceChoice,
+}
+
+fn args() -> Args {
+    let mut a = Args { scene: PathBuf::new(), solvers: vec![], preset: "preview".into(), frames: 30, motions: vec![], device: DeviceChoice::Cpu };
+    let list = |s: String| s.split(',').map(String::from).collect::<Vec<_>>();
+    a.solvers = list("pop,photon-grid,network,vpl,lpm".into());
+    a.motions = list("light,camera,sequence".into());
+    let mut it = std::env::args().skip(1);
+    while let Some(k) = it.next() {
+        let mut v = || it.next().unwrap_or_else(|| panic!("{k} needs a value"));
+        match k.as_str() {
+            "--solvers" => a.solvers = list(v()),
+            "--preset" => a.preset = v(),
+            "--frames" => a.frames = v().parse().expect("--frames N"),
+            "--motions" => a.motions = list(v()),
+            "--device" => a.device = if v() == "gpu" { DeviceChoice::Gpu } else { DeviceChoice::Cpu },
+            path => a.scene = PathBuf::from(path),
+        }
+    }
+    a
+}
+
+/// Frame `f` of `motion`: the sun (every distant light) turned 3 degrees a frame about the
+/// vertical, the camera 3 degrees a frame about the medium's centre, or the density scale 1%
+/// up a frame.
+fn frame(base: &Scene, motion: &str, f: usize) -> Scene {
+    let mut sc = base.clone();
+    let turn = Quat::from_rotation_z((3.0 * f as f32).to_radians());
+    match motion {
+        "light" => {
+            for l in &mut sc.lights {
+                if let Light::Distant { direction, .. } = l {
+                    *direction = turn * *direction;
+                }
+            }
+        }
+        "camera" => {
+            let (lo, hi) = sc.medium.world_bounds();
+            let c = 0.5 * (lo + hi);
+            let cam = &mut sc.camera;
+            cam.position = c + turn * (cam.position - c);
+            cam.forward = turn * cam.forward;
+            cam.right = turn * cam.right;
+            cam.up = turn * cam.up;
+        }
+        "sequence" => sc.medium.density_scale *= 1.0 + 0.01 * f as f32,
+        other => panic!("unknown motion {other}"),
+    }
+    sc
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s[((q * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)]
+}
+
+fn main() {
+    let a = args();
+    let base = Scene::load(&a.scene).unwrap_or_else(|e| panic!("{}: {e}", a.scene.display()));
+    let devices = volscatter_gpu::devices(a.device);
+    for solver in &a.solvers {
+        let mut settings = registry::preset_settings(solver, &a.preset);
+        settings.insert("name".into(), solver.clone().into());
+        for motion in &a.motions {
+            let mut session = Session::new(solver, &settings, devices).expect("settings");
+            let (mut times, mut one_off, mut errors) = (vec![], vec![], vec![]);
+            let (mut identical, mut second, mut device) = (0usize, None, String::new());
+            for f in 0..a.frames {
+                let sc = frame(&base, motion, f);
+                let t = Instant::now();
+                let kept = session.solve(&sc, &NoProgress).expect("session frame");
+                times.push(t.elapsed().as_secs_f64());
+                device = kept.device.to_string();
+                let t = Instant::now();
+                let fresh = pipeline::solve(&sc, solver, &settings, devices, &NoProgress).expect("one-off solve");
+                one_off.push(t.elapsed().as_secs_f64());
+                let (k, o) = (&kept.output.scattering.data, &fresh.output.scattering.data);
+                identical += usize::from(k.iter().zip(o).all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
+                errors.push(relative_rmse(k, o));
+                if f == 1 {
+                    second = Some(kept.output.counters.clone());
+                }
+            }
+            // The first frame fills the session: the per-frame figures are of the later ones.
+            let later = &times[1.min(times.len())..];
+            let doc = json!({
+                "bench": format!("{}/{solver}/{motion}", a.scene.display()),
+                "data": {
+                    "scene": a.scene.display().to_string(), "solver": solver, "preset": a.preset, "motion": motion,
+                    "bbox": format!("{:?}", base.medium.grid.bbox()), "frames": a.frames, "device": device,
+                    "threads": rayon::current_num_threads(),
+                    "first_frame_seconds": times.first(), "frame_median_seconds": percentile(later, 0.5), "frame_p95_seconds": percentile(later, 0.95),
+                    "one_off_median_seconds": percentile(&one_off, 0.5),
+                    "max_rel_rmse_vs_one_off": errors.iter().cloned().fold(0.0, f64::max), "bit_identical_frames": identical,
+                    "second_frame_counters": second,
+                }
+            });
+            println!("BENCH_JSON {doc}");
+        }
+    }
+}
