@@ -164,8 +164,17 @@ pub fn regenerate_selected(cases: &[&str], select_key: &str, case: impl Fn(&str)
 /// compositor computes independently (ray-marched shadow rays).
 pub fn against_single_scattering(sc: &Scene, scattering: &ScatteringGrid) -> (f64, f64) {
     let img = composite(sc, scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-    let (image, single) = (rgb(&img), img.aov("single").unwrap());
+    let (image, single) = (scattered(&img), img.aov("single").unwrap());
     (relative_rmse(&image, single), mean(&image) / mean(single))
+}
+
+/// The light a composite's S gives: its RGB less the medium's emission seen directly (the
+/// `emission` AOV, which does not depend on the solver).
+pub fn scattered(img: &Image) -> Vec<Vec3> {
+    match img.aov("emission") {
+        Some(e) => img.rgba.iter().zip(e).map(|(p, e)| p.truncate() - *e).collect(),
+        None => rgb(img),
+    }
 }
 
 /// The RGB of an image, without alpha.
@@ -183,7 +192,7 @@ pub fn mean(v: &[Vec3]) -> f64 {
 }
 
 /// What a solver's scattering grid gives, in the fixtures' terms: the composited image (RGB,
-/// transparent background), its multiple-scattering part (image minus the compositor's
+/// transparent background, without the emission seen directly), its multiple-scattering part (image minus the compositor's
 /// single-scattering AOV, which the compositor computes the same way for every solver) and the
 /// grid resampled (trilinear) onto the fixtures' `FIXTURE_GRID` frame.
 pub struct SolverOutput {
@@ -196,7 +205,7 @@ pub struct SolverOutput {
 impl SolverOutput {
     pub fn of(sc: &Scene, scattering: &ScatteringGrid) -> Self {
         let img = composite(sc, scattering, &CompositeOptions { transparent: true, ..Default::default() }).unwrap();
-        let image = rgb(&img);
+        let image = scattered(&img);
         let multiple = image.iter().zip(img.aov("single").unwrap()).map(|(a, b)| *a - *b).collect();
         let frame = ScatteringGrid::over_medium(&sc.medium, FIXTURE_GRID).unwrap();
         let grid = resample(scattering, &frame);

@@ -128,7 +128,7 @@ pub fn emission_vpls(medium: &Medium, n: u32) -> EmissionVpls {
                 *v += volume[k];
             }
         } else {
-            out.emitters.push(PointEmitter { position: cell.position, intensity: p / four_pi, radius: 0.0, interior: Default::default(), profile: Profile::Isotropic });
+            out.emitters.push(PointEmitter { position: cell.position, intensity: p / four_pi, radius: 0.0, extent: super::Extent::Ball, profile: Profile::Isotropic });
             vpl_volume.push(volume[k]);
             last_holder = holder[k];
         }

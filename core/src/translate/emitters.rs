@@ -82,9 +82,19 @@ pub struct PointEmitter {
     pub intensity: Vec3,
     /// > 0: a sphere light of this radius (solvers may treat it as a point from outside it).
     pub radius: f32,
-    /// What points inside that sphere receive.
-    pub interior: SphereInterior,
+    /// What that radius is: a sphere lamp's surface, or a ball the light is spread over.
+    pub extent: Extent,
     pub profile: Profile,
+}
+
+/// What a `PointEmitter`'s radius > 0 stands for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Extent {
+    /// A sphere lamp's surface (docs/scene-format.md "Sphere lamps"), with what its inside gets.
+    Sphere(SphereInterior),
+    /// A ball its light is spread over (an emission VPL's stratum, translate::emission): 1/d^2
+    /// as its mean over the ball.
+    Ball,
 }
 
 impl PointEmitter {
@@ -92,10 +102,14 @@ impl PointEmitter {
         self.intensity * self.profile.factor(w)
     }
 
-    /// `medium::lamp_inverse_square` for this emitter at distance `d`, spread over `near`.
+    /// The emitter's field at distance `d` per W/sr, spread over `near`: a sphere lamp's
+    /// (`medium::lamp_inverse_square`) or the mean of 1/d^2 over its ball.
     #[inline]
     pub fn inverse_square(&self, d: f32, near: f32) -> f32 {
-        crate::medium::lamp_inverse_square(d, self.radius, near, self.interior == SphereInterior::Lit)
+        match self.extent {
+            Extent::Sphere(interior) => crate::medium::lamp_inverse_square(d, self.radius, near, interior == SphereInterior::Lit),
+            Extent::Ball => crate::medium::ball_mean_inverse_square(d, (self.radius * self.radius + near * near).sqrt()),
+        }
     }
 
     pub fn power(&self) -> Vec3 {
@@ -108,7 +122,7 @@ pub fn spot_emitter(s: &Spot) -> PointEmitter {
         position: s.position,
         intensity: s.intensity,
         radius: s.radius,
-        interior: SphereInterior::Dark,
+        extent: Extent::Sphere(SphereInterior::Dark),
         profile: Profile::Cone { axis: s.axis, cos_outer: s.cos_outer, cos_inner: s.cos_inner },
     }
 }
@@ -123,7 +137,7 @@ pub fn area_vpls(a: &AreaLight, k: u32) -> Vec<PointEmitter> {
     for j in 0..k {
         for i in 0..k {
             let u = [(i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32];
-            out.push(PointEmitter { position: a.point(u), intensity: share, radius: 0.0, interior: SphereInterior::Dark, profile: Profile::Cosine { normal: a.normal } });
+            out.push(PointEmitter { position: a.point(u), intensity: share, radius: 0.0, extent: Extent::Sphere(SphereInterior::Dark), profile: Profile::Cosine { normal: a.normal } });
         }
     }
     out
@@ -136,7 +150,7 @@ pub fn local_emitters(lights: &[Light], area_k: u32) -> Vec<PointEmitter> {
     for light in lights {
         match light {
             Light::Point { position, intensity, radius, interior } => {
-                out.push(PointEmitter { position: *position, intensity: *intensity, radius: *radius, interior: *interior, profile: Profile::Isotropic })
+                out.push(PointEmitter { position: *position, intensity: *intensity, radius: *radius, extent: Extent::Sphere(*interior), profile: Profile::Isotropic })
             }
             Light::Spot(s) => out.push(spot_emitter(s)),
             Light::Area(a) => out.extend(area_vpls(a, area_k)),

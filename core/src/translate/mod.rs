@@ -20,6 +20,6 @@ pub mod emitters;
 pub mod ordinates;
 pub mod sampling;
 
-pub use emitters::{area_vpls, local_emitters, scene_emitters, spot_emitter, PointEmitter, Profile};
+pub use emitters::{area_vpls, local_emitters, scene_emitters, spot_emitter, Extent, PointEmitter, Profile};
 pub use ordinates::{distant_ordinate, Ordinate};
 pub use sampling::{LightRay, LightSampler};

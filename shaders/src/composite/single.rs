@@ -68,7 +68,7 @@ impl GpuLight {
             pos_or_dir: e.position.extend(1.0).to_array(),
             power: e.intensity.extend(kind).to_array(),
             axis: axis.extend(cos_outer).to_array(),
-            extra: [cos_inner, e.radius, (e.interior == volscatter_core::scene::SphereInterior::Lit) as u32 as f32, 0.0],
+            extra: [cos_inner, e.radius, extent_code(e.extent), 0.0],
         }
     }
 }
@@ -127,4 +127,15 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         *dst = glam::Vec3::new(v[0], v[1], v[2]);
     }
     Ok(grid)
+}
+
+/// single.wgsl's `extra.z`: 0 a sphere lamp with a dark interior, 1 with a lit one, 2 a ball.
+fn extent_code(extent: volscatter_core::translate::Extent) -> f32 {
+    use volscatter_core::scene::SphereInterior;
+    use volscatter_core::translate::Extent;
+    match extent {
+        Extent::Sphere(SphereInterior::Dark) => 0.0,
+        Extent::Sphere(SphereInterior::Lit) => 1.0,
+        Extent::Ball => 2.0,
+    }
 }

@@ -177,7 +177,7 @@ mod tests {
             cos_inner: 0.9,
         };
         let e = volscatter_core::translate::spot_emitter(&spot);
-        let emitter = init::Emitter { intensity: e.intensity, profile: e.profile, radius: 0.0, clamp_radius: 0.0, lit_interior: false };
+        let emitter = init::Emitter { intensity: e.intensity, profile: e.profile, radius: 0.0, clamp_radius: 0.0, lamp_interior: None };
         let mip = MediumMip::new(medium, 1.0);
         let grid = RadialGrid::new(medium, &mip, position, 16, 0.0, 24).unwrap();
         let mu = propagate::view_cosines(&grid, scene.camera.position);

@@ -124,7 +124,7 @@ mod tests {
     use crate::solvers::pop::radial::init::Emitter;
 
     fn point(p: Vec3, i: f32) -> RadialSource {
-        RadialSource { light: 0, kind: "point", position: p, emitter: Emitter { intensity: Vec3::splat(i), profile: Profile::Isotropic, radius: 0.0, clamp_radius: 0.0, lit_interior: false } }
+        RadialSource { light: 0, kind: "point", position: p, emitter: Emitter { intensity: Vec3::splat(i), profile: Profile::Isotropic, radius: 0.0, clamp_radius: 0.0, lamp_interior: None } }
     }
 
     /// 10,000 point lights on a 100 x 100 lattice merge into at most MAX_SOURCES, keeping the

@@ -33,9 +33,9 @@ pub struct Emitter {
     /// light arrives in the cone that patch subtends, and its inverse-square law stops there.
     /// 0 for a true point or sphere light.
     pub clamp_radius: f32,
-    /// A sphere light's interior is lit (docs/scene-format.md): inside it J is half the
-    /// surface's radiance, I / (2 pi radius^2), from every direction; else J has no direct part.
-    pub lit_interior: bool,
+    /// A sphere lamp's interior (docs/scene-format.md), None for other emitters: lit, J inside
+    /// it is half the surface's radiance, I / (2 pi radius^2), from every direction; dark, none.
+    pub lamp_interior: Option<crate::scene::SphereInterior>,
 }
 
 impl Emitter {

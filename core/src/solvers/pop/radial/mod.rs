@@ -71,7 +71,7 @@ pub fn emission_sources(medium: &crate::medium::Medium, n: u32, first_index: usi
             light: first_index,
             kind: "emission VPL",
             position: e.position,
-            emitter: Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius: 0.0, lit_interior: false },
+            emitter: Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius: 0.0, lamp_interior: None },
         })
         .collect()
 }
@@ -104,8 +104,11 @@ pub fn sources(lights: &[Light], area_k: u32) -> Vec<RadialSource> {
             if !(e.intensity.is_finite() && e.position.is_finite()) || e.intensity.max_element() <= 0.0 {
                 continue;
             }
-            let lit_interior = e.interior == crate::scene::SphereInterior::Lit;
-            let emitter = Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius, lit_interior };
+            let lamp_interior = match e.extent {
+                translate::Extent::Sphere(interior) => Some(interior),
+                translate::Extent::Ball => None,
+            };
+            let emitter = Emitter { intensity: e.intensity, profile: e.profile, radius: e.radius.max(0.0), clamp_radius, lamp_interior };
             out.push(RadialSource { light: i, kind, position: e.position, emitter });
         }
     }
@@ -223,9 +226,9 @@ pub fn solve_sources(
         // Inside a sphere light no further brightening (its surface is where the light starts).
         let r_clamp = e.clamp_radius.max(e.radius).max(CELL_MEAN_RADIUS * merged_spacing);
         // Inside a sphere light the radial grid has no cells: its interior is the light's model.
-        let interior = (e.radius > 0.0 && e.radius >= CELL_MEAN_RADIUS * merged_spacing).then(|| {
+        let interior = e.lamp_interior.filter(|_| e.radius > 0.0 && e.radius >= CELL_MEAN_RADIUS * merged_spacing).map(|interior| {
             let lit = e.intensity / (2.0 * std::f32::consts::PI * e.radius * e.radius);
-            (e.radius, if e.lit_interior { lit } else { Vec3::ZERO })
+            (e.radius, if interior == crate::scene::SphereInterior::Lit { lit } else { Vec3::ZERO })
         });
         lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp, interior });
     }
