@@ -112,7 +112,7 @@ def test_sparse_1024_vdb_gets_the_offer_with_the_librarys_numbers(fresh):
 
 def test_offer_estimates_the_quality_presets_settings(fresh):
     """The estimate is for the settings Compute runs under each Quality (the preset's
-    `directions` included: draft 9, final 49), not for lpm's defaults."""
+    `directions` included: draft 4, final 49), not for lpm's defaults."""
     offer_mod = _mod("lpm_offer")
     ob = bs.file_volume("Big", FIXTURE)
     s = ob.volscatter
@@ -122,7 +122,7 @@ def test_offer_estimates_the_quality_presets_settings(fresh):
         est, proposed = offer_mod.offer(ob, bpy.context)
         assert direct_estimate(ob) == est, quality
         if quality != "CUSTOM":
-            assert s.solver_settings()["directions"] == {"DRAFT": 9, "PREVIEW": 25, "FINAL": 49}[quality]
+            assert s.solver_settings()["directions"] == {"DRAFT": 4, "PREVIEW": 25, "FINAL": 49}[quality]
         seen[quality] = est
     # The directions change what lpm holds (so the comparison above can fail): final's 49 per
     # face against preview's 25 on the same grid would be more; the grids differ too.

@@ -818,7 +818,7 @@ fn composite_aovs_makes_only_the_layers_asked_for() {
             let mut px = vec![0f32; (w * h * 4) as usize];
             assert_eq!((a.vs_image_copy_rgba)(img, px.as_mut_ptr(), px.len()), OK);
             let mut rgb = vec![0f32; (w * h * 3) as usize];
-            let layers: Vec<&str> = ["single", "multiple", "background"]
+            let layers: Vec<&str> = ["single", "multiple", "background", "emission"]
                 .into_iter()
                 .filter(|n| (a.vs_image_copy_aov)(img, cstr(n).as_ptr(), rgb.as_mut_ptr(), rgb.len()) == OK)
                 .collect();
@@ -826,13 +826,13 @@ fn composite_aovs_makes_only_the_layers_asked_for() {
             (px, layers)
         };
         let (all_px, all) = rgba_and_layers(None);
-        assert_eq!(all, ["single", "multiple", "background"]);
-        for (bits, want) in [(0u32, vec![]), (1, vec!["single"]), (2, vec!["multiple"]), (4, vec!["background"]), (5, vec!["single", "background"]), (7, all.clone())] {
+        assert_eq!(all, ["single", "multiple", "background", "emission"]);
+        for (bits, want) in [(0u32, vec![]), (1, vec!["single"]), (2, vec!["multiple"]), (4, vec!["background"]), (8, vec!["emission"]), (5, vec!["single", "background"]), (15, all.clone())] {
             let (px, layers) = rgba_and_layers(Some(bits));
             assert_eq!(layers, want, "aovs {bits}");
             assert_eq!(px, all_px, "aovs {bits}: RGBA differs from vs_result_composite's");
         }
-        for bad in [8u32, 0x10, u32::MAX] {
+        for bad in [0x10u32, 0x20, u32::MAX] {
             let mut img = std::ptr::dangling_mut::<c_void>();
             expect_result(r, (a.vs_result_composite_aovs)(r, 0, bad, 0, 0.0, &mut img), INVALID_ARGUMENT, &["aovs", "unknown bits"]);
             assert!(img.is_null(), "output handle set to NULL on failure");

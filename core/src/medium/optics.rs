@@ -110,11 +110,14 @@ pub fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
 /// its surface subtends times its radiance 1/(pi r^2), inside it nothing (`lit` false) or its
 /// surface's value 2/r^2 (`lit`: half that radiance from every direction, as Cycles lights it). `near` > 0 spreads the field over a ball of
 /// that radius (a grid cell, a solver's near field); a lamp smaller than that is a ball too
-/// (`ball_mean_inverse_square`, which keeps the power: its inside cannot be resolved anyway).
+/// (`ball_mean_inverse_square`, which keeps the power: its inside cannot be resolved), and a
+/// lit interior's added light, 2/r^2 over the sphere's volume, is spread evenly over that ball.
 #[inline]
 pub fn lamp_inverse_square(d: f32, lamp: f32, near: f32, lit: bool) -> f32 {
     if lamp <= near {
-        return ball_mean_inverse_square(d, (lamp * lamp + near * near).sqrt());
+        let ball = (lamp * lamp + near * near).sqrt();
+        let interior = if lit && d < ball { 2.0 * lamp / (ball * ball * ball) } else { 0.0 };
+        return ball_mean_inverse_square(d, ball) + interior;
     }
     if d < lamp {
         return if lit { 2.0 / (lamp * lamp) } else { 0.0 };
@@ -171,6 +174,10 @@ mod tests {
         assert!((lamp_inverse_square(0.3, r, 0.0, true) - 2.0 / (r * r)).abs() < 1e-5);
         assert_eq!(lamp_inverse_square(2.0, 0.0, 0.0, true), 0.25);
         assert!((lamp_inverse_square(0.3, 0.1, 0.2, false) - ball_mean_inverse_square(0.3, (0.05f32).sqrt())).abs() < 1e-5);
+        // Unresolved and lit: the interior's 2/r^2 over the sphere's volume, spread over the ball.
+        let b = 0.05f32.sqrt();
+        let added = (lamp_inverse_square(0.1, 0.1, 0.2, true) - lamp_inverse_square(0.1, 0.1, 0.2, false)) * b.powi(3);
+        assert!((added - 2.0 / 0.01 * 0.001).abs() < 1e-5, "{added}");
         // Exact: 2 (1 - cos(asin(r/d))) / r^2 at d = 2r is (2 - sqrt 3) * 2 / r^2 = 2.1436.
         assert!((lamp_inverse_square(1.0, r, 0.0, false) - 2.0 * (2.0 - 3f32.sqrt()) * 2.0 / 1.0).abs() < 1e-4);
     }

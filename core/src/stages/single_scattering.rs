@@ -506,7 +506,7 @@ fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f3
         if intensity.max_element() > 0.0 {
             let field = e.inverse_square(dist, near);
             if field > 0.0 {
-                return intensity * field * hg(w.dot(view), g) * tr(w, dist);
+                return intensity * field * hg(w.dot(view), g) * tr(w, e.shadow_length(dist));
             }
         }
     } else if e.profile == crate::translate::Profile::Isotropic && (e.radius > 0.0 || near > 0.0) {

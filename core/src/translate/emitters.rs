@@ -112,6 +112,20 @@ impl PointEmitter {
         }
     }
 
+    /// How far the light from this emitter travels through the medium to a point at distance
+    /// `d`, along the direction to its centre: a sphere lamp's light leaves its surface; inside
+    /// a lit lamp it comes from every direction, taken as the mean chord to the surface,
+    /// r - d^2 / 3r (Jensen: slightly dark; the lamp probe states by how much); a point's or a
+    /// ball's light, from its centre.
+    #[inline]
+    pub fn shadow_length(&self, d: f32) -> f32 {
+        match self.extent {
+            Extent::Sphere(_) if d < self.radius => self.radius - d * d / (3.0 * self.radius),
+            Extent::Sphere(_) => d - self.radius,
+            Extent::Ball => d,
+        }
+    }
+
     pub fn power(&self) -> Vec3 {
         self.intensity * self.profile.solid_angle()
     }

@@ -42,7 +42,9 @@ fn ball_mean_inverse_square(d: f32, r: f32) -> f32 {
 // dark, or lit at its surface's 2/r^2), spread over a ball of radius `near`.
 fn lamp_inverse_square(d: f32, lamp: f32, near: f32, lit: bool) -> f32 {
     if (lamp <= near) {
-        return ball_mean_inverse_square(d, sqrt(lamp * lamp + near * near));
+        let ball = sqrt(lamp * lamp + near * near);
+        let interior = select(0.0, 2.0 * lamp / (ball * ball * ball), lit && d < ball);
+        return ball_mean_inverse_square(d, ball) + interior;
     }
     if (d < lamp) {
         return select(0.0, 2.0 / (lamp * lamp), lit);

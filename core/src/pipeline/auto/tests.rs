@@ -194,10 +194,9 @@ fn runs_what_it_says_it_picked() {
 /// is converged enough to tell (its own noise under half the target: fig10_g08's fixture has
 /// 0.31 of noise, so no error against it can be below about that), so that the hosts' default
 /// never asks for the impossible.
-/// Measured scenes no solver reaches the default on: `smoke_point` (a lamp inside the smoke),
-/// where every solver is 0.65-0.77x the reference's flux (best 0.38; BENCHMARKS.md `solvers`):
-/// an open accuracy problem of the solvers with a light inside the medium, not of `auto`.
-const UNREACHED: &[&str] = &["smoke_point"];
+/// Measured scenes no solver reaches the default on (none since the reference's sphere lamp was
+/// corrected: smoke_point's "0.65-0.77x of the reference" was the reference's error).
+const UNREACHED: &[&str] = &[];
 
 #[test]
 fn default_target_is_reached_on_every_measured_scene() {

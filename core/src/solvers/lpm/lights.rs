@@ -154,7 +154,7 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                     }
                     let arriving = intensity * field;
                     let bin = dirs.bin_of(-towards);
-                    add(cell, jv, p, sigma_s, -towards, arriving, grid.transmittance(p, towards, dist), &|d| table.storage_mean_from_bin(dirs, d, bin));
+                    add(cell, jv, p, sigma_s, -towards, arriving, grid.transmittance(p, towards, em.shadow_length(dist)), &|d| table.storage_mean_from_bin(dirs, d, bin));
                 }
             }
         }

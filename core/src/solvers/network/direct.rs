@@ -72,7 +72,7 @@ fn incoming_direct(scene: &Scene, medium: &Medium, x: Vec3, ball: f32, dome: &[(
         let intensity = e.intensity_towards(-w);
         let field = e.inverse_square(dist, ball);
         if intensity.max_element() > 0.0 && field > 0.0 {
-            out.push((-w, intensity * field * tr(w, dist)));
+            out.push((-w, intensity * field * tr(w, e.shadow_length(dist))));
         }
     }
     out

@@ -150,14 +150,17 @@ pub struct RadialLight {
     pub j_direct: Vec<Vec3>,
     pub j_scattered: Vec<Vec3>,
     pub r_clamp: f32,
-    /// A sphere light's radius and its direct J inside it (zero for a dark interior).
-    pub interior: Option<(f32, Vec3)>,
+    /// A sphere lamp's interior: its radius, the direct J inside it (zero when dark), and
+    /// whether that J replaces the grid's (a resolved lamp) or adds to it (a lamp under a cell:
+    /// a lit interior's light spread over the cell's ball, as `medium::lamp_inverse_square`).
+    pub interior: Option<(f32, Vec3, bool)>,
 }
 
 impl RadialLight {
     pub fn sample(&self, w: Vec3) -> Vec3 {
         let direct = match self.interior {
-            Some((radius, inside)) if (w - self.grid.centre).length() < radius => inside,
+            Some((radius, inside, true)) if (w - self.grid.centre).length() < radius => inside,
+            Some((radius, inside, false)) if (w - self.grid.centre).length() < radius => inside + self.grid.sample(&self.j_direct, w, true, self.r_clamp),
             _ => self.grid.sample(&self.j_direct, w, true, self.r_clamp),
         };
         direct + self.grid.sample(&self.j_scattered, w, false, 0.0)
@@ -226,9 +229,23 @@ pub fn solve_sources(
         // Inside a sphere light no further brightening (its surface is where the light starts).
         let r_clamp = e.clamp_radius.max(e.radius).max(CELL_MEAN_RADIUS * merged_spacing);
         // Inside a sphere light the radial grid has no cells: its interior is the light's model.
-        let interior = e.lamp_interior.filter(|_| e.radius > 0.0 && e.radius >= CELL_MEAN_RADIUS * merged_spacing).map(|interior| {
-            let lit = e.intensity / (2.0 * std::f32::consts::PI * e.radius * e.radius);
-            (e.radius, if interior == crate::scene::SphereInterior::Lit { lit } else { Vec3::ZERO })
+        let near = CELL_MEAN_RADIUS * merged_spacing;
+        let interior = e.lamp_interior.filter(|_| e.radius > 0.0).and_then(|interior| {
+            let lit = interior == crate::scene::SphereInterior::Lit;
+            if e.radius >= near {
+                // Attenuated over the mean chord to the surface averaged over the ball, 0.8 r
+                // (PointEmitter::shadow_length), at the medium's extinction at the centre.
+                let sigma_t = scene.medium.sigma_t(scene.medium.density_world(src.position));
+                let tr = (-sigma_t * (0.8 * e.radius)).exp();
+                let j = if lit { e.intensity * tr / (2.0 * std::f32::consts::PI * e.radius * e.radius) } else { Vec3::ZERO };
+                Some((e.radius, j, true))
+            } else if lit {
+                // J = fluence / 4 pi: 2 I r / ball^3 over the ball (lamp_inverse_square).
+                let ball = (e.radius * e.radius + near * near).sqrt();
+                Some((ball, e.intensity * (2.0 * e.radius / ball.powi(3)) / (4.0 * std::f32::consts::PI), false))
+            } else {
+                None
+            }
         });
         lights.push(RadialLight { grid, j_direct, j_scattered: j, r_clamp, interior });
     }
