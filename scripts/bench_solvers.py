@@ -283,7 +283,7 @@ def gpu_note() -> str:
 SCENE_NOTES = {
     "smoke_point": "The lamp's interior is `lit`, as Cycles lights it and the add-on exports it (docs/scene-format.md "
                    "\"Sphere lamps\"); the reference with a `dark` interior agrees with Mitsuba 3's one-sided sphere "
-                   "(BENCHMARKS.md `mitsuba-bench`). No renderer here draws the lamp itself.",
+                   "(BENCHMARKS.md `mitsuba-bench`). volscatter's images do not draw the lamp itself.",
     "fire_smoke": "Images hold the emission seen directly on both sides (the compositor, the reference and Cycles), "
                   "so the errors compare like with like.",
 }
