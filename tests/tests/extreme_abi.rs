@@ -232,7 +232,9 @@ fn heavy_settings(name: &str) -> &'static str {
 /// little. CPU time, unlike the wall clock, does not grow when other processes load the
 /// machine (a worker waiting for a core spends none), so the bound holds on a loaded CI
 /// machine; 100 ms is 10x the stride. Before issue 40, pop spent 0.4 s of it in its dome
-/// importance and photon-grid 0.4-0.8 s summing batch caches after a cancel.
+/// importance and photon-grid 0.4-0.8 s summing batch caches after a cancel; pop later spent
+/// up to 0.57 s (CI) in its first light grid, sweep and propagation step, and vpl up to 0.17 s
+/// freeing per-walk lists.
 const CANCEL_CPU_PER_WORKER: Duration = Duration::from_millis(100);
 
 /// A wall-clock bound that only a hang (a loop that never reads the flag) exceeds, even on a

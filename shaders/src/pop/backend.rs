@@ -80,7 +80,7 @@ impl PopBackend for GpuBackend {
     type Light = GpuLight;
     type Merged = GpuMerged;
 
-    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(GpuLight, SweepSums)> {
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32, _progress: &dyn Progress) -> Result<(GpuLight, SweepSums)> {
         let mut light = GpuLight::upload(&self.ctx, grid, mu).map_err(gpu_error)?;
         let sums = init::sweep(&self.ctx, &mut light, grid.h, fluence, a0, g).map_err(gpu_error)?;
         Ok((light, sums))

@@ -82,7 +82,7 @@ fn gpu_residuum_propagation_matches_cpu() {
     let medium = &scene.medium;
     let mip = MediumMip::new(medium, 1.0);
     let light = LightGrid::new(medium, &mip, glam::Vec3::new(0.3, -0.4, -0.8).normalize(), 16).unwrap();
-    let mut residuum = Residuum::new(medium, &mip, 16).unwrap();
+    let mut residuum = Residuum::new(medium, &mip, 16, &volscatter_core::stages::progress::NoProgress).unwrap();
     residuum.gather(&light, &init::sweep(&light, Vec3::ONE).packets);
     let grid = &residuum.grid;
     let mu = accumulate::view_cosines(grid, scene.camera.position);

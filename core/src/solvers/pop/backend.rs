@@ -37,7 +37,7 @@ pub trait PopBackend: Sync {
 
     /// Transmittance sweep (init.rs) and single scattering of the unscattered light into a
     /// fresh J (accumulate::add_direct with anisotropy `a0 g`).
-    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(Self::Light, SweepSums)>;
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32, progress: &dyn Progress) -> Result<(Self::Light, SweepSums)>;
 
     /// A light whose packets are given (the isotropic residuum's, gathered from other grids)
     /// with an empty J.
@@ -89,8 +89,8 @@ impl PopBackend for CpuBackend {
     type Light = CpuLight;
     type Merged = Merged;
 
-    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32) -> Result<(CpuLight, SweepSums)> {
-        let initial = init::sweep(grid, fluence);
+    fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32, progress: &dyn Progress) -> Result<(CpuLight, SweepSums)> {
+        let initial = init::sweep_or_cancel(grid, fluence, progress)?;
         let mut j = vec![Vec3::ZERO; grid.len()];
         accumulate::add_direct(&initial.direct, mu, a0, g, &mut j);
         let sums = SweepSums { entering: initial.entering, transmitted: initial.transmitted, absorbed: initial.absorbed };

@@ -21,6 +21,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::light_grid::LightGrid;
+use crate::error::{Error, Result};
+use crate::stages::progress::{NoProgress, Progress};
 
 #[derive(Clone)]
 pub struct Initial {
@@ -38,6 +40,12 @@ pub struct Initial {
 /// `fluence`: fluence of the incident light (for a cone of half-angle theta with irradiance E
 /// perpendicular to it: E * 2 / (1 + cos theta)).
 pub fn sweep(grid: &LightGrid, fluence: Vec3) -> Initial {
+    sweep_or_cancel(grid, fluence, &NoProgress).expect("NoProgress never cancels")
+}
+
+/// As `sweep`, stopping with `Error::Cancelled` once `progress` is cancelled (read per slice:
+/// a fine grid's sweep takes a core tenths of a second).
+pub fn sweep_or_cancel(grid: &LightGrid, fluence: Vec3, progress: &dyn Progress) -> Result<Initial> {
     let n = grid.len();
     let slab = grid.slab();
     let h = grid.h;
@@ -47,6 +55,9 @@ pub fn sweep(grid: &LightGrid, fluence: Vec3) -> Initial {
     // Optical depth from the entry face to the current slice, per column.
     let mut tau = vec![Vec3::ZERO; slab];
     for k in 0..grid.dims.z as usize {
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
         let range = k * slab..(k + 1) * slab;
         let (ss, sa) = (&grid.sigma_s[range.clone()], &grid.sigma_a[range.clone()]);
         direct[range.clone()]
@@ -77,5 +88,5 @@ pub fn sweep(grid: &LightGrid, fluence: Vec3) -> Initial {
             absorbed += *ab;
         }
     }
-    Initial { direct, packets, entering, transmitted, absorbed }
+    Ok(Initial { direct, packets, entering, transmitted, absorbed })
 }

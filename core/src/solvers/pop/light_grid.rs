@@ -6,6 +6,7 @@ use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::stages::mip::MediumMip;
+use crate::stages::progress::{NoProgress, Progress};
 use crate::error::{Error, Result};
 use crate::medium::optics::box_corners;
 use crate::medium::{trilinear, Medium};
@@ -44,12 +45,18 @@ impl LightGrid {
 
     /// Sets up the frame and samples the medium. `resolution` cells along the longest side.
     pub fn new(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32) -> Result<Self> {
-        Self::with_margin(medium, mip, d, resolution, 0)
+        Self::with_margin(medium, mip, d, resolution, 0, &NoProgress)
     }
 
-    /// As `new`, with `margin` extra empty cells on every side (the cell size is that of
-    /// `new`).
-    pub fn with_margin(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32, margin: u32) -> Result<Self> {
+    /// As `new`, stopping with `Error::Cancelled` once `progress` is cancelled: a solve's
+    /// grids at high resolutions take a core tenths of a second to fill.
+    pub fn new_or_cancel(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32, progress: &dyn Progress) -> Result<Self> {
+        Self::with_margin(medium, mip, d, resolution, 0, progress)
+    }
+
+    /// As `new_or_cancel`, with `margin` extra empty cells on every side (the cell size is
+    /// that of `new`).
+    pub fn with_margin(medium: &Medium, mip: &MediumMip, d: Vec3, resolution: u32, margin: u32, progress: &dyn Progress) -> Result<Self> {
         let d = d.normalize();
         let (u, v) = orthonormal_basis(d);
         let rot = Mat3A::from_cols(u.into(), v.into(), d.into());
@@ -83,6 +90,9 @@ impl LightGrid {
         crate::budget::check(&format!("pop grids of {}x{}x{} cells (solver.grid_resolution)", dims.x, dims.y, dims.z), count.saturating_mul(96))?;
         let mut density = vec![0.0f32; count as usize];
         density.par_chunks_mut(slab).enumerate().for_each(|(k, out)| {
+            if progress.cancelled() {
+                return;
+            }
             for j in 0..dims.y {
                 for i in 0..dims.x {
                     let w = index_to_world.transform_point3(Vec3::new(i as f32, j as f32, k as f32));
@@ -90,6 +100,9 @@ impl LightGrid {
                 }
             }
         });
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
         let sigma_s = density.iter().map(|&r| medium.sigma_s(r)).collect();
         let sigma_a = density.iter().map(|&r| medium.sigma_t(r) - medium.sigma_s(r)).map(|s| s.max(Vec3::ZERO)).collect();
         Ok(LightGrid { dims, h, d, index_to_world, world_to_index, sigma_s, sigma_a })

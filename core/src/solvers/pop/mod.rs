@@ -222,7 +222,7 @@ impl Pop {
 
         let g = medium.g;
         let mut lights = Vec::with_capacity(distant.len() + 1);
-        let mut residuum = if s.isotropic_residuum { Some(residuum::Residuum::new(medium, &mip, s.residuum_grid_resolution())?) } else { None };
+        let mut residuum = if s.isotropic_residuum { Some(residuum::Residuum::new(medium, &mip, s.residuum_grid_resolution(), progress)?) } else { None };
         // In a session, lights solved for this medium, camera and settings are reused (reuse.rs).
         let mut kept = match (reuse, &key) {
             (Some(r), Some(k)) => {
@@ -247,9 +247,12 @@ impl Pop {
                     continue;
                 }
             }
-            let grid = timings.time("pop light grid", || LightGrid::new(medium, &mip, direction, resolution))?;
+            let grid = timings.time("pop light grid", || LightGrid::new_or_cancel(medium, &mip, direction, resolution, progress))?;
             let mu = accumulate::view_cosines(&grid, scene.camera.position);
-            let (mut light, sweep) = timings.time("pop init", || backend.init(&grid, fluence, &mu, a0, g))?;
+            let (mut light, sweep) = timings.time("pop init", || backend.init(&grid, fluence, &mu, a0, g, progress))?;
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             // With the residuum, each light stops at its switch iteration m' (Eq. 10).
             let max_iterations = match &residuum {
                 Some(_) if s.residuum_iterations > 0 => s.residuum_iterations.min(s.max_iterations),

@@ -219,12 +219,20 @@ impl Propagation<'_> {
             .zip(j_acc.par_iter_mut())
             .enumerate()
             .map(|(c, (e, jc))| {
+                if progress.cancelled() {
+                    return Vec3::ZERO;
+                }
                 *e = self.emit(c, a[c], opts.moment_anisotropy);
                 let w = p[c] * e.path / h * 0.5;
                 *jc += w * per_channel(a[c], |ac| hg(self.mu[c], clamp_a(ac * g)));
                 escaped_at(c, e, p[c])
             })
             .sum::<Vec3>();
+        // An iteration over a fine grid takes a core tenths of a second: the cancel is read
+        // before each and per slab within its gather.
+        if progress.cancelled() {
+            return Err(Error::Cancelled);
+        }
         let mut escaped = Vec3::ZERO;
         let mut absorbed = Vec3::ZERO;
         let mut remaining = injected;
@@ -236,6 +244,9 @@ impl Propagation<'_> {
             // Gather (Eq. 2-6).
             let (p_ref, e_ref) = (&p, &emit);
             p_next.par_chunks_mut(slab).zip(a_next.par_chunks_mut(slab)).enumerate().for_each(|(k, (pn, an))| {
+                if progress.cancelled() {
+                    return;
+                }
                 for jj in 0..ny {
                     for ii in 0..nx {
                         let dst = ii + nx * jj + slab * k;
@@ -283,6 +294,9 @@ impl Propagation<'_> {
                     }
                 }
             });
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             std::mem::swap(&mut p, &mut p_next);
             std::mem::swap(&mut a, &mut a_next);
             // Accumulate (Eq. 7-8) and prepare the next emission.
@@ -294,7 +308,7 @@ impl Propagation<'_> {
                 .enumerate()
                 .map(|(c, ((e, jc), pc))| {
                     let arrived = *pc;
-                    if arrived == Vec3::ZERO {
+                    if arrived == Vec3::ZERO || progress.cancelled() {
                         *e = Emit::default();
                         return (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
                     }
@@ -318,6 +332,9 @@ impl Propagation<'_> {
                     (arrived, escaped_at(c, e, *pc), vac)
                 })
                 .reduce(|| (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
+            if progress.cancelled() {
+                return Err(Error::Cancelled);
+            }
             // What left `before` and neither arrived in a cell nor left the grid was absorbed.
             absorbed += (before - esc_next - arrived).max(Vec3::ZERO);
             escaped += esc_next + vac;

@@ -37,6 +37,7 @@ use super::light_grid::LightGrid;
 use crate::stages::mip::MediumMip;
 use crate::error::Result;
 use crate::medium::Medium;
+use crate::stages::progress::Progress;
 
 /// Empty cells around the medium's box in the residuum grid. Isotropic light that leaves the
 /// medium random-walks in the lattice's empty cells and partly comes back (the lattice cannot
@@ -78,9 +79,9 @@ pub struct Residuum {
 }
 
 impl Residuum {
-    pub fn new(medium: &Medium, mip: &MediumMip, resolution: u32) -> Result<Self> {
+    pub fn new(medium: &Medium, mip: &MediumMip, resolution: u32, progress: &dyn Progress) -> Result<Self> {
         let axis = Vec3::from(medium.index_to_world.matrix3.z_axis).normalize_or(Vec3::Z);
-        let grid = LightGrid::with_margin(medium, mip, axis, resolution, MARGIN_CELLS)?;
+        let grid = LightGrid::with_margin(medium, mip, axis, resolution, MARGIN_CELLS, progress)?;
         let packets = vec![Vec3::ZERO; grid.len()];
         Ok(Residuum { grid, packets })
     }

@@ -56,72 +56,112 @@ impl Walks {
 /// the result is then `Error::Cancelled`.
 pub fn trace(scene: &Scene, settings: &VplSettings, max_orders: u32, progress: &dyn Progress) -> Result<Walks> {
     let medium = &scene.medium;
-    let sampler = LightSampler::new(scene);
     let majorant = MajorantGrid::new(medium, 32);
-    let tracking = Tracking::new(medium, &majorant);
-    let phase = HenyeyGreenstein::new(medium.g);
     let n = settings.walks;
-    // One (list, cut) entry per walk before they are packed; the VPLs themselves are not
-    // known in advance (a few per walk in the media this is meant for).
-    crate::budget::check_elements::<(Vec<Vpl>, bool)>("vpl walk lists (solver.walks)", n as u64)?;
-    let per_walk: Vec<(Vec<Vpl>, bool)> = (0..n)
+    let walker = Walker {
+        settings,
+        max_orders,
+        sampler: LightSampler::new(scene),
+        tracking: Tracking::new(medium, &majorant),
+        phase: HenyeyGreenstein::new(medium.g),
+        medium,
+        walks: n,
+    };
+    // Walks are traced in blocks, each packing its walks' VPLs into one list: the VPLs are
+    // not known in advance (a few per walk in the media this is meant for), and millions of
+    // per-walk lists took a third of a second of CPU to free after a cancel at 16M walks.
+    crate::budget::check_elements::<usize>("vpl walk offsets (solver.walks)", n as u64 + 1)?;
+    let blocks: Vec<WalkBlock> = (0..n.div_ceil(WALK_BLOCK))
         .into_par_iter()
-        .map(|w| {
-            // None ends the collection (`while_some`): visiting millions of skipped walks
-            // would itself take most of a second.
-            if progress.cancelled() {
-                return None;
-            }
-            let mut out = Vec::new();
-            let mut rng = Rng::new(settings.seed, w as u64);
-            let Some(ray) = sampler.sample_rng(&mut rng) else { return Some((out, false)) };
-            let (mut x, mut d) = (ray.origin, ray.direction);
-            let start = ray.power / n as f32;
-            let mut beta = start;
-            let limit = settings.max_vertices.min(max_orders);
-            loop {
-                if out.len() as u32 >= limit {
-                    return Some((out, limit == settings.max_vertices && max_orders == u32::MAX));
+        .map(|b| {
+            let mut block = WalkBlock::default();
+            for w in b * WALK_BLOCK..((b + 1) * WALK_BLOCK).min(n) {
+                // None ends the collection (`while_some`): visiting millions of skipped walks
+                // would itself take most of a second.
+                if progress.cancelled() {
+                    return None;
                 }
-                match tracking.sample_free_flight(x, d, f32::INFINITY, beta, &mut rng) {
-                    FreeFlight::Escaped { .. } => return Some((out, false)),
-                    FreeFlight::Scattered { t, weight } => {
-                        x += d * t;
-                        beta = weight * medium.albedo;
-                        if beta.max_element() <= 0.0 {
-                            return Some((out, false));
-                        }
-                        out.push(Vpl { position: x, incident: d, power: beta });
-                        if out.len() as u32 >= settings.rr_depth {
-                            // Survival in proportion to the throughput left (at most 1).
-                            let p = (beta.max_element() / start.max_element().max(1e-30)).min(1.0);
-                            if rng.f32() >= p {
-                                return Some((out, false));
-                            }
-                            beta /= p;
-                        }
-                        d = phase.sample(d, rng.pair());
-                    }
-                }
+                block.cut += trace_walk(&walker, w, &mut block.vpls) as u32;
+                block.ends.push(block.vpls.len());
             }
+            Some(block)
         })
         .while_some()
         .collect();
     if progress.cancelled() {
-        // Millions of small lists take a third of a second of CPU to free at 16M walks: they
-        // are freed on a thread of their own, so that a cancelled solve returns at once.
-        // Without a thread to be had, the closure and the lists in it are dropped here.
-        let _ = std::thread::Builder::new().name("vpl-free".into()).spawn(move || drop(per_walk));
         return Err(crate::error::Error::Cancelled);
     }
-    let mut offsets = Vec::with_capacity(per_walk.len() + 1);
+    let mut offsets = Vec::with_capacity(n as usize + 1);
     offsets.push(0);
-    let mut vpls = Vec::new();
+    let mut vpls = Vec::with_capacity(blocks.iter().map(|b| b.vpls.len()).sum());
     let mut cut = 0;
-    for (v, c) in per_walk {
-        vpls.extend(v);
-        offsets.push(vpls.len());
-        cut += c as u32;
+    for b in blocks {
+        let base = vpls.len();
+        offsets.extend(b.ends.iter().map(|e| base + e));
+        vpls.extend(b.vpls);
+        cut += b.cut;
     }
     Ok(Walks { vpls, offsets, cut })
+}
+
+/// Walks traced together, their VPLs packed: walk i of the block ends at `vpls[..ends[i]]`.
+#[derive(Default)]
+struct WalkBlock {
+    vpls: Vec<Vpl>,
+    ends: Vec<usize>,
+    cut: u32,
+}
+
+/// Walks per block: enough that a block's lists are few to free, few enough (milliseconds of
+/// work) that the blocks spread over the workers.
+const WALK_BLOCK: u32 = 1024;
+
+/// What every walk of a solve shares.
+struct Walker<'a> {
+    settings: &'a VplSettings,
+    max_orders: u32,
+    sampler: LightSampler<'a>,
+    tracking: Tracking<'a>,
+    phase: HenyeyGreenstein,
+    medium: &'a crate::medium::Medium,
+    walks: u32,
+}
+
+/// Traces walk `w`, appending its VPLs to `out`; true when it was cut at `max_vertices`.
+fn trace_walk(walker: &Walker, w: u32, out: &mut Vec<Vpl>) -> bool {
+    let Walker { settings, max_orders, sampler, tracking, phase, medium, walks: n } = walker;
+    let (max_orders, n) = (*max_orders, *n);
+    let first = out.len();
+    let mut rng = Rng::new(settings.seed, w as u64);
+    let Some(ray) = sampler.sample_rng(&mut rng) else { return false };
+    let (mut x, mut d) = (ray.origin, ray.direction);
+    let start = ray.power / n as f32;
+    let mut beta = start;
+    let limit = settings.max_vertices.min(max_orders);
+    loop {
+        let made = (out.len() - first) as u32;
+        if made >= limit {
+            return limit == settings.max_vertices && max_orders == u32::MAX;
+        }
+        match tracking.sample_free_flight(x, d, f32::INFINITY, beta, &mut rng) {
+            FreeFlight::Escaped { .. } => return false,
+            FreeFlight::Scattered { t, weight } => {
+                x += d * t;
+                beta = weight * medium.albedo;
+                if beta.max_element() <= 0.0 {
+                    return false;
+                }
+                out.push(Vpl { position: x, incident: d, power: beta });
+                if made + 1 >= settings.rr_depth {
+                    // Survival in proportion to the throughput left (at most 1).
+                    let p = (beta.max_element() / start.max_element().max(1e-30)).min(1.0);
+                    if rng.f32() >= p {
+                        return false;
+                    }
+                    beta /= p;
+                }
+                d = phase.sample(d, rng.pair());
+            }
+        }
+    }
 }
