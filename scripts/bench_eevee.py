@@ -30,7 +30,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import eevee_scenes as es  # noqa: E402
-from benchlib import write_section  # noqa: E402
+from benchlib import today, write_section  # noqa: E402
 
 PICTURE = os.path.join(REPO, "docs", "eevee_comparison.png")
 UPSCALE = 3  # each 80x60 render shown as 240x180 (nearest neighbour: froxels stay visible)
@@ -110,6 +110,7 @@ def markdown(metas, rows, solvers):
     lines = [
         "## EEVEE with volscatter against Cycles' multiple scattering (`scripts/bench_eevee.py`)",
         "",
+        f"`python3 scripts/bench_eevee.py` on {today()}. "
         "Blender %s, %dx%d pixels, film transparent (only the volume counts). Ground truth: Cycles with many "
         "volume bounces at a high sample count (tests/python/fixtures/eevee/, scripts/make_eevee_fixtures.py); "
         "*error* is the relative RMSE of the premultiplied RGB against it, *flux* the ratio of the sums. "

@@ -22,7 +22,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from benchlib import log, phase_sum, render, volscatter_bin, write_section
+from benchlib import log, phase_sum, render, today, volscatter_bin, write_section
 
 # (solver, extra arguments): vpl at the walks of issue 16's profile; the reference at few
 # samples (a control only).
@@ -86,6 +86,7 @@ def main() -> None:
     lines = [
         "## Fixed costs: single-scattering grid and composite (`scripts/bench_fixed_costs.py`)",
         "",
+        f"`python3 scripts/bench_fixed_costs.py` on {today()}. "
         "The default scene (256x256, the plume under sun and sky), CPU, 2 threads, best of "
         f"{args.repeat}; seconds {'before -> after (speed-up)' if before_bin else ''}. `single` is the "
         "solver's exact single-scattering phase (the compositor's grid: shadow rays to the sun "

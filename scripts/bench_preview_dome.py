@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from benchlib import REPO_ROOT, rel_rmse, write_section
+from benchlib import REPO_ROOT, rel_rmse, written_line, write_section
 
 sys.path.insert(0, str(REPO_ROOT / "usd"))
 from volscatter import _native as native  # noqa: E402  (the one binding, the add-on's too; no bpy needed)
@@ -61,7 +61,8 @@ def main():
         row = "| %.2f | %.0f%% | %.3f, %.3f | %.3f, %.3f |" % (world, 100 * share, t0, rmse(img0, ref), t1, rmse(img1, ref))
         print(row, flush=True)
         rows.append(row)
-    text = ("Preview cost of a dim world for pop (scripts/bench_preview_dome.py): plume 32^3 under a "
+    text = ("## pop's preview under a dim world (`scripts/bench_preview_dome.py`)\n\n" + written_line("python3 scripts/bench_preview_dome.py") + "\n\n"
+            "Preview cost of a dim world for pop (scripts/bench_preview_dome.py): plume 32^3 under a "
             "sun of %g W/m^2 and a grey world, pop Preview (grid 32, output 128), warm solve; error is "
             "the composited 64x64 image's relative RMSE (transparent: the medium's light only) against the reference (grid 48, 64 spp). World "
             "share = 4 pi L / (4 pi L + E_sun).\n\n" % SUN) + "\n".join(rows) + "\n"

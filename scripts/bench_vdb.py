@@ -21,7 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchlib import volscatter_bin, write_section
+from benchlib import today, volscatter_bin, write_section
 
 SYS_PY = "/usr/bin/python3"
 
@@ -81,7 +81,7 @@ def main() -> int:
         "",
         f"256^3 float grid (16.8 M active voxels) written by OpenVDB {lib} with Blosc + half precision, "
         f"{mb:.1f} MB on disk. Fastest of {args.runs} runs, twice alternated; {os.cpu_count()} CPUs, "
-        f"load average {load:.1f} at the end ({platform.machine()}). Written by `scripts/bench_vdb.py`.",
+        f"load average {load:.1f} at the end ({platform.machine()}). Written by `python3 scripts/bench_vdb.py` on {today()}.",
         "",
         "| reader | time (ms) | MB/s | M voxels/s |",
         "|---|---|---|---|",

@@ -8,8 +8,9 @@ EXR readers are imported by the functions that need them, so that a script which
 them runs where they are missing (the lent GPU machine of scripts/bench_device.sh, whose
 Python has only the OpenEXR wheel it carries).
 
-- BENCHMARKS.md: `write_section(name, text)` (`publish(name, lines)`: and says so) replaces (or appends) the text between
-  `<!-- BEGIN name -->` and `<!-- END name -->`, markers kept, every other section untouched;
+- BENCHMARKS.md: `write_section(name, text)` (`publish(name, lines)`: and says so) replaces (or adds) the text between
+  `<!-- BEGIN name -->` and `<!-- END name -->`, markers kept, every other section untouched, and lays
+  the file out by question (`QUESTIONS`, `layout`);
   `read_section(name)` returns that text; `table(header, rows)` a table's lines.
 - The CLI: `volscatter_bin()`, `require_volscatter()`, `render(...)`, `compare(...)`,
   `solver_registry()`, `gpu_info()`, `set_args(settings)`, `write_scene(...)`.
@@ -53,6 +54,60 @@ def log(*a) -> None:
 
 TITLE = "# Benchmarks\n\nWritten by the scripts in `scripts/` (one section each); do not edit by hand.\n"
 
+#: BENCHMARKS.md by the question a reader has: (heading, what it answers, its sections in order).
+#: `write_section` lays the file out in this order; a section missing here goes under OTHER.
+QUESTIONS: list[tuple[str, str, list[str]]] = [
+    ("Accuracy: how close is each solver to the truth?",
+     "Image error against converged references (the reference path tracer, itself checked against Mitsuba 3) "
+     "and against Cycles; the scene set `auto` is fitted on; EEVEE with and without volscatter.",
+     ["solvers", "bench-solvers", "scene-set", "presets", "auto-acceptance", "mitsuba-bench", "reference", "lpm-accuracy", "eevee"]),
+    ("Speed on the CPU: what each solver costs, and how it scales",
+     "Each solver's time against its settings and the scene's size, on the CPU.",
+     ["one-path", "lpm", "pop", "pop-dome", "pop-local-lights", "pop-cloud", "preview-dome", "network", "photon-grid", "vpl", "vpl-image"]),
+    ("GPU: the same solves through wgpu",
+     "Every solver end to end on the GPU, and its kernels one by one (lavapipe where no GPU was lent).",
+     ["solvers-gpu", "gpu", "photon-grid-gpu", "network-gpu", "vpl-gpu", "interactive-gpu"]),
+    ("Sessions and interactivity: a frame after a change",
+     "Session frames after a moved light or camera or a new frame of a sequence, against one-off solves; Blender's live mode.",
+     ["interactive", "lpm-draft", "session", "blender-live"]),
+    ("Memory, files and out-of-core",
+     "Media larger than memory, and reading VDB files.",
+     ["lpm-region", "vdb"]),
+    ("Fixed costs: what every solve pays",
+     "The single-scattering grid and the compositor, whatever the solver.",
+     ["fixed-costs", "composite"]),
+    ("Robustness: extreme scenes",
+     "Legal but extreme scenes: each solver's answer and its time, or its refusal.",
+     ["extremes", "cost-guard"]),
+    ("Farms: long sequences",
+     "Bakes in chunks, on local Dask workers.",
+     ["farm"]),
+]
+OTHER = ("Other measurements", "Sections not yet placed under a question (benchlib.QUESTIONS).")
+_SECTION = re.compile(r"<!-- BEGIN ([A-Za-z0-9_.-]+) -->.*?<!-- END \1 -->", re.DOTALL)
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces as hyphens."""
+    return re.sub(r"[^a-z0-9 -]", "", heading.lower()).replace(" ", "-")
+
+
+def layout(text: str) -> str:
+    """`text`'s sections laid out under their questions (QUESTIONS, then OTHER), with a list of
+    the questions first; the sections' own text is kept as it is."""
+    blocks = {m.group(1): m.group(0) for m in _SECTION.finditer(text)}
+    placed = [n for _, _, names in QUESTIONS for n in names]
+    groups = [(h, why, [n for n in names if n in blocks]) for h, why, names in QUESTIONS]
+    groups.append((*OTHER, [n for n in blocks if n not in placed]))
+    groups = [g for g in groups if g[2]]
+    out = [TITLE.rstrip("\n"), ""]
+    out += [f"- [{h}](#{_anchor(h)})" for h, _, _ in groups]
+    for h, why, names in groups:
+        out += ["", f"# {h}", "", why]
+        for n in names:
+            out += ["", blocks[n]]
+    return "\n".join(out) + "\n"
+
 
 def _markers(name: str) -> tuple[str, str]:
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
@@ -79,8 +134,7 @@ def write_section(name: str, markdown_text: str, path: str | os.PathLike = "BENC
         text = pattern.sub(lambda _: block, text, count=1)
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
-    if not text.endswith("\n"):
-        text += "\n"
+    text = layout(text)
     # Write atomically so that a script interrupted mid-write never truncates other sections.
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".benchmarks.", suffix=".tmp")
     with os.fdopen(fd, "w", encoding="utf-8") as f:

@@ -3,14 +3,11 @@
 //! Why: a host renders S as volume emission, looking it up trilinearly between grid points,
 //! and so does our compositor. When the grid is the medium's own voxel lattice the density is
 //! trilinear on it too, and S's true integral over a cell is that of the product of two
-//! interpolants, not the interpolant of the products at the nodes. Per lattice edge the two
-//! differ by (d_b - d_a)(K_b - K_a) / 6 (1D: the integral of the product of two linear
-//! functions less the mean of their end products), and wherever J falls into the medium as the
-//! density rises (a lit surface, a dense wisp in a light's shadow) the node products lose it:
-//! the compositor's single scattering beside a point light was 1.7% below the path tracer's
-//! first order, and on a grid of twice the lattice's resolution 0.2%.
-//! These edge terms are moved into the node values, so that the sum of the nodes, which is the
-//! interpolant's integral, matches the product's for J linear over each cell:
+//! interpolants, not the interpolant of the products at the nodes: per lattice edge the two
+//! differ by (d_b - d_a)(K_b - K_a) / 6, and wherever J falls as the density rises (a lit
+//! surface, a dense wisp in a light's shadow) the node products lose it. These edge terms are
+//! moved into the node values, so that the sum of the nodes, which is the interpolant's
+//! integral, matches the product's for J linear over each cell:
 //!
 //!   S_i = d_i K_i - 1/12 sum over the six neighbours n of w_n (d_n - d_i)(K_n - K_i)
 //!
@@ -19,23 +16,10 @@
 //! other takes it whole (w = 2), and an empty node's S stays zero (no emission where the
 //! host's density is zero at the node). No solver knows J at an empty node, so there K is
 //! extrapolated through the node from the opposite one as a transmittance (`through`).
-//! Not moved: J's own curvature over a cell (the trapezoid rule's h^2 J'' / 12, which
-//! over-counts a convex J, such as e^-tau or 1/d^2): its discrete Laplacian sharpens the noise
-//! of the Monte Carlo solvers' J (measured with it: photon-grid's cube g 0.9 image error 0.145
-//! -> 0.171, without 0.153), so the single scattering comes out a little bright instead of
-//! dark. Measured (vpl tests' `vpl_explore_single_scattering`: the compositor's single
-//! scattering against the path tracer at max_depth 1, 16384 paths a pixel; image mean, then
-//! image rel. RMSE, plain -> these nodes): point light beside the plume x0.983 -> x1.006
-//! (0.0209 -> 0.0212), rect light x0.983 -> x1.006 (0.0198 -> 0.0197), spot x0.991 -> x1.005
-//! (0.0165 -> 0.0161), the plume under a distant light x0.969 -> x1.001 (0.0301 -> 0.0236),
-//! cube g 0.7 x0.966 -> x0.983 (0.0568 -> 0.0412). The solvers' fixture errors at their tests'
-//! settings (where only the cubes' output grids are lattices) moved by little, mostly up: the
-//! single part's gain shows where a solver's multiple scattering was already bright (image
-//! rel. RMSE photon-grid cube g 0 0.0308 -> 0.0313, cube g 0.9 0.145 -> 0.153; lpm cube g 0
-//! 0.0230 -> 0.0245; vpl cube g 0 0.0693 -> 0.0713, cube g 0.7 0.1480 -> 0.1494; pop cube g 0
-//! 0.1704 -> 0.1694).
-//! On a grid coarser than the lattice the density at the nodes is a point sample of a finer
-//! field and the terms do not hold (measured: worse), and nothing is changed.
+//! Not moved: J's own curvature over a cell (the trapezoid rule's h^2 J'' / 12): its discrete
+//! Laplacian sharpens the Monte Carlo solvers' noise. On a grid coarser than the lattice the
+//! density at the nodes is a point sample of a finer field and the terms do not hold, and
+//! nothing is changed. The measurements behind these choices: docs/architecture.md.
 
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;

@@ -114,3 +114,15 @@ def test_c_build_line_in_the_docs_links_and_runs(tmp_path):
     r = subprocess.run(["./smoke", "tests/c/smoke_scene.json", "out/"], cwd=tmp_path, capture_output=True,
                        text=True, timeout=300)
     assert r.returncode == 0 and "smoke: ok" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
+
+
+def test_benchmarks_are_laid_out_by_question():
+    """BENCHMARKS.md reads by question (benchlib.QUESTIONS): every section sits under one, in
+    the order the list gives, and none is left under "Other measurements"."""
+    import benchlib
+
+    text = (ROOT / "BENCHMARKS.md").read_text(encoding="utf-8")
+    assert benchlib.layout(text) == text, "BENCHMARKS.md is not in benchlib.layout's order: rewrite it with benchlib.layout"
+    placed = {n for _, _, names in benchlib.QUESTIONS for n in names}
+    unplaced = [n for n in re.findall(r"<!-- BEGIN ([A-Za-z0-9_.-]+) -->", text) if n not in placed]
+    assert not unplaced, f"sections under no question (add them to benchlib.QUESTIONS): {unplaced}"

@@ -29,11 +29,7 @@
 //!   phase (the compositor marches S with the true sigma_t): `PhaseTable::view` is the true
 //!   table.
 //!
-//! Measured against the alternative the brief first named (the first order whole, true T and
-//! p, and the split only in the later orders): that puts the lobe's peak into U, whose m = 6
-//! storage bins spread it over a cube face; cube g 0.9 image 0.41 (x1.26) against the split
-//! first order's 0.147 (x1.06); dome_milk 0.175 with only the beams split against 0.124 with
-//! the first propagation split too (tests.rs has the full table).
+//! The split was measured against keeping the first order whole: docs/solvers/lpm.md.
 
 use glam::Vec3;
 

@@ -4,16 +4,10 @@
 //!
 //! Why: a host renders S as emission next to the medium's own extinction, voxel by voxel. S
 //! point-sampled on a grid coarser than the voxels blurs sigma_s, the factor that varies
-//! fastest, away from where the density is: on the Blender noise cube (40^3 voxels, sun, 32x32
-//! image) the 16-cell point-sampled grid composites to 0.765 of the path-traced flux, this
-//! one to 0.981 (at 42 cells, the voxels, both 0.999); on the plume 0.940 instead of 1.116 at
-//! 12 cells, 0.987 instead of 1.009 at 32 (tests.rs `grid_on_voxels_keeps_the_light`). Two
-//! mass-preserving alternatives on the coarse grid were measured and dropped: sigma_s from the
-//! density hat-averaged over each point's cells (cube 0.935 at 16 cells, plume 1.47 at 12) and
-//! the hat average of sigma_s L sampled by the paths' start points (cube 0.854, plume 1.40):
-//! with the fine extinction beside it, S blurred out of the dense core shows brighter. L is
-//! smoother than S (sigma_s is known exactly at every voxel): interpolating L and multiplying
-//! by the voxel's own sigma_s costs no more paths than the coarse grid.
+//! fastest, away from where the density is, and loses light (tests.rs
+//! `grid_on_voxels_keeps_the_light`). L is smoother than S (sigma_s is known exactly at every
+//! voxel): interpolating L and multiplying by the voxel's own sigma_s costs no more paths than
+//! the coarse grid. The alternatives measured and dropped: docs/solvers/reference.md.
 
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
