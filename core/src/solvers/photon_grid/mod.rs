@@ -51,12 +51,10 @@ use ring::{Generation, KeptRing, Ring};
 use crate::translate::LightSampler;
 
 /// Light scattered fewer times than this goes into a cell's first lobe, the rest into its
-/// second: two HG lobes per cell instead of the paper's one. Departure, by measurement (2^20
-/// photons, cache 24, image / grid rel. RMSE): one lobe, cube g 0.9 0.152 / 0.192 and dense
-/// cloud 0.203 / 0.251 (image x0.90: the inward, once-scattered sun lobe and the outward
-/// diffuse flux cancel in one moment vector); split at 2, 0.134 / 0.169 and 0.153 / 0.240
-/// (x0.98); at 3, cloud 0.146 but cube 0.146 (at 4). Order 2 is also the natural cut: once
-/// scattered light is the medium's HG(g) about the sun, what follows is the diffuse part.
+/// second: two HG lobes per cell instead of the paper's one, because the inward, once-scattered
+/// sun lobe and the outward diffuse flux cancel in one moment vector (measured:
+/// docs/solvers/photon-grid.md). Order 2 is the natural cut: once scattered light is the
+/// medium's HG(g) about the sun, what follows is the diffuse part.
 const SPLIT_ORDER: u32 = 2;
 
 #[derive(Clone)]

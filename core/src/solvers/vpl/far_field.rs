@@ -41,14 +41,8 @@ pub const MAX_BASE: u32 = 64;
 
 /// The highest level of the tree whose nodes are taken as clusters: the base cells alone.
 /// Why: a larger node's VPLs mix first-order ones, all arriving along the light, with
-/// scattered ones, whose directions one lobe model cannot hold. Measured on cube g 0.7 (4096
-/// walks, 16-cell gather, distance 2, each far node against its own VPLs,
-/// gather.rs `vpl_explore_clusters_against_their_vpls`):
-/// with |m| whole lobes and the rest isotropic, base cells x1.005, the level above x0.928, the
-/// next x0.891; with one lobe of g |m| x1.036 / 1.053 / 1.057, with a blend of the two matched
-/// to the VPLs' second Legendre moment x1.030 / 1.018 / 0.979, with six bins of directions x1.014
-/// / 1.043 / 0.967. Clusters at every level made that cube's 8-seed flux x1.030-1.034 (bound
-/// 2%); at the base cells x1.018.
+/// scattered ones, whose directions one lobe model cannot hold (the lobe models measured:
+/// docs/solvers/vpl.md).
 pub const MAX_CLUSTER_LEVEL: u32 = 0;
 
 /// A node of the tree: what its VPLs are, seen from afar.

@@ -354,13 +354,8 @@ pub struct Scratch {
 }
 
 /// `transmittance: map`: connections shorter than this many gather-grid spacings are marched,
-/// not looked up (depth_map.rs: the near VPLs carry most of J, and their march is short).
-/// Measured on the default scene (16384 walks): 2 / 1 / 0 cells, gather 0.55 / 0.50 / 0.51 s,
-/// image rel. RMSE 0.08688 / 0.08688 / 0.08684: neither time nor error tells them apart there.
-/// Since the far VPLs are clusters (`cluster_distance`), most connections left are the near
-/// ones, and there 1 cell pays (vpl_bench_image, 65536 walks, 8 x 8 maps, 2 cores): default
-/// scene gather 0.20 -> 0.15 s, image 0.04384 -> 0.04380; plume_point 0.0542 -> 0.0541 (262144
-/// walks 0.0419 -> 0.0420).
+/// not looked up (depth_map.rs: the near VPLs carry most of J, and their march is short); one
+/// cell was the fastest at the same error (docs/solvers/vpl.md).
 pub const MAP_EXACT_CELLS: f32 = 1.0;
 
 /// One gather point's connection: where, seen from where, with which kernel, to which subset.
