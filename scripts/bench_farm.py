@@ -18,7 +18,6 @@ import argparse
 import json
 import os
 import platform
-import shutil
 import statistics
 import subprocess
 import sys
@@ -33,22 +32,10 @@ NOISE = ROOT.parent / "shared" / "fixtures" / "blender_noise_cube" / "volumes" /
 
 
 def make_stage(folder: Path, frames: int) -> Path:
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdVol
-    folder.mkdir(parents=True, exist_ok=True)
-    shutil.copy(NOISE, folder / "d.vdb")
-    path = folder / "seq.usda"
-    st = Usd.Stage.CreateNew(str(path))
-    UsdGeom.SetStageUpAxis(st, "Z")
-    vol = UsdVol.Volume.Define(st, "/World/Smoke")
-    f = UsdVol.OpenVDBAsset.Define(st, "/World/Smoke/density")
-    f.CreateFilePathAttr().Set(Sdf.AssetPath("./d.vdb"))
-    f.CreateFieldNameAttr().Set("density")
-    vol.CreateFieldRelationship("density", f.GetPath())
-    vol.GetPrim().CreateAttribute("volscatter:densityScale", Sdf.ValueTypeNames.Float).Set(5.0)
-    cam = UsdGeom.Camera.Define(st, "/World/Cam")
-    x = UsdGeom.Xformable(cam)
-    x.AddTranslateOp().Set(Gf.Vec3d(0.0, -6.0, 0.0))
-    x.AddRotateXOp().Set(90.0)
+    from pxr import Gf, UsdGeom, UsdLux
+    sys.path.insert(0, str(ROOT / "tests" / "python"))
+    from usd_stages import smoke_stage
+    st, path = smoke_stage(folder, NOISE, name="seq.usda", vdb_path="d.vdb", focal=None)
     sun = UsdLux.DistantLight.Define(st, "/World/Sun")
     sun.CreateIntensityAttr().Set(1.0)
     op = UsdGeom.Xformable(sun).AddRotateYOp()

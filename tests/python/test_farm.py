@@ -9,7 +9,6 @@ setting (a fraction of a second a frame on 2 cores), so every frame's grid diffe
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -23,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[2]
 NOISE = ROOT.parent / "shared" / "fixtures" / "blender_noise_cube" / "volumes" / "Volume.vdb"
 
 pytest.importorskip("pxr", reason="pxr (usd-core) is not installed: pip install usd-core")
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdVol  # noqa: E402
+from pxr import Usd, UsdGeom, UsdLux  # noqa: E402
+from usd_stages import smoke_stage  # noqa: E402
 
 LIB = Path(os.environ.get("VOLSCATTER_LIB", ROOT / "target" / "release" / "libvolscatter.so"))
 if not LIB.exists():
@@ -54,23 +54,7 @@ def bake_popen(stage, out, *extra, env=None):
 
 def make_sequence(folder: Path) -> Path:
     """The noise cube under a sun turning 10 degrees a frame over frames 1-12."""
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "seq.usda"
-    stage = Usd.Stage.CreateNew(str(path))
-    UsdGeom.SetStageUpAxis(stage, "Z")
-    (folder / "vol").mkdir(exist_ok=True)
-    shutil.copy(NOISE, folder / "vol" / "d.vdb")
-    vol = UsdVol.Volume.Define(stage, "/World/Smoke")
-    f = UsdVol.OpenVDBAsset.Define(stage, "/World/Smoke/density")
-    f.CreateFilePathAttr().Set(Sdf.AssetPath("./vol/d.vdb"))
-    f.CreateFieldNameAttr().Set("density")
-    vol.CreateFieldRelationship("density", f.GetPath())
-    vol.GetPrim().CreateAttribute("volscatter:densityScale", Sdf.ValueTypeNames.Float).Set(5.0)
-    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
-    cam.CreateFocalLengthAttr().Set(50.0)
-    x = UsdGeom.Xformable(cam)
-    x.AddTranslateOp().Set(Gf.Vec3d(0.0, -6.0, 0.0))
-    x.AddRotateXOp().Set(90.0)
+    stage, path = smoke_stage(folder, NOISE, name="seq.usda")
     sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
     sun.CreateIntensityAttr().Set(1.0)
     op = UsdGeom.Xformable(sun).AddRotateYOp()

@@ -25,6 +25,7 @@ SYS_PY = "/usr/bin/python3"
 pytest.importorskip("pxr", reason="pxr (usd-core) is not installed: pip install usd-core")
 np = pytest.importorskip("numpy")
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdVol  # noqa: E402
+from usd_stages import smoke_stage  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "usd"))
 LIB = Path(os.environ.get("VOLSCATTER_LIB", ROOT / "target" / "release" / "libvolscatter.so"))
@@ -57,25 +58,7 @@ def cli(*args, cwd=None):
 
 def make_stage(tmp_path, name="s.usda", mpu=1.0, vdb=NOISE, sun_rotate=None, exposure=None, intensity=1.0):
     """Blender's noise cube (40^3 voxels over [-1, 1]^3 m) under a sun, seen by a camera on -Y."""
-    path = tmp_path / name
-    stage = Usd.Stage.CreateNew(str(path))
-    UsdGeom.SetStageUpAxis(stage, "Z")
-    UsdGeom.SetStageMetersPerUnit(stage, mpu)
-    (tmp_path / "vol").mkdir(exist_ok=True)
-    shutil.copy(vdb, tmp_path / "vol" / "d.vdb")
-    vol = UsdVol.Volume.Define(stage, "/World/Smoke")
-    f = UsdVol.OpenVDBAsset.Define(stage, "/World/Smoke/density")
-    f.CreateFilePathAttr().Set(Sdf.AssetPath("./vol/d.vdb"))
-    f.CreateFieldNameAttr().Set("density")
-    vol.CreateFieldRelationship("density", f.GetPath())
-    vol.GetPrim().CreateAttribute("volscatter:densityScale", Sdf.ValueTypeNames.Float).Set(5.0)
-    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
-    cam.CreateFocalLengthAttr().Set(50.0)
-    cam.CreateHorizontalApertureAttr().Set(36.0)
-    cam.CreateVerticalApertureAttr().Set(27.0)
-    x = UsdGeom.Xformable(cam)
-    x.AddTranslateOp().Set(Gf.Vec3d(0.0, -6.0 / mpu, 0.0))
-    x.AddRotateXOp().Set(90.0)
+    stage, path = smoke_stage(tmp_path, vdb, name=name, mpu=mpu, aperture=(36.0, 27.0))
     sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
     sun.CreateIntensityAttr().Set(intensity)
     sun.CreateAngleAttr().Set(0.0)
