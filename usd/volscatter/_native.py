@@ -331,6 +331,21 @@ def solver(name: str) -> Optional[dict]:
     return next((s for s in solvers()["solvers"] if s["name"] == name), None)
 
 
+def settings_from_pairs(pairs) -> dict:
+    """Solver settings from the hosts' ``--set KEY=VALUE`` options: VALUE as JSON where it parses
+    (``grid_resolution=48``, ``dome=true``), else as the string it is."""
+    out = {}
+    for kv in pairs:
+        if "=" not in kv:
+            raise VolscatterError("--set %s: expected KEY=VALUE" % kv, 2)
+        k, v = kv.split("=", 1)
+        try:
+            out[k] = json.loads(v)
+        except ValueError:
+            out[k] = v
+    return out
+
+
 def solver_names() -> list:
     """The solvers' names, the default (the reference) first."""
     return [s["name"] for s in solvers()["solvers"]]

@@ -21,7 +21,7 @@ import threading
 import time as _time
 from typing import List, Optional
 
-from ._native import STATUS_INVALID_ARGUMENT, VolscatterError
+from ._native import STATUS_INVALID_ARGUMENT, VolscatterError, settings_from_pairs
 
 PROG = "volscatter-usd"
 
@@ -180,14 +180,7 @@ def _settings(args) -> dict:
         s["spp"] = args.spp
     if args.seed is not None:
         s["seed"] = args.seed
-    for kv in args.set or []:
-        if "=" not in kv:
-            raise VolscatterError(f"--set {kv}: expected KEY=VALUE", 2)
-        k, v = kv.split("=", 1)
-        try:
-            s[k] = json.loads(v)
-        except ValueError:
-            s[k] = v
+    s.update(settings_from_pairs(args.set or []))
     return s
 
 

@@ -116,19 +116,6 @@ def _matches(record_path, out, digest):
         return False
 
 
-def _settings_arg(pairs):
-    out = {}
-    for kv in pairs:
-        if "=" not in kv:
-            raise native.VolscatterError("--set %s: expected KEY=VALUE" % kv, 2)
-        k, v = kv.split("=", 1)
-        try:
-            out[k] = json.loads(v)
-        except ValueError:
-            out[k] = v
-    return out
-
-
 def bake(context, ob_name, frames, out=None, solver=None, settings=(), device=None, force=False, say=print):
     """Bakes ``frames`` of object ``ob_name``; returns {frame: "baked" | "skipped"}."""
     ob = bpy.data.objects.get(ob_name)
@@ -140,11 +127,11 @@ def bake(context, ob_name, frames, out=None, solver=None, settings=(), device=No
     s = owner.volscatter
     if solver:
         sdoc = {"name": solver}
-        sdoc.update(_settings_arg(settings))
+        sdoc.update(native.settings_from_pairs(settings))
     else:
         sdoc = {"name": s.solver}
         sdoc.update(s.solver_settings())
-        sdoc.update(_settings_arg(settings))
+        sdoc.update(native.settings_from_pairs(settings))
     device = device or s.device
     out = os.path.abspath(out) if out else operators._out_dir(s)
     name = bpy.path.clean_name(obj.name + "_scattering")
