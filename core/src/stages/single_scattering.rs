@@ -363,7 +363,11 @@ impl<'a> DirectLight<'a> {
     /// the suns.
     fn parts(&self) -> Vec<Part> {
         let merged = self.locals.merges();
-        let own = |l: &Light| !matches!(l, Light::Dome(_)) && !(merged && !matches!(l, Light::Distant { .. }));
+        let own = |l: &Light| match l {
+            Light::Dome(_) => false,
+            Light::Distant { .. } => true,
+            _ => !merged,
+        };
         let mut parts: Vec<Part> = (0..self.scene.lights.len()).filter(|&i| own(&self.scene.lights[i])).map(Part::Light).collect();
         if merged {
             parts.push(Part::Locals);

@@ -19,9 +19,11 @@ use super::emitters::{Extent, PointEmitter, Profile};
 pub const TREE_ABOVE: usize = 256;
 
 /// A node stands for its emitters where its radius is below this fraction of its distance:
-/// the 1/d^2 of a member at the node's edge is within about (1 +- 0.25)^-2 of the centre's,
-/// and the node's members' errors cancel to second order; measured on 500 point lights above
-/// a plume (`tree_matches_exact_sum`), the single scattering within 1% in total.
+/// its members' directions are within 15 degrees of the centre's, and their 1/d^2's mean is
+/// the centre's within 25% before `inverse_square_factor`'s second-order correction. Measured
+/// on 600 point and spot lights above a plume (solvers/many_lights_tests.rs), the
+/// single-scattering grid is within 0.3% of the exact sum in total and 0.9% in L1, at a
+/// fraction of the shadow rays (10,000 lights: vpl's single scattering 43 s -> 0.2 s).
 pub const OPENING: f32 = 0.25;
 
 struct Node {
@@ -31,6 +33,26 @@ struct Node {
     radius: f32,
     /// Children (None: a leaf).
     children: Option<(u32, u32)>,
+    /// The members' power-weighted covariance of position about the centre (xx, yy, zz, xy,
+    /// xz, yz), for `inverse_square_factor`.
+    cov: [f32; 6],
+}
+
+/// The members' mean of 1/d^2 over the centre's, to second order in their spread: 1/d^2 is
+/// convex, so the centre alone is always low (-1% in total on `many_lights_single_scattering`
+/// without this). The Hessian of |p - x|^-2 averaged over the members' covariance S is
+/// (4 u.S.u - tr S) / d^4, u the unit direction from `x` to the centre at distance d.
+fn inverse_square_factor(cov: &[f32; 6], to: Vec3) -> f32 {
+    let d2 = to.length_squared();
+    if d2 <= 0.0 {
+        return 1.0;
+    }
+    let u = to / d2.sqrt();
+    let [xx, yy, zz, xy, xz, yz] = *cov;
+    let usu = u.x * u.x * xx + u.y * u.y * yy + u.z * u.z * zz + 2.0 * (u.x * u.y * xy + u.x * u.z * xz + u.y * u.z * yz);
+    // Within the opening rule the term is at most 4 OPENING^2 = 0.25: the clamp only guards
+    // rounding.
+    (1.0 + (4.0 * usu - (xx + yy + zz)) / d2).clamp(0.5, 2.0)
 }
 
 /// Point emitters as a sum that is cheap however many there are (see the module docs).
@@ -86,7 +108,7 @@ impl EmitterTree {
 
     fn build(&mut self, members: &mut [PointEmitter]) -> u32 {
         if members.len() == 1 {
-            self.nodes.push(Node { merged: members[0], radius: members[0].radius, children: None });
+            self.nodes.push(Node { merged: members[0], radius: members[0].radius, children: None, cov: [0.0; 6] });
             return self.nodes.len() as u32 - 1;
         }
         let weight = |e: &PointEmitter| e.intensity.element_sum().max(1e-30);
@@ -94,6 +116,13 @@ impl EmitterTree {
         let centre = members.iter().map(|e| e.position * weight(e)).sum::<Vec3>() / total;
         let radius = members.iter().map(|e| e.position.distance(centre) + e.radius).fold(0.0f32, f32::max);
         let intensity = members.iter().map(|e| e.intensity).sum::<Vec3>();
+        let mut cov = [0.0f32; 6];
+        for e in members.iter() {
+            let (v, w) = (e.position - centre, weight(e) / total);
+            for (c, p) in cov.iter_mut().zip([v.x * v.x, v.y * v.y, v.z * v.z, v.x * v.y, v.x * v.z, v.y * v.z]) {
+                *c += w * p;
+            }
+        }
         let (lo, hi) = members.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), e| (l.min(e.position), h.max(e.position)));
         let ext = hi - lo;
         let axis = if ext.x >= ext.y && ext.x >= ext.z { 0 } else if ext.y >= ext.z { 1 } else { 2 };
@@ -103,7 +132,7 @@ impl EmitterTree {
         let left = self.build(a);
         let right = self.build(b);
         let merged = PointEmitter { position: centre, intensity, radius: 0.0, extent: Extent::Ball, profile: members[0].profile };
-        self.nodes.push(Node { merged, radius, children: Some((left, right)) });
+        self.nodes.push(Node { merged, radius, children: Some((left, right)), cov });
         self.nodes.len() as u32 - 1
     }
 
@@ -129,7 +158,11 @@ impl EmitterTree {
                         stack[top + 1] = r;
                         top += 2;
                     }
-                    _ => f(&node.merged),
+                    Some(_) => {
+                        let k = inverse_square_factor(&node.cov, node.merged.position - x);
+                        f(&PointEmitter { intensity: node.merged.intensity * k, ..node.merged })
+                    }
+                    None => f(&node.merged),
                 }
             }
         }
