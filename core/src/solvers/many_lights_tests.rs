@@ -106,3 +106,15 @@ fn many_lights_pop_merging_matches_unmerged_sum() {
     eprintln!("pop, 240 point lights merged into <= {MAX_SOURCES}: total {total:+.5}, L1 {l1:.5}");
     assert!(total.abs() < 0.05 && l1 < 0.06, "total {total}, L1 {l1}");
 }
+
+/// What a host running vpl on 2000 lights gets: the single scattering's local lights as one
+/// part of the sum (the tree), not 2000 (each a shadow ray per grid point, minutes at 10,000
+/// lights), with a finite, lit answer.
+#[test]
+fn many_lights_vpl_sums_local_lights_as_one_part() {
+    let sc = plume_scene(lights_above(&scenes::plume(16, 8.0, 0.9, 0.5), 2000, 10));
+    let vpl = super::vpl::Vpl::new(super::vpl::VplSettings { walks: 4096, walks_per_subset: 0, gather_resolution: 12, output_resolution: 16, ..Default::default() }).unwrap();
+    let out = vpl.solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
+    assert_eq!(out.counters.recomputed, vec!["single scattering: local lights".to_string()]);
+    assert!(out.scattering.data.iter().all(|v| v.is_finite()) && out.scattering.data.iter().any(|v| v.max_element() > 0.0));
+}
