@@ -16,6 +16,8 @@ pub mod vpl;
 /// crates' tests and benchmark examples (never in a plain build).
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
+#[cfg(test)]
+mod many_lights_tests;
 
 use std::any::Any;
 

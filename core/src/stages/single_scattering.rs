@@ -16,6 +16,7 @@ use crate::medium::{near_field_radius, Medium};
 use crate::phase::hg;
 use crate::scene::{Light, Scene};
 use crate::translate::dome::dome_directions_of;
+use crate::translate::EmitterTree;
 
 /// The dome directions a single-scattering grid gets at most (`dome_directions_for` takes
 /// fewer for a dim dome).
@@ -233,6 +234,8 @@ enum Part {
     Domes,
     /// The medium's emission VPLs.
     Emission,
+    /// Every local light (point, spot, area) together, past `EmitterTree`'s threshold.
+    Locals,
 }
 
 /// The dome's in-scattered light (before sigma_s) on the points of a fine grid `spacing` of
@@ -319,6 +322,10 @@ pub struct DirectLight<'a> {
     /// emission's.
     light_emitters: Vec<Range<usize>>,
     emission_emitters: Range<usize>,
+    /// The lights' emitters, and the emission's, as sums whose far emitters merge past
+    /// `EmitterTree`'s threshold (thousands of point lights: one shadow ray each was minutes).
+    locals: EmitterTree,
+    emission: EmitterTree,
     /// Near-field radius of the local emitters (`emitter_single`).
     near: f32,
 }
@@ -345,13 +352,26 @@ impl<'a> DirectLight<'a> {
             emitters.extend(crate::translate::emission::emission_vpls(&scene.medium, e.vpl_count).emitters);
         }
         let emission_emitters = start..emitters.len();
-        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, light_emitters, emission_emitters, near }
+        let locals = EmitterTree::new(emitters[..start].to_vec());
+        let emission = EmitterTree::new(emitters[emission_emitters.clone()].to_vec());
+        DirectLight { scene, march, grey: is_grey(&scene.medium), step, dome, emitters, light_emitters, emission_emitters, locals, emission, near }
     }
 
     /// The parts of the sum in the order the grid adds them: the lights but domes, in the
     /// scene's order, then the domes, then the medium's emission.
+    /// Past `EmitterTree`'s threshold the local lights are one part (`Part::Locals`), after
+    /// the suns.
     fn parts(&self) -> Vec<Part> {
-        let mut parts: Vec<Part> = (0..self.scene.lights.len()).filter(|&i| !matches!(self.scene.lights[i], Light::Dome(_))).map(Part::Light).collect();
+        let merged = self.locals.merges();
+        let own = |l: &Light| match l {
+            Light::Dome(_) => false,
+            Light::Distant { .. } => true,
+            _ => !merged,
+        };
+        let mut parts: Vec<Part> = (0..self.scene.lights.len()).filter(|&i| own(&self.scene.lights[i])).map(Part::Light).collect();
+        if merged {
+            parts.push(Part::Locals);
+        }
         if self.has_dome() {
             parts.push(Part::Domes);
         }
@@ -374,6 +394,14 @@ impl<'a> DirectLight<'a> {
                 h.finish()
             }
             Part::Emission => Bits::new().u64(2).u64(medium_key(&self.scene.medium).1).finish(),
+            Part::Locals => {
+                let mut h = Bits::new();
+                h.u64(3);
+                for l in self.scene.lights.iter().filter(|l| !matches!(l, Light::Dome(_) | Light::Distant { .. })) {
+                    h.u64(light_key(l));
+                }
+                h.finish()
+            }
         }
     }
 
@@ -382,6 +410,7 @@ impl<'a> DirectLight<'a> {
             Part::Light(i) => format!("single scattering: light {i}"),
             Part::Domes => "single scattering: dome".into(),
             Part::Emission => "single scattering: emission".into(),
+            Part::Locals => "single scattering: local lights".into(),
         }
     }
 
@@ -397,6 +426,11 @@ impl<'a> DirectLight<'a> {
             }
             sum
         };
+        let tree = |t: &EmitterTree| {
+            let mut sum = Vec3::ZERO;
+            t.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &tr));
+            sum
+        };
         match part {
             Part::Light(i) => match &self.scene.lights[i] {
                 Light::Distant { direction, irradiance, .. } => {
@@ -406,7 +440,8 @@ impl<'a> DirectLight<'a> {
                 _ => emitters(&self.light_emitters[i]),
             },
             Part::Domes => coarse_dome().unwrap_or_else(|| self.dome_inscattered(x, view)),
-            Part::Emission => emitters(&self.emission_emitters),
+            Part::Emission => tree(&self.emission),
+            Part::Locals => tree(&self.locals),
         }
     }
 
@@ -457,9 +492,8 @@ impl<'a> DirectLight<'a> {
                 Light::Dome(_) => {}
             }
         }
-        for e in &self.emitters {
-            sum += emitter_single(e, x, view, g, self.near, &tr);
-        }
+        self.locals.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &tr));
+        self.emission.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &tr));
         sum
     }
 }

@@ -9,6 +9,7 @@
 //! - `emitters`: point, sphere and spot lights, and rect/disk area lights, as *point emitters*
 //!   (a position, an intensity and an angular profile; area lights as VPLs);
 //! - `emission`: an emissive medium as isotropic VPLs;
+//! - `emitter_tree`: many point emitters as a tree whose far nodes are summed as one emitter;
 //! - `sampling`: rays with their power drawn from any light (`LightSampler`), where photon
 //!   tracing and VPL random walks start.
 //!
@@ -16,10 +17,12 @@
 
 pub mod dome;
 pub mod emission;
+pub mod emitter_tree;
 pub mod emitters;
 pub mod ordinates;
 pub mod sampling;
 
+pub use emitter_tree::EmitterTree;
 pub use emitters::{area_vpls, local_emitters, scene_emitters, spot_emitter, Extent, PointEmitter, Profile};
 pub use ordinates::{distant_ordinate, Ordinate};
 pub use sampling::{LightRay, LightSampler};

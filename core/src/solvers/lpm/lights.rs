@@ -99,7 +99,9 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
     } else {
         Vec::new()
     };
-    let emitters = crate::translate::local_emitters(&scene.lights, crate::stages::single_scattering::AREA_VPLS_PER_SIDE);
+    // Far emitters merged past the tree's threshold (10,000 point lights: one shadow ray each
+    // per cell was over 60 s).
+    let emitters = crate::translate::EmitterTree::new(crate::translate::local_emitters(&scene.lights, crate::stages::single_scattering::AREA_VPLS_PER_SIDE));
     if suns.is_empty() && emitters.is_empty() {
         return;
     }
@@ -137,25 +139,25 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                 for (w, e, pbar) in &suns {
                     add(cell, jv, p, sigma_s, *w, *e, grid.transmittance(p, -*w, f32::INFINITY), &|d| pbar[d]);
                 }
-                for em in &emitters {
+                emitters.visit(p, |em| {
                     let to = em.position - p;
                     let dist = to.length();
                     if dist <= 1e-6 {
-                        continue;
+                        return;
                     }
                     let towards = to / dist;
                     let intensity = em.intensity_towards(-towards);
                     if intensity.max_element() <= 0.0 {
-                        continue;
+                        return;
                     }
                     let field = em.inverse_square(dist, near);
                     if field <= 0.0 {
-                        continue;
+                        return;
                     }
                     let arriving = intensity * field;
                     let bin = dirs.bin_of(-towards);
                     add(cell, jv, p, sigma_s, -towards, arriving, grid.transmittance(p, towards, em.shadow_length(dist)), &|d| table.storage_mean_from_bin(dirs, d, bin));
-                }
+                });
             }
         }
     });
