@@ -126,9 +126,9 @@ def point(p, i=4.0, radius=0.0):
     return {"type": "point", "position": list(p), "intensity": [i] * 3, "radius": radius}
 
 
-def spot(p, d, i=20.0, cone=25.0):
+def spot(p, d, i=20.0, cone=25.0, radius=0.0):
     return {"type": "spot", "position": list(p), "direction": list(d), "intensity": [i] * 3,
-            "cone_half_angle_deg": cone, "blend": 0.2}
+            "cone_half_angle_deg": cone, "blend": 0.2, "radius": radius}
 
 
 def rect(p, nrm, size=(1.0, 1.0), rad=2.0):
@@ -162,9 +162,11 @@ SCENES = [
     ("s09_point_outside", "smoke", 32, 3.0, 0.9, 0.3, [point((1.6, -0.8, 0.6), 6.0)], None, 4096, "smoke beside a point light"),
     ("s10_point_inside", "smoke", 32, 2.0, 0.9, 0.0, [point((0.1, 0.0, 0.0), 2.0, 0.1)], None, 4096, "a sphere lamp inside a smoke"),
     ("s11_spot_outside", "plume", 32, 5.0, 0.7, 0.5, [spot((0, -2.0, 1.5), (0, 1, -0.75), 30.0)], None, 4096, "a plume lit by a spot from outside"),
-    ("s12_spot_inside", "smoke", 24, 2.0, 0.95, -0.3, [spot((0, 0, -0.3), (0, 0, 1), 3.0, 35.0)], None, 4096, "a spot inside a smoke pointing up, back-scattering g -0.3"),
+    ("s12_spot_inside", "smoke", 24, 2.0, 0.95, -0.3, [spot((0, 0, -0.3), (0, 0, 1), 3.0, 35.0, 0.1)], None, 4096,
+     "a spot lamp (radius 0.1: a point spot inside a medium made a heavy-tailed reference, 0.13 of noise) inside a smoke pointing up, back-scattering g -0.3"),
     ("s13_area_outside", "smoke", 32, 6.0, 0.9, 0.2, [rect((0, 0, 1.8), (0, 0, -1), (1.5, 1.5), 3.0)], None, 4096, "smoke under a rect area light"),
-    ("s14_disk_inside", "slab", 32, 4.0, 0.9, 0.4, [disk((0, 0, -0.05), (0, 0, 1), 0.25, 8.0)], None, 4096, "a disk light inside a layer"),
+    ("s14_disk_inside", "slab", 32, 4.0, 0.9, 0.4, [disk((0, 0, -0.5), (0, 0, 1), 0.3, 6.0)], None, 4096,
+     "a disk light under a layer, inside the medium's box (a disk within the layer made a heavy-tailed reference, 0.28 of noise)"),
     ("s15_fire", "fire", 32, 2.0, 0.6, 0.0, [], fire(3.0), 4096, "fire: emission lighting its own smoke"),
     ("s16_fire_sun", "fire", 24, 4.0, 0.8, 0.3, [sun(1.5)], fire(2.0), 4096, "fire under a sun"),
     ("s17_three_points", "smoke", 32, 4.0, 0.9, 0.3,
@@ -175,7 +177,7 @@ SCENES = [
     ("s21_slab_sun", "slab", 32, 12.0, 0.95, 0.6, [sun(3.0, (0.1, 0.2, -0.97))], None, 2048, "a thick layer under a high sun"),
     ("s22_cloud64", "cumulus", 64, 20.0, 0.97, 0.8, [sun(), sky()], None, 2048, "a 64^3 cumulus under sun and sky"),
     ("s23_sphere_dense", "sphere", 16, 40.0, 0.999, 0.9, [hdr()], None, 2048, "a dense white ball (16^3) under an HDR sky"),
-    ("s24_thin_lights", "plume", 32, 0.5, 0.99, 0.9, [point((1.2, -1.2, 0.0), 3.0), spot((0, -2.5, -1.0), (0, 1, 0.4), 15.0)], None, 4096,
+    ("s24_thin_lights", "plume", 32, 0.5, 0.99, 0.7, [point((1.2, -1.2, 0.0), 3.0), spot((0, -2.5, -1.0), (0, 1, 0.4), 15.0)], None, 4096,
      "a thin forward-scattering plume with a point and a spot"),
 ]
 
