@@ -456,7 +456,31 @@ def set_markdown(meas: dict) -> list[str]:
                      + " | ".join(f"{row[q][0]:.2f} / {row[q][1]:.3f}" for q in QUALITIES)
                      + f" | {'yes' if row['climbs_time'] else '**no**'} | {'yes' if row['climbs_error'] else '**no**'} |")
     lines.append("")
+    lines += lpm_classes(meas)
     return lines
+
+
+#: Issue 36's accuracy aim: lpm within 5% image error at a preview cost on these classes.
+LPM_CLASSES = {"thin smoke under sun and sky": ("thin_smoke", "s01_thin_sun", "s02_thin_sunsky"),
+               "dense cloud": ("dense_cloud", "s05_cloud_sun", "s06_cloud_sunsky", "s07_cloud_tau60", "s22_cloud64"),
+               "point light": ("smoke_point", "s09_point_outside", "s10_point_inside", "s17_three_points")}
+
+
+def lpm_classes(meas: dict) -> list[str]:
+    """lpm at its preview preset on the issue's three classes: the image error, the reference's
+    own noise and the error with that noise removed (sqrt(e^2 - noise^2))."""
+    noise = {s["name"]: s["reference_noise"] for s in meas["scenes"]}
+    cell = {(r["scene"], r["quality"]): r for r in meas["runs"] if r["solver"] == "lpm"}
+    lines = ["#### lpm at preview on the issue's accuracy classes (aim: <= 0.05)", "",
+             "| class | scene | time (s) | image error | reference noise | noise removed |", "|---|---|---:|---:|---:|---:|"]
+    for cls, names in LPM_CLASSES.items():
+        for n in names:
+            r = cell.get((n, "preview"))
+            if r is None or n not in noise:
+                continue
+            e, nz = r["image_error"], noise[n]
+            lines.append(f"| {cls} | {n} | {r['seconds']:.2f} | {e:.3f} | {nz:.3f} | {math.sqrt(max(e * e - nz * nz, 0.0)):.3f} |")
+    return lines + [""]
 
 
 def set_plot(meas: dict) -> Path | None:
