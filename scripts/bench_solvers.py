@@ -533,11 +533,13 @@ def auto_acceptance() -> int:
         return 1
     text = ["## auto: leave-one-scene-out acceptance (issue 36)", "",
             "Written by `scripts/bench_solvers.py --auto-acceptance` from the `leave_one_scene_out` test of "
-            "core/src/pipeline/auto/tests.rs (it asserts >= 90%): fitted to measurements.json without the scene, `auto` "
+            "core/src/pipeline/auto/tests.rs (it asserts >= 90% on the error part and, as a floor, >= 75% on both; the "
+            "issue's 90% on both is not met: the misses are time predictions): fitted to measurements.json without the scene, `auto` "
             "at its default target (image error 0.10) picks; the pick passes when its measured error is within 1.5x of the "
             "best error measured there at no more than its time, and its measured time within 2x of its prediction (or "
             "0.25 s of it: sub-second runs vary 2-4x on the loaded shared machine). "
-            f"Measurements of {today()}.", "", *keep, ""]
+            f"Measurements of {today()}. The error part is lenient with cheap picks (a draft is compared only with runs no "
+            "slower), so the last line also counts the picks whose measured error is within the target itself.", "", *keep, ""]
     write_section("auto-acceptance", "\n".join(text))
     log("\n".join(keep))
     return 0 if out.returncode == 0 else 1
