@@ -327,11 +327,12 @@ SCENE_NOTES = {
 def skipped_runs(meas: dict) -> list[str]:
     """The presets not measured because a cheaper one of the same solver took too long."""
     out = []
+    capped = {(c["scene"], c["solver"], c["quality"]) for c in meas.get("capped", [])}
     for sc in meas["scenes"]:
         for solver in dict.fromkeys(r["solver"] for r in meas["runs"]):
             rs = {r["quality"]: r for r in meas["runs"] if r["scene"] == sc["name"] and r["solver"] == solver}
             for prev, q in zip(QUALITIES, QUALITIES[1:]):
-                if prev in rs and q not in rs and rs[prev]["seconds"] > SKIP_AFTER_SECONDS:
+                if prev in rs and q not in rs and rs[prev]["seconds"] > SKIP_AFTER_SECONDS and (sc["name"], solver, q) not in capped:
                     out.append(f"{solver} {q} on {sc['name']} (its {prev} took {rs[prev]['seconds']:.0f} s)")
     return out
 
