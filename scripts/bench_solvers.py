@@ -7,6 +7,13 @@ fitted to), docs/bench_error_time.png and docs/bench_strip_<scene>.png.
 
 Scenes: bench/scenes/<name>/scene.json (+ .vdb), exported from Blender by scripts/bench_scenes.py
 the way the add-on exports them; Cycles renders the same scenes rebuilt in Blender through bpy.
+The generated scene set of issue 36 (scripts/make_scene_set.py, indexed by bench/scenes/set.json)
+is measured without Cycles, added to the same measurements.json with `--update`:
+
+    python3 scripts/bench_solvers.py --update --solvers pop,vpl,photon-grid,network,lpm \
+        --scenes $(python3 scripts/make_scene_set.py --list) --qualities draft,preview --timeout 30
+    python3 scripts/bench_solvers.py --update ... --qualities final --timeout 30 --skip-after 6
+    python3 scripts/bench_solvers.py --auto-acceptance   # auto's leave-one-scene-out table
 
 - References (`--references`): `volscatter render --solver reference` (our path tracer, checked
   against Mitsuba 3 in tests/mitsuba) at REF_SPP paths per pixel with two seeds; their mean is
@@ -66,6 +73,15 @@ REF_SPP = {"thin_smoke": 4096, "dense_cloud": 16384, "smoke_point": 8192, "overc
 #: roulette after 8 bounces, 0.35 without; 20% more time). max_depth 1000 still ends the walk
 #: (0.99^1000 = 4e-5 of the light is left out).
 REF_SETTINGS = {"dense_cloud": {"rr_depth": 1000}}
+#: The generated scene set (scripts/make_scene_set.py): its index names each scene's description,
+#: reference spp and settings, and the held-out subset auto's acceptance picks on.
+SET_INDEX = SCENE_DIR / "set.json"
+SCENE_SET = json.loads(SET_INDEX.read_text())["scenes"] if SET_INDEX.is_file() else []
+for _s in SCENE_SET:
+    REF_SPP[_s["name"]] = _s["reference_spp"]
+    REF_SETTINGS[_s["name"]] = _s["reference_settings"]
+DESCRIPTIONS = {**bench_scenes.DESCRIPTIONS, **{_s["name"]: _s["description"] for _s in SCENE_SET}}
+ALL_SCENES = (*bench_scenes.SCENES, *(_s["name"] for _s in SCENE_SET))
 
 
 def scene_json(name: str) -> Path:
@@ -77,12 +93,14 @@ def scene_json(name: str) -> Path:
 
 
 def render(name: str, solver: str, settings: dict, work: Path, tag: str, spp: int | None = None,
-           seed: int | None = None) -> tuple[np.ndarray, dict]:
-    """`volscatter render` of scene `name` (transparent film, CPU, no AOVs); (RGB, report)."""
+           seed: int | None = None, timeout: float | None = None) -> tuple[np.ndarray, dict]:
+    """`volscatter render` of scene `name` (transparent film, CPU, no AOVs); (RGB, report).
+    Past `timeout` seconds the render is killed (subprocess.TimeoutExpired)."""
     out, rep = work / f"{tag}.exr", work / f"{tag}.json"
     extra = ["--transparent", "--aov", "none"] + (["--spp", str(spp)] if spp is not None else [])
     extra += ["--seed", str(seed)] if seed is not None else []
-    subprocess.run(render_cmd(out, rep, scene_json(name), solver=solver, device="cpu", settings=settings, extra=extra), check=True)
+    subprocess.run(render_cmd(out, rep, scene_json(name), solver=solver, device="cpu", settings=settings, extra=extra), check=True,
+                   timeout=timeout)
     return read_exr_rgb(out), json.loads(rep.read_text())
 
 
@@ -195,30 +213,47 @@ def full_settings(entry: dict, quality: str) -> dict:
         if "default" in st:
             s[st["name"]] = st["default"]
     preset = next(p for p in entry["presets"] if p["name"] == quality)
-    s.update(preset["settings"])
+    s.update(PRESET_OVERRIDE.get((entry["name"], quality), preset["settings"]))
     return s
+
+
+#: --preset SOLVER.QUALITY=JSON: a candidate preset measured in place of the registry's (before
+#: the registry's table is changed to it).
+PRESET_OVERRIDE: dict[tuple[str, str], dict] = {}
 
 
 #: A solver's next (dearer) quality is skipped on a scene once one of its runs there took longer
 #: than this: the presets grow 4-16x in cost per step, and the whole benchmark has to fit in an
 #: hour of this shared machine. Skipped runs are listed in the section.
 SKIP_AFTER_SECONDS = 20.0
+#: --timeout: a run killed past this many seconds is left out of the measurements and listed as
+#: capped (`capped` in measurements.json), so that the whole matrix fits the shared machine.
+RUN_TIMEOUT = None
 
 
 def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tuple[str, ...], work: Path,
-                skipped: list[str]):
+                skipped: list[str], earlier: list[dict] = (), capped: list[dict] | None = None):
+    """Runs each solver of `entries` at each quality on scene `name`; `earlier` holds runs measured
+    before (a cheaper preset measured in an earlier pass also skips the dearer one)."""
     runs, images = [], {}
     for e in entries:
         for q in qualities:
-            if runs and runs[-1]["solver"] == e["name"] and runs[-1]["seconds"] > SKIP_AFTER_SECONDS:
-                skipped.append(f"{e['name']} {q} on {name} (its {runs[-1]['quality']} took {runs[-1]['seconds']:.0f} s)")
+            prev = [r for r in [*earlier, *runs] if r["scene"] == name and r["solver"] == e["name"]
+                    and QUALITIES.index(r["quality"]) == QUALITIES.index(q) - 1]
+            if prev and prev[-1]["seconds"] > SKIP_AFTER_SECONDS:
+                skipped.append(f"{e['name']} {q} on {name} (its {prev[-1]['quality']} took {prev[-1]['seconds']:.0f} s)")
                 log("skipped:", skipped[-1])
                 continue
             settings = full_settings(e, q)
             try:
-                img, rep = render(name, e["name"], settings, work, f"{name}_{e['name']}_{q}")
+                img, rep = render(name, e["name"], settings, work, f"{name}_{e['name']}_{q}", timeout=RUN_TIMEOUT)
             except subprocess.CalledProcessError as err:
                 log(f"{e['name']} {q} on {name} failed: {err}")
+                continue
+            except subprocess.TimeoutExpired:
+                log(f"{e['name']} {q} on {name}: capped at {RUN_TIMEOUT:.0f} s")
+                if capped is not None:
+                    capped.append({"scene": name, "solver": e["name"], "quality": q, "seconds_limit": RUN_TIMEOUT})
                 continue
             solve, comp = split_phases(rep)
             r = {"scene": name, "solver": e["name"], "quality": q, "settings": settings, "device": "cpu",
@@ -292,11 +327,12 @@ SCENE_NOTES = {
 def skipped_runs(meas: dict) -> list[str]:
     """The presets not measured because a cheaper one of the same solver took too long."""
     out = []
+    capped = {(c["scene"], c["solver"], c["quality"]) for c in meas.get("capped", [])}
     for sc in meas["scenes"]:
         for solver in dict.fromkeys(r["solver"] for r in meas["runs"]):
             rs = {r["quality"]: r for r in meas["runs"] if r["scene"] == sc["name"] and r["solver"] == solver}
             for prev, q in zip(QUALITIES, QUALITIES[1:]):
-                if prev in rs and q not in rs and rs[prev]["seconds"] > SKIP_AFTER_SECONDS:
+                if prev in rs and q not in rs and rs[prev]["seconds"] > SKIP_AFTER_SECONDS and (sc["name"], solver, q) not in capped:
                     out.append(f"{solver} {q} on {sc['name']} (its {prev} took {rs[prev]['seconds']:.0f} s)")
     return out
 
@@ -328,8 +364,11 @@ def markdown(meas: dict, note_gpu: str) -> str:
     if skipped:
         lines += [f"Not run (a cheaper quality of the same solver took over {SKIP_AFTER_SECONDS:.0f} s on that scene): "
                   + "; ".join(skipped) + ".", ""]
+    set_names = {s["name"] for s in SCENE_SET}
     for sc in meas["scenes"]:
         n = sc["name"]
+        if n in set_names:
+            continue
         cyc = [c for c in meas["cycles"] if c["scene"] == n]
         lines += [f"### {n}", "", f"{sc['description']}. Reference noise {sc['reference_noise']:.4f}.", ""]
         if n in SCENE_NOTES:
@@ -354,7 +393,157 @@ def markdown(meas: dict, note_gpu: str) -> str:
                          f"{r['composite_seconds']:.2f} | {r['image_error']:.3f} | {ct} | {sp} | {sp2} | "
                          + ("-" if r.get("grid_error") is None else f"{r['grid_error']:.3f}") + " |")
         lines.append("")
+    lines += set_markdown(meas)
     return "\n".join(lines)
+
+
+def median(xs: list[float]) -> float:
+    return float(np.median(xs)) if xs else float("nan")
+
+
+def ladders(meas: dict, scenes: list[str]) -> list[dict]:
+    """Per solver, the median time and error of each preset over `scenes`, taken over the scenes
+    where all three presets were measured (so the medians compare like with like), and whether the
+    ladder climbs: draft < preview < final in time, final <= preview <= draft in error."""
+    out = []
+    for solver in dict.fromkeys(r["solver"] for r in meas["runs"]):
+        by = {(r["scene"], r["quality"]): r for r in meas["runs"] if r["solver"] == solver and r["scene"] in scenes}
+        full = [n for n in scenes if all((n, q) in by for q in QUALITIES)]
+        row = {"solver": solver, "scenes": len(full), "of": len(scenes)}
+        for q in QUALITIES:
+            row[q] = (median([by[(n, q)]["seconds"] for n in full]), median([by[(n, q)]["image_error"] for n in full]))
+        t = [row[q][0] for q in QUALITIES]
+        e = [row[q][1] for q in QUALITIES]
+        row["climbs_time"] = bool(full) and t[0] < t[1] < t[2]
+        row["climbs_error"] = bool(full) and e[2] <= e[1] <= e[0]
+        out.append(row)
+    return out
+
+
+def set_markdown(meas: dict) -> list[str]:
+    """The generated scene set (issue 36): every solver x preset's image error and time per scene,
+    the preset ladders' medians, what was capped."""
+    names = [s["name"] for s in meas["scenes"] if any(s["name"] == x["name"] for x in SCENE_SET)]
+    if not names:
+        return []
+    solvers = list(dict.fromkeys(r["solver"] for r in meas["runs"]))
+    held = {s["name"] for s in SCENE_SET if s["held_out"]}
+    noise = {s["name"]: s["reference_noise"] for s in meas["scenes"]}
+    lines = ["### Scene set (issue 36)", "",
+             f"{len(names)} procedural scenes from `scripts/make_scene_set.py` (bench/scenes/set.json; 40 x 30 pixels, "
+             "16^3-64^3 media; optical depth through the centre 0.5-60, albedo 0.5-0.999, g -0.3-0.95; sun, sun + sky, sky, "
+             "an HDR map, point / spot / area lights outside and inside, fire, several lights). References: our path tracer, "
+             "two seeds (bench/references/). `*`: in the fixed held-out subset. Plot: `docs/bench_set_error_time.png`.", ""]
+    capped = meas.get("capped", [])
+    if capped:
+        lines += [f"Capped (killed past {capped[0]['seconds_limit']:.0f} s, not in the measurements): "
+                  + "; ".join(f"{c['solver']} {c['quality']} on {c['scene']}" for c in capped) + ".", ""]
+    lines += ["Image error (draft / preview / final; `-` not measured):", "",
+              "| scene | ref. noise | " + " | ".join(solvers) + " |", "|---|---:|" + "---|" * len(solvers)]
+    cell = {(r["scene"], r["solver"], r["quality"]): r for r in meas["runs"]}
+    fmt = lambda n, s, key, f: " / ".join(f.format(cell[(n, s, q)][key]) if (n, s, q) in cell else "-" for q in QUALITIES)
+    for n in names:
+        lines.append(f"| {n}{'*' if n in held else ''} | {noise[n]:.3f} | " + " | ".join(fmt(n, s, "image_error", "{:.3f}") for s in solvers) + " |")
+    lines += ["", "Time (s, solve + composite, CPU; draft / preview / final):", "",
+              "| scene | " + " | ".join(solvers) + " |", "|---|" + "---|" * len(solvers)]
+    for n in names:
+        lines.append(f"| {n} | " + " | ".join(fmt(n, s, "seconds", "{:.2f}") for s in solvers) + " |")
+    lines += ["", "#### Preset ladders on the set", "",
+              "Median over the scenes where all three presets were measured: time (s) / image error. A ladder climbs "
+              "when draft < preview < final in time and final <= preview <= draft in error.", "",
+              "| solver | scenes | draft | preview | final | time climbs | error climbs |", "|---|---:|---|---|---|---|---|"]
+    for row in ladders(meas, names):
+        lines.append(f"| {row['solver']} | {row['scenes']} of {row['of']} | "
+                     + " | ".join(f"{row[q][0]:.2f} / {row[q][1]:.3f}" for q in QUALITIES)
+                     + f" | {'yes' if row['climbs_time'] else '**no**'} | {'yes' if row['climbs_error'] else '**no**'} |")
+    lines.append("")
+    lines += lpm_classes(meas)
+    return lines
+
+
+#: Issue 36's accuracy aim: lpm within 5% image error at a preview cost on these classes.
+LPM_CLASSES = {"thin smoke under sun and sky": ("thin_smoke", "s01_thin_sun", "s02_thin_sunsky"),
+               "dense cloud": ("dense_cloud", "s05_cloud_sun", "s06_cloud_sunsky", "s07_cloud_tau60", "s22_cloud64"),
+               "point light": ("smoke_point", "s09_point_outside", "s10_point_inside", "s17_three_points")}
+
+
+def lpm_classes(meas: dict) -> list[str]:
+    """lpm at its preview preset on the issue's three classes: the image error, the reference's
+    own noise and the error with that noise removed (sqrt(e^2 - noise^2))."""
+    noise = {s["name"]: s["reference_noise"] for s in meas["scenes"]}
+    cell = {(r["scene"], r["quality"]): r for r in meas["runs"] if r["solver"] == "lpm"}
+    lines = ["#### lpm at preview on the issue's accuracy classes (aim: <= 0.05)", "",
+             "| class | scene | time (s) | image error | reference noise | noise removed |", "|---|---|---:|---:|---:|---:|"]
+    for cls, names in LPM_CLASSES.items():
+        for n in names:
+            r = cell.get((n, "preview"))
+            if r is None or n not in noise:
+                continue
+            e, nz = r["image_error"], noise[n]
+            lines.append(f"| {cls} | {n} | {r['seconds']:.2f} | {e:.3f} | {nz:.3f} | {math.sqrt(max(e * e - nz * nz, 0.0)):.3f} |")
+    return lines + [""]
+
+
+def set_plot(meas: dict) -> Path | None:
+    """Error against time of every run on the scene set, one colour per solver, the preset
+    ladders' medians joined."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        log("matplotlib missing (tests/requirements.txt lists it): no plot written")
+        return None
+    names = [s["name"] for s in meas["scenes"] if any(s["name"] == x["name"] for x in SCENE_SET)]
+    if not names:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    marks = dict(zip(QUALITIES, "o^s"))
+    for c, row in zip(colours, ladders(meas, names)):
+        s = row["solver"]
+        for q in QUALITIES:
+            rs = [r for r in meas["runs"] if r["solver"] == s and r["quality"] == q and r["scene"] in names]
+            ax.scatter([r["seconds"] for r in rs], [r["image_error"] for r in rs], s=9, color=c, marker=marks[q], alpha=0.35)
+        ax.plot([row[q][0] for q in QUALITIES], [row[q][1] for q in QUALITIES], "-", color=c, lw=2, label=f"{s} (median ladder)")
+        for q in QUALITIES:
+            ax.scatter([row[q][0]], [row[q][1]], s=60, color=c, marker=marks[q], edgecolor="black")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s, CPU, solve + composite)")
+    ax.set_ylabel("image relative RMSE")
+    ax.set_title(f"scene set ({len(names)} scenes): o draft, ^ preview, s final")
+    ax.grid(True, which="both", lw=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    p = DOCS / "bench_set_error_time.png"
+    fig.savefig(p, dpi=90)
+    plt.close(fig)
+    return p
+
+
+def auto_acceptance() -> int:
+    """BENCHMARKS.md `auto-acceptance`: the table that auto's leave-one-scene-out test prints
+    (core/src/pipeline/auto/tests.rs), run through cargo nextest."""
+    cmd = ["cargo", "nextest", "run", "-p", "volscatter-core", "--cargo-profile", "release", "--no-capture",
+           "-E", "test(/auto::tests::leave_one_scene_out/)"]
+    out = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True)
+    keep = [l for l in out.stdout.splitlines() if l.startswith("|") or l.startswith("Leave-one") or l.startswith("Fixed held-out")]
+    if not keep:
+        log(out.stdout[-3000:], out.stderr[-3000:])
+        return 1
+    text = ["## auto: leave-one-scene-out acceptance (issue 36)", "",
+            "Written by `scripts/bench_solvers.py --auto-acceptance` from the `leave_one_scene_out` test of "
+            "core/src/pipeline/auto/tests.rs (it asserts >= 90% on the error part and, as a floor, >= 75% on both; the "
+            "issue's 90% on both is not met: the misses are time predictions): fitted to measurements.json without the scene, `auto` "
+            "at its default target (image error 0.10) picks; the pick passes when its measured error is within 1.5x of the "
+            "best error measured there at no more than its time, and its measured time within 2x of its prediction (or "
+            "0.25 s of it: sub-second runs vary 2-4x on the loaded shared machine). "
+            f"Measurements of {today()}. The error part is lenient with cheap picks (a draft is compared only with runs no "
+            "slower), so the last line also counts the picks whose measured error is within the target itself.", "", *keep, ""]
+    write_section("auto-acceptance", "\n".join(text))
+    log("\n".join(keep))
+    return 0 if out.returncode == 0 else 1
 
 
 def images_from(work: Path, meas: dict) -> dict:
@@ -377,7 +566,8 @@ def readme_table(meas: dict) -> str:
     """The README's "which solver for which scene" table: per solver (linked to its page in
     docs/solvers/) and scene its preview run's image error, time and speed-up over Cycles at that
     error (BENCHMARKS.md `solvers` has all). Lines stay under 200 characters (tests/python/test_docs.py)."""
-    scenes = [s["name"] for s in meas["scenes"]]
+    # the scenes compared with Cycles (the generated set's are in BENCHMARKS.md only)
+    scenes = [s["name"] for s in meas["scenes"] if any(c["scene"] == s["name"] for c in meas["cycles"])]
     solvers = list(dict.fromkeys(r["solver"] for r in meas["runs"]))
     caption = (f"Which solver for which scene ([BENCHMARKS.md](BENCHMARKS.md) *Solvers against Cycles*, {meas['date']}, "
                "written by `scripts/bench_solvers.py`): image error (relative RMSE against a converged path-traced "
@@ -486,30 +676,46 @@ def update_runs(scenes: list[str], args, work: Path) -> int:
     names = args.solvers.split(",")
     entries = [e for e in registry() if e["name"] in names]
     skipped = []
+    qualities = tuple(args.qualities.split(","))
     for n in scenes:
-        ref, _ = load_reference(n)
-        r, _ = solver_runs(n, ref, entries, tuple(args.qualities.split(",")), work, skipped)
+        ref, meta = load_reference(n)
+        if not any(s["name"] == n for s in meas["scenes"]):
+            # a scene of the generated set measured for the first time (no Cycles runs)
+            meas["scenes"].append({"name": n, "scene": f"bench/scenes/{n}/scene.json", "reference_noise": meta["noise"],
+                                   "description": DESCRIPTIONS[n],
+                                   **({"held_out": True} if any(s["name"] == n and s["held_out"] for s in SCENE_SET) else {})})
+        capped = [c for c in meas.get("capped", []) if not (c["scene"] == n and c["solver"] in names and c["quality"] in qualities)]
+        r, _ = solver_runs(n, ref, entries, qualities, work, skipped, earlier=meas["runs"], capped=capped)
+        meas["capped"] = capped
         done = {(x["solver"], x["quality"]) for x in r}
         old = [x for x in meas["runs"] if not (x["scene"] == n and (x["solver"], x["quality"]) in done)]
         # keep the file's order: scene by scene, the solvers in registry order
         meas["runs"] = old + r
+        if not args.no_write:
+            # after every scene: a run cut short keeps what it measured
+            MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
     order = {e["name"]: i for i, e in enumerate(registry())}
     scene_order = {s["name"]: i for i, s in enumerate(meas["scenes"])}
     quality_order = {q: i for i, q in enumerate(QUALITIES)}
     meas["runs"].sort(key=lambda x: (scene_order[x["scene"]], order.get(x["solver"], 99), quality_order.get(x["quality"], 9)))
-    meas["updated"] = f"{today()}: {','.join(names)} measured again on {','.join(scenes)}"
+    where = ",".join(scenes) if len(scenes) <= 5 else f"{len(scenes)} scenes ({scenes[0]} ... {scenes[-1]})"
+    meas["updated"] = f"{today()}: {','.join(names)} measured again on {where}"
     if args.no_write:
         print(markdown(meas, gpu_note()))
         return 0
     MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
     write_section("solvers", markdown(meas, gpu_note()))
     write_section("bench-solvers", readme_table(meas), path="README.md")
+    p = set_plot(meas)
+    if p:
+        log("wrote", p.relative_to(REPO_ROOT))
     return 0
 
 
 def main() -> int:
+    global RUN_TIMEOUT, SKIP_AFTER_SECONDS
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenes", default=",".join(bench_scenes.SCENES))
+    ap.add_argument("--scenes", default=",".join(ALL_SCENES))
     ap.add_argument("--solvers", default="", help="comma-separated (default: every registered solver but reference)")
     ap.add_argument("--qualities", default=",".join(QUALITIES))
     ap.add_argument("--references", action="store_true", help="compute the converged references, then stop")
@@ -528,7 +734,21 @@ def main() -> int:
     ap.add_argument("--update", action="store_true", help="measure only --solvers on --scenes again and replace their "
                     "runs in measurements.json, keeping every other run and Cycles' (after a solver changed); "
                     "rewrites the section and README table, not the plots (they need every image: rerun in full)")
+    ap.add_argument("--preset", action="append", default=[], metavar="SOLVER.QUALITY=JSON",
+                    help="measure this preset's settings in place of the registry's (a candidate preset)")
+    ap.add_argument("--timeout", type=float, help="kill a solver run past this many seconds and list it as capped")
+    ap.add_argument("--skip-after", type=float, default=SKIP_AFTER_SECONDS,
+                    help=f"skip a preset when the solver's cheaper one took longer than this (seconds, default {SKIP_AFTER_SECONDS:.0f})")
+    ap.add_argument("--auto-acceptance", action="store_true", help="run auto's leave-one-scene-out test and write its "
+                    "table to BENCHMARKS.md (auto-acceptance), then stop")
     args = ap.parse_args()
+    if args.auto_acceptance:
+        return auto_acceptance()
+    RUN_TIMEOUT, SKIP_AFTER_SECONDS = args.timeout, args.skip_after
+    for p in args.preset:
+        key, _, js = p.partition("=")
+        solver, _, quality = key.rpartition(".")
+        PRESET_OVERRIDE[(solver, quality)] = json.loads(js)
     scenes = args.scenes.split(",")
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="bench-solvers-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -580,7 +800,8 @@ def main() -> int:
         ref, meta = load_reference(n)
         refs[n] = ref
         meas["scenes"].append({"name": n, "scene": f"bench/scenes/{n}/scene.json", "reference_noise": meta["noise"],
-                               "description": bench_scenes.DESCRIPTIONS[n]})
+                               "description": DESCRIPTIONS[n],
+                               **({"held_out": True} if any(s["name"] == n and s["held_out"] for s in SCENE_SET) else {})})
         images[n] = {}
         if not args.no_cycles:
             c, cimg = cycles_runs(n, ref, spps, work)

@@ -101,7 +101,9 @@ pub const ENTRY: SolverEntry = SolverEntry {
     presets: &[
         Preset::draft(r#"{"grid_resolution": 16, "max_iterations": 100, "output_resolution": 64}"#),
         Preset::preview(r#"{"grid_resolution": 32, "max_iterations": 400, "output_resolution": 128}"#),
-        Preset::final_(r#"{"grid_resolution": 64, "max_iterations": 1000, "output_resolution": 256}"#),
+        // The preview's grids converged further: a finer grid made pop's image worse, not better,
+        // at 7-17x the time (issue 36; BENCHMARKS.md `solvers`, preset ladders on the scene set).
+        Preset::final_(r#"{"grid_resolution": 32, "max_iterations": 1000, "residual_threshold": 0.0001, "output_resolution": 128}"#),
     ],
     // furnace.rs's (its bounds were measured with them); extreme.rs's grid too (its scenes have
     // no dome, and their 16^3 voxels cap the output at 16).
