@@ -111,7 +111,7 @@ fn main() {
                 identical += usize::from(k.iter().zip(o).all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
                 errors.push(relative_rmse(k, o));
                 if f == 1 {
-                    second = Some(kept.output.counters.clone());
+                    second = Some((kept.output.counters.clone(), kept.output.timings.0.clone(), fresh.output.timings.0.clone()));
                 }
             }
             // The first frame fills the session: the per-frame figures are of the later ones.
@@ -125,7 +125,8 @@ fn main() {
                     "first_frame_seconds": times.first(), "frame_median_seconds": percentile(later, 0.5), "frame_p95_seconds": percentile(later, 0.95),
                     "one_off_median_seconds": percentile(&one_off, 0.5),
                     "max_rel_rmse_vs_one_off": errors.iter().cloned().fold(0.0, f64::max), "bit_identical_frames": identical,
-                    "second_frame_counters": second,
+                    "second_frame_counters": second.as_ref().map(|s| &s.0),
+                    "second_frame_timings": second.as_ref().map(|s| &s.1), "one_off_timings": second.as_ref().map(|s| &s.2),
                 }
             });
             println!("BENCH_JSON {doc}");

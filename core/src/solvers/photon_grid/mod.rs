@@ -180,8 +180,7 @@ impl PhotonGrid {
     /// generation, the one-off solve.
     fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend, on_cpu: bool, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if self.settings.generations == 1 {
-            let kept = on_cpu.then(|| Some(state.single()));
-            return self.solve_generations(scene, self.first, progress, backend, kept, counters);
+            return self.solve_keeping_photons(scene, progress, state, backend, on_cpu, counters);
         }
         // The ring's frames keep no single scattering (their S is not the one-off's anyway).
         let single = on_cpu.then_some(None);
@@ -207,6 +206,34 @@ impl PhotonGrid {
         }
     }
 
+    /// A session frame of one generation: the photons traced for the last frame are kept while
+    /// the medium and the lights stay (a camera move: they do not depend on the camera, but
+    /// with `angular = camera`), so the frame only reconstructs S towards the new camera.
+    fn solve_keeping_photons(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend, on_cpu: bool, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
+        let key = (self.settings.angular != Angular::Camera).then(|| traced_key(scene));
+        let kept = state.kept(KeptPhotons::default).0.take().filter(|(k, r)| Some(k) == key.as_ref() && r.traced_with(&self.settings));
+        let mut timings = Timings::default();
+        if !progress.update("photons", 0.0) {
+            return Err(Error::Cancelled);
+        }
+        let ring = match kept {
+            Some((_, ring)) => {
+                counters.kept("photons");
+                ring
+            }
+            None => {
+                counters.computed("photons");
+                self.fresh_ring(scene, self.first, &mut timings, progress, backend)?
+            }
+        };
+        let single = on_cpu.then(|| Some(state.single()));
+        let out = self.finish(scene, &ring, timings, progress, backend, single, counters)?;
+        if let Some(k) = key {
+            state.kept(KeptPhotons::default).0 = Some((k, ring));
+        }
+        Ok(out)
+    }
+
     /// The view-independent first lobe (fluence, g', direction) at world points (light
     /// scattered less than `SPLIT_ORDER` times; in `exact` mode without the unscattered light):
     /// the cache as a host could keep it to re-light from any view.
@@ -219,6 +246,17 @@ impl PhotonGrid {
         Ok(points.iter().map(|&p| reconstruct::lobe_at(&scene.medium, &first, p, self.settings.upsampling)).collect())
     }
 }
+
+/// What the photons of a frame depend on besides the settings: the medium and the lights.
+type TracedKey = ((crate::medium::key::MediumKey, u64), Vec<u64>);
+
+fn traced_key(scene: &Scene) -> TracedKey {
+    (crate::stages::diff::medium_key(&scene.medium), scene.lights.iter().map(crate::stages::diff::light_key).collect())
+}
+
+/// What a one-generation session keeps: the last frame's photons, under their key.
+#[derive(Default)]
+struct KeptPhotons(Option<(TracedKey, Ring)>);
 
 impl Solver for PhotonGrid {
     fn name(&self) -> &'static str {
