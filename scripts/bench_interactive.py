@@ -65,6 +65,33 @@ def lpm_draft(repeats: int, threads: int) -> None:
     publish("lpm-draft", lines)
 
 
+def write(args: argparse.Namespace, rows: list[str]) -> None:
+    """The section with the rows so far (written after every scene: a run cut short keeps its scenes)."""
+    cmd = "python3 scripts/bench_interactive.py " + " ".join(
+        f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
+                                  ("motions", args.motions), ("preset", args.preset), ("device", args.device), ("threads", args.threads),
+                                  ("check-every", args.check_every)])
+    gpu = args.device == "gpu"
+    lines = [
+        "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads"),
+        "",
+        written_line(cmd),
+        f"Each scene at its stored resolution, solver at its `{args.preset}` preset; {args.frames} frames a session:"
+        " `light` turns the lights 3 degrees a frame about the medium's vertical (a sun's direction, a point or spot light's"
+        " position), `camera` the camera 3 degrees a frame"
+        " about the medium's centre, `sequence` steps the density scale 1% a frame (every voxel changes, as in a VDB"
+        " sequence); a scene with no light to move (a uniform dome, emission only) has no `light` row."
+        " Frame times are the later frames' (the first fills the session); `one-off` is the same frame solved"
+        f" alone (every {args.check_every}th frame and the last); `ratio` = session median / one-off median; `target` is issue 37's"
+        " (a light move <= 0.30 of a one-off solve, a camera move <= 0.10); `identical` counts checked frames bit for bit the"
+        " one-off S (`rel. RMSE` the worst of them); `slowest stage` is where the second frame spent most (s); `kept` what it reused"
+        " (its counters).",
+        "",
+        *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |", rows),
+    ]
+    publish("interactive-gpu" if gpu else "interactive", lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=30)
@@ -103,29 +130,7 @@ def main() -> None:
             rows.append(f"| {scene} | {d['solver']} | {d['motion']} | {d['device']} | {d['first_frame_seconds']:.3f} |"
                         f" {d['frame_median_seconds']:.3f} | {d['frame_p95_seconds']:.3f} | {d['one_off_median_seconds']:.3f} |"
                         f" {ratio:.2f} | {aim} | {d['bit_identical_frames']}/{d['checked_frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {top} | {kept} |")
-    cmd = "python3 scripts/bench_interactive.py " + " ".join(
-        f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
-                                  ("motions", args.motions), ("preset", args.preset), ("device", args.device), ("threads", args.threads),
-                                  ("check-every", args.check_every)])
-    gpu = args.device == "gpu"
-    lines = [
-        "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads"),
-        "",
-        written_line(cmd),
-        f"Each scene at its stored resolution, solver at its `{args.preset}` preset; {args.frames} frames a session:"
-        " `light` turns every distant light 3 degrees a frame about the vertical, `camera` the camera 3 degrees a frame"
-        " about the medium's centre, `sequence` steps the density scale 1% a frame (every voxel changes, as in a VDB"
-        " sequence); a scene with no light to move (a uniform dome, emission only) has no `light` row."
-        " `light` moves distant, point and spot lights (3 degrees a frame about the medium's vertical)."
-        " Frame times are the later frames' (the first fills the session); `one-off` is the same frame solved"
-        f" alone (every {args.check_every}th frame and the last); `ratio` = session median / one-off median; `target` is issue 37's"
-        " (a light move <= 0.30 of a one-off solve, a camera move <= 0.10); `identical` counts checked frames bit for bit the"
-        " one-off S (`rel. RMSE` the worst of them); `slowest stage` is where the second frame spent most (s); `kept` what it reused"
-        " (its counters).",
-        "",
-        *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |", rows),
-    ]
-    publish("interactive-gpu" if gpu else "interactive", lines)
+        write(args, rows)
 
 
 if __name__ == "__main__":
