@@ -65,7 +65,7 @@ def lpm_draft(repeats: int, threads: int) -> None:
     publish("lpm-draft", lines)
 
 
-def write(args: argparse.Namespace, rows: list[str]) -> None:
+def write(args: argparse.Namespace, rows: list[str], done: list[str]) -> None:
     """The section with the rows so far (written after every scene: a run cut short keeps its scenes)."""
     cmd = "python3 scripts/bench_interactive.py " + " ".join(
         f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
@@ -85,7 +85,7 @@ def write(args: argparse.Namespace, rows: list[str]) -> None:
         f" alone (every {args.check_every}th frame and the last); `ratio` = session median / one-off median; `target` is issue 37's"
         " (a light move <= 0.30 of a one-off solve, a camera move <= 0.10); `identical` counts checked frames bit for bit the"
         " one-off S (`rel. RMSE` the worst of them); `slowest stage` is where the second frame spent most (s); `kept` what it reused"
-        " (its counters).",
+        " (its counters)." + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}."),
         "",
         *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |", rows),
     ]
@@ -108,7 +108,8 @@ def main() -> None:
     if args.lpm_draft:
         lpm_draft(args.repeats, args.threads)
         return
-    rows = []
+    rows: list[str] = []
+    done: list[str] = []
     for scene in args.scenes.split(","):
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
         found = cargo_example_benches("volscatter-gpu", "bench_interactive",
@@ -130,7 +131,8 @@ def main() -> None:
             rows.append(f"| {scene} | {d['solver']} | {d['motion']} | {d['device']} | {d['first_frame_seconds']:.3f} |"
                         f" {d['frame_median_seconds']:.3f} | {d['frame_p95_seconds']:.3f} | {d['one_off_median_seconds']:.3f} |"
                         f" {ratio:.2f} | {aim} | {d['bit_identical_frames']}/{d['checked_frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {top} | {kept} |")
-        write(args, rows)
+        done.append(scene)
+        write(args, rows, done)
 
 
 if __name__ == "__main__":
