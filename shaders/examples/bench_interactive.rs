@@ -3,11 +3,13 @@
 //! frame (a VDB sequence's stand-in: the density scale stepped) — each frame solved in one
 //! session and, for its error, as a one-off solve. Prints one line `BENCH_JSON {...}` a
 //! (scene, solver, motion) with the per-frame times, the one-off times, the session frames'
-//! relative RMSE against the one-off S, and the counters of the second frame.
+//! relative RMSE against the one-off S, and the counters and stage times of the second frame.
+//! One-off solves run on every `--check-every`-th frame (and the last): they are the costly part.
+//! A scene without a light to move (a uniform dome, emission only) skips `light`.
 //!
 //! cargo run --release -p volscatter-gpu --example bench_interactive -- SCENE.json
 //!     [--solvers pop,lpm] [--preset preview] [--frames 30] [--motions light,camera,sequence]
-//!     [--device cpu|gpu]
+//!     [--device cpu|gpu] [--check-every 1]
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -27,10 +29,11 @@ struct Args {
     frames: usize,
     motions: Vec<String>,
     device: DeviceChoice,
+    check_every: usize,
 }
 
 fn args() -> Args {
-    let mut a = Args { scene: PathBuf::new(), solvers: vec![], preset: "preview".into(), frames: 30, motions: vec![], device: DeviceChoice::Cpu };
+    let mut a = Args { scene: PathBuf::new(), solvers: vec![], preset: "preview".into(), frames: 30, motions: vec![], device: DeviceChoice::Cpu, check_every: 1 };
     let list = |s: String| s.split(',').map(String::from).collect::<Vec<_>>();
     a.solvers = list("pop,photon-grid,network,vpl,lpm".into());
     a.motions = list("light,camera,sequence".into());
@@ -43,29 +46,37 @@ fn args() -> Args {
             "--frames" => a.frames = v().parse().expect("--frames N"),
             "--motions" => a.motions = list(v()),
             "--device" => a.device = if v() == "gpu" { DeviceChoice::Gpu } else { DeviceChoice::Cpu },
+            "--check-every" => a.check_every = v().parse::<usize>().expect("--check-every N").max(1),
             path => a.scene = PathBuf::from(path),
         }
     }
     a
 }
 
-/// Frame `f` of `motion`: the sun (every distant light) turned 3 degrees a frame about the
-/// vertical, the camera 3 degrees a frame about the medium's centre, or the density scale 1%
-/// up a frame.
+/// Frame `f` of `motion`: the lights turned 3 degrees a frame about the vertical through the
+/// medium's centre (a sun's direction, a point or spot light's position and a spot's axis),
+/// the camera 3 degrees a frame about the medium's centre, or the density scale 1% up a frame.
 fn frame(base: &Scene, motion: &str, f: usize) -> Scene {
     let mut sc = base.clone();
     let turn = Quat::from_rotation_z((3.0 * f as f32).to_radians());
+    let (lo, hi) = sc.medium.world_bounds();
+    let centre = 0.5 * (lo + hi);
     match motion {
         "light" => {
             for l in &mut sc.lights {
-                if let Light::Distant { direction, .. } = l {
-                    *direction = turn * *direction;
+                match l {
+                    Light::Distant { direction, .. } => *direction = turn * *direction,
+                    Light::Point { position, .. } => *position = centre + turn * (*position - centre),
+                    Light::Spot(s) => {
+                        s.position = centre + turn * (s.position - centre);
+                        s.axis = turn * s.axis;
+                    }
+                    Light::Area(_) | Light::Dome(_) => {}
                 }
             }
         }
         "camera" => {
-            let (lo, hi) = sc.medium.world_bounds();
-            let c = 0.5 * (lo + hi);
+            let c = centre;
             let cam = &mut sc.camera;
             cam.position = c + turn * (cam.position - c);
             cam.forward = turn * cam.forward;
@@ -95,24 +106,32 @@ fn main() {
         let mut settings = registry::preset_settings(solver, &a.preset);
         settings.insert("name".into(), solver.clone().into());
         for motion in &a.motions {
+            if motion == "light" && !base.lights.iter().any(|l| matches!(l, Light::Distant { .. } | Light::Point { .. } | Light::Spot(_))) {
+                eprintln!("{}: no light to move, `light` skipped", a.scene.display());
+                continue;
+            }
             let mut session = Session::new(solver, &settings, devices).expect("settings");
             let (mut times, mut one_off, mut errors) = (vec![], vec![], vec![]);
-            let (mut identical, mut second, mut device) = (0usize, None, String::new());
+            let (mut identical, mut second, mut device, mut checked) = (0usize, None, String::new(), 0usize);
             for f in 0..a.frames {
                 let sc = frame(&base, motion, f);
                 let t = Instant::now();
                 let kept = session.solve(&sc, &NoProgress).expect("session frame");
                 times.push(t.elapsed().as_secs_f64());
                 device = kept.device.to_string();
+                if f == 1 {
+                    second = Some((kept.output.counters.clone(), kept.output.timings.0.clone()));
+                }
+                if f % a.check_every != 0 && f + 1 != a.frames {
+                    continue;
+                }
+                checked += 1;
                 let t = Instant::now();
                 let fresh = pipeline::solve(&sc, solver, &settings, devices, &NoProgress).expect("one-off solve");
                 one_off.push(t.elapsed().as_secs_f64());
                 let (k, o) = (&kept.output.scattering.data, &fresh.output.scattering.data);
                 identical += usize::from(k.iter().zip(o).all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
                 errors.push(relative_rmse(k, o));
-                if f == 1 {
-                    second = Some(kept.output.counters.clone());
-                }
             }
             // The first frame fills the session: the per-frame figures are of the later ones.
             let later = &times[1.min(times.len())..];
@@ -125,7 +144,8 @@ fn main() {
                     "first_frame_seconds": times.first(), "frame_median_seconds": percentile(later, 0.5), "frame_p95_seconds": percentile(later, 0.95),
                     "one_off_median_seconds": percentile(&one_off, 0.5),
                     "max_rel_rmse_vs_one_off": errors.iter().cloned().fold(0.0, f64::max), "bit_identical_frames": identical,
-                    "second_frame_counters": second,
+                    "second_frame_counters": second.as_ref().map(|s| &s.0),
+                    "second_frame_timings": second.as_ref().map(|s| &s.1), "checked_frames": checked,
                 }
             });
             println!("BENCH_JSON {doc}");

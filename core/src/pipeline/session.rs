@@ -15,7 +15,10 @@
 //! scene did not change, or changed only in its camera where the solver's S does not depend on
 //! it (`Solver::view_independent`: an isotropic medium), hands back the last frame's S without
 //! solving. Below that, the single scattering keeps each light's part while that light, the
-//! medium and the camera stay (stages/single_scattering.rs), and each solver what it keeps.
+//! medium and the camera stay, and its shadow rays' transmittances across a camera move
+//! (stages/single_scattering.rs), and each solver what it keeps (across a camera move at
+//! g != 0: photon-grid its photons, network its direct light and iteration; see
+//! docs/architecture.md for what lpm, pop and vpl solve again and why).
 //! Every result's `counters` say what was computed and what was kept.
 //!
 //! The scene may change in any way between solves. A solver keeps only what it can key on the

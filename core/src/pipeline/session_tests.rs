@@ -130,3 +130,52 @@ fn view_independent_solvers_give_the_same_s_from_any_camera() {
     }
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
+
+/// A camera move in an anisotropic medium (g 0.6, where S depends on the view): lpm, network and
+/// photon-grid recompute the single scattering's terms but replay its shadow rays (they depend
+/// on the point and the light, not on the view); photon-grid keeps its photons and their lobes,
+/// network its visibility, direct light and iteration; after a sun move the sky's shadow rays are still kept for the next
+/// camera move. Every frame is bit for bit its one-off solve.
+#[test]
+fn camera_moves_at_g_keep_what_does_not_depend_on_the_view() {
+    for name in ["lpm", "photon-grid", "network"] {
+        let mut settings = registry::preset_settings(name, "test");
+        settings.insert("name".into(), name.into());
+        let settings = serde_json::Value::Object(settings);
+        let mut session = Session::for_scene(&scene(16, 0.6, 0.0, 0.0, &settings), Devices::cpu()).unwrap();
+        // (sun, camera, shadow rays kept, shadow rays marched)
+        let frames = [
+            (0.0, 0.0, &[][..], &["shadow rays: light 0", "shadow rays: dome"][..]),
+            (0.0, 0.5, &["shadow rays: light 0", "shadow rays: dome"][..], &[][..]),
+            (0.4, 0.5, &[][..], &["shadow rays: light 0"][..]),
+            (0.4, 1.0, &["shadow rays: light 0", "shadow rays: dome"][..], &[][..]),
+        ];
+        for (f, (sun, camera, kept, marched)) in frames.into_iter().enumerate() {
+            let sc = scene(16, 0.6, sun, camera, &settings);
+            let out = session.solve(&sc, &NoProgress).unwrap();
+            let c = &out.output.counters;
+            let camera_only = out.diff.camera_only();
+            for part in kept {
+                assert!(c.was_reused(part) && !c.was_computed(part), "{name} frame {f}: {part} kept: {c:?}");
+            }
+            for part in marched {
+                assert!(c.was_computed(part) && !c.was_reused(part), "{name} frame {f}: {part} marched: {c:?}");
+            }
+            if camera_only {
+                assert!(c.was_computed("single scattering: light 0") && c.was_computed("single scattering: dome"), "{name} frame {f}: the terms follow the view: {c:?}");
+            }
+            match name {
+                "photon-grid" => {
+                    assert_eq!(c.was_reused("photons"), camera_only, "{name} frame {f}: {c:?}");
+                    assert_eq!(c.was_reused("photon lobes"), camera_only, "{name} frame {f}: {c:?}");
+                }
+                "network" => {
+                    assert_eq!(c.was_reused("network iterate"), camera_only, "{name} frame {f}: {c:?}");
+                    assert_eq!(c.was_reused("network direct"), camera_only, "{name} frame {f}: {c:?}");
+                }
+                _ => {}
+            }
+            assert_eq!(bits(&out.output), bits(&one_off(&sc)), "{name} frame {f}");
+        }
+    }
+}

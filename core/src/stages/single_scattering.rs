@@ -112,34 +112,54 @@ fn single_scattering_by_parts(
     let parts = direct.parts();
     let points = (nx * ny * nz) as usize;
     let keys = cache.as_ref().map(|_| {
-        let frame_key = Bits::new()
+        let path_key = Bits::new()
             .debug(&crate::medium::key::MediumKey::of(medium))
-            .f32s(scene.camera.position.to_array())
             .debug(&(grid.dims, grid.index_to_world, dome_directions, dome_spacing))
             .f32s([step, near])
             .finish();
-        (frame_key, parts.iter().map(|p| direct.part_key(*p)).collect::<Vec<u64>>())
+        let frame_key = Bits::new().u64(path_key).f32s(scene.camera.position.to_array()).finish();
+        (frame_key, path_key, parts.iter().map(|p| direct.part_key(*p)).collect::<Vec<u64>>())
     });
     // Kept only while every part fits (each a value per grid point).
     let keep = keys.is_some() && parts.len().saturating_mul(points) <= SingleCache::MAX_VALUES;
     let reused: Vec<Option<Arc<Vec<Vec3>>>> = match (&cache, &keys) {
-        (Some(c), Some((frame_key, part_keys))) if keep && c.frame == Some(*frame_key) => {
+        (Some(c), Some((frame_key, _, part_keys))) if keep && c.frame == Some(*frame_key) => {
             part_keys.iter().map(|k| c.parts.iter().find(|(kk, _)| kk == k).map(|(_, v)| v.clone())).collect()
         }
         _ => vec![None; parts.len()],
     };
+    // A part computed afresh replays the shadow rays a frame from another camera marched for
+    // it (`Paths`: they depend on the point and the light, not on the view), else marches
+    // them and, in a session, records them. The dome blended from a coarse grid is marched:
+    // which fine points fall back to their own march depends on the coarse values, which
+    // depend on the view.
+    let recordable = |p: &Part| !(matches!(p, Part::Domes) && dome_spacing > 1);
+    let prior: Vec<Option<Arc<Vec<Vec<f32>>>>> = match (&cache, &keys) {
+        (Some(c), Some((_, path_key, part_keys))) if keep => part_keys
+            .iter()
+            .zip(&parts)
+            .map(|(k, p)| if !recordable(p) { None } else { c.paths.as_ref().filter(|ps| ps.key == *path_key).and_then(|ps| ps.parts.iter().find(|(kk, _)| kk == k).map(|(_, v)| v.clone())) })
+            .collect(),
+        _ => vec![None; parts.len()],
+    };
+    let replayed: Vec<Option<Arc<Vec<Vec<f32>>>>> = prior.iter().zip(&reused).map(|(t, r)| if r.is_some() { None } else { t.clone() }).collect();
+    let record: Vec<bool> = parts.iter().zip(&reused).zip(&replayed).map(|((p, r), t)| keep && r.is_none() && t.is_none() && recordable(p)).collect();
+    let grey = direct.grey;
     // Parts this frame computes, and where each sits among them.
     let fresh: Vec<usize> = (0..parts.len()).filter(|&i| reused[i].is_none()).collect();
     let k = if keep { fresh.len() } else { 0 };
     let dome_fresh = parts.iter().zip(&reused).any(|(p, r)| matches!(p, Part::Domes) && r.is_none());
     let coarse = if dome_spacing > 1 && dome_fresh { Some(CoarseDome::new(scene, &direct, grid, dome_spacing, progress)?) } else { None };
     let slab = (nx * ny) as usize;
-    let fresh_slabs: Vec<Vec<Vec3>> = grid
+    let fresh_slabs: Vec<(Vec<Vec3>, Vec<Vec<f32>>)> = grid
         .data
         .par_chunks_mut(slab)
         .enumerate()
         .map(|(kz, out)| {
             let mut kept = vec![Vec3::ZERO; slab * k];
+            // Per part: this slab's shadow rays recorded, or the cursor into those replayed.
+            let mut recorded: Vec<Vec<f32>> = vec![Vec::new(); parts.len()];
+            let mut cursor = vec![0usize; parts.len()];
             for j in 0..ny {
                 if progress.cancelled() {
                     break;
@@ -154,12 +174,27 @@ fn single_scattering_by_parts(
                     let at = (i + nx * j) as usize;
                     let mut sum = Vec3::ZERO;
                     let mut f = 0;
-                    for (part, kept_part) in parts.iter().zip(&reused) {
+                    for (pi, (part, kept_part)) in parts.iter().zip(&reused).enumerate() {
                         let term = match kept_part {
                             Some(values) => values[kz * slab + at],
                             None => {
                                 let dome = || coarse.as_ref().and_then(|c| c.at(UVec3::new(i, j, kz as u32)));
-                                let t = direct.part_term(*part, x, view, dome);
+                                let t = match &replayed[pi] {
+                                    Some(paths) => {
+                                        let (rays, c) = (&paths[kz], &mut cursor[pi]);
+                                        direct.part_term_with(*part, x, view, dome, &mut |_, _| replay(rays, c, grey))
+                                    }
+                                    None if record[pi] => {
+                                        let rays = &mut recorded[pi];
+                                        direct.part_term_with(*part, x, view, dome, &mut |w, t_max| {
+                                            let t = direct.transmittance(x, w, t_max);
+                                            let a = t.to_array();
+                                            rays.extend_from_slice(if grey { &a[..1] } else { &a });
+                                            t
+                                        })
+                                    }
+                                    None => direct.part_term(*part, x, view, dome),
+                                };
                                 if k > 0 {
                                     kept[at * k + f] = t;
                                 }
@@ -172,27 +207,52 @@ fn single_scattering_by_parts(
                     out[at] = medium.sigma_s(dens) * sum;
                 }
             }
-            kept
+            (kept, recorded)
         })
         .collect();
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
-    for (p, r) in parts.iter().zip(&reused) {
+    for ((p, r), t) in parts.iter().zip(&reused).zip(&replayed) {
         let name = direct.part_name(*p);
         if r.is_some() {
             counters.kept(name);
         } else {
-            counters.computed(name);
+            counters.computed(&name);
+            let rays = name.replacen("single scattering", "shadow rays", 1);
+            if t.is_some() {
+                counters.kept(rays);
+            } else {
+                counters.computed(rays);
+            }
         }
     }
-    if let (Some(c), Some((frame_key, part_keys))) = (cache, keys) {
+    if let (Some(c), Some((frame_key, path_key, part_keys))) = (cache, keys) {
         if !keep {
             *c = SingleCache::default();
             return Ok(());
         }
+        // The shadow rays of the parts that have them: replayed ones as they were, recorded
+        // ones gathered slab by slab; none kept above `MAX_VALUES` floats in all.
+        let mut fresh_rays: Vec<Vec<Vec<f32>>> = vec![Vec::new(); parts.len()];
+        for (_, recorded) in &fresh_slabs {
+            for (pi, rays) in recorded.iter().enumerate() {
+                if record[pi] {
+                    fresh_rays[pi].push(rays.clone());
+                }
+            }
+        }
+        let paths_parts: Vec<(u64, Arc<Vec<Vec<f32>>>)> = part_keys
+            .iter()
+            .zip(prior)
+            .zip(fresh_rays)
+            .enumerate()
+            .filter_map(|(pi, ((key, t), fresh))| t.or_else(|| record[pi].then(|| Arc::new(fresh))).map(|v| (*key, v)))
+            .collect();
+        let floats: usize = paths_parts.iter().map(|(_, v)| v.iter().map(Vec::len).sum::<usize>()).sum();
+        let paths = (floats <= SingleCache::MAX_VALUES).then_some(Paths { key: path_key, parts: paths_parts });
         let mut fresh_values = fresh.iter().map(|_| Vec::with_capacity(points)).collect::<Vec<Vec<Vec3>>>();
-        for values in &fresh_slabs {
+        for (values, _) in &fresh_slabs {
             for point in values.chunks_exact(k.max(1)) {
                 for (f, v) in point.iter().enumerate() {
                     fresh_values[f].push(*v);
@@ -205,9 +265,23 @@ fn single_scattering_by_parts(
             .zip(reused)
             .map(|(key, r)| (key, r.unwrap_or_else(|| Arc::new(fresh_values.next().unwrap_or_default()))))
             .collect();
-        *c = SingleCache { frame: Some(frame_key), parts };
+        *c = SingleCache { frame: Some(frame_key), parts, paths };
     }
     Ok(())
+}
+
+/// The next shadow ray's transmittance of a recorded slab (`Paths`): one value a ray in a grey
+/// medium, three otherwise.
+#[inline]
+fn replay(rays: &[f32], cursor: &mut usize, grey: bool) -> Vec3 {
+    let at = *cursor;
+    if grey {
+        *cursor += 1;
+        Vec3::splat(rays[at])
+    } else {
+        *cursor += 3;
+        Vec3::new(rays[at], rays[at + 1], rays[at + 2])
+    }
 }
 
 /// What a session keeps of its last single-scattering grid: each part's term (before sigma_s)
@@ -217,6 +291,17 @@ fn single_scattering_by_parts(
 pub struct SingleCache {
     frame: Option<u64>,
     parts: Vec<(u64, Arc<Vec<Vec3>>)>,
+    /// The shadow rays' transmittances of the last frame's parts, for a frame seen from
+    /// another camera (whose terms differ only in the phase towards the viewer).
+    paths: Option<Paths>,
+}
+
+/// Each part's shadow-ray transmittances, in the order its term marched them, slab by slab
+/// (one value a ray in a grey medium, three otherwise), keyed by what they depend on: the
+/// medium, the grid and the quadrature (not the camera), and the part's light.
+struct Paths {
+    key: u64,
+    parts: Vec<(u64, Arc<Vec<Vec<f32>>>)>,
 }
 
 impl SingleCache {
@@ -417,18 +502,29 @@ impl<'a> DirectLight<'a> {
     /// A part's term at `x` towards `view` (before sigma_s); `coarse_dome` the dome's value
     /// blended from a coarse grid where there is one.
     fn part_term(&self, part: Part, x: Vec3, view: Vec3, coarse_dome: impl FnOnce() -> Option<Vec3>) -> Vec3 {
+        self.part_term_with(part, x, view, coarse_dome, &mut |w, t_max| self.transmittance(x, w, t_max))
+    }
+
+    /// The shadow ray's transmittance from `x` along `w` over `t_max`.
+    #[inline]
+    fn transmittance(&self, x: Vec3, w: Vec3, t_max: f32) -> Vec3 {
+        exp_neg(self.march.optical_depth(x, w, t_max, self.step, 512), self.grey)
+    }
+
+    /// `part_term` with the shadow rays' transmittances from `tr` (direction, length), called
+    /// in an order that depends on `x` and the part's light only, never on `view`.
+    fn part_term_with(&self, part: Part, x: Vec3, view: Vec3, coarse_dome: impl FnOnce() -> Option<Vec3>, tr: &mut dyn FnMut(Vec3, f32) -> Vec3) -> Vec3 {
         let g = self.scene.medium.g;
-        let tr = |w: Vec3, t_max: f32| exp_neg(self.march.optical_depth(x, w, t_max, self.step, 512), self.grey);
-        let emitters = |range: &Range<usize>| {
+        let emitters = |range: &Range<usize>, tr: &mut dyn FnMut(Vec3, f32) -> Vec3| {
             let mut sum = Vec3::ZERO;
             for e in &self.emitters[range.clone()] {
-                sum += emitter_single(e, x, view, g, self.near, &tr);
+                sum += emitter_single(e, x, view, g, self.near, tr);
             }
             sum
         };
-        let tree = |t: &EmitterTree| {
+        let tree = |t: &EmitterTree, tr: &mut dyn FnMut(Vec3, f32) -> Vec3| {
             let mut sum = Vec3::ZERO;
-            t.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &tr));
+            t.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, tr));
             sum
         };
         match part {
@@ -437,11 +533,11 @@ impl<'a> DirectLight<'a> {
                     let w = -*direction;
                     *irradiance * hg(w.dot(view), g) * tr(w, f32::INFINITY)
                 }
-                _ => emitters(&self.light_emitters[i]),
+                _ => emitters(&self.light_emitters[i], tr),
             },
-            Part::Domes => coarse_dome().unwrap_or_else(|| self.dome_inscattered(x, view)),
-            Part::Emission => tree(&self.emission),
-            Part::Locals => tree(&self.locals),
+            Part::Domes => coarse_dome().unwrap_or_else(|| self.one_dome_with(view, tr) * self.domes() as f32),
+            Part::Emission => tree(&self.emission, tr),
+            Part::Locals => tree(&self.locals, tr),
         }
     }
 
@@ -468,10 +564,15 @@ impl<'a> DirectLight<'a> {
 
     /// One dome light's in-scattered light: its directions summed.
     fn one_dome(&self, x: Vec3, view: Vec3) -> Vec3 {
+        self.one_dome_with(view, &mut |w, t_max| self.transmittance(x, w, t_max))
+    }
+
+    /// `one_dome` with the shadow rays' transmittances from `tr`.
+    fn one_dome_with(&self, view: Vec3, tr: &mut dyn FnMut(Vec3, f32) -> Vec3) -> Vec3 {
         let g = self.scene.medium.g;
         let mut sum = Vec3::ZERO;
         for &(w, weight) in &self.dome {
-            sum += weight * hg(w.dot(view), g) * exp_neg(self.march.optical_depth(x, w, f32::INFINITY, self.step, 512), self.grey);
+            sum += weight * hg(w.dot(view), g) * tr(w, f32::INFINITY);
         }
         sum
     }
@@ -479,7 +580,7 @@ impl<'a> DirectLight<'a> {
     /// `inscattered`, with the dome's part only where `dome`.
     pub fn inscattered_parts(&self, x: Vec3, view: Vec3, dome: bool) -> Vec3 {
         let g = self.scene.medium.g;
-        let tr = |w: Vec3, t_max: f32| exp_neg(self.march.optical_depth(x, w, t_max, self.step, 512), self.grey);
+        let mut tr = |w: Vec3, t_max: f32| self.transmittance(x, w, t_max);
         let mut sum = Vec3::ZERO;
         for light in &self.scene.lights {
             match light {
@@ -492,8 +593,8 @@ impl<'a> DirectLight<'a> {
                 Light::Dome(_) => {}
             }
         }
-        self.locals.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &tr));
-        self.emission.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &tr));
+        self.locals.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &mut tr));
+        self.emission.visit(x, |e| sum += emitter_single(e, x, view, g, self.near, &mut tr));
         sum
     }
 }
@@ -531,7 +632,7 @@ pub fn shadow_step(medium: &Medium, grid: &ScatteringGrid) -> f32 {
 /// field (`PointEmitter::inverse_square`: 1/d^2, a sphere lamp's, spread over `near`, the grid's
 /// cell). On the emitter's centre the phase function's mean, 1/4 pi, is used.
 #[inline]
-fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &impl Fn(Vec3, f32) -> Vec3) -> Vec3 {
+fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &mut dyn FnMut(Vec3, f32) -> Vec3) -> Vec3 {
     let to = e.position - x;
     let dist = to.length();
     if dist > 1e-6 {

@@ -89,6 +89,9 @@ struct Kept {
     /// The last few direct lights' first scattering and the I iterated from each, newest
     /// last (at most `REMEMBERED_LIGHTS`).
     answers: Vec<(Vec<glam::Vec3>, Vec<glam::Vec3>)>,
+    /// The keys of the lights (and the medium's emission) the newest answer's direct light came
+    /// from: while they stay (a camera move), the direct light is not computed again.
+    newest_lights: Option<(u64, Vec<u64>)>,
 }
 
 /// How many lights' I a session remembers: enough to toggle between a few lights or key
@@ -148,43 +151,32 @@ impl Network {
                 let input = VisibilityInput { medium, particles: &p, dirs: &dirs, centre: sphere.center, radius: sphere.radius, window, opacity: s.opacity };
                 let links = timings.time("network visibility", || backend.visibility(&input, progress))?;
                 let phase = directions::phase_matrix(&dirs, medium.g, self.normalise_phase);
-                Kept { medium: key, particles: p, dirs, links, phase, window, answers: Vec::new() }
+                Kept { medium: key, particles: p, dirs, links, phase, window, answers: Vec::new(), newest_lights: None }
             }
         };
         report.window = net.window;
         if !progress.update("network visibility", 0.3) {
             return Err(Error::Cancelled);
         }
-        let Some(first) = timings.time("network direct", || direct::first_scattering(scene, &net.particles, &net.dirs, s.dome_directions, progress)) else {
-            // The network itself is whole: kept for the session's next solve.
-            kept.0 = Some(net);
-            return Err(Error::Cancelled);
-        };
-        let remembered = net.answers.iter().position(|(f, _)| same_bits(f, &first));
-        if let Some(k) = remembered {
+        // The direct light depends on the particles (kept with the medium), the lights and the
+        // medium's emission, not on the camera.
+        let lights = (crate::stages::diff::medium_key(medium).1, scene.lights.iter().map(crate::stages::diff::light_key).collect::<Vec<u64>>());
+        if net.newest_lights.as_ref() == Some(&lights) && !net.answers.is_empty() {
+            counters.kept("network direct");
             counters.kept("network iterate");
             report.start = Start::Kept;
-            let answer = net.answers.remove(k);
-            net.answers.push(answer);
         } else {
-            counters.computed("network iterate");
-            report.start = Start::Cold;
-            let input = IterationInput { links: &net.links, phase: &net.phase, first: &first, albedo: medium.albedo, max_iterations: s.max_iterations, threshold: s.residual_threshold };
-            let it = match timings.time("network iterate", || backend.iterate(&input, None, progress)) {
-                Ok(it) => it,
-                Err(e) => {
-                    // The network itself is whole, and so are the remembered answers.
-                    kept.0 = Some(net);
-                    return Err(e);
-                }
-            };
-            report.residuals = it.residuals;
-            if net.answers.len() >= REMEMBERED_LIGHTS {
-                net.answers.remove(0);
+            net.newest_lights = None;
+            counters.computed("network direct");
+            if let Err(e) = self.direct_and_iterate(scene, progress, backend, &mut net, &mut timings, &mut report, counters) {
+                // The network itself is whole, and so are the remembered answers.
+                kept.0 = Some(net);
+                return Err(e);
             }
-            net.answers.push((first, it.radiance));
+            net.newest_lights = Some(lights);
         }
         if !progress.update("network iterate", 0.9) {
+            kept.0 = Some(net);
             return Err(Error::Cancelled);
         }
         let Some((_, radiance)) = net.answers.last() else { unreachable!("an answer was just found or pushed") };
@@ -204,6 +196,37 @@ impl Network {
         splatted?;
         progress.update("network splat", 1.0);
         Ok((SolveOutput::new(finished(medium, scattering), timings), report))
+    }
+}
+
+impl Network {
+    /// The direct light's first scattering at the particles, and I iterated from it (or a
+    /// remembered answer of a bit-identical direct light), made `net`'s newest answer.
+    #[allow(clippy::too_many_arguments)]
+    fn direct_and_iterate(&self, scene: &Scene, progress: &dyn Progress, backend: &dyn NetworkBackend, net: &mut Kept, timings: &mut Timings, report: &mut NetworkReport, counters: &mut Counters) -> Result<()> {
+        let s = &self.settings;
+        let medium = &scene.medium;
+        let Some(first) = timings.time("network direct", || direct::first_scattering(scene, &net.particles, &net.dirs, s.dome_directions, progress)) else {
+            return Err(Error::Cancelled);
+        };
+        let remembered = net.answers.iter().position(|(f, _)| same_bits(f, &first));
+        if let Some(k) = remembered {
+            counters.kept("network iterate");
+            report.start = Start::Kept;
+            let answer = net.answers.remove(k);
+            net.answers.push(answer);
+        } else {
+            counters.computed("network iterate");
+            report.start = Start::Cold;
+            let input = IterationInput { links: &net.links, phase: &net.phase, first: &first, albedo: medium.albedo, max_iterations: s.max_iterations, threshold: s.residual_threshold };
+            let it = timings.time("network iterate", || backend.iterate(&input, None, progress))?;
+            report.residuals = it.residuals;
+            if net.answers.len() >= REMEMBERED_LIGHTS {
+                net.answers.remove(0);
+            }
+            net.answers.push((first, it.radiance));
+        }
+        Ok(())
     }
 }
 

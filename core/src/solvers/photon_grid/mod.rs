@@ -124,20 +124,26 @@ impl PhotonGrid {
     }
 
     /// S from the ring's cache: its lobes towards the camera, plus exact single scattering.
-    /// `kept`: the session's single-scattering parts, used on the CPU (None on a device).
+    /// `kept`: the session's single-scattering parts, used on the CPU (None on a device);
+    /// `lobes`: the ring's tallies as lobes when already made from it (else made and put there).
     #[allow(clippy::too_many_arguments)]
-    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
+    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, lobes: &mut Option<[cache::Tallies; 2]>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
         }
         let medium = &scene.medium;
         let lobe = |t| if progress.cancelled() { Err(Error::Cancelled) } else { Ok(cache::Tallies::from_fixed(medium, ring.cache(), t)) };
         let [first, second] = ring.total();
-        let tallies = timings.time("cache", || Ok::<_, Error>([lobe(first)?, lobe(second)?]))?;
+        if lobes.is_some() {
+            counters.kept("photon lobes");
+        } else {
+            *lobes = Some(timings.time("cache", || Ok::<_, Error>([lobe(first)?, lobe(second)?]))?);
+        }
+        let Some(tallies) = lobes.as_ref() else { unreachable!("the lobes were set just above") };
         let res = self.settings.output_dim(medium);
         // The backend sizes its grid from `output_resolution`: give it the voxel-aligned one.
         let out = PhotonGridSettings { output_resolution: res, ..self.settings.clone() };
-        let mut s = timings.time("reconstruct", || backend.reconstruct(medium, &tallies, scene.camera.position, &out, progress))?;
+        let mut s = timings.time("reconstruct", || backend.reconstruct(medium, tallies, scene.camera.position, &out, progress))?;
         if self.settings.single_scattering == SingleScattering::Exact {
             let dirs = dome_directions_for(scene, DOME_DIRECTIONS);
             let single = timings.time("single scattering", || match kept {
@@ -170,7 +176,7 @@ impl PhotonGrid {
             return Err(Error::Cancelled);
         }
         let ring = self.fresh_ring(scene, first, &mut timings, progress, backend)?;
-        self.finish(scene, &ring, timings, progress, backend, kept, counters)
+        self.finish(scene, &ring, timings, progress, backend, kept, &mut None, counters)
     }
 
     /// One frame of a session: the first frame (or one after the settings changed) fills the
@@ -178,8 +184,7 @@ impl PhotonGrid {
     /// generation, the one-off solve.
     fn solve_in_session(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend, on_cpu: bool, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if self.settings.generations == 1 {
-            let kept = on_cpu.then(|| Some(state.single()));
-            return self.solve_generations(scene, self.first, progress, backend, kept, counters);
+            return self.solve_keeping_photons(scene, progress, state, backend, on_cpu, counters);
         }
         // The ring's frames keep no single scattering (their S is not the one-off's anyway).
         let single = on_cpu.then_some(None);
@@ -200,9 +205,37 @@ impl PhotonGrid {
             None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress, backend)?),
         }
         match kept.0.as_ref() {
-            Some(ring) => self.finish(scene, ring, timings, progress, backend, single, counters),
+            Some(ring) => self.finish(scene, ring, timings, progress, backend, single, &mut None, counters),
             None => unreachable!("the ring was set just above"),
         }
+    }
+
+    /// A session frame of one generation: the photons traced for the last frame are kept while
+    /// the medium and the lights stay (a camera move: they do not depend on the camera, but
+    /// with `angular = camera`), so the frame only reconstructs S towards the new camera.
+    fn solve_keeping_photons(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend, on_cpu: bool, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
+        let key = (self.settings.angular != Angular::Camera).then(|| traced_key(scene));
+        let kept = state.kept(KeptPhotons::default).0.take().filter(|(k, r, _)| Some(k) == key.as_ref() && r.traced_with(&self.settings));
+        let mut timings = Timings::default();
+        if !progress.update("photons", 0.0) {
+            return Err(Error::Cancelled);
+        }
+        let (ring, mut lobes) = match kept {
+            Some((_, ring, lobes)) => {
+                counters.kept("photons");
+                (ring, lobes)
+            }
+            None => {
+                counters.computed("photons");
+                (self.fresh_ring(scene, self.first, &mut timings, progress, backend)?, None)
+            }
+        };
+        let single = on_cpu.then(|| Some(state.single()));
+        let out = self.finish(scene, &ring, timings, progress, backend, single, &mut lobes, counters)?;
+        if let Some(k) = key {
+            state.kept(KeptPhotons::default).0 = Some((k, ring, lobes));
+        }
+        Ok(out)
     }
 
     /// The view-independent first lobe (fluence, g', direction) at world points (light
@@ -217,6 +250,18 @@ impl PhotonGrid {
         Ok(points.iter().map(|&p| reconstruct::lobe_at(&scene.medium, &first, p, self.settings.upsampling)).collect())
     }
 }
+
+/// What the photons of a frame depend on besides the settings: the medium and the lights.
+type TracedKey = ((crate::medium::key::MediumKey, u64), Vec<u64>);
+
+fn traced_key(scene: &Scene) -> TracedKey {
+    (crate::stages::diff::medium_key(&scene.medium), scene.lights.iter().map(crate::stages::diff::light_key).collect())
+}
+
+/// What a one-generation session keeps: the last frame's photons under their key, and their
+/// lobes (view-independent too) once made.
+#[derive(Default)]
+struct KeptPhotons(Option<(TracedKey, Ring, Option<[cache::Tallies; 2]>)>);
 
 impl Solver for PhotonGrid {
     fn name(&self) -> &'static str {
