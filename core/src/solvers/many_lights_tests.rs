@@ -115,6 +115,7 @@ fn many_lights_vpl_sums_local_lights_as_one_part() {
     let sc = plume_scene(lights_above(&scenes::plume(16, 8.0, 0.9, 0.5), 2000, 10));
     let vpl = super::vpl::Vpl::new(super::vpl::VplSettings { walks: 4096, walks_per_subset: 0, gather_resolution: 12, output_resolution: 16, ..Default::default() }).unwrap();
     let out = vpl.solve(&sc, &mut SolveCtx::new(&NoProgress)).unwrap();
-    assert_eq!(out.counters.recomputed, vec!["single scattering: local lights".to_string()]);
+    // The part, and its shadow rays (which a session keeps for a camera move).
+    assert_eq!(out.counters.recomputed, vec!["single scattering: local lights".to_string(), "shadow rays: local lights".to_string()]);
     assert!(out.scattering.data.iter().all(|v| v.is_finite()) && out.scattering.data.iter().any(|v| v.max_element() > 0.0));
 }
