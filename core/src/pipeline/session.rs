@@ -133,6 +133,9 @@ impl Session {
         let last = self.last.take();
         guard::check_scene(scene)?;
         let choice = self.pick(scene)?;
+        // A solver wildly off on this scene refuses it, naming the solvers to use (auto never
+        // picks one that does).
+        crate::solvers::limits::check_scene(self.built.as_ref().map_or(self.name.as_str(), |b| b.name.as_str()), scene)?;
         let keys = SceneKeys::of(scene);
         let (diff, kept) = match (last, &self.last) {
             // `pick` left `last` empty: the same solver as the last frame.
