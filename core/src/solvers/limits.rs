@@ -48,8 +48,9 @@ fn limits_of(name: &str) -> Limits {
 }
 
 /// The solvers to use instead, by what was refused (the first two that are not the refusing
-/// one): those measured right there on the extremes table.
-const FOR_G: [&str; 1] = ["reference"];
+/// one; none: the path tracer's image): those measured right there on the extremes table.
+/// For g: no solver's grid (the path tracer's included) is within 2x at g +-0.999, its image is.
+const FOR_G: [&str; 0] = [];
 const FOR_DEPTH: [&str; 3] = ["pop", "reference", "lpm"];
 const FOR_DEPTH_DOME: [&str; 3] = ["lpm", "photon-grid", "network"];
 const FOR_CAMERA_INSIDE: [&str; 2] = ["photon-grid", "lpm"];
