@@ -206,7 +206,6 @@ const KNOWN: &[(&str, &str, &str)] = &[];
 fn known(name: &str, case: &str) -> Option<&'static str> {
     KNOWN.iter().find(|k| k.0 == name && k.1 == case).map(|k| k.2)
 }
-}
 
 /// Runs solver `name` on `case` as a host does: a session's solve, then the composite of its
 /// grid (transparent for lit cases, over the dome for furnaces). Returns the outcome, its
