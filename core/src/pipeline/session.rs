@@ -176,6 +176,10 @@ impl Session {
         let Session { devices, built, state, last, .. } = self;
         // Built in `new` for every name but auto, and by `pick` for auto.
         let Some(built) = built.as_ref() else { unreachable!("a session's solver is built before it solves") };
+        // A solver whose scattering grid is wildly off on this scene refuses it, naming the
+        // solvers to use (auto never picks one that does). Here, not in `begin`: the path
+        // tracer's own image is right where its grid is refused.
+        crate::solvers::limits::check_scene(&built.name, scene)?;
         let Some((_, kept)) = last.as_mut() else { unreachable!("`begin` keeps the frame's keys") };
         let same_s = diff.nothing() || (diff.camera_only() && built.solver.view_independent(scene));
         match kept.take() {

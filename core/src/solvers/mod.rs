@@ -2,6 +2,7 @@
 //! `Scene` into a scattering grid S(x) = sigma_s(x) * integral p(w_view, w') L(x, w') dw' —
 //! in-scattered radiance per metre towards the camera, RGB, on a grid over the medium.
 
+pub mod limits;
 pub mod lpm;
 pub mod network;
 pub mod photon_grid;

@@ -12,6 +12,8 @@ pub mod cloud;
 #[cfg(test)]
 mod coverage;
 #[cfg(test)]
+mod extremes;
+#[cfg(test)]
 mod furnace;
 #[cfg(test)]
 mod lamp_probe;

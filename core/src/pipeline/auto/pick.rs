@@ -42,6 +42,13 @@ const NEAR_BEST: f64 = 1.25;
 /// the most accurate).
 /// `preset` gives a solver's quality preset (the fall-back's settings).
 pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64, preset: fn(&str, &str) -> Map<String, Value>) -> Choice {
+    pick_among(model, f, target_error, time_budget, preset, &|_| false)
+}
+
+/// `pick` among the solvers that do not refuse the scene (`refuses(solver)`: solvers/limits.rs,
+/// where a solver's image is measured wildly off); the fall-back too is the first of
+/// `FALLBACK_ORDER` that does not refuse it.
+pub fn pick_among(model: &Model, f: &Features, target_error: f64, time_budget: f64, preset: fn(&str, &str) -> Map<String, Value>, refuses: &dyn Fn(&str) -> bool) -> Choice {
     let missing: Vec<&str> = f
         .lights
         .named()
@@ -55,11 +62,12 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64, pr
     let nearest = model.nearest_scene(f);
     let preds: Vec<(usize, Prediction)> = (0..model.configs.len())
         .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s) && !model.dominated_on(i, s)))
+        .filter(|&i| !refuses(&model.configs[i].0.solver))
         .filter_map(|i| Some((i, model.predict(i, f)?)))
         .collect();
     if preds.is_empty() || !missing.is_empty() {
         let reason = if preds.is_empty() {
-            "no measurements to pick from".to_string()
+            "no measurements to pick from among the solvers that do not refuse this scene".to_string()
         } else {
             // The classes as a sentence names them ("a local light outside light" before).
             let phrase = |n: &str| match n {
@@ -69,7 +77,7 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64, pr
             };
             format!("no measured scene has {}", missing.iter().map(|n| phrase(n)).collect::<Vec<_>>().join(" or "))
         };
-        return fallback(f, target_error, time_budget, &reason, preset);
+        return fallback(f, target_error, time_budget, &reason, preset, refuses);
     }
     let by_seconds = |a: &&(usize, Prediction), b: &&(usize, Prediction)| a.1.seconds.total_cmp(&b.1.seconds);
     let by_error = |a: &&(usize, Prediction), b: &&(usize, Prediction)| a.1.error.total_cmp(&b.1.error).then(a.1.seconds.total_cmp(&b.1.seconds));
@@ -122,8 +130,14 @@ pub fn pick(model: &Model, f: &Features, target_error: f64, time_budget: f64, pr
     }
 }
 
-fn fallback(f: &Features, target_error: f64, time_budget: f64, reason: &str, preset: fn(&str, &str) -> Map<String, Value>) -> Choice {
-    let (solver, quality) = FALLBACK;
+/// The fall-back's solvers in order of preference, at `FALLBACK.1`, where `FALLBACK.0` refuses
+/// the scene (the last, the path tracer, refuses least).
+const FALLBACK_ORDER: [&str; 6] = ["pop", "lpm", "photon-grid", "network", "vpl", "reference"];
+
+fn fallback(f: &Features, target_error: f64, time_budget: f64, reason: &str, preset: fn(&str, &str) -> Map<String, Value>, refuses: &dyn Fn(&str) -> bool) -> Choice {
+    let quality = FALLBACK.1;
+    // Where every solver's grid refuses (g 0.999), the path tracer: its image is right.
+    let solver = FALLBACK_ORDER.iter().copied().find(|s| !refuses(s)).unwrap_or("reference");
     let settings = preset(solver, quality);
     Choice {
         solver: solver.into(),
@@ -133,7 +147,7 @@ fn fallback(f: &Features, target_error: f64, time_budget: f64, reason: &str, pre
         predicted_seconds: None,
         target_error,
         time_budget,
-        why: format!("{solver} {quality} (the default): {reason}, so nothing measured predicts this scene of {}", f.describe()),
+        why: format!("{solver} {quality} (the default{}): {reason}, so nothing measured predicts this scene of {}", if solver == FALLBACK.0 { "" } else { ", where pop refuses the scene" }, f.describe()),
         fallback: true,
     }
 }
