@@ -258,11 +258,12 @@ impl Model {
     }
 
     /// Whether another configuration measured on scene `s` was both faster and more accurate
-    /// there than configuration `i` (at least as good in both, better in one).
-    pub fn dominated_on(&self, i: usize, s: usize) -> bool {
+    /// there than configuration `i` (at least as good in both, better in one), among those
+    /// `among` admits.
+    pub fn dominated_on(&self, i: usize, s: usize, among: impl Fn(usize) -> bool) -> bool {
         let on = |j: usize| self.configs[j].1.iter().find(|o| o.scene == s).map(|o| (o.error, o.seconds));
         let Some((e, t)) = on(i) else { return false };
-        (0..self.configs.len()).any(|j| j != i && on(j).is_some_and(|(ej, tj)| ej <= e && tj <= t && (ej < e || tj < t)))
+        (0..self.configs.len()).any(|j| j != i && among(j) && on(j).is_some_and(|(ej, tj)| ej <= e && tj <= t && (ej < e || tj < t)))
     }
 
     /// Configuration `i`'s predicted error and seconds on a scene of features `f`.

@@ -61,8 +61,10 @@ pub fn pick_among(model: &Model, f: &Features, target_error: f64, time_budget: f
     // other configuration beat there in both error and time (a dominated one is never worth it).
     let nearest = model.nearest_scene(f);
     let preds: Vec<(usize, Prediction)> = (0..model.configs.len())
-        .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s) && !model.dominated_on(i, s)))
+        // A configuration whose solver refuses the scene is no candidate, nor does it rule
+        // others out as dominated.
         .filter(|&i| !refuses(&model.configs[i].0.solver))
+        .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s) && !model.dominated_on(i, s, |j| !refuses(&model.configs[j].0.solver))))
         .filter_map(|i| Some((i, model.predict(i, f)?)))
         .collect();
     if preds.is_empty() || !missing.is_empty() {
