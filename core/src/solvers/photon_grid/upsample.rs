@@ -41,9 +41,8 @@
 //!   neighbour has weight, the trilinear lobe is kept.
 //! - Departure, by measurement: each neighbour's phi_q and g'_q count with w_L times its mass
 //!   (ratios of w_L-weighted sums, as the trilinear lobe does with its weights). With w_L alone
-//!   a rim cell holding a sliver of the medium and a few deposits weighs as much as a full one:
-//!   on the dense cloud (2^18 photons) image rel. RMSE 0.578 (x1.15) at cache 24 and 8.8 at
-//!   cache 48, against 0.173 trilinear.
+//!   a rim cell holding a sliver of the medium and a few deposits weighs as much as a full one,
+//!   and the dense cloud came out far worse than trilinear (docs/solvers/photon-grid.md).
 //! - Each neighbour's extrapolated g'_q g^delta is capped at 0.999 (delta < 0 can exceed 1).
 //! - g <= 0: g^delta is |g|^delta (floored at 1e-3 so that delta < 0 stays finite), and g' is
 //!   clamped to [0, 0.999] as everywhere.

@@ -21,7 +21,7 @@
 //! - propagate.rs: an iteration stands for a light path matched to the lattice's drift
 //!   (directional light) and to physical diffusion (isotropic light) instead of one cell edge;
 //!   without it diffuse light is several times too bright on the paper's own Fig. 12 cube
-//!   (image rel. RMSE 3.3 and 2.6 at g 0 and 0.7, against 0.18 and 0.27 with it).
+//!   (docs/solvers/pop.md).
 //! - light_grid.rs: cubic cells (Eq. 3's 45-degree cones assume them), so a grid is
 //!   `grid_resolution` cells along its longest side rather than e.g. 64^2 x 16.
 //! - negative g: the anisotropy decays with |g|^(sigma_s t) (Eq. 4 assumes g in [0, 1]).

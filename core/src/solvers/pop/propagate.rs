@@ -16,13 +16,11 @@
 //! the lattice is a random walk with steps h, whose mean square displacement per step is h^2;
 //! physical diffusion gives 2 l* per unit path (l* = 1 / sigma_tr, sigma_tr = sigma_s (1 - g) +
 //! sigma_a). Taking t = h as path length makes the fluence of diffuse light depend on the grid
-//! (at 16 cells per metre and sigma_tr = 4 it is 8x too high). With `diffusion_correction` an
+//! (docs/solvers/pop.md has the numbers). With `diffusion_correction` an
 //! iteration stands for the path s = h kappa with kappa = |a| k_d + (1 - |a|) h sigma_tr / 2,
 //! blending by the lobe's mean cosine: for directional light k_d = (front - back) / a, the path
 //! that makes the lattice's drift per step equal the lobe's mean cosine times the path (about
-//! one cell); for isotropic light the diffusion-matched h sigma_tr / 2. (Measured against the
-//! reference on the cube, without the correction the g = 0 and g = 0.7 cases have image rel. RMSE
-//! 3.3 and 2.6, several times too bright; with it 0.18 and 0.27, mean brightness within 10%.)
+//! one cell); for isotropic light the diffusion-matched h sigma_tr / 2.
 //! The fluence a packet leaves in a cell is P s / h (fluence = energy x path length per
 //! volume), and absorption and the decay of a use the same s. Energy accounting is
 //! unchanged: the fractions still sum to one.
