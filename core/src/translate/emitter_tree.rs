@@ -1,6 +1,6 @@
 //! The cost guard of the shadow-ray sums over point emitters (the single-scattering grid,
 //! network's direct light, lpm's first scattering): each emitter costs a shadow ray at every
-//! grid point, so thousands of point lights (or area lights cut into VPLs) took 14-97x a
+//! grid point, so thousands of point lights (or area lights cut into VPLs) took many times a
 //! solver's usual time (BENCHMARKS.md, "Cost guard on extreme scenes"). Past `TREE_ABOVE`
 //! emitters they are put in a binary tree by position (one per angular profile, so a merged
 //! node keeps its members' direction dependence exactly), and a point sums a node as one
@@ -23,7 +23,7 @@ pub const TREE_ABOVE: usize = 256;
 /// the centre's within 25% before `inverse_square_factor`'s second-order correction. Measured
 /// on 600 point and spot lights above a plume (solvers/many_lights_tests.rs), the
 /// single-scattering grid is within 0.3% of the exact sum in total and 0.9% in L1, at a
-/// fraction of the shadow rays (10,000 lights: vpl's single scattering 43 s -> 0.2 s).
+/// fraction of the shadow rays.
 pub const OPENING: f32 = 0.25;
 
 struct Node {
