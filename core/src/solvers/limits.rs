@@ -104,30 +104,62 @@ pub fn camera_inside(scene: &Scene) -> bool {
 
 /// Ok, or the refusal of solver `name` for `scene`, naming the reason and the solvers to use.
 pub fn check_scene(name: &str, scene: &Scene) -> Result<()> {
+    Measures::of(scene).check(name)
+}
+
+/// What the limits compare, measured once per scene: `auto` checks every candidate solver
+/// against them (the thickness alone is 200k density lookups).
+pub struct Measures {
+    g: f32,
+    dome: bool,
+    depth: f32,
+    /// Under a dome only (no limit reads it otherwise).
+    thickness: f32,
+    camera_inside: bool,
+}
+
+impl Measures {
+    pub fn of(scene: &Scene) -> Measures {
+        let dome = scene.lights.iter().any(|l| matches!(l, Light::Dome(_)));
+        Measures {
+            g: scene.medium.g,
+            dome,
+            depth: depth_per_voxel(scene),
+            thickness: if dome { thickness(scene) } else { 0.0 },
+            camera_inside: camera_inside(scene),
+        }
+    }
+
+    /// `check_scene` of solver `name` on the scene these measures are of.
+    pub fn check(&self, name: &str) -> Result<()> {
+        check_measures(name, self)
+    }
+}
+
+fn check_measures(name: &str, m: &Measures) -> Result<()> {
     let l = limits_of(name);
     let refuse = |why: String, instead: &[&str]| {
         let instead: Vec<&str> = instead.iter().copied().filter(|s| *s != name).take(2).collect();
         let instead = if instead.is_empty() { "reference's own image (the CLI's `render` path-traces every pixel)".to_string() } else { instead.join(" or ") };
         Err(Error::scene("solver", format!("{name} refuses this scene: {why}, where its scattering grid's image is more than 2x off; use {instead}")))
     };
-    let g = scene.medium.g;
-    let dome = scene.lights.iter().any(|l| matches!(l, Light::Dome(_)));
+    let (g, dome) = (m.g, m.dome);
     let (lo, hi) = if dome { (l.g.0.max(l.g_dome.0), l.g.1.min(l.g_dome.1)) } else { l.g };
     if !(lo..=hi).contains(&g) {
         let under = if dome { " under a dome" } else { "" };
         return refuse(format!("g = {g}{under} is beyond its angular resolution ({lo} <= g <= {hi})"), &FOR_G);
     }
-    let depth = depth_per_voxel(scene);
+    let depth = m.depth;
     if depth > l.max_depth_per_voxel {
         return refuse(format!("an optical depth of {depth:.3e} per voxel (density x density_scale x voxel edge; at most {}) leaves a lit skin thinner than its cells", l.max_depth_per_voxel), &FOR_DEPTH);
     }
     if dome && l.max_thickness_dome.is_finite() {
-        let thickness = thickness(scene);
+        let thickness = m.thickness;
         if thickness > l.max_thickness_dome {
             return refuse(format!("an optical thickness of {thickness:.1} through the medium under a dome (at most {})", l.max_thickness_dome), &FOR_DEPTH_DOME);
         }
     }
-    if l.camera_inside && camera_inside(scene) {
+    if l.camera_inside && m.camera_inside {
         return refuse("the camera is inside the medium".into(), &FOR_CAMERA_INSIDE);
     }
     Ok(())

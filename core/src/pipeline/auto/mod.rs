@@ -38,7 +38,8 @@ pub fn validate(settings: &Map<String, Value>) -> Result<()> {
 pub fn choose(scene: &Scene, settings: &Map<String, Value>, preset: fn(&str, &str) -> Map<String, Value>) -> Result<Choice> {
     let s: AutoSettings = parse_settings(settings)?;
     s.validate()?;
-    let refuses = |solver: &str| crate::solvers::limits::check_scene(solver, scene).is_err();
+    let measures = crate::solvers::limits::Measures::of(scene);
+    let refuses = |solver: &str| measures.check(solver).is_err();
     Ok(pick::pick_among(Model::embedded()?, &Features::of(scene), s.target_error, s.time_budget, preset, &refuses))
 }
 
