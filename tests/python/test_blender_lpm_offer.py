@@ -112,7 +112,7 @@ def test_sparse_1024_vdb_gets_the_offer_with_the_librarys_numbers(fresh):
 
 def test_offer_estimates_the_quality_presets_settings(fresh):
     """The estimate is for the settings Compute runs under each Quality (the preset's
-    `directions` included: draft 4, final 49), not for lpm's defaults."""
+    `directions` included: draft 4, final 36), not for lpm's defaults."""
     offer_mod = _mod("lpm_offer")
     ob = bs.file_volume("Big", FIXTURE)
     s = ob.volscatter
@@ -122,17 +122,17 @@ def test_offer_estimates_the_quality_presets_settings(fresh):
         est, proposed = offer_mod.offer(ob, bpy.context)
         assert direct_estimate(ob) == est, quality
         if quality != "CUSTOM":
-            assert s.solver_settings()["directions"] == {"DRAFT": 4, "PREVIEW": 25, "FINAL": 49}[quality]
+            assert s.solver_settings()["directions"] == {"DRAFT": 4, "PREVIEW": 25, "FINAL": 36}[quality]
         seen[quality] = est
-    # The directions change what lpm holds (so the comparison above can fail): final's 49 per
+    # The directions change what lpm holds (so the comparison above can fail): final's 36 per
     # face against preview's 25 on the same grid would be more; the grids differ too.
     assert seen["FINAL"]["in_memory_bytes"] > seen["PREVIEW"]["in_memory_bytes"] > seen["DRAFT"]["in_memory_bytes"]
-    # At equal grids, only the directions differ: Custom at final's grid (64) against Final.
+    # At equal grids, only the directions differ: Custom at final's grid (40) against Final.
     s.solver, s.quality, s.lpm_out_of_core = "lpm", "CUSTOM", False
-    s.grid_resolution = 64
+    s.grid_resolution = 40
     est, _ = offer_mod.offer(ob, bpy.context)
     assert est["grid_dims"] == seen["FINAL"]["grid_dims"]
-    assert est["in_memory_bytes"] < seen["FINAL"]["in_memory_bytes"], "lpm's default 25 directions hold less than 49"
+    assert est["in_memory_bytes"] < seen["FINAL"]["in_memory_bytes"], "lpm's default 25 directions hold less than 36"
 
 
 def test_offer_follows_a_result_volume_and_a_smoke_domain_to_their_source(fresh):
