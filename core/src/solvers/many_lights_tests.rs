@@ -60,6 +60,16 @@ fn errors(a: &ScatteringGrid, b: &ScatteringGrid) -> (f64, f64) {
     (total(a) / total(b) - 1.0, l1 / total(b))
 }
 
+/// Solves `sc` whole and as the sum of solves over its lights `per` at a time (`whole_and_parts`),
+/// prints the whole's total and L1 error against the sum under `what`, and asserts them below
+/// `max_total` and `max_l1`.
+fn assert_whole_near_parts(what: &str, sc: &Scene, per: usize, solve: impl Fn(&Scene) -> ScatteringGrid, max_total: f64, max_l1: f64) {
+    let (whole, exact) = whole_and_parts(sc, per, solve);
+    let (total, l1) = errors(&whole, &exact);
+    eprintln!("{what}: total {total:+.5}, L1 {l1:.5}");
+    assert!(total.abs() < max_total && l1 < max_l1, "total {total}, L1 {l1}");
+}
+
 /// The single-scattering grid (the stage vpl, photon-grid, network and lpm add) of 600 point
 /// and spot lights, summed through the emitter tree, against the exact sum of three grids of
 /// 200 lights each (below the tree's threshold): the total within 1% and the grid's L1 within
@@ -69,10 +79,7 @@ fn errors(a: &ScatteringGrid, b: &ScatteringGrid) -> (f64, f64) {
 fn many_lights_single_scattering_tree_matches_exact_sum() {
     let sc = plume_scene(lights_above(&scenes::plume(16, 8.0, 0.9, 0.5), 600, 7));
     assert!(sc.lights.len() > TREE_ABOVE && 200 <= TREE_ABOVE);
-    let (whole, exact) = whole_and_parts(&sc, 200, |s| single_scattering_grid(s, 16, 8).unwrap());
-    let (total, l1) = errors(&whole, &exact);
-    eprintln!("single scattering, 600 lights: total {total:+.5}, L1 {l1:.5}");
-    assert!(total.abs() < 0.01 && l1 < 0.02, "total {total}, L1 {l1}");
+    assert_whole_near_parts("single scattering, 600 lights", &sc, 200, |s| single_scattering_grid(s, 16, 8).unwrap(), 0.01, 0.02);
 }
 
 /// network's whole solve (its direct light at the particles and its single scattering both go
@@ -83,10 +90,7 @@ fn many_lights_single_scattering_tree_matches_exact_sum() {
 fn many_lights_network_tree_matches_exact_sum() {
     let sc = plume_scene(lights_above(&scenes::plume(16, 8.0, 0.9, 0.5), 600, 8));
     let net = super::network::Network::new(super::network::NetworkSettings { particles: 1024, directions: 48, output_resolution: 16, ..Default::default() }).unwrap();
-    let (whole, exact) = whole_and_parts(&sc, 200, |s| net.solve(s, &mut SolveCtx::new(&NoProgress)).unwrap().scattering);
-    let (total, l1) = errors(&whole, &exact);
-    eprintln!("network, 600 lights: total {total:+.5}, L1 {l1:.5}");
-    assert!(total.abs() < 0.01 && l1 < 0.02, "total {total}, L1 {l1}");
+    assert_whole_near_parts("network, 600 lights", &sc, 200, |s| net.solve(s, &mut SolveCtx::new(&NoProgress)).unwrap().scattering, 0.01, 0.02);
 }
 
 /// pop's light merging (radial/cluster.rs: past MAX_SOURCES point lights, one radial source per
@@ -101,10 +105,8 @@ fn many_lights_pop_merging_matches_unmerged_sum() {
     let lights: Vec<Light> = lights_above(&medium, 480, 9).into_iter().filter(|l| matches!(l, Light::Point { .. })).collect();
     let sc = plume_scene(lights);
     let pop = super::pop::Pop::new(super::pop::PopSettings { grid_resolution: 16, output_resolution: 16, ..Default::default() }).unwrap();
-    let (whole, exact) = whole_and_parts(&sc, MAX_SOURCES, |s| pop.solve(s, &mut SolveCtx::new(&NoProgress)).unwrap().scattering);
-    let (total, l1) = errors(&whole, &exact);
-    eprintln!("pop, 240 point lights merged into <= {MAX_SOURCES}: total {total:+.5}, L1 {l1:.5}");
-    assert!(total.abs() < 0.05 && l1 < 0.06, "total {total}, L1 {l1}");
+    let what = format!("pop, 240 point lights merged into <= {MAX_SOURCES}");
+    assert_whole_near_parts(&what, &sc, MAX_SOURCES, |s| pop.solve(s, &mut SolveCtx::new(&NoProgress)).unwrap().scattering, 0.05, 0.06);
 }
 
 /// What a host running vpl on 2000 lights gets: the single scattering's local lights as one
