@@ -1,9 +1,9 @@
 //! The cost guard of lpm: its work is cells x directions x orders, and the orders are the
 //! medium's to decide: a thick, white medium keeps scattering light for hundreds of orders
-//! before the last falls below `epsilon` (the dense white furnace took all 200 of the default
-//! cap, over 90 s, where a cloud takes 10 to 40). Before the orders run, the solve predicts
-//! their number from the medium's optical thickness and albedo, and when it is far beyond a
-//! usual solve's says so up front (the progress stage's text, which a host shows while it
+//! before the last falls below `epsilon`. Before the orders run, the solve predicts their
+//! number from the medium's optical thickness and albedo; past twice a usual solve's the late
+//! orders run over fewer directions (coarse.rs), and where they cannot, a solve far beyond
+//! a usual one says so up front (the progress stage's text, which a host shows while it
 //! waits) and in a note.
 
 use glam::Vec3;

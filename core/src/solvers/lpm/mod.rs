@@ -26,6 +26,7 @@
 //! files too, read and written a slab at a time (out_of_core.rs): the whole solve is bounded by
 //! `memory_budget`, not only the sweeps.
 
+pub mod coarse;
 mod collect;
 pub mod cost;
 pub mod delta_m;
@@ -80,6 +81,8 @@ pub struct LpmReport {
     pub max_u: Vec<f32>,
     /// Propagations after the first order's (each gives J one more order).
     pub orders: usize,
+    /// Of those, the ones run over fewer directions (coarse.rs).
+    pub coarse_orders: usize,
     /// What the user should hear (the cost guard's prediction), passed on as the solve's notes.
     pub notes: Vec<String>,
     pub layers: [usize; FACES],
@@ -101,6 +104,8 @@ pub struct Overrides {
     pub keep_orders: bool,
     /// Skip the upsampled output (the report's J is enough).
     pub j_only: bool,
+    /// Run every order on the propagation grid (coarse.rs's late orders off).
+    pub fine_orders_only: bool,
 }
 
 fn max_abs(v: &[Vec3]) -> f32 {
@@ -170,7 +175,9 @@ impl Lpm {
         let dirs = Directions::new(s.lattice_side() as usize, s.storage_per_face as usize);
         // The cost guard (cost.rs): a solve of hundreds of orders says so before they run.
         let (orders, tau) = cost::predicted_orders(&grid, medium.albedo, medium.g, s.epsilon, s.max_orders);
-        let slow = cost::note(orders, tau, medium.albedo, grid.len(), dirs.len());
+        // Hundreds of orders run mostly over fewer directions (coarse.rs), at a few times a usual cost.
+        let coarse_late_orders = coarse::engaged(orders, &dirs) && !ov.keep_orders && !ov.fine_orders_only;
+        let slow = if coarse_late_orders { None } else { cost::note(orders, tau, medium.albedo, grid.len(), dirs.len()) };
         if let Some(n) = &slow {
             if !progress.update(&format!("lpm: about {orders} orders, minutes (see the note)"), 0.0) {
                 return Err(Error::Cancelled);
@@ -251,11 +258,31 @@ impl Lpm {
         if !progress.update("lpm propagate", 0.1) {
             return Err(Error::Cancelled);
         }
+        // The late orders' sweeper over fewer directions (coarse.rs), started when the first
+        // ones are done.
+        let late = if coarse_late_orders { Some(coarse::LateOrders::new(&dirs, medium.g, &delta)?) } else { None };
+        let late_layers = match (&late, ov.layers) {
+            (Some(_), Some(l)) => [l.max(1); FACES],
+            (Some(late), None) => stream::plan(grid.dims, &late.dirs, s.memory_budget)?,
+            (None, _) => layers,
+        };
         timings.time("lpm propagate", || -> Result<()> {
+            let mut late_sweeper: Option<Box<dyn stream::Sweeper + '_>> = None;
             while first_max > 0.0 && report.orders < s.max_orders as usize && *report.max_u.last().unwrap_or(&0.0) > s.epsilon * first_max {
+                if let Some(late) = late.as_ref().filter(|_| late_sweeper.is_none() && report.orders == coarse::FIRST_ORDERS) {
+                    let setup = stream::SweepSetup { grid: &grid, dirs: &late.dirs, table: late.table(), layers: &late_layers, camera, albedo: delta.albedo };
+                    late_sweeper = Some(backend.start(setup, progress)?);
+                }
                 u_cur.iter_mut().for_each(|v| *v = Vec3::ZERO);
                 let before = ov.keep_orders.then(|| j.clone());
-                sweeper.sweep(&u_prev, &zero_boundary, &mut u_cur, Some(&mut j), &mut report.sweep, progress)?;
+                match late_sweeper.as_mut() {
+                    Some(late_sweeper) => {
+                        let boundary = late.as_ref().map_or(&zero_boundary, |l| &l.zero_boundary);
+                        late_sweeper.sweep(&u_prev, boundary, &mut u_cur, Some(&mut j), &mut report.sweep, progress)?;
+                        report.coarse_orders += 1;
+                    }
+                    None => sweeper.sweep(&u_prev, &zero_boundary, &mut u_cur, Some(&mut j), &mut report.sweep, progress)?,
+                }
                 if let Some(b) = before {
                     report.j_per_order.push(j.iter().zip(&b).map(|(a, b)| *a - *b).collect());
                 }
