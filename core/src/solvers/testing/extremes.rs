@@ -305,6 +305,22 @@ fn table() -> (Vec<String>, Vec<String>) {
     (lines, failures)
 }
 
+/// Today's date (UTC) as YYYY-MM-DD, from the days since 1970 (the civil-from-days
+/// conversion of H. Hinnant's date algorithms; no date crate for one line of a table).
+fn utc_date() -> String {
+    let days = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs() / 86_400) as i64;
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}")
+}
+
 /// Writes `body` between the `extremes` markers of BENCHMARKS.md (appended when absent), as
 /// scripts/benchlib.py's `write_section` does, through a temporary file renamed over it.
 fn publish(body: &str) {
@@ -332,7 +348,13 @@ fn no_solver_wildly_off_on_extreme_scenes() {
     println!("{body}");
     eprintln!("extremes table: {:.0} s", t.elapsed().as_secs_f64());
     if std::env::var("VS_EXTREMES_WRITE").is_ok_and(|v| v == "1") {
-        publish(&body);
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let stamp = format!(
+            "Written on {} ({threads} threads, {}) by `VS_EXTREMES_WRITE=1 cargo nextest run -p volscatter-core --cargo-profile release -E 'test(no_solver_wildly_off_on_extreme_scenes)'`.",
+            utc_date(),
+            std::env::consts::ARCH
+        );
+        publish(&body.replacen("\n\n", &format!("\n\n{stamp} "), 1));
     }
     assert!(failures.is_empty(), "solvers wildly off without refusing:\n{}", failures.join("\n"));
 }
