@@ -8,8 +8,8 @@
 //! function's lobe, the orders go on over `LATE_SIDE`^2 directions a face. U is kept as it
 //! is: its storage bins do not depend on the propagation directions. A medium predicted to
 //! converge in a usual number of orders never switches (`engaged`), so its solve is the same
-//! to the bit. (Coarser cells in place of fewer directions lose light: a cell of optical
-//! thickness 3 at the boundary lets its averaged source leak out, 12% of a dense white box.)
+//! to the bit. (Coarser cells in place of fewer directions lose light at the medium's
+//! boundary: docs/solvers/lpm.md.)
 
 use glam::Vec3;
 
