@@ -134,7 +134,9 @@ def write_section(name: str, markdown_text: str, path: str | os.PathLike = "BENC
         text = pattern.sub(lambda _: block, text, count=1)
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
-    text = layout(text)
+    if path.name == "BENCHMARKS.md":
+        # Only BENCHMARKS.md is laid out by question; README.md's generated blocks stay in place.
+        text = layout(text)
     # Write atomically so that a script interrupted mid-write never truncates other sections.
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".benchmarks.", suffix=".tmp")
     with os.fdopen(fd, "w", encoding="utf-8") as f:

@@ -126,3 +126,13 @@ def test_benchmarks_are_laid_out_by_question():
     placed = {n for _, _, names in benchlib.QUESTIONS for n in names}
     unplaced = [n for n in re.findall(r"<!-- BEGIN ([A-Za-z0-9_.-]+) -->", text) if n not in placed]
     assert not unplaced, f"sections under no question (add them to benchlib.QUESTIONS): {unplaced}"
+
+
+def test_a_section_written_into_another_file_leaves_the_file_as_it_is(tmp_path):
+    """readme_tables.py writes README.md's blocks through write_section: only BENCHMARKS.md is
+    rearranged by question, never the README around its blocks."""
+    import benchlib
+    readme = tmp_path / "README.md"
+    readme.write_text("# A title\n\nProse.\n\n<!-- BEGIN readme-eevee -->\nold\n<!-- END readme-eevee -->\n\n## More\n")
+    benchlib.write_section("readme-eevee", "new", readme)
+    assert readme.read_text() == "# A title\n\nProse.\n\n<!-- BEGIN readme-eevee -->\nnew\n<!-- END readme-eevee -->\n\n## More\n"
