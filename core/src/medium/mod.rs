@@ -21,7 +21,7 @@ use glam::{Affine3A, IVec3, Vec3};
 pub use emission::{Emission, EmissionLaw, EmissionTerm};
 pub use grid::{DensityGrid, DensityGridBuilder, GridLimits};
 pub use majorant::MajorantGrid;
-pub use optics::{ball_mean_inverse_square, lamp_inverse_square, min_spacing, near_field_radius, optical_depth, ray_box};
+pub use optics::{ball_mean_inverse_square, lamp_inverse_square, lamp_mean_over_ball, min_spacing, near_field_radius, optical_depth, ray_box};
 pub use tracking::{FreeFlight, Tracking};
 
 #[derive(Clone, Debug)]

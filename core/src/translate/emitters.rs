@@ -112,6 +112,16 @@ impl PointEmitter {
         }
     }
 
+    /// `inverse_square` as a cell's mean: a sphere lamp larger than `near` is averaged over the
+    /// ball of radius `near` about the point (`medium::lamp_mean_over_ball`), as a smaller one
+    /// already is.
+    pub fn cell_mean_inverse_square(&self, d: f32, near: f32) -> f32 {
+        match self.extent {
+            Extent::Sphere(interior) if self.radius > near => crate::medium::lamp_mean_over_ball(d, self.radius, near, interior == SphereInterior::Lit),
+            _ => self.inverse_square(d, near),
+        }
+    }
+
     /// How far the light from this emitter travels through the medium to a point at distance
     /// `d`, along the direction to its centre: a sphere lamp's light leaves its surface; inside
     /// a lit lamp it comes from every direction, taken as the mean chord to the surface,

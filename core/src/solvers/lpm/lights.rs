@@ -150,7 +150,9 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                     if intensity.max_element() <= 0.0 {
                         return;
                     }
-                    let field = em.inverse_square(dist, near);
+                    // A cell's mean: at its centre a cell beside a sphere lamp would see the
+                    // surface up close or not at all, as its centre falls.
+                    let field = em.cell_mean_inverse_square(dist, near);
                     if field <= 0.0 {
                         return;
                     }
