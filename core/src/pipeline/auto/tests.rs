@@ -171,8 +171,8 @@ fn leave_one_scene_out() {
     let n = full.scenes.len();
     let pct = |k: usize| 100.0 * k as f64 / n as f64;
     println!(
-        "\nLeave-one-scene-out: {passed} of {n} picks pass both ({:.0}%), {error_passed} of {n} the error part ({:.0}%); \
-         {within_target} of {n} picks measured within the target error itself ({:.0}%).",
+        "\nLeave-one-scene-out: {passed} of {n} picks pass both ({:.1}%), {error_passed} of {n} the error part ({:.1}%); \
+         {within_target} of {n} picks measured within the target error itself ({:.1}%).",
         pct(passed),
         pct(error_passed),
         pct(within_target)
