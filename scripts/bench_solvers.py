@@ -100,7 +100,7 @@ def render(name: str, solver: str, settings: dict, work: Path, tag: str, spp: in
     extra = ["--transparent", "--aov", "none"] + (["--spp", str(spp)] if spp is not None else [])
     extra += ["--seed", str(seed)] if seed is not None else []
     subprocess.run(render_cmd(out, rep, scene_json(name), solver=solver, device="cpu", settings=settings, extra=extra), check=True,
-                   timeout=timeout)
+                   timeout=timeout, stderr=subprocess.PIPE, text=True)
     return read_exr_rgb(out), json.loads(rep.read_text())
 
 
@@ -252,9 +252,10 @@ def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tupl
             try:
                 img, rep = render(name, e["name"], settings, work, f"{name}_{e['name']}_{q}", timeout=RUN_TIMEOUT)
             except subprocess.CalledProcessError as err:
-                log(f"{e['name']} {q} on {name} failed: {err}")
+                why = (err.stderr or "").strip().splitlines()[-1:] or [str(err)]
+                log(f"{e['name']} {q} on {name} failed: {why[0]}")
                 if failed is not None:
-                    failed.append((e["name"], q))
+                    failed.append((e["name"], q, why[0]))
                 continue
             except subprocess.TimeoutExpired:
                 log(f"{e['name']} {q} on {name}: capped at {RUN_TIMEOUT:.0f} s")
@@ -700,8 +701,10 @@ def update_runs(scenes: list[str], args, work: Path) -> int:
         r, _ = solver_runs(n, ref, entries, qualities, work, skipped, earlier=meas["runs"], capped=capped, failed=failed)
         meas["capped"] = capped
         # A run that fails now (a solver that refuses the scene since: solvers/limits.rs) no
-        # longer stands for what the solver does there: its old row goes too.
-        done = {(x["solver"], x["quality"]) for x in r} | set(failed)
+        # longer stands for what the solver does there: its old row goes, and the refusal is kept.
+        done = {(x["solver"], x["quality"]) for x in r} | {(f[0], f[1]) for f in failed}
+        meas["refused"] = [x for x in meas.get("refused", []) if not (x["scene"] == n and (x["solver"], x["quality"]) in done)]
+        meas["refused"] += [{"scene": n, "solver": f[0], "quality": f[1], "error": f[2]} for f in failed]
         before = {(x["solver"], x["quality"]): x["seconds"] for x in meas["runs"] if x["scene"] == n}
         ratios[n] = [x["seconds"] / before[(x["solver"], x["quality"])] for x in r if before.get((x["solver"], x["quality"]), 0) > 0]
         old = [x for x in meas["runs"] if not (x["scene"] == n and (x["solver"], x["quality"]) in done)]
