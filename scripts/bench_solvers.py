@@ -100,7 +100,7 @@ def render(name: str, solver: str, settings: dict, work: Path, tag: str, spp: in
     extra = ["--transparent", "--aov", "none"] + (["--spp", str(spp)] if spp is not None else [])
     extra += ["--seed", str(seed)] if seed is not None else []
     subprocess.run(render_cmd(out, rep, scene_json(name), solver=solver, device="cpu", settings=settings, extra=extra), check=True,
-                   timeout=timeout)
+                   timeout=timeout, stderr=subprocess.PIPE, text=True)
     return read_exr_rgb(out), json.loads(rep.read_text())
 
 
@@ -232,7 +232,8 @@ RUN_TIMEOUT = None
 
 
 def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tuple[str, ...], work: Path,
-                skipped: list[str], earlier: list[dict] = (), capped: list[dict] | None = None):
+                skipped: list[str], earlier: list[dict] = (), capped: list[dict] | None = None,
+                failed: list[tuple[str, str]] | None = None):
     """Runs each solver of `entries` at each quality on scene `name`; `earlier` holds runs measured
     before (a cheaper preset measured in an earlier pass also skips the dearer one)."""
     runs, images = [], {}
@@ -245,10 +246,16 @@ def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tupl
                 log("skipped:", skipped[-1])
                 continue
             settings = full_settings(e, q)
+            # The 1-minute load average as the run starts: times taken under heavy load are not
+            # comparable with the rest (issue 36: five scenes measured at 10-14 ran 1.5-4x slower).
+            load = os.getloadavg()[0]
             try:
                 img, rep = render(name, e["name"], settings, work, f"{name}_{e['name']}_{q}", timeout=RUN_TIMEOUT)
             except subprocess.CalledProcessError as err:
-                log(f"{e['name']} {q} on {name} failed: {err}")
+                why = (err.stderr or "").strip().splitlines()[-1:] or [str(err)]
+                log(f"{e['name']} {q} on {name} failed: {why[0]}")
+                if failed is not None:
+                    failed.append((e["name"], q, why[0]))
                 continue
             except subprocess.TimeoutExpired:
                 log(f"{e['name']} {q} on {name}: capped at {RUN_TIMEOUT:.0f} s")
@@ -258,7 +265,7 @@ def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tupl
             solve, comp = split_phases(rep)
             r = {"scene": name, "solver": e["name"], "quality": q, "settings": settings, "device": "cpu",
                  "seconds": solve + comp, "solve_seconds": solve, "composite_seconds": comp,
-                 "image_error": rel_rmse(img, ref), "grid_error": None}
+                 "image_error": rel_rmse(img, ref), "grid_error": None, "load_average": round(load, 2)}
             runs.append(r)
             images[(e["name"], q)] = img
             log(f"{e['name']:12s} {q:8s} {name}: {r['seconds']:.2f} s (solve {solve:.2f}), error {r['image_error']:.4f}")
@@ -532,10 +539,12 @@ def auto_acceptance() -> int:
     if not keep:
         log(out.stdout[-3000:], out.stderr[-3000:])
         return 1
+    tests = (REPO_ROOT / "core" / "src" / "pipeline" / "auto" / "tests.rs").read_text()
+    floor = float(tests.split("const LOSO_BOTH_FLOOR: f64 = ")[1].split(";")[0])
     text = ["## auto: leave-one-scene-out acceptance (issue 36)", "",
             "Written by `scripts/bench_solvers.py --auto-acceptance` from the `leave_one_scene_out` test of "
-            "core/src/pipeline/auto/tests.rs (it asserts >= 90% on the error part and, as a floor, >= 75% on both; the "
-            "issue's 90% on both is not met: the misses are time predictions): fitted to measurements.json without the scene, `auto` "
+            f"core/src/pipeline/auto/tests.rs (it asserts >= 90% on the error part and, as a floor, >= {floor:.0%} on both, "
+            "the issue's aim being 90%): fitted to measurements.json without the scene, `auto` "
             "at its default target (image error 0.10) picks; the pick passes when its measured error is within 1.5x of the "
             "best error measured there at no more than its time, and its measured time within 2x of its prediction (or "
             "0.25 s of it: sub-second runs vary 2-4x on the loaded shared machine). "
@@ -677,6 +686,9 @@ def update_runs(scenes: list[str], args, work: Path) -> int:
     entries = [e for e in registry() if e["name"] in names]
     skipped = []
     qualities = tuple(args.qualities.split(","))
+    # Per scene, each new run's seconds / the replaced run's: scenes measured again beside those
+    # re-measured for load tell whether the new times are comparable with the file's others.
+    ratios: dict[str, list[float]] = {}
     for n in scenes:
         ref, meta = load_reference(n)
         if not any(s["name"] == n for s in meas["scenes"]):
@@ -685,9 +697,16 @@ def update_runs(scenes: list[str], args, work: Path) -> int:
                                    "description": DESCRIPTIONS[n],
                                    **({"held_out": True} if any(s["name"] == n and s["held_out"] for s in SCENE_SET) else {})})
         capped = [c for c in meas.get("capped", []) if not (c["scene"] == n and c["solver"] in names and c["quality"] in qualities)]
-        r, _ = solver_runs(n, ref, entries, qualities, work, skipped, earlier=meas["runs"], capped=capped)
+        failed = []
+        r, _ = solver_runs(n, ref, entries, qualities, work, skipped, earlier=meas["runs"], capped=capped, failed=failed)
         meas["capped"] = capped
-        done = {(x["solver"], x["quality"]) for x in r}
+        # A run that fails now (a solver that refuses the scene since: solvers/limits.rs) no
+        # longer stands for what the solver does there: its old row goes, and the refusal is kept.
+        done = {(x["solver"], x["quality"]) for x in r} | {(f[0], f[1]) for f in failed}
+        meas["refused"] = [x for x in meas.get("refused", []) if not (x["scene"] == n and (x["solver"], x["quality"]) in done)]
+        meas["refused"] += [{"scene": n, "solver": f[0], "quality": f[1], "error": f[2]} for f in failed]
+        before = {(x["solver"], x["quality"]): x["seconds"] for x in meas["runs"] if x["scene"] == n}
+        ratios[n] = [x["seconds"] / before[(x["solver"], x["quality"])] for x in r if before.get((x["solver"], x["quality"]), 0) > 0]
         old = [x for x in meas["runs"] if not (x["scene"] == n and (x["solver"], x["quality"]) in done)]
         # keep the file's order: scene by scene, the solvers in registry order
         meas["runs"] = old + r
@@ -700,6 +719,11 @@ def update_runs(scenes: list[str], args, work: Path) -> int:
     meas["runs"].sort(key=lambda x: (scene_order[x["scene"]], order.get(x["solver"], 99), quality_order.get(x["quality"], 9)))
     where = ",".join(scenes) if len(scenes) <= 5 else f"{len(scenes)} scenes ({scenes[0]} ... {scenes[-1]})"
     meas["updated"] = f"{today()}: {','.join(names)} measured again on {where}"
+    loads = [x["load_average"] for x in meas["runs"] if x["scene"] in scenes and "load_average" in x]
+    if loads:
+        meas["updated"] += (f" (interleaved, under `nice`; 1-minute load average at the runs' start {min(loads):.1f}-{max(loads):.1f}, "
+                            f"median {median(loads):.1f}; new / old time per scene, geometric mean over its runs: "
+                            + ", ".join(f"{k} {math.exp(sum(map(math.log, v)) / len(v)):.2f}" for k, v in ratios.items() if v) + ")")
     if args.no_write:
         print(markdown(meas, gpu_note()))
         return 0

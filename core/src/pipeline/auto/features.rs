@@ -49,6 +49,11 @@ pub struct LightClasses {
     pub local_inside: bool,
     pub local_outside: bool,
     pub emission: bool,
+    /// The kinds of local light, wherever they sit, for the time model: a solver's cost is per
+    /// kind (a point or spot light is one position to sample; an area light's surface is
+    /// sampled over, lpm draft took 5x longer under a rect light than beside a point light).
+    pub point: bool,
+    pub area: bool,
 }
 
 impl LightClasses {
@@ -61,6 +66,12 @@ impl LightClasses {
             ("local light outside", self.local_outside),
             ("emission", self.emission),
         ]
+    }
+
+    /// (name, present) of what sets a solver's cost, for `model::time_distance`: the light
+    /// kinds (distant, dome, point or spot, area, emission), where local lights sit aside.
+    pub fn kinds(&self) -> [(&'static str, bool); 5] {
+        [("distant", self.distant), ("dome", self.dome), ("point", self.point), ("area", self.area), ("emission", self.emission)]
     }
 
     /// The names of the classes present, joined by "+" ("none" without lights).
@@ -114,9 +125,18 @@ impl Features {
                     lights.dome = true;
                     None
                 }
-                Light::Point { position, .. } => Some(*position),
-                Light::Spot(s) => Some(s.position),
-                Light::Area(a) => Some(a.center),
+                Light::Point { position, .. } => {
+                    lights.point = true;
+                    Some(*position)
+                }
+                Light::Spot(s) => {
+                    lights.point = true;
+                    Some(s.position)
+                }
+                Light::Area(a) => {
+                    lights.area = true;
+                    Some(a.center)
+                }
             };
             if let Some(p) = local {
                 if inside(p) {
@@ -137,6 +157,19 @@ impl Features {
             voxels: extent.x as f64 * extent.y as f64 * extent.z as f64,
             pixels: scene.camera.width as f64 * scene.camera.height as f64,
         }
+    }
+
+    /// The scattering orders an iterative solve runs on this medium before an order's light falls
+    /// below `epsilon` (at most `max_orders`): lpm's cost model (solvers/lpm/cost.rs
+    /// `predicted_orders`, diffusion's slowest mode), here from the probe's mean optical depth
+    /// under the similarity (1 - albedo g). Thick white media keep scattering for hundreds of
+    /// orders, which no light class or size tells (issue 40: the dense white furnace).
+    pub fn scattering_orders(&self, epsilon: f64, max_orders: f64) -> f64 {
+        let a = self.albedo.clamp(0.0, 1.0);
+        let tau = self.tau_mean.max(0.0) * (1.0 - a * self.g.clamp(-1.0, 1.0)).max(0.0);
+        let lambda = a / (1.0 + (std::f64::consts::PI / (tau + 1.42)).powi(2) / 3.0);
+        let orders = if lambda <= 0.0 || !(epsilon > 0.0 && epsilon < 1.0) { 1.0 } else { (epsilon.ln() / lambda.ln()).ceil() + 1.0 };
+        orders.clamp(1.0, max_orders.max(1.0))
     }
 
     /// One line for the `why` sentence.

@@ -9,8 +9,10 @@
 //!   ln e(q) = sum_s w_s ln e_s / sum_s w_s with w_s = exp(-d(q, s)^2 / 2), where d is the
 //!   distance of `distance` below; a measured scene at distance 0 (the query is that scene) is
 //!   used alone, so that on measured scenes the prediction is the measurement;
-//! - seconds: a weighted geometric mean of the measured solve seconds scaled by voxels^(1/3),
-//!   with weights from `time_distance` (light classes and size: what sets the cost), plus the
+//! - seconds: a weighted geometric mean of the measured solve seconds scaled by voxels^(1/3) (not
+//!   lpm's: it solves on its own grid)
+//!   (and, for lpm and photon-grid, by the scattering orders: `orders_scaling`), with weights from
+//!   `time_distance` (light kinds and size: what sets the cost), plus the
 //!   measured composite seconds scaled by pixels x voxels^(1/3) (the compositor marches every
 //!   pixel through the grid, in steps of a voxel).
 //!
@@ -163,17 +165,41 @@ pub fn distance(a: &Features, b: &Features) -> f64 {
 }
 
 /// Distance between two scenes for the time prediction: what sets a solver's cost is which
-/// lights it handles (dome ordinates, radial grids for local lights, emission VPLs) and the
-/// medium's size, far more than its albedo or g (issue 36's scene set: a separate time kernel
-/// took leave-one-scene-out time predictions from 22 to 24 of 29 within 2x). A light class
-/// present in one scene and not the other counts 2, a factor of e in voxels 1, the optical depth
-/// half as much as in `distance`.
+/// kinds of light it handles (dome ordinates, one sample per point or spot light, samples over
+/// an area light's surface, emission VPLs) and the medium's size, far more than its albedo or g
+/// (issue 36's scene set: a separate time kernel took leave-one-scene-out time predictions from
+/// 22 to 24 of 29 within 2x). A light kind present in one scene and not the other counts 2, a
+/// local light inside the medium in one and outside in the other 1 (the kind sets the cost more
+/// than where it sits: an area light outside took the time of the disc inside, not of the point
+/// lights outside), a factor of e in voxels 1, the optical depth half as much as in `distance`.
 pub fn time_distance(a: &Features, b: &Features) -> f64 {
     let ln2 = std::f64::consts::LN_2;
     let tau = |x: f64| (1.0 + x.max(0.0)).ln() / ln2;
-    let lights = a.lights.named().iter().zip(b.lights.named()).filter(|(x, y)| x.1 != y.1).count() as f64;
-    let d2 = 4.0 * lights + (a.voxels.max(1.0) / b.voxels.max(1.0)).ln().powi(2) + 0.25 * (tau(a.tau_mean) - tau(b.tau_mean)).powi(2);
+    let kinds = a.lights.kinds().iter().zip(b.lights.kinds()).filter(|(x, y)| x.1 != y.1).count() as f64;
+    let sides = (a.lights.local_inside != b.lights.local_inside) as u8 + (a.lights.local_outside != b.lights.local_outside) as u8;
+    let d2 = 4.0 * (kinds + 0.25 * sides as f64) + (a.voxels.max(1.0) / b.voxels.max(1.0)).ln().powi(2) + 0.25 * (tau(a.tau_mean) - tau(b.tau_mean)).powi(2);
     d2.sqrt()
+}
+
+/// How a configuration's solve time grows with the scattering orders its medium needs
+/// (`Features::scattering_orders`, at lpm's `epsilon` and `max_orders` where the configuration
+/// has them): the solve time is scaled by the orders' ratio to this power. lpm's work is
+/// cells x directions x orders (solvers/lpm/cost.rs) and photon-grid's photons scatter about as
+/// many times before they leave, but later orders light fewer cells: on the scene set both
+/// solvers' times grow as about the orders' square root (lpm's propagation 1.3 s at 9 orders,
+/// 4 s at 61). Leave-one-scene-out, that took time predictions from 25 to 26 of 29 within 2x;
+/// network's, pop's and vpl's times did not follow the orders, so theirs are not scaled.
+/// Beyond the most orders measured, the time grows with the orders themselves: there every
+/// order sweeps the whole medium (issue 40's dense white furnace, 200 orders at albedo 1, took
+/// lpm preview 49 s where a tenth of its density took 4 s).
+const ORDERS_EXPONENT: f64 = 0.5;
+
+/// (epsilon, max_orders, exponent) of `config`'s orders scaling; None: its time is not scaled.
+fn orders_scaling(config: &Config) -> Option<(f64, f64, f64)> {
+    matches!(config.solver.as_str(), "lpm" | "photon-grid").then(|| {
+        let get = |k: &str, default: f64| config.settings.get(k).and_then(|v| v.as_f64()).unwrap_or(default);
+        (get("epsilon", 1e-3), get("max_orders", 200.0), ORDERS_EXPONENT)
+    })
 }
 
 impl Model {
@@ -293,7 +319,19 @@ impl Model {
         // scaled by the cube root of the voxels (its marches cross the medium voxel by voxel).
         let wt: Vec<f64> = obs.iter().map(|o| (-0.5 * time_distance(f, &self.scenes[o.scene].1).powi(2)).exp().max(1e-300)).collect();
         let voxels = |o: &Observation| (f.voxels / self.scenes[o.scene].1.voxels.max(1.0)).cbrt();
-        let solve = mean_ln(&wt, &|o| o.solve_seconds * voxels(o)).exp();
+        // lpm solves on its own grid (`grid_resolution` cells along the longest side), whatever
+        // the medium's voxels: its solve is not scaled by them.
+        let solve_voxels = |o: &Observation| if self.configs[i].0.solver == "lpm" { 1.0 } else { voxels(o) };
+        let scaling = orders_scaling(&self.configs[i].0);
+        let measured_most = scaling.map_or(1.0, |(eps, max, _)| obs.iter().map(|o| self.scenes[o.scene].1.scattering_orders(eps, max)).fold(1.0, f64::max));
+        let orders = |o: &Observation| match scaling {
+            Some((eps, max, k)) => {
+                let q = f.scattering_orders(eps, max);
+                (q.min(measured_most) / self.scenes[o.scene].1.scattering_orders(eps, max)).powf(k) * (q / measured_most).max(1.0)
+            }
+            None => 1.0,
+        };
+        let solve = mean_ln(&wt, &|o| o.solve_seconds * solve_voxels(o) * orders(o)).exp();
         let composite = obs
             .iter()
             .zip(&wt)

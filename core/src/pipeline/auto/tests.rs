@@ -117,11 +117,10 @@ const LOSO_TIME_FACTOR: f64 = 2.0;
 const LOSO_TIME_SLACK: f64 = 0.25;
 /// The share of left-out scenes whose pick's error must pass (the issue's 90%)...
 const LOSO_PASS_SHARE: f64 = 0.9;
-/// ...and the share that must pass error and time together: a floor against regressions, below
-/// the issue's 90%, which the measurements of 2026-11-28 do not reach (24 of 29: the misses are
-/// time predictions, the old five scenes' solvers 2-7x slower than the set's at the same
-/// features, and lpm draft under an area light; BENCHMARKS.md `auto-acceptance`).
-const LOSO_BOTH_FLOOR: f64 = 0.75;
+/// ...and the share that must pass error and time together: a floor against regressions at what
+/// the measurements reach, just under the issue's 90% (BENCHMARKS.md `auto-acceptance` names
+/// the misses).
+const LOSO_BOTH_FLOOR: f64 = 0.89;
 
 /// One left-out scene's pick at the default target by `model` (fitted without it): (error passed,
 /// error and time passed, a table row "| scene | pick | predicted | measured | best at its time | ... |").
@@ -172,8 +171,8 @@ fn leave_one_scene_out() {
     let n = full.scenes.len();
     let pct = |k: usize| 100.0 * k as f64 / n as f64;
     println!(
-        "\nLeave-one-scene-out: {passed} of {n} picks pass both ({:.0}%), {error_passed} of {n} the error part ({:.0}%); \
-         {within_target} of {n} picks measured within the target error itself ({:.0}%).",
+        "\nLeave-one-scene-out: {passed} of {n} picks pass both ({:.1}%), {error_passed} of {n} the error part ({:.1}%); \
+         {within_target} of {n} picks measured within the target error itself ({:.1}%).",
         pct(passed),
         pct(error_passed),
         pct(within_target)
@@ -279,4 +278,34 @@ fn default_target_is_reached_on_every_measured_scene() {
             eprintln!("{scene}: reference noise {noise:.3}, best run {best:.3}: not a test of the default");
         }
     }
+}
+
+/// Issue 40's dense white furnace (scripts/bench_cost_guard.py: a 16^3 plume at density scale 40,
+/// albedo 1, under a white dome), where `auto` predicted lpm preview at 8.6 s and it took 38.5 s:
+/// no measured scene is that thick and white, and only the scattering orders (the cap of 200,
+/// where the set's scenes need 7 to 61) tell the model so. lpm preview's predicted time there
+/// and at a tenth of the density is within 2x of what it measured beside the scene set's
+/// measurements (49 s and 4.2 s, 2026-11-28, load average 7), and 4x larger at the full density.
+#[test]
+fn lpm_time_follows_the_scattering_orders_of_a_dense_white_furnace() {
+    let furnace = |density: f64| {
+        let text = json!({"format": 1,
+            "medium": {"procedural": "plume", "dims": [16], "density_scale": density, "albedo": 1.0},
+            "lights": [{"type": "dome", "color": [1, 1, 1]}],
+            "camera": {"position": [0, -4.5, 0.4], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 40, "width": 128, "height": 128}});
+        crate::scene::Scene::from_json_str(&text.to_string(), std::path::Path::new(".")).unwrap()
+    };
+    let model = model();
+    let lpm_preview = model.configs.iter().position(|(c, _)| c.solver == "lpm" && c.quality == "preview").expect("lpm preview measured");
+    let (dense_scene, thin) = (furnace(40.0), Features::of(&furnace(4.0)));
+    let dense = Features::of(&dense_scene);
+    assert_eq!(dense.scattering_orders(1e-3, 200.0), 200.0, "{dense:?}");
+    let seconds = |f: &Features| model.predict(lpm_preview, f).unwrap().seconds;
+    let (t_dense, t_thin) = (seconds(&dense), seconds(&thin));
+    eprintln!("lpm preview predicted {t_dense:.1} s on the dense white furnace, {t_thin:.1} s at a tenth of its density");
+    let c = choose(&dense_scene, &Map::new(), registry::preset_settings).unwrap();
+    eprintln!("auto on the dense white furnace: {}", c.why);
+    let within_2x = |t: f64, measured: f64| (measured / 2.0..=measured * 2.0).contains(&t);
+    assert!(within_2x(t_dense, 49.0), "lpm preview predicted {t_dense:.1} s on the dense white furnace (measured 49 s)");
+    assert!(within_2x(t_thin, 4.2) && t_thin * 4.0 < t_dense, "at a tenth of the density: {t_thin:.1} s (measured 4.2 s; dense: {t_dense:.1} s)");
 }
