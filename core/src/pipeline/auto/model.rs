@@ -189,16 +189,17 @@ pub fn time_distance(a: &Features, b: &Features) -> f64 {
 /// solvers' times grow as about the orders' square root (lpm's propagation 1.3 s at 9 orders,
 /// 4 s at 61). Leave-one-scene-out, that took time predictions from 25 to 26 of 29 within 2x;
 /// network's, pop's and vpl's times did not follow the orders, so theirs are not scaled.
-/// Beyond the most orders measured, the time grows with the orders themselves: there every
-/// order sweeps the whole medium (issue 40's dense white furnace, 200 orders at albedo 1, took
-/// lpm preview 49 s where a tenth of its density took 4 s).
+/// Beyond the most orders measured, photon-grid's time grows with the orders themselves (every
+/// order traces every photon on); lpm's does not: past twice a usual solve's orders its late
+/// orders run over a sixth of the directions (solvers/lpm/coarse.rs).
 const ORDERS_EXPONENT: f64 = 0.5;
 
-/// (epsilon, max_orders, exponent) of `config`'s orders scaling; None: its time is not scaled.
-fn orders_scaling(config: &Config) -> Option<(f64, f64, f64)> {
+/// (epsilon, max_orders, exponent, linear beyond the measured orders) of `config`'s orders
+/// scaling; None: its time is not scaled.
+fn orders_scaling(config: &Config) -> Option<(f64, f64, f64, bool)> {
     matches!(config.solver.as_str(), "lpm" | "photon-grid").then(|| {
         let get = |k: &str, default: f64| config.settings.get(k).and_then(|v| v.as_f64()).unwrap_or(default);
-        (get("epsilon", 1e-3), get("max_orders", 200.0), ORDERS_EXPONENT)
+        (get("epsilon", 1e-3), get("max_orders", 200.0), ORDERS_EXPONENT, config.solver == "photon-grid")
     })
 }
 
@@ -323,11 +324,12 @@ impl Model {
         // the medium's voxels: its solve is not scaled by them.
         let solve_voxels = |o: &Observation| if self.configs[i].0.solver == "lpm" { 1.0 } else { voxels(o) };
         let scaling = orders_scaling(&self.configs[i].0);
-        let measured_most = scaling.map_or(1.0, |(eps, max, _)| obs.iter().map(|o| self.scenes[o.scene].1.scattering_orders(eps, max)).fold(1.0, f64::max));
+        let measured_most = scaling.map_or(1.0, |(eps, max, _, _)| obs.iter().map(|o| self.scenes[o.scene].1.scattering_orders(eps, max)).fold(1.0, f64::max));
         let orders = |o: &Observation| match scaling {
-            Some((eps, max, k)) => {
+            Some((eps, max, k, linear_beyond)) => {
                 let q = f.scattering_orders(eps, max);
-                (q.min(measured_most) / self.scenes[o.scene].1.scattering_orders(eps, max)).powf(k) * (q / measured_most).max(1.0)
+                let beyond = if linear_beyond { (q / measured_most).max(1.0) } else { 1.0 };
+                (q.min(measured_most) / self.scenes[o.scene].1.scattering_orders(eps, max)).powf(k) * beyond
             }
             None => 1.0,
         };

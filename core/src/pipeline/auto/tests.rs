@@ -117,10 +117,9 @@ const LOSO_TIME_FACTOR: f64 = 2.0;
 const LOSO_TIME_SLACK: f64 = 0.25;
 /// The share of left-out scenes whose pick's error must pass (the issue's 90%)...
 const LOSO_PASS_SHARE: f64 = 0.9;
-/// ...and the share that must pass error and time together: a floor against regressions at what
-/// the measurements reach, just under the issue's 90% (BENCHMARKS.md `auto-acceptance` names
-/// the misses).
-const LOSO_BOTH_FLOOR: f64 = 0.89;
+/// ...and the share that must pass error and time together: the issue's 90% too
+/// (BENCHMARKS.md `auto-acceptance` names the misses).
+const LOSO_BOTH_FLOOR: f64 = 0.9;
 
 /// One left-out scene's pick at the default target by `model` (fitted without it): (error passed,
 /// error and time passed, a table row "| scene | pick | predicted | measured | best at its time | ... |").
@@ -281,11 +280,12 @@ fn default_target_is_reached_on_every_measured_scene() {
 }
 
 /// Issue 40's dense white furnace (scripts/bench_cost_guard.py: a 16^3 plume at density scale 40,
-/// albedo 1, under a white dome), where `auto` predicted lpm preview at 8.6 s and it took 38.5 s:
-/// no measured scene is that thick and white, and only the scattering orders (the cap of 200,
-/// where the set's scenes need 7 to 61) tell the model so. lpm preview's predicted time there
-/// and at a tenth of the density is within 2x of what it measured beside the scene set's
-/// measurements (49 s and 4.2 s, 2026-11-28, load average 7), and 4x larger at the full density.
+/// albedo 1, under a white dome): no measured scene is that thick and white, and only the
+/// scattering orders (the cap of 200, where the set's scenes need 7 to 61) tell the model so.
+/// lpm preview's predicted time there and at a tenth of the density is within 2x of what it
+/// measured after the scene set's measurements of lpm (5.9 s and 1.4 s, 2026-11-28, load
+/// average 2; its late orders over fewer directions, solvers/lpm/coarse.rs), and larger at the
+/// full density.
 #[test]
 fn lpm_time_follows_the_scattering_orders_of_a_dense_white_furnace() {
     let furnace = |density: f64| {
@@ -306,6 +306,6 @@ fn lpm_time_follows_the_scattering_orders_of_a_dense_white_furnace() {
     let c = choose(&dense_scene, &Map::new(), registry::preset_settings).unwrap();
     eprintln!("auto on the dense white furnace: {}", c.why);
     let within_2x = |t: f64, measured: f64| (measured / 2.0..=measured * 2.0).contains(&t);
-    assert!(within_2x(t_dense, 49.0), "lpm preview predicted {t_dense:.1} s on the dense white furnace (measured 49 s)");
-    assert!(within_2x(t_thin, 4.2) && t_thin * 4.0 < t_dense, "at a tenth of the density: {t_thin:.1} s (measured 4.2 s; dense: {t_dense:.1} s)");
+    assert!(within_2x(t_dense, 5.9), "lpm preview predicted {t_dense:.1} s on the dense white furnace (measured 5.9 s)");
+    assert!(within_2x(t_thin, 1.4) && t_thin < t_dense, "at a tenth of the density: {t_thin:.1} s (measured 1.4 s; dense: {t_dense:.1} s)");
 }
