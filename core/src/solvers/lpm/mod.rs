@@ -81,7 +81,7 @@ pub struct LpmReport {
     pub max_u: Vec<f32>,
     /// Propagations after the first order's (each gives J one more order).
     pub orders: usize,
-    /// Of those, the ones run over fewer directions (coarse.rs).
+    /// Of those, the late ones run over fewer directions (coarse.rs).
     pub coarse_orders: usize,
     /// What the user should hear (the cost guard's prediction), passed on as the solve's notes.
     pub notes: Vec<String>,
@@ -104,7 +104,7 @@ pub struct Overrides {
     pub keep_orders: bool,
     /// Skip the upsampled output (the report's J is enough).
     pub j_only: bool,
-    /// Run every order on the propagation grid (coarse.rs's late orders off).
+    /// Run every order over the solve's directions (coarse.rs's late orders off).
     pub fine_orders_only: bool,
 }
 
