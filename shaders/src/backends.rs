@@ -69,9 +69,14 @@ impl Accelerator for Gpu {
             // What the device did for this solve: the context's totals across it (one solve
             // at a time holds the shared context).
             let before = ctx.counts();
+            ctx.take_stages();
+            ctx.idle();
             let mut out = job(make(ctx).as_ref())?;
             let after = ctx.counts();
             out.counters.add(&device_delta(&before, &after));
+            // The medium's device objects built or kept (`GpuContext::resident`).
+            out.counters.add(&ctx.take_stages());
+            ctx.end_solve();
             Ok(out)
         })
     }
