@@ -61,7 +61,7 @@ pub struct GpuContext {
     pool: Arc<Pool>,
     /// Objects built from the medium alone (its density, mip, majorants), by label, with the
     /// key of what they were built from (`resident`).
-    resident: Mutex<HashMap<&'static str, Vec<(u64, Arc<dyn Any + Send + Sync>)>>>,
+    resident: Mutex<HashMap<&'static str, Vec<Resident>>>,
     /// Which resident objects were built or kept since the last `take_stages`.
     stages: Mutex<Counters>,
     /// Every (size, use) of buffer the helpers allocated, with the solve (`Pool::solves`) that
@@ -149,6 +149,9 @@ struct DeviceCounts {
 fn bump(c: &AtomicU64, by: u64) {
     c.fetch_add(by, Ordering::Relaxed);
 }
+
+/// A resident object with the key of what it was built from.
+type Resident = (u64, Arc<dyn Any + Send + Sync>);
 
 /// Objects `GpuContext::resident` keeps per label: two, so that a solver alternating between
 /// two forms of one medium (lpm's extinction with and without its delta-M scaling) keeps both.
@@ -397,7 +400,7 @@ impl GpuContext {
     fn filled(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> Buf {
         bump(&self.counts.bytes_uploaded, contents.len() as u64);
         // The queue writes whole 4-byte words; every kernel input is made of them.
-        if contents.len() % 4 == 0 {
+        if contents.len().is_multiple_of(4) {
             if let Some(b) = self.pool.take(contents.len() as u64, usage) {
                 self.queue.write_buffer(&b, 0, contents);
                 return self.wrap(b);

@@ -141,7 +141,7 @@ pub fn composite_with_single(
         "composite",
         WGSL,
         bytemuck::bytes_of(&params),
-        &[&density, &s_buf, &s1_buf, &env_buf],
+        &[density, &s_buf, &s1_buf, &env_buf],
         pixels * 48,
         [cam.width.div_ceil(8), cam.height.div_ceil(8), 1],
     )?;

@@ -119,7 +119,7 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         "single scattering",
         WGSL,
         bytemuck::bytes_of(&params),
-        &[&density, &light_buf],
+        &[density, &light_buf],
         grid.data.len() as u64 * 16,
         [grid.dims[0].div_ceil(4), grid.dims[1].div_ceil(4), grid.dims[2].div_ceil(4)],
     )?;

@@ -123,14 +123,14 @@ pub fn visibility_chunked(ctx: &GpuContext, x: &VisibilityInput, keys_per_chunk:
         params.modes[0] = row;
         let keys_params = ctx.uniform("network keys params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &keys_k, &[&keys_params, &density, &positions, &basis, &keys, &to_boundary], groups);
+        ctx.record(&mut enc, &keys_k, &[&keys_params, density, &positions, &basis, &keys, &to_boundary], groups);
         ctx.submit_and_wait(enc)?;
         sort::sort(ctx, &keys, len, c, progress)?;
         let (groups, row) = groups_for(c * n32);
         params.modes[0] = row;
         let links_params = ctx.uniform("network links params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &links_k, &[&links_params, &density, &positions, &basis, &keys, &to_boundary, &order, &up, &alpha], groups);
+        ctx.record(&mut enc, &links_k, &[&links_params, density, &positions, &basis, &keys, &to_boundary, &order, &up, &alpha], groups);
         ctx.submit_and_wait(enc)?;
         let words = c as u64 * n;
         let order_back = ctx.read_buffer(&order, words * 4)?;

@@ -236,7 +236,7 @@ impl PhotonBackend for GpuPhotonBackend {
                 let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;
                 let groups = n.div_ceil(64);
                 let mut enc = ctx.device.create_command_encoder(&Default::default());
-                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &sums, &majorants], [groups, 1, 1]);
+                ctx.record(&mut enc, &pipeline, &[&params, density, &rays, &sums, majorants], [groups, 1, 1]);
                 ctx.submit_and_wait(enc)?;
             }
             let words: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&sums, sum_bytes)?).to_vec();

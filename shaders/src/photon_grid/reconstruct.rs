@@ -130,7 +130,7 @@ pub fn scattering_towards(ctx: &GpuContext, medium: &Medium, tallies: &[Tallies]
         let params = ReconstructParams { out_dims: [nx, ny, first, base.out_dims[3]], ..base };
         let params = ctx.uniform("photon reconstruct params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &pipeline, &[&params, &density, &cells, &slab], [nx.div_ceil(8), ny.div_ceil(8), count]);
+        ctx.record(&mut enc, &pipeline, &[&params, density, &cells, &slab], [nx.div_ceil(8), ny.div_ceil(8), count]);
         ctx.submit_and_wait(enc)?;
         let at = (plane * first as u64) as usize;
         let n = plane * count as u64;

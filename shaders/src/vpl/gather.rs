@@ -156,7 +156,7 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
         let params = GatherParams { range: [first as u32, chunk as u32, n as u32, per_row as u32], ..base };
         let params = ctx.uniform("vpl gather params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &pipeline, &[&params, &density, &point_buf, &vpl_buf, &out], [per_row as u32, rows as u32, 1]);
+        ctx.record(&mut enc, &pipeline, &[&params, density, &point_buf, &vpl_buf, &out], [per_row as u32, rows as u32, 1]);
         ctx.submit_and_wait(enc).map_err(to_gpu)?;
         first += chunk;
     }
