@@ -94,3 +94,33 @@ fn every_gpu_backend_has_a_light_move_test() {
         assert!(covered.contains(&name), "{name} has a GPU backend but no light-move session test");
     }
 }
+
+/// The compositor's frames: a second composite after a camera move compiles no kernel, keeps
+/// the medium's density on the device, allocates no buffer of a size it had, and gives the
+/// image a fresh context gives (bit for bit: the same kernel on the same inputs).
+#[test]
+#[ignore = "needs a GPU adapter: run with --run-ignored all (scripts/test.sh does when one exists)"]
+fn gpu_composite_second_frame_keeps_device_state() {
+    use volscatter_core::compositor::CompositeOptions;
+    let ctx = gpu_or_skip();
+    let sc = scene(0.0);
+    let mut s = volscatter_core::ScatteringGrid::over_medium(&sc.medium, 12).unwrap();
+    for (i, v) in s.data.iter_mut().enumerate() {
+        *v = glam::Vec3::new((i % 7) as f32, (i % 5) as f32, (i % 3) as f32) * 0.1;
+    }
+    let opts = CompositeOptions::default();
+    crate::composite::composite(&ctx, &sc, &s, &opts).unwrap();
+    assert!(ctx.take_stages().was_computed("gpu medium upload: density"), "the first composite uploads the density");
+    let mut moved = sc.clone();
+    moved.camera.position.x += 0.05;
+    let (before, known) = (ctx.counts(), ctx.buffers_of_known_size());
+    let second = crate::composite::composite(&ctx, &moved, &s, &opts).unwrap();
+    let after = ctx.counts();
+    let stages = ctx.take_stages();
+    assert_eq!(after.pipelines_created - before.pipelines_created, 0, "the second composite compiles nothing");
+    assert!(stages.was_reused("gpu medium upload: density") && !stages.was_computed("gpu medium upload"), "{stages:?}");
+    assert_eq!(ctx.buffers_of_known_size() - known, 0, "no buffer of a size the first composite had");
+    let fresh = crate::composite::composite(&GpuContext::new().unwrap(), &moved, &s, &opts).unwrap();
+    let bits = |im: &volscatter_core::image::Image| im.rgba.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&second), bits(&fresh), "the second composite is the fresh context's image");
+}
