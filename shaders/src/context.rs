@@ -347,7 +347,7 @@ impl GpuContext {
     /// (one submission, no upload).
     pub fn zeroed_storage(&self, label: &str, bytes: u64) -> Result<Buf, GpuError> {
         self.check_storage_size(label, bytes)?;
-        let (size, usage) = (bytes.max(16), Self::STORAGE);
+        let (size, usage) = (self.size_class(bytes), Self::STORAGE);
         if let Some(b) = self.pool.take(size, usage) {
             let mut enc = self.device.create_command_encoder(&Default::default());
             enc.clear_buffer(&b, 0, None);
@@ -362,6 +362,26 @@ impl GpuContext {
             usage,
             mapped_at_creation: false, // wgpu zero-initialises buffers
         })))
+    }
+
+    /// The size a storage buffer of `bytes` is allocated with: above 64 KiB rounded up to a
+    /// sixteenth of the next power of two (at most 6.25% more), so that a buffer whose size
+    /// follows the lights (pop's light-aligned grids change shape as the sun turns) is served
+    /// from the pool by one of its neighbours' sizes. Kernels index their buffers by their own
+    /// counts, never by the binding's length (photon-grid's reconstruction only guards with it).
+    fn size_class(&self, bytes: u64) -> u64 {
+        let exact = bytes.max(16);
+        if exact <= 1 << 16 {
+            return exact;
+        }
+        let step = exact.next_power_of_two() / 16;
+        let class = exact.div_ceil(step) * step;
+        let max = (self.limits.max_storage_buffer_binding_size as u64).min(self.limits.max_buffer_size);
+        if class > max {
+            exact
+        } else {
+            class
+        }
     }
 
     const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
@@ -401,10 +421,16 @@ impl GpuContext {
         bump(&self.counts.bytes_uploaded, contents.len() as u64);
         // The queue writes whole 4-byte words; every kernel input is made of them.
         if contents.len().is_multiple_of(4) {
-            if let Some(b) = self.pool.take(contents.len() as u64, usage) {
-                self.queue.write_buffer(&b, 0, contents);
-                return self.wrap(b);
-            }
+            let size = if usage == Self::STORAGE { self.size_class(contents.len() as u64) } else { contents.len() as u64 };
+            let b = match self.pool.take(size, usage) {
+                Some(b) => b,
+                None => {
+                    self.allocated(size, usage);
+                    self.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false })
+                }
+            };
+            self.queue.write_buffer(&b, 0, contents);
+            return self.wrap(b);
         }
         self.allocated(contents.len() as u64, usage);
         self.wrap(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage }))
