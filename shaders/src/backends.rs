@@ -82,14 +82,22 @@ impl Accelerator for Gpu {
     }
 
     fn single_for(&self, choice: DeviceChoice, scene: &Scene, opts: &CompositeOptions) -> Result<Attempt<Option<ScatteringGrid>>> {
-        try_gpu(choice, |ctx| crate::composite::single_for(ctx, scene, opts).map_err(Into::into))
+        try_gpu(choice, |ctx| {
+            let out = crate::composite::single_for(ctx, scene, opts).map_err(Into::into);
+            ctx.end_solve();
+            out
+        })
     }
 
     fn composite(&self, choice: DeviceChoice, scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Attempt<Image>> {
         if scene.medium.emission.is_some() {
             return Ok(Attempt::Declined("the GPU compositor does not march the medium's emission yet".into()));
         }
-        try_gpu(choice, |ctx| crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into))
+        try_gpu(choice, |ctx| {
+            let out = crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into);
+            ctx.end_solve();
+            out
+        })
     }
 }
 

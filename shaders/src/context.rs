@@ -105,9 +105,9 @@ impl Drop for Buf {
 pub struct Pool {
     free: Mutex<Vec<(u64, u64, wgpu::Buffer)>>,
     flushes: AtomicU64,
-    /// Solves (`end_solve`) so far: a buffer not taken during the whole solve after the one
-    /// that dropped it (and the composite between) is freed, so the pool holds at most about
-    /// two frames' working set.
+    /// Solves and composites (`end_solve`) so far: a buffer not taken during the two after the
+    /// one that dropped it (a frame's solve and composite) is freed, so the pool holds about two
+    /// frames' working set, also when the sizes change (a resized viewport).
     solves: AtomicU64,
 }
 
@@ -129,7 +129,7 @@ impl Pool {
     fn end_solve(&self) {
         let solves = self.solves.fetch_add(1, Ordering::Relaxed);
         if let Ok(mut free) = self.free.lock() {
-            free.retain(|(_, s, _)| *s >= solves);
+            free.retain(|(_, s, _)| *s + 1 >= solves);
         }
     }
 }
@@ -275,8 +275,8 @@ impl GpuContext {
         Ok(out)
     }
 
-    /// After a solver's solve (a frame): waits for the device (the buffers it dropped may then
-    /// serve the next frame) and frees pooled buffers that the whole frame did not take (`Pool`).
+    /// After a solver's solve or a composite: waits for the device (the buffers it dropped may
+    /// then serve the next one) and frees pooled buffers left untaken (`Pool`).
     pub(crate) fn end_solve(&self) {
         let _ = self.wait();
         self.pool.end_solve();
