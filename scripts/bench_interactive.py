@@ -85,9 +85,12 @@ def write(args: argparse.Namespace, rows: list[str], done: list[str]) -> None:
         f" alone (every {args.check_every}th frame and the last); `ratio` = session median / one-off median; `target` is issue 37's"
         " (a light move <= 0.30 of a one-off solve, a camera move <= 0.10); `identical` counts checked frames bit for bit the"
         " one-off S (`rel. RMSE` the worst of them); `slowest stage` is where the second frame spent most (s); `kept` what it reused"
-        " (its counters)." + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}."),
+        " (its counters)." + (" On the GPU the second frame's device counters follow: MiB uploaded, buffers allocated,"
+                              " pipelines compiled (issue 37: after a light move no medium upload, no buffer of a known size, no pipeline)." if gpu else "")
+        + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}."),
         "",
-        *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |", rows),
+        *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |"
+               + (" MiB up | buffers | pipelines |" if gpu else ""), rows),
     ]
     publish("interactive-gpu" if gpu else "interactive", lines)
 
@@ -130,7 +133,8 @@ def main() -> None:
             aim = "-" if target is None else (f"<= {target:.2f} " + ("met" if ratio <= target else "**missed**"))
             rows.append(f"| {scene} | {d['solver']} | {d['motion']} | {d['device']} | {d['first_frame_seconds']:.3f} |"
                         f" {d['frame_median_seconds']:.3f} | {d['frame_p95_seconds']:.3f} | {d['one_off_median_seconds']:.3f} |"
-                        f" {ratio:.2f} | {aim} | {d['bit_identical_frames']}/{d['checked_frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {top} | {kept} |")
+                        f" {ratio:.2f} | {aim} | {d['bit_identical_frames']}/{d['checked_frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {top} | {kept} |"
+                        + (f" {c.get('bytes_uploaded', 0) / 2**20:.2f} | {c.get('buffers_created', 0)} | {c.get('pipelines_created', 0)} |" if args.device == "gpu" else ""))
         done.append(scene)
         write(args, rows, done)
 

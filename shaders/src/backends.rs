@@ -69,22 +69,35 @@ impl Accelerator for Gpu {
             // What the device did for this solve: the context's totals across it (one solve
             // at a time holds the shared context).
             let before = ctx.counts();
+            ctx.take_stages();
+            ctx.idle();
             let mut out = job(make(ctx).as_ref())?;
             let after = ctx.counts();
             out.counters.add(&device_delta(&before, &after));
+            // The medium's device objects built or kept (`GpuContext::resident`).
+            out.counters.add(&ctx.take_stages());
+            ctx.end_solve();
             Ok(out)
         })
     }
 
     fn single_for(&self, choice: DeviceChoice, scene: &Scene, opts: &CompositeOptions) -> Result<Attempt<Option<ScatteringGrid>>> {
-        try_gpu(choice, |ctx| crate::composite::single_for(ctx, scene, opts).map_err(Into::into))
+        try_gpu(choice, |ctx| {
+            let out = crate::composite::single_for(ctx, scene, opts).map_err(Into::into);
+            ctx.end_solve();
+            out
+        })
     }
 
     fn composite(&self, choice: DeviceChoice, scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions) -> Result<Attempt<Image>> {
         if scene.medium.emission.is_some() {
             return Ok(Attempt::Declined("the GPU compositor does not march the medium's emission yet".into()));
         }
-        try_gpu(choice, |ctx| crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into))
+        try_gpu(choice, |ctx| {
+            let out = crate::composite::composite_with_single(ctx, scene, s, single, opts).map_err(Into::into);
+            ctx.end_solve();
+            out
+        })
     }
 }
 

@@ -2,6 +2,7 @@
 
 use std::any::Any;
 use std::collections::HashMap;
+use std::ops::Deref;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use volscatter_core::stages::Counters;
@@ -55,6 +56,82 @@ pub struct GpuContext {
     objects: Mutex<HashMap<&'static str, Arc<dyn Any + Send + Sync>>>,
     /// What this context's helpers created and moved so far (`counts`).
     counts: DeviceCounts,
+    /// Buffers the helpers made and their users dropped, handed out again for requests of
+    /// the same size and use (`Buf`): a session's frames allocate only buffers of new sizes.
+    pool: Arc<Pool>,
+    /// Objects built from the medium alone (its density, mip, majorants), by label, with the
+    /// key of what they were built from (`resident`).
+    resident: Mutex<HashMap<&'static str, Vec<Resident>>>,
+    /// Which resident objects were built or kept since the last `take_stages`.
+    stages: Mutex<Counters>,
+    /// Every (size, use) of buffer the helpers allocated, with the solve (`Pool::solves`) that
+    /// first did, and how many allocations repeated one of an earlier solve
+    /// (`buffers_of_known_size`: what the pool should have served).
+    sizes: Mutex<HashMap<(u64, u32), u64>>,
+    known_size: AtomicU64,
+}
+
+/// A device buffer from the context's helpers (derefs to `wgpu::Buffer`): dropped, it goes
+/// back to its context's pool instead of being freed.
+pub struct Buf {
+    buffer: Option<wgpu::Buffer>,
+    pool: Arc<Pool>,
+}
+
+impl Deref for Buf {
+    type Target = wgpu::Buffer;
+    fn deref(&self) -> &wgpu::Buffer {
+        match &self.buffer {
+            Some(b) => b,
+            None => unreachable!("a Buf holds its buffer until dropped"),
+        }
+    }
+}
+
+impl Drop for Buf {
+    fn drop(&mut self) {
+        if let Some(b) = self.buffer.take() {
+            self.pool.put(b);
+        }
+    }
+}
+
+/// Dropped buffers, each with the count of the callers' submissions when it was dropped: it is
+/// handed out again only after a later one, so that a command encoder that recorded it before
+/// the drop has been submitted (the queue then orders the next user's clear or write after
+/// that work; wgpu tracks the hazard). A kernel's own encoders go through `submit` or
+/// `submit_and_wait`; the pool's clears do not count.
+#[derive(Default)]
+pub struct Pool {
+    free: Mutex<Vec<(u64, u64, wgpu::Buffer)>>,
+    flushes: AtomicU64,
+    /// Solves and composites (`end_solve`) so far: a buffer not taken during the two after the
+    /// one that dropped it (a frame's solve and composite) is freed, so the pool holds about two
+    /// frames' working set, also when the sizes change (a resized viewport).
+    solves: AtomicU64,
+}
+
+impl Pool {
+    fn put(&self, b: wgpu::Buffer) {
+        let (flushes, solves) = (self.flushes.load(Ordering::Acquire), self.solves.load(Ordering::Relaxed));
+        if let Ok(mut free) = self.free.lock() {
+            free.push((flushes, solves, b));
+        }
+    }
+
+    fn take(&self, size: u64, usage: wgpu::BufferUsages) -> Option<wgpu::Buffer> {
+        let flushes = self.flushes.load(Ordering::Acquire);
+        let mut free = self.free.lock().ok()?;
+        let at = free.iter().position(|(f, _, b)| *f < flushes && b.size() == size && b.usage() == usage)?;
+        Some(free.swap_remove(at).2)
+    }
+
+    fn end_solve(&self) {
+        let solves = self.solves.fetch_add(1, Ordering::Relaxed);
+        if let Ok(mut free) = self.free.lock() {
+            free.retain(|(_, s, _)| *s + 1 >= solves);
+        }
+    }
 }
 
 /// Running totals of what a context's helpers did: a solve's counters are the difference
@@ -72,6 +149,13 @@ struct DeviceCounts {
 fn bump(c: &AtomicU64, by: u64) {
     c.fetch_add(by, Ordering::Relaxed);
 }
+
+/// A resident object with the key of what it was built from.
+type Resident = (u64, Arc<dyn Any + Send + Sync>);
+
+/// Objects `GpuContext::resident` keeps per label: two, so that a solver alternating between
+/// two forms of one medium (lpm's extinction with and without its delta-M scaling) keeps both.
+const RESIDENT_PER_LABEL: usize = 2;
 
 /// The process's context (see `GpuContext::with_shared`).
 static SHARED: Mutex<Option<Arc<GpuContext>>> = Mutex::new(None);
@@ -137,7 +221,22 @@ impl GpuContext {
                 }
             });
         }
-        Ok(GpuContext { device, queue, info, limits, errors, lost, pipelines: Mutex::new(HashMap::new()), objects: Mutex::new(HashMap::new()), counts: DeviceCounts::default() })
+        Ok(GpuContext {
+            device,
+            queue,
+            info,
+            limits,
+            errors,
+            lost,
+            pipelines: Mutex::new(HashMap::new()),
+            objects: Mutex::new(HashMap::new()),
+            counts: DeviceCounts::default(),
+            pool: Arc::new(Pool::default()),
+            resident: Mutex::new(HashMap::new()),
+            stages: Mutex::new(Counters::default()),
+            sizes: Mutex::new(Default::default()),
+            known_size: AtomicU64::new(0),
+        })
     }
 
     /// Runs `f` on the process's context, opened on first use (opening costs tens of
@@ -168,10 +267,19 @@ impl GpuContext {
         };
         ctx.clear_errors();
         let out = f(&ctx);
+        // The buffers the caller dropped may serve the next one once the device is idle.
+        let _ = ctx.wait();
         if ctx.is_lost() {
             *slot = None;
         }
         Ok(out)
+    }
+
+    /// After a solver's solve or a composite: waits for the device (the buffers it dropped may
+    /// then serve the next one) and frees pooled buffers left untaken (`Pool`).
+    pub(crate) fn end_solve(&self) {
+        let _ = self.wait();
+        self.pool.end_solve();
     }
 
     /// Whether the device was lost (a lost device never comes back: open a new context).
@@ -230,23 +338,159 @@ impl GpuContext {
     }
 
     /// A uniform buffer holding `bytes` (a kernel's parameters).
-    pub fn uniform(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
-        bump(&self.counts.buffers_created, 1);
-        bump(&self.counts.bytes_uploaded, bytes.len() as u64);
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage: wgpu::BufferUsages::UNIFORM })
+    pub fn uniform(&self, label: &str, bytes: &[u8]) -> Buf {
+        self.filled(label, bytes, wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST)
     }
 
     /// A zero-filled storage buffer of `bytes` (at least one vec4: empty bindings are invalid),
-    /// checked against the adapter's limits first.
-    pub fn zeroed_storage(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
+    /// checked against the adapter's limits first. A pooled buffer is cleared on the device
+    /// (one submission, no upload).
+    pub fn zeroed_storage(&self, label: &str, bytes: u64) -> Result<Buf, GpuError> {
         self.check_storage_size(label, bytes)?;
-        bump(&self.counts.buffers_created, 1);
-        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+        let (size, usage) = (self.size_class(bytes), Self::STORAGE);
+        if let Some(b) = self.pool.take(size, usage) {
+            let mut enc = self.device.create_command_encoder(&Default::default());
+            enc.clear_buffer(&b, 0, None);
+            bump(&self.counts.submissions, 1);
+            self.queue.submit([enc.finish()]);
+            return Ok(self.wrap(b));
+        }
+        self.allocated(size, usage);
+        Ok(self.wrap(self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
-            size: bytes.max(16),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            size,
+            usage,
             mapped_at_creation: false, // wgpu zero-initialises buffers
-        }))
+        })))
+    }
+
+    /// The size a storage buffer of `bytes` is allocated with: above 64 KiB rounded up to a
+    /// sixteenth of the next power of two (at most 6.25% more), so that a buffer whose size
+    /// follows the lights (pop's light-aligned grids change shape as the sun turns) is served
+    /// from the pool by one of its neighbours' sizes. Kernels index their buffers by their own
+    /// counts, never by the binding's length (photon-grid's reconstruction only guards with it).
+    fn size_class(&self, bytes: u64) -> u64 {
+        let exact = bytes.max(16);
+        if exact <= 1 << 16 {
+            return exact;
+        }
+        let step = exact.next_power_of_two() / 16;
+        let class = exact.div_ceil(step) * step;
+        let max = (self.limits.max_storage_buffer_binding_size as u64).min(self.limits.max_buffer_size);
+        if class > max {
+            exact
+        } else {
+            class
+        }
+    }
+
+    const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
+
+    /// Counts one allocation of `size` and `usage`.
+    fn allocated(&self, size: u64, usage: wgpu::BufferUsages) {
+        bump(&self.counts.buffers_created, 1);
+        let solve = self.pool.solves.load(Ordering::Relaxed);
+        if let Ok(mut seen) = self.sizes.lock() {
+            if *seen.entry((size, usage.bits())).or_insert(solve) < solve {
+                bump(&self.known_size, 1);
+            }
+        }
+    }
+
+    /// Allocations so far of a buffer whose size and use this context had allocated in an
+    /// earlier solve (a session's later frames should have none: the pool serves them).
+    pub fn buffers_of_known_size(&self) -> u64 {
+        self.known_size.load(Ordering::Relaxed)
+    }
+
+    /// Drops the medium's resident objects (`resident`): a host closing its last session frees
+    /// their device memory, and a test starts from a cold device.
+    pub fn drop_resident(&self) {
+        if let Ok(mut m) = self.resident.lock() {
+            m.clear();
+        }
+    }
+
+    fn wrap(&self, b: wgpu::Buffer) -> Buf {
+        Buf { buffer: Some(b), pool: self.pool.clone() }
+    }
+
+    /// A buffer of `usage` holding `contents`: a pooled one of the same size written through
+    /// the queue, else a new one.
+    fn filled(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> Buf {
+        bump(&self.counts.bytes_uploaded, contents.len() as u64);
+        // The queue writes whole 4-byte words; every kernel input is made of them.
+        if contents.len().is_multiple_of(4) {
+            let size = if usage == Self::STORAGE { self.size_class(contents.len() as u64) } else { contents.len() as u64 };
+            let b = match self.pool.take(size, usage) {
+                Some(b) => b,
+                None => {
+                    self.allocated(size, usage);
+                    self.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false })
+                }
+            };
+            self.queue.write_buffer(&b, 0, contents);
+            return self.wrap(b);
+        }
+        self.allocated(contents.len() as u64, usage);
+        self.wrap(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage }))
+    }
+
+    /// Writes `data` into `buffer` at `offset` through the queue, counted as uploaded.
+    pub fn write(&self, buffer: &wgpu::Buffer, offset: u64, data: &[u8]) {
+        bump(&self.counts.bytes_uploaded, data.len() as u64);
+        self.queue.write_buffer(buffer, offset, data);
+    }
+
+    /// The object `build` makes from the medium, kept under `label` while `key` (a fingerprint
+    /// of what it is built from) is unchanged: built and uploaded once for the frames of a
+    /// session that keep their medium, and for one-off solves of the same medium in a row.
+    /// Two objects per label (`RESIDENT_PER_LABEL`; a new key replaces the least recently used). Counted as the stage
+    /// "gpu medium upload: LABEL", computed or kept (`take_stages`).
+    pub fn resident<T: Any + Send + Sync>(&self, label: &'static str, key: u64, build: impl FnOnce() -> Result<T, GpuError>) -> Result<Arc<T>, GpuError> {
+        let found = self.resident.lock().ok().and_then(|mut m| {
+            let kept = m.get_mut(label)?;
+            let at = kept.iter().position(|(k, _)| *k == key)?;
+            // Most recently used last.
+            let entry = kept.remove(at);
+            let v = entry.1.clone();
+            kept.push(entry);
+            Some(v)
+        });
+        if let Some(Ok(v)) = found.map(|v| v.downcast::<T>()) {
+            self.log_stage(label, false);
+            return Ok(v);
+        }
+        // The least recently used object goes first: its buffers return to the pool before the
+        // new ones are made.
+        if let Ok(mut m) = self.resident.lock() {
+            let kept = m.entry(label).or_default();
+            if kept.len() >= RESIDENT_PER_LABEL {
+                kept.remove(0);
+            }
+        }
+        let value = Arc::new(build()?);
+        if let Ok(mut m) = self.resident.lock() {
+            m.entry(label).or_default().push((key, value.clone()));
+        }
+        self.log_stage(label, true);
+        Ok(value)
+    }
+
+    /// Names `label` once per solve among the built or the kept (`take_stages`).
+    fn log_stage(&self, label: &str, built: bool) {
+        let stage = format!("gpu medium upload: {label}");
+        if let Ok(mut st) = self.stages.lock() {
+            let list = if built { &mut st.recomputed } else { &mut st.reused };
+            if !list.contains(&stage) {
+                list.push(stage);
+            }
+        }
+    }
+
+    /// The resident objects built and kept since the last call (`resident`).
+    pub fn take_stages(&self) -> Counters {
+        self.stages.lock().map(|mut s| std::mem::take(&mut *s)).unwrap_or_default()
     }
 
     /// What this context's helpers created and moved so far: a solve's share is the
@@ -279,10 +523,29 @@ impl GpuContext {
     /// Submits `enc`, waits for the device to finish and reports any error it raised (so a
     /// stage's wall time is its GPU time, and its errors are its own).
     pub fn submit_and_wait(&self, enc: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        self.submit(enc);
+        self.wait()?;
+        self.check()
+    }
+
+    /// Submits `enc` without waiting (counted; buffers dropped before it may be handed out again).
+    pub fn submit(&self, enc: wgpu::CommandEncoder) {
         bump(&self.counts.submissions, 1);
         self.queue.submit([enc.finish()]);
+        self.pool.flushes.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// Declares that the caller holds no command encoder it has not submitted (a stage's
+    /// start): every buffer dropped so far may be handed out again at once.
+    pub fn idle(&self) {
+        self.pool.flushes.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// Waits for every submission so far.
+    fn wait(&self) -> Result<(), GpuError> {
         self.device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
-        self.check()
+        self.pool.flushes.fetch_add(1, Ordering::AcqRel);
+        Ok(())
     }
 
     /// Whether this context's adapter is a software one (`is_software_adapter`).
@@ -323,9 +586,9 @@ impl GpuContext {
 
     }
 
-    pub fn storage_buffer(&self, label: &str, data: &[u8]) -> Result<wgpu::Buffer, GpuError> {
+    /// A storage buffer holding `data` (padded to one vec4 when empty: empty bindings are invalid).
+    pub fn storage_buffer(&self, label: &str, data: &[u8]) -> Result<Buf, GpuError> {
         self.check_storage_size(label, data.len() as u64)?;
-        // Zero-sized bindings are invalid: pad to one vec4.
         let padded;
         let contents = if data.is_empty() {
             padded = [0u8; 16];
@@ -333,13 +596,7 @@ impl GpuContext {
         } else {
             data
         };
-        bump(&self.counts.buffers_created, 1);
-        bump(&self.counts.bytes_uploaded, contents.len() as u64);
-        Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        }))
+        Ok(self.filled(label, contents, Self::STORAGE))
     }
 
     /// Copies a buffer back to the host and waits for it.
@@ -360,7 +617,7 @@ impl GpuContext {
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.device.poll(wgpu::PollType::Wait).map_err(|e| GpuError::Internal(e.to_string()))?;
+        self.wait()?;
         self.check()?;
         rx.recv()
             .map_err(|_| GpuError::Internal("readback never completed".into()))?
@@ -375,47 +632,20 @@ impl GpuContext {
     /// `out_bytes`. Dispatches `groups` workgroups of `entry` in `wgsl` and reads the output back.
     pub fn run_single_pass(
         &self,
-        label: &str,
-        wgsl: &str,
+        label: &'static str,
+        wgsl: &'static str,
         params: &[u8],
         inputs: &[&wgpu::Buffer],
         out_bytes: u64,
         groups: [u32; 3],
     ) -> Result<Vec<u8>, GpuError> {
-        let device = &self.device;
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: params,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let out = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: out_bytes.max(16),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(wgsl.into()) });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let buffers: Vec<&wgpu::Buffer> = std::iter::once(&uniform).chain(inputs.iter().copied()).chain(std::iter::once(&out)).collect();
-        let entries: Vec<wgpu::BindGroupEntry> =
-            buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout: &pipeline.get_bind_group_layout(0), entries: &entries });
-        let mut enc = device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-        }
-        self.queue.submit([enc.finish()]);
-        self.check()?;
+        let pipeline = self.pipeline(label, wgsl, "main")?;
+        let uniform = self.uniform(label, params);
+        let out = self.zeroed_storage(label, out_bytes)?;
+        let buffers: Vec<&wgpu::Buffer> = std::iter::once(&*uniform).chain(inputs.iter().copied()).chain(std::iter::once(&*out)).collect();
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        self.record(&mut enc, &pipeline, &buffers, groups);
+        self.submit_and_wait(enc)?;
         self.read_buffer(&out, out_bytes)
     }
 }

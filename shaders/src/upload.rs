@@ -1,6 +1,10 @@
 //! Host-side packing of core types into GPU buffers.
 
 use glam::{Affine3A, Vec3};
+use std::sync::Arc;
+
+use crate::context::{Buf, GpuContext, GpuError};
+use volscatter_core::medium::key::grid_fingerprint;
 use volscatter_core::medium::grid::{self, BRICK_VOXELS};
 use volscatter_core::medium::Medium;
 use volscatter_core::ScatteringGrid;
@@ -55,4 +59,30 @@ pub fn rgb_as_vec4(data: &[Vec3]) -> Vec<[f32; 4]> {
 
 pub fn grid_dims(g: &ScatteringGrid) -> [u32; 4] {
     [g.dims[0], g.dims[1], g.dims[2], 0]
+}
+
+/// The medium's density on the device (`bricked_density`), kept by the context while the
+/// density grid is unchanged (`GpuContext::resident`, keyed by the grid's fingerprint): the
+/// kernels that march the medium share it, and a session's frames upload it once.
+pub struct ResidentDensity {
+    pub brick_min: [i32; 4],
+    pub brick_dims: [u32; 4],
+    pub buffer: Buf,
+}
+
+pub fn resident_density(ctx: &GpuContext, medium: &Medium) -> Result<Arc<ResidentDensity>, GpuError> {
+    ctx.check_storage_size("medium density", bricked_density_bytes(medium))?;
+    ctx.resident("density", grid_fingerprint(&medium.grid), || {
+        let d = bricked_density(medium);
+        Ok(ResidentDensity { brick_min: d.brick_min, brick_dims: d.brick_dims, buffer: ctx.storage_buffer("density", bytemuck::cast_slice(&d.words))? })
+    })
+}
+
+/// A key of `words`' exact bits and count (what `GpuContext::resident` compares).
+pub fn words_key(words: &[u32]) -> u64 {
+    use std::hash::Hasher;
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    h.write_usize(words.len());
+    h.write(bytemuck::cast_slice(words));
+    h.finish()
 }

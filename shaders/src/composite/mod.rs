@@ -7,7 +7,7 @@ use glam::{Vec3, Vec4};
 use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
-use crate::upload::{affine_rows, bricked_density, bricked_density_bytes, grid_dims, rgb_as_vec4};
+use crate::upload::{affine_rows, bricked_density_bytes, grid_dims, rgb_as_vec4};
 use volscatter_core::compositor::{assemble_image, CompositeOptions, Pixel};
 use volscatter_core::{Image, ScatteringGrid, Scene};
 
@@ -101,7 +101,7 @@ pub fn composite_with_single(
     ctx.check_storage_size("scattering grid", s.data.len() as u64 * 16)?;
     let pixels = cam.width as u64 * cam.height as u64;
     ctx.check_storage_size("image", pixels * 48)?;
-    let density = bricked_density(medium);
+    let density = crate::upload::resident_density(ctx, medium)?;
     let env = scene.environment();
     let (env_pixels, env_dims, has_map) = match env.and_then(|e| e.map.as_ref()) {
         Some(m) => (m.pixels.iter().map(|p| [p.x, p.y, p.z, 0.0]).collect::<Vec<_>>(), [m.width as u32, m.height as u32, 0, 0], true),
@@ -133,7 +133,7 @@ pub fn composite_with_single(
         env_dims,
         misc: [(0.5 * cam.fov_deg.to_radians()).tan(), step, 0.0, 0.0],
     };
-    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
+    let density: &wgpu::Buffer = &density.buffer;
     let s_buf = ctx.storage_buffer("scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&s.data)))?;
     let s1_buf = ctx.storage_buffer("single scattering grid", bytemuck::cast_slice(&rgb_as_vec4(&single.data)))?;
     let env_buf = ctx.storage_buffer("environment", bytemuck::cast_slice(&env_pixels))?;
@@ -141,7 +141,7 @@ pub fn composite_with_single(
         "composite",
         WGSL,
         bytemuck::bytes_of(&params),
-        &[&density, &s_buf, &s1_buf, &env_buf],
+        &[density, &s_buf, &s1_buf, &env_buf],
         pixels * 48,
         [cam.width.div_ceil(8), cam.height.div_ceil(8), 1],
     )?;

@@ -5,7 +5,7 @@ use bytemuck::{Pod, Zeroable};
 use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
-use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
+use crate::upload::{affine_rows, bricked_density_bytes};
 use glam::Vec3;
 use volscatter_core::stages::single_scattering::AREA_VPLS_PER_SIDE;
 use volscatter_core::translate::dome::dome_directions_of;
@@ -97,7 +97,7 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
     let mut grid = ScatteringGrid::over_medium(medium, max_dim).map_err(|e| GpuError::TooLarge(e.to_string()))?;
     ctx.check_storage_size("density", bricked_density_bytes(medium))?;
     ctx.check_storage_size("single scattering grid", grid.data.len() as u64 * 16)?;
-    let density = bricked_density(medium);
+    let density = crate::upload::resident_density(ctx, medium)?;
     let lights = light_list(scene, dome_directions);
     let (lo, hi) = medium.world_bounds();
     let params = SingleParams {
@@ -113,13 +113,13 @@ pub fn single_scattering_grid(ctx: &GpuContext, scene: &Scene, max_dim: u32, dom
         cam_pos: scene.camera.position.extend(0.0).to_array(),
         misc: [medium.g, volscatter_core::stages::single_scattering::shadow_step(medium, &grid), volscatter_core::medium::near_field_radius(&grid.index_to_world), 0.0],
     };
-    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
+    let density: &wgpu::Buffer = &density.buffer;
     let light_buf = ctx.storage_buffer("lights", bytemuck::cast_slice(&lights))?;
     let bytes = ctx.run_single_pass(
         "single scattering",
         WGSL,
         bytemuck::bytes_of(&params),
-        &[&density, &light_buf],
+        &[density, &light_buf],
         grid.data.len() as u64 * 16,
         [grid.dims[0].div_ceil(4), grid.dims[1].div_ceil(4), grid.dims[2].div_ceil(4)],
     )?;

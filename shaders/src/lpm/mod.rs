@@ -63,6 +63,8 @@ impl GpuSweeps {
 
 impl SweepBackend for GpuSweeps {
     fn start<'a>(&'a self, setup: SweepSetup<'a>, progress: &dyn Progress) -> Result<Box<dyn Sweeper + 'a>> {
+        // Between sweepers nothing is pending: the last one's buffers serve this one.
+        self.ctx.idle();
         Ok(Box::new(GpuSweeper::new(&self.ctx, setup, progress)?))
     }
 }
@@ -101,19 +103,25 @@ struct GpuSweeper<'a> {
     layers: [usize; FACES],
     /// Each cell's bin towards the camera, in grid order (collect.rs computes it per cell).
     view_bins: Vec<u32>,
-    dirs: wgpu::Buffer,
-    offsets: wgpu::Buffer,
-    by_incoming: wgpu::Buffer,
-    fine: wgpu::Buffer,
-    sigma: wgpu::Buffer,
-    u_in: wgpu::Buffer,
-    view_slab: wgpu::Buffer,
-    maps: [wgpu::Buffer; 2],
-    t: wgpu::Buffer,
-    u_out: wgpu::Buffer,
-    j_out: wgpu::Buffer,
+    dirs: crate::context::Buf,
+    offsets: crate::context::Buf,
+    by_incoming: crate::context::Buf,
+    fine: crate::context::Buf,
+    sigma: crate::context::Buf,
+    u_in: crate::context::Buf,
+    view_slab: crate::context::Buf,
+    maps: [crate::context::Buf; 2],
+    t: crate::context::Buf,
+    u_out: crate::context::Buf,
+    j_out: crate::context::Buf,
     device_bytes: u64,
+    /// The exact bits of the grid's extinction: a face swept in one slab keeps its packed
+    /// sigma_t on the device under this key (`GpuContext::resident`), uploaded once a session.
+    sigma_key: u64,
 }
+
+/// One resident sigma_t slab per face (labels of `GpuContext::resident`).
+const SIGMA_FACES: [&str; FACES] = ["lpm sigma_t face 0", "lpm sigma_t face 1", "lpm sigma_t face 2", "lpm sigma_t face 3", "lpm sigma_t face 4", "lpm sigma_t face 5"];
 
 impl<'a> GpuSweeper<'a> {
     fn new(ctx: &'a GpuContext, setup: SweepSetup<'a>, progress: &dyn Progress) -> Result<Self> {
@@ -162,6 +170,14 @@ impl<'a> GpuSweeper<'a> {
             u_out: ctx.zeroed_storage("lpm slab U out", slab_cells * m as u64 * v4)?,
             j_out: ctx.zeroed_storage("lpm slab J", slab_cells * v4)?,
             device_bytes: (2 * p as u64 * map_cells + (p as u64 + 2 * m as u64 + 2) * slab_cells) * v4 + slab_cells * 4,
+            sigma_key: {
+                use std::hash::Hasher;
+                let mut h = std::collections::hash_map::DefaultHasher::new();
+                h.write(bytemuck::cast_slice(&grid.dims.map(|d| d as u64)));
+                let flat: Vec<f32> = grid.sigma_t.iter().flat_map(|v| v.to_array()).collect();
+                h.write(bytemuck::cast_slice(&flat));
+                h.finish()
+            },
         };
         ctx.check()?;
         Ok(sweeper)
@@ -201,7 +217,7 @@ impl Sweeper for GpuSweeper<'_> {
             .zip(boundary)
             .map(|(d, b)| GpuDir { boundary: [b.x, b.y, b.z, 0.0], dl: grid.h * (1.0 + d.a * d.a + d.b * d.b).sqrt(), storage: d.storage as u32, pad: [0; 2] })
             .collect();
-        ctx.queue.write_buffer(&self.dirs, 0, bytemuck::cast_slice(&gpu_dirs));
+        ctx.write(&self.dirs, 0, bytemuck::cast_slice(&gpu_dirs));
         let propagate = ctx.pipeline("lpm/propagate.wgsl", PROPAGATE_WGSL, "main")?;
         let collect = ctx.pipeline("lpm/collect.wgsl", COLLECT_WGSL, "main")?;
         let mut sigma = Vec::new();
@@ -219,10 +235,36 @@ impl Sweeper for GpuSweeper<'_> {
                 sigma.resize(slab, [0.0f32; 4]);
                 u_in.resize(slab * m, [0.0f32; 4]);
                 view.resize(slab, 0u32);
+                // A face swept in one slab reads the same sigma_t every sweep and frame: kept
+                // on the device (a face streamed in several slabs uploads each slab's).
+                let whole = w0 == 0 && w1 == ff.nw;
+                let resident = if whole {
+                    let key = {
+                        use std::hash::Hasher;
+                        let mut h = std::collections::hash_map::DefaultHasher::new();
+                        h.write_u64(self.sigma_key);
+                        h.write_usize(f);
+                        h.finish()
+                    };
+                    Some(ctx.resident(SIGMA_FACES[f], key, || {
+                        let mut packed = vec![[0.0f32; 4]; slab];
+                        for z in 0..grid.dims[2] {
+                            slab_cells(grid.dims, &ff, w0, w1, z, |idx, k| {
+                                let st = grid.sigma_t[idx];
+                                packed[k] = [st.x, st.y, st.z, 0.0];
+                            });
+                        }
+                        ctx.storage_buffer(SIGMA_FACES[f], bytemuck::cast_slice(&packed))
+                    })?)
+                } else {
+                    None
+                };
                 for z in 0..grid.dims[2] {
                     slab_cells(grid.dims, &ff, w0, w1, z, |idx, k| {
-                        let st = grid.sigma_t[idx];
-                        sigma[k] = [st.x, st.y, st.z, 0.0];
+                        if !whole {
+                            let st = grid.sigma_t[idx];
+                            sigma[k] = [st.x, st.y, st.z, 0.0];
+                        }
                         for d in 0..m {
                             let v = u_prev[idx * m + d];
                             u_in[k * m + d] = [v.x, v.y, v.z, 0.0];
@@ -230,10 +272,16 @@ impl Sweeper for GpuSweeper<'_> {
                         view[k] = self.view_bins[idx];
                     });
                 }
-                ctx.queue.write_buffer(&self.sigma, 0, bytemuck::cast_slice(&sigma));
-                ctx.queue.write_buffer(&self.u_in, 0, bytemuck::cast_slice(&u_in));
+                if !whole {
+                    ctx.write(&self.sigma, 0, bytemuck::cast_slice(&sigma));
+                }
+                let sigma_buf: &wgpu::Buffer = match &resident {
+                    Some(b) => b,
+                    None => &self.sigma,
+                };
+                ctx.write(&self.u_in, 0, bytemuck::cast_slice(&u_in));
                 if j.is_some() {
-                    ctx.queue.write_buffer(&self.view_slab, 0, bytemuck::cast_slice(&view));
+                    ctx.write(&self.view_slab, 0, bytemuck::cast_slice(&view));
                 }
                 let params = LpmParams {
                     map: [ff.nu as u32, ff.nv as u32, map_len as u32, slab as u32],
@@ -245,11 +293,11 @@ impl Sweeper for GpuSweeper<'_> {
                 let tiles = (map_len as u32).div_ceil(TILE);
                 let (map_in, map_out) = (&self.maps[cur], &self.maps[1 - cur]);
                 let mut enc = ctx.device.create_command_encoder(&Default::default());
-                ctx.record(&mut enc, &propagate, &[&params, &self.dirs, &self.offsets, &self.sigma, &self.u_in, map_in, map_out, &self.t], [tiles, p as u32, 1]);
+                ctx.record(&mut enc, &propagate, &[&params, &self.dirs, &self.offsets, sigma_buf, &self.u_in, map_in, map_out, &self.t], [tiles, p as u32, 1]);
                 ctx.record(
                     &mut enc,
                     &collect,
-                    &[&params, &self.sigma, &self.t, &self.by_incoming, &self.fine, &self.view_slab, &self.u_out, &self.j_out],
+                    &[&params, sigma_buf, &self.t, &self.by_incoming, &self.fine, &self.view_slab, &self.u_out, &self.j_out],
                     [tiles, (w1 - w0) as u32, 1],
                 );
                 ctx.submit_and_wait(enc)?;

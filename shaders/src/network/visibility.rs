@@ -16,7 +16,7 @@ use std::mem::size_of;
 
 use super::sort::{self, groups_for};
 use crate::context::GpuContext;
-use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
+use crate::upload::{affine_rows, bricked_density_bytes};
 use volscatter_core::sampling::orthonormal_basis;
 use volscatter_core::solvers::network::backend::VisibilityInput;
 use volscatter_core::solvers::network::settings::Opacity;
@@ -79,7 +79,7 @@ pub fn visibility_chunked(ctx: &GpuContext, x: &VisibilityInput, keys_per_chunk:
         return Err(Error::Device(format!("network visibility: {n} particles exceed the GPU sort's 2^32 keys")));
     }
     let (len, n32, chunk) = (len as u32, n as u32, chunk as u32);
-    let density = bricked_density(medium);
+    let density = crate::upload::resident_density(ctx, medium)?;
     let (lo, hi) = medium.world_bounds();
     let mut params = VisibilityParams {
         density_w2i: affine_rows(&medium.world_to_index),
@@ -93,7 +93,7 @@ pub fn visibility_chunked(ctx: &GpuContext, x: &VisibilityInput, keys_per_chunk:
         modes: [0, if x.opacity == Opacity::Boundary { 0 } else { 1 }, 0, 0],
         misc: [march_step(medium), 0.0, 0.0, 0.0],
     };
-    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&density.words))?;
+    let density: &wgpu::Buffer = &density.buffer;
     let positions: Vec<[f32; 4]> = p.position.iter().map(|q| q.extend(0.0).to_array()).collect();
     let positions = ctx.storage_buffer("network particles", bytemuck::cast_slice(&positions))?;
     let keys = ctx.zeroed_storage("network sort keys", chunk as u64 * len as u64 * 16)?;
@@ -123,14 +123,14 @@ pub fn visibility_chunked(ctx: &GpuContext, x: &VisibilityInput, keys_per_chunk:
         params.modes[0] = row;
         let keys_params = ctx.uniform("network keys params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &keys_k, &[&keys_params, &density, &positions, &basis, &keys, &to_boundary], groups);
+        ctx.record(&mut enc, &keys_k, &[&keys_params, density, &positions, &basis, &keys, &to_boundary], groups);
         ctx.submit_and_wait(enc)?;
         sort::sort(ctx, &keys, len, c, progress)?;
         let (groups, row) = groups_for(c * n32);
         params.modes[0] = row;
         let links_params = ctx.uniform("network links params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &links_k, &[&links_params, &density, &positions, &basis, &keys, &to_boundary, &order, &up, &alpha], groups);
+        ctx.record(&mut enc, &links_k, &[&links_params, density, &positions, &basis, &keys, &to_boundary, &order, &up, &alpha], groups);
         ctx.submit_and_wait(enc)?;
         let words = c as u64 * n;
         let order_back = ctx.read_buffer(&order, words * 4)?;

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use std::mem::size_of;
 
 use crate::context::GpuContext;
-use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
+use crate::upload::affine_rows;
 use volscatter_core::medium::Medium;
 use volscatter_core::rng::Rng;
 use volscatter_core::solvers::photon_grid::backend::{PhotonBackend, TraceJob};
@@ -139,9 +139,8 @@ impl PhotonBackend for GpuPhotonBackend {
         ctx.check_storage_size("photon cache", sum_bytes)?;
         let chunk = if ctx.is_software() { CHUNK_SOFTWARE } else { CHUNK_GPU };
         ctx.check_storage_size("photon rays", chunk as u64 * 48)?;
-        ctx.check_storage_size("medium density", bricked_density_bytes(medium))?;
-        let bricks = bricked_density(medium);
-        let density = ctx.storage_buffer("density", bytemuck::cast_slice(&bricks.words))?;
+        let bricks = crate::upload::resident_density(ctx, medium)?;
+        let density: &wgpu::Buffer = &bricks.buffer;
 
         // Units (module doc). A ray's power is its light's over the light's probability, which
         // LightSampler makes proportional to the light's RGB sum: no channel of a ray exceeds
@@ -165,7 +164,9 @@ impl PhotonBackend for GpuPhotonBackend {
             }
             values.extend_from_slice(v);
         }
-        let majorants = ctx.storage_buffer("majorant grids", bytemuck::cast_slice(&values))?;
+        // Built from the medium alone: kept on the device while their values are unchanged.
+        let majorants = ctx.resident("majorant grids", crate::upload::words_key(bytemuck::cast_slice(&values)), || ctx.storage_buffer("majorant grids", bytemuck::cast_slice(&values)))?;
+        let majorants: &wgpu::Buffer = &majorants;
         let (lo, hi) = medium.world_bounds();
         let frame = &job.empty.frame;
         let base = TraceParams {
@@ -235,7 +236,7 @@ impl PhotonBackend for GpuPhotonBackend {
                 let rays = ctx.storage_buffer("photon rays", bytemuck::cast_slice(&rays))?;
                 let groups = n.div_ceil(64);
                 let mut enc = ctx.device.create_command_encoder(&Default::default());
-                ctx.record(&mut enc, &pipeline, &[&params, &density, &rays, &sums, &majorants], [groups, 1, 1]);
+                ctx.record(&mut enc, &pipeline, &[&params, density, &rays, &sums, majorants], [groups, 1, 1]);
                 ctx.submit_and_wait(enc)?;
             }
             let words: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&sums, sum_bytes)?).to_vec();

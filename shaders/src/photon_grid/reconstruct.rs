@@ -15,7 +15,7 @@ use std::mem::{offset_of, size_of};
 
 use crate::context::GpuContext;
 use crate::pop::light::read_rgb;
-use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
+use crate::upload::{affine_rows, bricked_density_bytes};
 use volscatter_core::medium::Medium;
 use volscatter_core::solvers::photon_grid::cache::Tallies;
 use volscatter_core::solvers::photon_grid::upsample::Upsampler;
@@ -94,8 +94,8 @@ pub fn scattering_towards(ctx: &GpuContext, medium: &Medium, tallies: &[Tallies]
     let slab_bytes = plane * planes as u64 * 16;
     ctx.check_storage_size("scattering grid slab (solver.output_resolution)", slab_bytes)?;
 
-    let bricks = bricked_density(medium);
-    let density = ctx.storage_buffer("density", bytemuck::cast_slice(&bricks.words))?;
+    let bricks = crate::upload::resident_density(ctx, medium)?;
+    let density: &wgpu::Buffer = &bricks.buffer;
     let cells = ctx.storage_buffer("photon cache tallies", bytemuck::cast_slice(&pack_cells(medium, tallies, physical)))?;
     let slab = ctx.zeroed_storage("scattering grid slab", slab_bytes)?;
     let (cell_dims, cell_i2w, cell_w2i) = match tallies.first() {
@@ -130,7 +130,7 @@ pub fn scattering_towards(ctx: &GpuContext, medium: &Medium, tallies: &[Tallies]
         let params = ReconstructParams { out_dims: [nx, ny, first, base.out_dims[3]], ..base };
         let params = ctx.uniform("photon reconstruct params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &pipeline, &[&params, &density, &cells, &slab], [nx.div_ceil(8), ny.div_ceil(8), count]);
+        ctx.record(&mut enc, &pipeline, &[&params, density, &cells, &slab], [nx.div_ceil(8), ny.div_ceil(8), count]);
         ctx.submit_and_wait(enc)?;
         let at = (plane * first as u64) as usize;
         let n = plane * count as u64;

@@ -67,7 +67,7 @@ impl GpuBackend {
             }
         }
         let t = std::time::Instant::now();
-        let m = Arc::new(GpuMip::upload(&self.ctx, mip).map_err(gpu_error)?);
+        let m = GpuMip::resident(&self.ctx, mip).map_err(gpu_error)?;
         if let Ok(mut s) = self.mip_upload_s.lock() {
             *s += t.elapsed().as_secs_f64();
         }
@@ -81,19 +81,22 @@ impl PopBackend for GpuBackend {
     type Merged = GpuMerged;
 
     fn init(&self, grid: &LightGrid, fluence: Vec3, mu: &[f32], a0: f32, g: f32, _progress: &dyn Progress) -> Result<(GpuLight, SweepSums)> {
+        self.ctx.idle();
         let mut light = GpuLight::upload(&self.ctx, grid, mu).map_err(gpu_error)?;
         let sums = init::sweep(&self.ctx, &mut light, grid.h, fluence, a0, g).map_err(gpu_error)?;
         Ok((light, sums))
     }
 
     fn with_packets(&self, grid: &LightGrid, packets: Vec<Vec3>, mu: &[f32]) -> Result<GpuLight> {
+        self.ctx.idle();
         let mut light = GpuLight::upload(&self.ctx, grid, mu).map_err(gpu_error)?;
-        self.ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&packets)));
+        self.ctx.write(&light.packets, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&packets)));
         light.injected = packets.iter().copied().sum();
         Ok(light)
     }
 
     fn propagate(&self, light: &mut GpuLight, prop: &Propagation, opts: RunOptions, a_scattered: f32, progress: &dyn Progress) -> Result<PropagationStats> {
+        self.ctx.idle();
         if opts.vacuum_escape || opts.moment_anisotropy {
             return self.propagate_on_cpu(light, prop, opts, a_scattered, progress);
         }
@@ -108,12 +111,14 @@ impl PopBackend for GpuBackend {
     }
 
     fn merge(&self, medium: &Medium, mip: &MediumMip, lights: &[(LightGrid, GpuLight)], resolution: u32) -> Result<GpuMerged> {
+        self.ctx.idle();
         let gmip = self.mip(mip)?;
-        let views: Vec<(&LightGrid, &wgpu::Buffer)> = lights.iter().map(|(g, l)| (g, &l.j)).collect();
+        let views: Vec<(&LightGrid, &wgpu::Buffer)> = lights.iter().map(|(g, l)| (g, &*l.j)).collect();
         merge::merge(&self.ctx, &gmip, medium, mip, &views, resolution).map_err(gpu_error)
     }
 
     fn propagate_radial(&self, prop: &RadialPropagation, init: &RadialInitial, j: &mut [Vec3], progress: &dyn Progress) -> Result<PropagationStats> {
+        self.ctx.idle();
         let (stats, _times) = crate::pop::radial::propagate_radial(&self.ctx, prop, init, j, self.check_every).map_err(gpu_error)?;
         if !progress.update("pop radial propagation", 1.0) {
             return Err(Error::Cancelled);
@@ -128,17 +133,19 @@ impl PopBackend for GpuBackend {
     /// The radial grids are sampled on the CPU (radial::add_to_merged), so the merged J makes
     /// one round trip when the scene has local lights.
     fn add_radial(&self, merged: &mut GpuMerged, lights: &[RadialLight]) -> Result<()> {
+        self.ctx.idle();
         if lights.is_empty() {
             return Ok(());
         }
         let mut j = merged.grid.clone();
         j.data = crate::pop::light::read_rgb(&self.ctx, &merged.j, merged.grid.dims.iter().map(|&d| d as u64).product()).map_err(gpu_error)?;
         radial::add_to_merged(&mut j, lights);
-        self.ctx.queue.write_buffer(&merged.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j.data)));
+        self.ctx.write(&merged.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j.data)));
         Ok(())
     }
 
     fn upsample(&self, medium: &Medium, mip: &MediumMip, merged: &GpuMerged, settings: &PopSettings) -> Result<ScatteringGrid> {
+        self.ctx.idle();
         let gmip = self.mip(mip)?;
         let out = upsample::upsample(&self.ctx, &gmip, medium, mip, merged, &settings.upsampling()).map_err(gpu_error);
         // The solve's last stage: free the mip (and never serve it to a later solve).
@@ -157,7 +164,7 @@ impl GpuBackend {
         let mut j = light.read_j(&self.ctx).map_err(gpu_error)?;
         let initial = Initial { direct: Vec::new(), packets, entering: Vec3::ZERO, transmitted: Vec3::ZERO, absorbed: Vec3::ZERO };
         let stats = prop.run_with(opts, &initial, a_scattered, &mut j, progress)?;
-        self.ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j)));
+        self.ctx.write(&light.j, 0, bytemuck::cast_slice(&crate::upload::rgb_as_vec4(&j)));
         Ok(stats)
     }
 }

@@ -40,7 +40,7 @@ pub fn sweep(ctx: &GpuContext, light: &mut GpuLight, h: f32, fluence: Vec3, a0: 
         &[&params, &light.sigma_s, &light.sigma_a, &light.mu, &light.packets, &light.j, &columns],
         [dims.x.div_ceil(8), dims.y.div_ceil(8), 1],
     );
-    ctx.queue.submit([enc.finish()]);
+    ctx.submit(enc);
     let cols = read_rgb(ctx, &columns, slab * 3)?;
     // init::sweep's sums over the columns that meet the medium.
     let mut sums = SweepSums::default();

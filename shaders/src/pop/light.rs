@@ -9,14 +9,14 @@ use volscatter_core::solvers::pop::light_grid::LightGrid;
 
 pub struct GpuLight {
     pub dims: UVec3,
-    pub sigma_s: wgpu::Buffer,
-    pub sigma_a: wgpu::Buffer,
+    pub sigma_s: crate::context::Buf,
+    pub sigma_a: crate::context::Buf,
     /// Cosine to the camera per cell (accumulate::view_cosines).
-    pub mu: wgpu::Buffer,
+    pub mu: crate::context::Buf,
     /// The packets still to propagate; the sweep writes them, the propagation consumes them.
-    pub packets: wgpu::Buffer,
+    pub packets: crate::context::Buf,
     /// The accumulation grid J, one vec4 per cell.
-    pub j: wgpu::Buffer,
+    pub j: crate::context::Buf,
     /// Energy injected into the propagation (the packets' sum), for its stopping threshold.
     pub injected: Vec3,
 }

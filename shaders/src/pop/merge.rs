@@ -38,10 +38,10 @@ const _: () = {
 pub struct GpuMerged {
     /// Dims and frame of the merged grid (its `data` is left empty: J lives in `j`).
     pub grid: ScatteringGrid,
-    pub j: wgpu::Buffer,
-    pub density: wgpu::Buffer,
+    pub j: crate::context::Buf,
+    pub density: crate::context::Buf,
     /// One u32: the bits of the largest density (see merge.wgsl).
-    pub max_density: wgpu::Buffer,
+    pub max_density: crate::context::Buf,
 }
 
 impl GpuMerged {
@@ -91,7 +91,7 @@ pub fn merge(ctx: &GpuContext, gmip: &GpuMip, medium: &Medium, mip: &MediumMip, 
     for (k, light) in passes.into_iter().enumerate() {
         let (light_w2i, light_dims, j) = match light {
             Some((g, j)) => (affine_rows(&g.world_to_index), [g.dims.x as i32, g.dims.y as i32, g.dims.z as i32, 1], *j),
-            None => (affine_rows(&glam::Affine3A::IDENTITY), [1, 1, 1, 0], &no_light),
+            None => (affine_rows(&glam::Affine3A::IDENTITY), [1, 1, 1, 0], &*no_light),
         };
         let params = MergeParams {
             merged_i2w: affine_rows(&merged.grid.index_to_world),

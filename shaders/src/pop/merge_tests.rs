@@ -44,7 +44,7 @@ fn gpu_merge_matches_cpu() {
                 l
             })
             .collect();
-        let views: Vec<(&LightGrid, &wgpu::Buffer)> = grids.iter().zip(&lights).map(|(g, l)| (g, &l.j)).collect();
+        let views: Vec<(&LightGrid, &wgpu::Buffer)> = grids.iter().zip(&lights).map(|(g, l)| (g, &*l.j)).collect();
         let gpu = merge(&ctx, &gmip, medium, &mip, &views, resolution).unwrap().read(&ctx).unwrap();
         assert_eq!(gpu.j.dims, cpu.j.dims);
         let e_j = relative_rmse(&gpu.j.data, &cpu.j.data);

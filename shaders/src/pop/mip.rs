@@ -40,7 +40,7 @@ pub struct MipParams {
 const _: () = assert!(size_of::<MipParams>() == 128);
 
 pub struct GpuMip {
-    pub buffer: wgpu::Buffer,
+    pub buffer: crate::context::Buf,
     origin: [i32; 4],
     levels: Vec<MipLevel>,
     /// Bytes uploaded (benchmarks, and the dense size's comparison).
@@ -106,6 +106,20 @@ impl GpuMip {
         let o = mip.origin();
         let bytes = words.len() as u64 * 4;
         Ok(GpuMip { buffer: ctx.storage_buffer("density mip", bytemuck::cast_slice(&words))?, origin: [o.x, o.y, o.z, 0], levels, bytes })
+    }
+
+    /// The mip on the device, kept by the context while its levels are unchanged
+    /// (`GpuContext::resident`, keyed by their exact bits): a session's frames upload it once.
+    pub fn resident(ctx: &GpuContext, mip: &MediumMip) -> Result<std::sync::Arc<Self>, GpuError> {
+        use std::hash::Hasher;
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        h.write(bytemuck::cast_slice(&mip.origin().to_array()));
+        for (dims, factor, data) in mip.levels() {
+            h.write(bytemuck::cast_slice(&dims.to_array()));
+            h.write_i32(factor);
+            h.write(bytemuck::cast_slice(data));
+        }
+        ctx.resident("density mip", h.finish(), || Self::upload(ctx, mip))
     }
 
     /// What `MediumMip::sample` reads at `footprint`. Where the CPU reads the density grid

@@ -71,8 +71,8 @@ pub fn propagate(
 ) -> Result<(PropagationStats, GpuPropagationTimes), GpuError> {
     let t_start = Instant::now();
     let mut light = GpuLight::upload(ctx, prop.grid, prop.mu)?;
-    ctx.queue.write_buffer(&light.packets, 0, bytemuck::cast_slice(&vec4s(&init.packets)));
-    ctx.queue.write_buffer(&light.j, 0, bytemuck::cast_slice(&vec4s(j_acc)));
+    ctx.write(&light.packets, 0, bytemuck::cast_slice(&vec4s(&init.packets)));
+    ctx.write(&light.j, 0, bytemuck::cast_slice(&vec4s(j_acc)));
     light.injected = init.packets.iter().copied().sum();
     let upload = t_start.elapsed().as_secs_f64();
     let (stats, mut times) = propagate_resident(ctx, &light, prop, a_scattered, check_every, keep_remaining)?;
@@ -160,7 +160,7 @@ pub fn propagate_resident(
     let (u_first, u_rest) = (ctx.uniform("pop params", bytemuck::bytes_of(&params(0.5))), ctx.uniform("pop params", bytemuck::bytes_of(&params(1.0))));
     let (sigma_s, sigma_a, mu, p0, j_buf) = (&light.sigma_s, &light.sigma_a, &light.mu, &light.packets, &light.j);
     let a0 = ctx.zeroed_storage("a0", cell_bytes)?;
-    ctx.queue.write_buffer(&a0, 0, bytemuck::cast_slice(&vec![[a_scattered, a_scattered, a_scattered, 0.0f32]; n]));
+    ctx.write(&a0, 0, bytemuck::cast_slice(&vec![[a_scattered, a_scattered, a_scattered, 0.0f32]; n]));
     let (p1, a1) = (ctx.zeroed_storage("p1", cell_bytes)?, ctx.zeroed_storage("a1", cell_bytes)?);
     let emit = ctx.zeroed_storage("emit", cell_bytes * 4)?;
     let esc = ctx.zeroed_storage("escapes", cell_bytes * 2)?;
@@ -276,7 +276,7 @@ pub(crate) fn iterate(
         dispatch(&mut enc, emit_pipe, e_bg);
         in_p1 = !in_p1;
         if iterations.is_multiple_of(check_every) || iterations == max_iterations {
-            ctx.queue.submit([std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())).finish()]);
+            ctx.submit(std::mem::replace(&mut enc, device.create_command_encoder(&Default::default())));
             if residual_threshold > 0.0 && iterations < max_iterations {
                 remaining = remaining_in(in_p1)?;
             }

@@ -27,6 +27,6 @@ pub fn total(ctx: &GpuContext, field: &wgpu::Buffer, dims: UVec3, stride: u32, o
     let pipeline = ctx.pipeline("sum.wgsl", WGSL, "main")?;
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     ctx.record(&mut enc, &pipeline, &[&params, field, &sums], [dims.x.div_ceil(8), dims.y.div_ceil(8), 1]);
-    ctx.queue.submit([enc.finish()]);
+    ctx.submit(enc);
     Ok(read_rgb(ctx, &sums, slab)?.into_iter().sum())
 }

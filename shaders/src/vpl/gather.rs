@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use std::mem::{offset_of, size_of};
 
 use crate::context::{GpuContext, GpuError};
-use crate::upload::{affine_rows, bricked_density, bricked_density_bytes};
+use crate::upload::{affine_rows, bricked_density_bytes};
 use volscatter_core::medium::Medium;
 use volscatter_core::stages::upsample::Merged;
 use volscatter_core::stages::mip::MediumMip;
@@ -131,7 +131,7 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
     }
     // VPLs per list per dispatch: a multiple of the workgroup's 64.
     let chunk = (CONNECTIONS_PER_DISPATCH / n).max(64).div_ceil(64) * 64;
-    let density = bricked_density(medium);
+    let density = crate::upload::resident_density(ctx, medium).map_err(to_gpu)?;
     let (lo, hi) = medium.world_bounds();
     let base = GatherParams {
         density_w2i: affine_rows(&medium.world_to_index),
@@ -143,7 +143,7 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
         misc: [medium.g, step, 0.0, 0.0],
         range: [0, chunk as u32, n as u32, per_row as u32],
     };
-    let density = ctx.storage_buffer("vpl gather: density", bytemuck::cast_slice(&density.words)).map_err(to_gpu)?;
+    let density: &wgpu::Buffer = &density.buffer;
     let point_buf = ctx.storage_buffer("vpl gather: points", bytemuck::cast_slice(&gpu_points)).map_err(to_gpu)?;
     let vpl_buf = ctx.storage_buffer("vpl gather: VPLs", bytemuck::cast_slice(&vpls)).map_err(to_gpu)?;
     let out = ctx.zeroed_storage("vpl gather: sums", n * SUMS_BYTES).map_err(to_gpu)?;
@@ -156,7 +156,7 @@ pub fn connect_points(ctx: &GpuContext, medium: &Medium, lists: &[Vec<volscatter
         let params = GatherParams { range: [first as u32, chunk as u32, n as u32, per_row as u32], ..base };
         let params = ctx.uniform("vpl gather params", bytemuck::bytes_of(&params));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        ctx.record(&mut enc, &pipeline, &[&params, &density, &point_buf, &vpl_buf, &out], [per_row as u32, rows as u32, 1]);
+        ctx.record(&mut enc, &pipeline, &[&params, density, &point_buf, &vpl_buf, &out], [per_row as u32, rows as u32, 1]);
         ctx.submit_and_wait(enc).map_err(to_gpu)?;
         first += chunk;
     }
