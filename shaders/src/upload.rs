@@ -80,9 +80,5 @@ pub fn resident_density(ctx: &GpuContext, medium: &Medium) -> Result<Arc<Residen
 
 /// A key of `words`' exact bits and count (what `GpuContext::resident` compares).
 pub fn words_key(words: &[u32]) -> u64 {
-    use std::hash::Hasher;
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    h.write_usize(words.len());
-    h.write(bytemuck::cast_slice(words));
-    h.finish()
+    volscatter_core::stages::diff::Bits::new().bytes(bytemuck::cast_slice(words)).finish()
 }

@@ -156,6 +156,25 @@ pub fn lamp_mean_over_ball(d: f32, lamp: f32, ball: f32, lit: bool) -> f32 {
     (sum / (4.0 / 3.0 * std::f64::consts::PI * (ball as f64).powi(3))) as f32
 }
 
+/// Tests' reference for the means over a ball: the mean of `f(|y|)` over the points of an
+/// n^3 lattice in the ball of radius `radius` about (d, 0, 0).
+#[cfg(test)]
+pub(crate) fn lattice_mean_over_ball(n: usize, d: f32, radius: f32, f: impl Fn(f32) -> f64) -> f64 {
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let q = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / n as f32 * 2.0 - 1.0;
+                if q.length() <= 1.0 {
+                    sum += f((Vec3::new(d, 0.0, 0.0) + q * radius).length());
+                    count += 1;
+                }
+            }
+        }
+    }
+    sum / count as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -166,22 +185,7 @@ mod tests {
     #[test]
     fn lamp_mean_over_ball_is_the_cells_mean() {
         let (lamp, ball) = (0.08f32, 0.031f32);
-        let lattice = |d: f32, lit: bool| {
-            let n = 64;
-            let (mut sum, mut count) = (0.0f64, 0usize);
-            for i in 0..n {
-                for j in 0..n {
-                    for k in 0..n {
-                        let q = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / n as f32 * 2.0 - 1.0;
-                        if q.length() <= 1.0 {
-                            sum += lamp_inverse_square((Vec3::new(d, 0.0, 0.0) + q * ball).length(), lamp, 0.0, lit) as f64;
-                            count += 1;
-                        }
-                    }
-                }
-            }
-            (sum / count as f64) as f32
-        };
+        let lattice = |d: f32, lit: bool| lattice_mean_over_ball(64, d, ball, |s| lamp_inverse_square(s, lamp, 0.0, lit) as f64) as f32;
         for (d, lit) in [(0.07f32, false), (0.08, false), (0.09, false), (0.11, false), (0.0, true), (0.06, true), (0.1, true)] {
             let (got, want) = (lamp_mean_over_ball(d, lamp, ball, lit), lattice(d, lit));
             assert!((got / want - 1.0).abs() < 0.02, "d {d} lit {lit}: {got} against {want}");

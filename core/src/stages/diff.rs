@@ -9,8 +9,15 @@ use crate::medium::key::{grid_fingerprint, MediumKey};
 use crate::medium::Medium;
 use crate::scene::{Camera, Light, Scene};
 
-/// A hasher fed with the exact bits of values (f32 through `to_bits`).
-pub(crate) struct Bits(DefaultHasher);
+/// A hasher fed with the exact bits of values (f32 through `to_bits`): the keys of what a
+/// session and the GPU context keep.
+pub struct Bits(DefaultHasher);
+
+impl Default for Bits {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 impl Bits {
     pub fn new() -> Self {
@@ -21,6 +28,11 @@ impl Bits {
         self
     }
     pub fn u64(&mut self, v: u64) -> &mut Self {
+        v.hash(&mut self.0);
+        self
+    }
+    /// Raw bytes, with their count.
+    pub fn bytes(&mut self, v: &[u8]) -> &mut Self {
         v.hash(&mut self.0);
         self
     }

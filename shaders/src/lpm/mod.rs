@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use std::mem::size_of;
 
 use crate::context::{GpuContext, GpuError};
+use volscatter_core::stages::diff::Bits;
 use crate::pop::light::read_rgb;
 use volscatter_core::solvers::lpm::directions::FACES;
 use volscatter_core::solvers::lpm::propagate::FaceFrame;
@@ -170,14 +171,7 @@ impl<'a> GpuSweeper<'a> {
             u_out: ctx.zeroed_storage("lpm slab U out", slab_cells * m as u64 * v4)?,
             j_out: ctx.zeroed_storage("lpm slab J", slab_cells * v4)?,
             device_bytes: (2 * p as u64 * map_cells + (p as u64 + 2 * m as u64 + 2) * slab_cells) * v4 + slab_cells * 4,
-            sigma_key: {
-                use std::hash::Hasher;
-                let mut h = std::collections::hash_map::DefaultHasher::new();
-                h.write(bytemuck::cast_slice(&grid.dims.map(|d| d as u64)));
-                let flat: Vec<f32> = grid.sigma_t.iter().flat_map(|v| v.to_array()).collect();
-                h.write(bytemuck::cast_slice(&flat));
-                h.finish()
-            },
+            sigma_key: Bits::new().debug(&grid.dims).f32s(grid.sigma_t.iter().flat_map(|v| v.to_array())).finish(),
         };
         ctx.check()?;
         Ok(sweeper)
@@ -239,13 +233,7 @@ impl Sweeper for GpuSweeper<'_> {
                 // on the device (a face streamed in several slabs uploads each slab's).
                 let whole = w0 == 0 && w1 == ff.nw;
                 let resident = if whole {
-                    let key = {
-                        use std::hash::Hasher;
-                        let mut h = std::collections::hash_map::DefaultHasher::new();
-                        h.write_u64(self.sigma_key);
-                        h.write_usize(f);
-                        h.finish()
-                    };
+                    let key = Bits::new().u64(self.sigma_key).u64(f as u64).finish();
                     Some(ctx.resident(SIGMA_FACES[f], key, || {
                         let mut packed = vec![[0.0f32; 4]; slab];
                         for z in 0..grid.dims[2] {

@@ -111,13 +111,10 @@ impl GpuMip {
     /// The mip on the device, kept by the context while its levels are unchanged
     /// (`GpuContext::resident`, keyed by their exact bits): a session's frames upload it once.
     pub fn resident(ctx: &GpuContext, mip: &MediumMip) -> Result<std::sync::Arc<Self>, GpuError> {
-        use std::hash::Hasher;
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        h.write(bytemuck::cast_slice(&mip.origin().to_array()));
+        let mut h = volscatter_core::stages::diff::Bits::new();
+        h.debug(&mip.origin());
         for (dims, factor, data) in mip.levels() {
-            h.write(bytemuck::cast_slice(&dims.to_array()));
-            h.write_i32(factor);
-            h.write(bytemuck::cast_slice(data));
+            h.debug(&(dims, factor)).bytes(bytemuck::cast_slice(data));
         }
         ctx.resident("density mip", h.finish(), || Self::upload(ctx, mip))
     }
