@@ -143,6 +143,11 @@ def fire(strength):
     return {"grid": "density", "color": [1.0, 0.45, 0.12], "strength": strength}
 
 
+#: sixteen lamps (radius 0.08: a radius-0 lamp inside a medium makes a heavy-tailed reference)
+#: spread through a smoke's core, a fixed seed
+LAMPS_INSIDE = [point(tuple(float(c) for c in p), 0.4, 0.08) for p in np.random.default_rng(40).uniform(-0.45, 0.45, (16, 3))]
+
+
 # name, shape, voxels, tau (centre, along x), albedo, g, lights, emission, reference spp per seed,
 # what it stands for. Reference spp: each seed about 10 s here (40 x 30 pixels; 128 spp took 0.2-0.4 s,
 # the dense clouds 0.6-0.9 s, so they get half the paths); albedo >= 0.98 without Russian roulette
@@ -179,6 +184,12 @@ SCENES = [
     ("s23_sphere_dense", "sphere", 16, 40.0, 0.999, 0.9, [hdr()], None, 2048, "a dense white ball (16^3) under an HDR sky"),
     ("s24_thin_lights", "plume", 32, 0.5, 0.99, 0.7, [point((1.2, -1.2, 0.0), 3.0), spot((0, -2.5, -1.0), (0, 1, 0.4), 15.0)], None, 4096,
      "a thin forward-scattering plume with a point and a spot"),
+    # Issue 40's extreme classes, so that auto's model has measured them (its cost-guard table
+    # runs other scenes of the same classes: bench_cost_guard.py).
+    ("s25_white_furnace", "smoke", 24, 40.0, 1.0, 0.0, [sky((1.0, 1.0, 1.0))], None, 1024,
+     "a dense white smoke under a white sky: every pixel is 1 (the white furnace)"),
+    ("s26_lamps_inside", "smoke", 32, 3.0, 0.9, 0.5, LAMPS_INSIDE, None, 4096, "sixteen sphere lamps inside a smoke"),
+    ("s27_dense_small", "smoke", 16, 50.0, 0.95, 0.8, [sun(), sky()], None, 4096, "a small, dense grey smoke (16^3) under sun and sky"),
 ]
 
 
@@ -193,7 +204,10 @@ def held_out(i: int) -> bool:
 
 
 def reference_settings(albedo: float) -> dict:
-    # long walks at high albedo: no Russian roulette (bench_solvers.REF_SETTINGS says why)
+    # long walks at high albedo: no Russian roulette (bench_solvers.REF_SETTINGS says why); at
+    # albedo 1 no depth cap either (a path in a white furnace ends only by leaving)
+    if albedo >= 1.0:
+        return {"rr_depth": 100000, "max_depth": 100000}
     return {"rr_depth": 1000} if albedo >= 0.98 else {}
 
 

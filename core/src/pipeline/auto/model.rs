@@ -293,6 +293,28 @@ impl Model {
         (0..self.configs.len()).any(|j| j != i && among(j) && on(j).is_some_and(|(ej, tj)| ej <= e && tj <= t && (ej < e || tj < t)))
     }
 
+    /// Whether configuration `i` is dominated (`dominated_on`) on the measured scenes nearest
+    /// a scene of features `f`: on scenes holding more than half of the weight that `predict`
+    /// gives its measurements (on a measured scene, on that scene alone). One neighbour is not
+    /// enough: sub-second times there vary 2-4x with the machine's load, and a draft that
+    /// happened to beat a preview on the nearest scene would otherwise strike the preview
+    /// everywhere around it (issue 40's 64 lamps: photon-grid's presets struck by one run of
+    /// lpm draft on smoke_point, where they were right on the other neighbours).
+    pub fn dominated_near(&self, i: usize, f: &Features, among: impl Fn(usize) -> bool) -> bool {
+        let Some((_, obs)) = self.configs.get(i) else { return false };
+        let d: Vec<f64> = obs.iter().map(|o| distance(f, &self.scenes[o.scene].1)).collect();
+        let exact = d.iter().any(|&x| x < 1e-9);
+        let (mut dominated, mut total) = (0.0, 0.0);
+        for (o, &x) in obs.iter().zip(&d) {
+            let w = if exact { f64::from(x < 1e-9) } else { (-0.5 * x * x).exp() };
+            total += w;
+            if w > 0.0 && self.dominated_on(i, o.scene, &among) {
+                dominated += w;
+            }
+        }
+        total > 0.0 && dominated > 0.5 * total
+    }
+
     /// Configuration `i`'s predicted error and seconds on a scene of features `f`.
     pub fn predict(&self, i: usize, f: &Features) -> Option<Prediction> {
         let obs = &self.configs.get(i)?.1;

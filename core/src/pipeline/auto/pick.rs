@@ -57,14 +57,15 @@ pub fn pick_among(model: &Model, f: &Features, target_error: f64, time_budget: f
         .map(|(n, _)| *n)
         .filter(|n| !model.scenes.iter().any(|(_, s)| s.lights.named().iter().any(|(m, p)| m == n && *p)))
         .collect();
-    // Candidates: the configurations measured on the nearest measured scene (model.rs) that no
-    // other configuration beat there in both error and time (a dominated one is never worth it).
+    // Candidates: the configurations measured on the nearest measured scene (model.rs) that
+    // other configurations did not beat in both error and time on the nearest scenes (a
+    // dominated one is never worth it: `Model::dominated_near`).
     let nearest = model.nearest_scene(f);
     let preds: Vec<(usize, Prediction)> = (0..model.configs.len())
         // A configuration whose solver refuses the scene is no candidate, nor does it rule
         // others out as dominated.
         .filter(|&i| !refuses(&model.configs[i].0.solver))
-        .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s) && !model.dominated_on(i, s, |j| !refuses(&model.configs[j].0.solver))))
+        .filter(|&i| nearest.is_some_and(|s| model.measured_on(i, s)) && !model.dominated_near(i, f, |j| !refuses(&model.configs[j].0.solver)))
         .filter_map(|i| Some((i, model.predict(i, f)?)))
         .collect();
     if preds.is_empty() || !missing.is_empty() {
