@@ -25,7 +25,7 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
 # The sections the GPU benchmarks write (benchlib.py's write_section markers).
-GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm solvers-gpu pop-local-lights interactive-gpu)
+GPU_SECTIONS=(vpl-gpu gpu photon-grid-gpu network-gpu lpm solvers-gpu pop-local-lights interactive-gpu interactive-gpu-64 interactive-gpu-128)
 
 stage() {
     set -e
@@ -131,6 +131,10 @@ run() {
         # One-off solves every 10th frame only (they are most of the time); the section is written
         # after every scene, so a step cut off keeps the scenes it finished.
         step interactive 240 python3 scripts/bench_interactive.py --device gpu --frames 30 --check-every 10 --threads "$(nproc)"
+        # The sizes: the media resampled to 64^3 and 128^3.
+        for n in 64 128; do
+            step "interactive $n" 150 python3 scripts/bench_interactive.py --device gpu --frames 30 --check-every 15 --resolution "$n" --threads "$(nproc)"
+        done
         # Every GPU kernel against the CPU on real hardware (lavapipe is all CI sees). One at a
         # time: in one process (nextest gives each its own) a test that destroys the shared
         # device would reopen it under another that checks it is never reopened.

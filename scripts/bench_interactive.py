@@ -7,7 +7,11 @@ last: the one-off solves are most of the run's time); writes the "interactive" (
 
     python3 scripts/bench_interactive.py [--frames 30] [--scenes thin_smoke,...]
         [--solvers pop,photon-grid,network,vpl,lpm] [--preset preview] [--device cpu|gpu]
-        [--threads 2] [--check-every 1]
+        [--threads 2] [--check-every 1] [--resolution 64]
+
+`--resolution N` resamples each scene's medium (density and emission, trilinearly) to N voxels
+along its longest side first (the bench scenes are stored at 24-40): the section is then
+"interactive-N" ("interactive-gpu-N" on the GPU).
 
 Runs shaders/examples/bench_interactive.rs (`cargo run --release`; on a lent GPU machine the
 prebuilt binary through scripts/device/cargo, as scripts/bench_device.sh sets up).
@@ -70,13 +74,16 @@ def write(args: argparse.Namespace, rows: list[str], done: list[str]) -> None:
     cmd = "python3 scripts/bench_interactive.py " + " ".join(
         f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
                                   ("motions", args.motions), ("preset", args.preset), ("device", args.device), ("threads", args.threads),
-                                  ("check-every", args.check_every)])
+                                  ("check-every", args.check_every)]
+        + ([("resolution", args.resolution)] if args.resolution else []))
     gpu = args.device == "gpu"
     lines = [
-        "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads"),
+        "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads")
+        + (f", media at {args.resolution}^3" if args.resolution else ""),
         "",
         written_line(cmd),
-        f"Each scene at its stored resolution, solver at its `{args.preset}` preset; {args.frames} frames a session:"
+        (f"Each scene's medium resampled to {args.resolution} voxels along its longest side (trilinearly; optical depths"
+         " unchanged)" if args.resolution else "Each scene at its stored resolution") + f", solver at its `{args.preset}` preset; {args.frames} frames a session:"
         " `light` turns the lights 3 degrees a frame about the medium's vertical (a sun's direction, a point or spot light's"
         " position), `camera` the camera 3 degrees a frame"
         " about the medium's centre, `sequence` steps the density scale 1% a frame (every voxel changes, as in a VDB"
@@ -92,7 +99,7 @@ def write(args: argparse.Namespace, rows: list[str], done: list[str]) -> None:
         *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |"
                + (" MiB up | buffers | pipelines |" if gpu else ""), rows),
     ]
-    publish("interactive-gpu" if gpu else "interactive", lines)
+    publish(("interactive-gpu" if gpu else "interactive") + (f"-{args.resolution}" if args.resolution else ""), lines)
 
 
 def main() -> None:
@@ -105,6 +112,7 @@ def main() -> None:
     ap.add_argument("--device", default="cpu", choices=["cpu", "gpu"])
     ap.add_argument("--threads", type=int, default=2, help="CPU worker threads (RAYON_NUM_THREADS)")
     ap.add_argument("--check-every", type=int, default=1, help="solve one-off (for the ratio and the error) every N-th frame and the last")
+    ap.add_argument("--resolution", type=int, default=0, help="resample each medium to N voxels along its longest side (0: as stored)")
     ap.add_argument("--lpm-draft", action="store_true", help="measure lpm's draft preset instead of sessions")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
@@ -117,7 +125,8 @@ def main() -> None:
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
         found = cargo_example_benches("volscatter-gpu", "bench_interactive",
                                       [str(path), "--solvers", args.solvers, "--preset", args.preset, "--frames", str(args.frames),
-                                       "--motions", args.motions, "--device", args.device, "--check-every", str(args.check_every)],
+                                       "--motions", args.motions, "--device", args.device, "--check-every", str(args.check_every)]
+                                      + (["--resolution", str(args.resolution)] if args.resolution else []),
                                       env={"RAYON_NUM_THREADS": str(args.threads)})
         for d in found.values():
             ratio = d["frame_median_seconds"] / d["one_off_median_seconds"] if d["one_off_median_seconds"] else float("nan")
