@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import random
+import re
 import statistics
 import subprocess
 import tempfile
@@ -81,6 +82,13 @@ def run(bin_: Path, scene: dict, solver: str, tmp: Path, limit: float) -> tuple[
         return None, ""
     took = time.monotonic() - t
     notes = " ".join(line[6:] for line in p.stderr.splitlines() if line.startswith("note: ") and "software adapter" not in line)
+    # auto's pick, in short (its whole sentence is on stderr): what ran, at what predicted cost.
+    picked = []
+    for line in p.stderr.splitlines():
+        if line.startswith("auto picked "):
+            m = re.search(r"predicted image error ([0-9.]+) in ([0-9.]+) s", line)
+            picked.append(line.split(": ", 1)[0].removeprefix("auto picked ") + (f" (predicted error {m[1]} in {m[2]} s)" if m else ""))
+    notes = "; ".join(x for x in [*picked, notes] if x)
     if p.returncode != 0:
         return took, "error: " + (p.stderr.strip().splitlines() or ["?"])[-1]
     return took, notes
@@ -110,7 +118,7 @@ def main() -> None:
                 shown = f"> {args.limit:.0f}" if t is None else f"{t:.1f}"
                 ratio = f"> {args.limit / median:.0f}" if t is None else f"{t / median:.1f}"
                 flag = "" if t is not None and t <= 10 * median else " **over 10x**"
-                rows.append(f"| `{solver}` | {name} | {median:.1f} | {shown} | {ratio}{flag} | {notes[:160] or '-'} |")
+                rows.append(f"| `{solver}` | {name} | {median:.2f} | {shown} | {ratio}{flag} | {notes[:160] or '-'} |")
     # Rows of solvers not run this time are kept from the last run (--solvers reruns some).
     old = read_section("cost-guard") or ""
     kept = [r for r in old.splitlines() if r.startswith("| `") and r.split("`")[1] not in solvers]
