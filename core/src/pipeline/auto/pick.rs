@@ -104,13 +104,21 @@ pub fn pick_among(model: &Model, f: &Features, target_error: f64, time_budget: f
     };
     let (i, p) = *best;
     let config = &model.configs[i].0;
+    // The cost guard (issue 40): a pick predicted at over 10x the time of another candidate
+    // says up front what a tenth of its time would buy instead.
+    let tenth = p.seconds / 10.0;
+    let cheaper = if time_budget > 0.0 { None } else { preds.iter().filter(|(_, q)| q.seconds <= tenth).min_by(by_error) };
+    let guard = cheaper.map_or(String::new(), |(j, q)| {
+        let c = &model.configs[*j].0;
+        format!("; in a tenth of its time {} {} is predicted at image error {:.3} in {:.2} s (set time_budget to trade)", c.solver, c.quality, q.error, q.seconds)
+    });
     let leaned: Vec<String> = {
         let mut near: Vec<(f64, &str)> = model.scenes.iter().map(|(n, s)| (super::model::distance(f, s), n.as_str())).collect();
         near.sort_by(|a, b| a.0.total_cmp(&b.0));
         near.iter().take(2).map(|(d, n)| format!("{n} (distance {d:.2})")).collect()
     };
     let why = format!(
-        "{} {}: {rule}, predicted image error {:.3} in {:.2} s, for a scene of {}, {} voxels, {} pixels; leaning on the measured scenes {}",
+        "{} {}: {rule}, predicted image error {:.3} in {:.2} s, for a scene of {}, {} voxels, {} pixels; leaning on the measured scenes {}{guard}",
         config.solver,
         config.quality,
         p.error,

@@ -337,3 +337,22 @@ fn a_configuration_beaten_on_one_neighbour_alone_stays_a_candidate() {
     assert!(model(&[0]).dominated_near(0, &scene(0.15), |_| true));
     assert!(!model(&[1, 2]).dominated_near(0, &scene(0.15), |_| true));
 }
+
+/// The cost guard of issue 40: a pick predicted at over 10x another candidate's time says what
+/// a tenth of its time would buy. On s27_dense_small only lpm preview (2.7 s) reaches 0.10 and
+/// photon-grid's draft takes 0.07 s; on s01_thin_sun the pick, lpm draft, is the cheapest.
+#[test]
+fn a_costly_pick_says_what_a_tenth_of_its_time_would_buy() {
+    let model = model();
+    let costly = pick(model, &features_of(model, "s27_dense_small"), 0.1, 0.0, registry::preset_settings);
+    assert_eq!((costly.solver.as_str(), costly.quality.as_str()), ("lpm", "preview"), "{}", costly.why);
+    let tenth = costly.predicted_seconds.unwrap() / 10.0;
+    let clause = costly.why.split("; in a tenth of its time ").nth(1).unwrap_or_else(|| panic!("no cheaper option named: {}", costly.why));
+    let seconds: f64 = clause.split(" in ").nth(1).and_then(|x| x.split(" s").next()).and_then(|x| x.parse().ok()).unwrap_or(f64::NAN);
+    assert!(seconds <= tenth, "{clause} (a tenth: {tenth})");
+    let cheap = pick(model, &features_of(model, "s01_thin_sun"), 0.1, 0.0, registry::preset_settings);
+    assert!(!cheap.why.contains("in a tenth of its time"), "{}", cheap.why);
+    // With a budget the pick is already the trade: no such clause.
+    let budget = pick(model, &features_of(model, "s27_dense_small"), 0.1, 0.5, registry::preset_settings);
+    assert!(!budget.why.contains("in a tenth of its time"), "{}", budget.why);
+}
