@@ -47,9 +47,10 @@ fn gpu_lpm_matches_cpu() {
     let ctx = gpu_or_skip();
     let gpu: Box<dyn SweepBackend> = Box::new(GpuSweeps::new(&ctx));
     let cpu: Box<dyn SweepBackend> = Box::new(volscatter_core::solvers::lpm::stream::CpuSweeps);
-    for (name, first_order) in [("plume", FirstOrder::Boundary), ("plume", FirstOrder::Exact), ("plume_point", FirstOrder::Exact)] {
+    // storage_per_face 3: the final preset's 54 storage bins (one per propagation direction here).
+    for (name, first_order, storage_per_face) in [("plume", FirstOrder::Boundary, 1), ("plume", FirstOrder::Exact, 1), ("plume_point", FirstOrder::Exact, 1), ("plume", FirstOrder::Exact, 3)] {
         let sc = fixture(name);
-        let s = LpmSettings { grid_resolution: 24, directions: 9, max_orders: 3, first_order, ..Default::default() };
+        let s = LpmSettings { grid_resolution: 24, directions: 9, max_orders: 3, first_order, storage_per_face, ..Default::default() };
         let t = std::time::Instant::now();
         let c = run(&sc, &s, None, &cpu);
         let tc = t.elapsed().as_secs_f64();
@@ -58,7 +59,7 @@ fn gpu_lpm_matches_cpu() {
         let tg = t.elapsed().as_secs_f64();
         assert_eq!(c.orders, g.orders);
         let e = relative_rmse(j_of(&g), j_of(&c));
-        eprintln!("{name} ({first_order:?}): J relative RMSE GPU vs CPU {e:e} (CPU {tc:.2} s, GPU {tg:.2} s on {})", ctx.describe());
+        eprintln!("{name} ({first_order:?}, storage_per_face {storage_per_face}): J relative RMSE GPU vs CPU {e:e} (CPU {tc:.2} s, GPU {tg:.2} s on {})", ctx.describe());
         assert!(j_of(&c).iter().any(|v| v.max_element() > 0.0), "{name}: nothing compared");
         assert!(e < 5e-5, "{name} ({first_order:?}): J relative RMSE {e}");
         for (o, (a, b)) in g.max_u.iter().zip(&c.max_u).enumerate() {
