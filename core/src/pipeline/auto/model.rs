@@ -296,10 +296,8 @@ impl Model {
     /// Whether configuration `i` is dominated (`dominated_on`) on the measured scenes nearest
     /// a scene of features `f`: on scenes holding more than half of the weight that `predict`
     /// gives its measurements (on a measured scene, on that scene alone). One neighbour is not
-    /// enough: sub-second times there vary 2-4x with the machine's load, and a draft that
-    /// happened to beat a preview on the nearest scene would otherwise strike the preview
-    /// everywhere around it (issue 40's 64 lamps: photon-grid's presets struck by one run of
-    /// lpm draft on smoke_point, where they were right on the other neighbours).
+    /// enough: sub-second times vary 2-4x with the machine's load, and one lucky run of a draft
+    /// on the nearest scene would strike a preview everywhere around it.
     pub fn dominated_near(&self, i: usize, f: &Features, among: impl Fn(usize) -> bool) -> bool {
         let Some((_, obs)) = self.configs.get(i) else { return false };
         let d: Vec<f64> = obs.iter().map(|o| distance(f, &self.scenes[o.scene].1)).collect();

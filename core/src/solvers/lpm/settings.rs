@@ -90,9 +90,8 @@ pub const ENTRY: SolverEntry = SolverEntry {
         Preset::preview(r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"#),
         // 64 cells and 49 directions took over 30 s on most of the scene set's 40 x 30 scenes
         // (issue 36): this one costs a few times the preview (BENCHMARKS.md `solvers`). Nine
-        // storage bins a face carry the residual lobe that one flattens: the sun-lit dense
-        // clouds' excess light (dense_cloud 1.17x the reference's flux, 1.06x with them) is
-        // mostly that (docs/solvers/lpm.md).
+        // storage bins a face carry the residual lobe that one flattens, the cause of most of
+        // the sun-lit dense clouds' excess light (docs/solvers/lpm.md, `storage_per_face`).
         Preset::final_(r#"{"grid_resolution": 40, "directions": 36, "output_resolution": 96, "storage_per_face": 3}"#),
     ],
     // furnace.rs's (its bounds were measured with them).
