@@ -438,7 +438,7 @@ def set_markdown(meas: dict) -> list[str]:
     noise = {s["name"]: s["reference_noise"] for s in meas["scenes"]}
     lines = ["### Scene set (issue 36)", "",
              f"{len(names)} procedural scenes from `scripts/make_scene_set.py` (bench/scenes/set.json; 40 x 30 pixels, "
-             "16^3-64^3 media; optical depth through the centre 0.5-60, albedo 0.5-0.999, g -0.3-0.95; sun, sun + sky, sky, "
+             "16^3-64^3 media; optical depth through the centre 0.5-60, albedo 0.5-1, g -0.3-0.95; sun, sun + sky, sky (a white one: a furnace), "
              "an HDR map, point / spot / area lights outside and inside, fire, several lights). References: our path tracer, "
              "two seeds (bench/references/). `*`: in the fixed held-out subset. Plot: `docs/bench_set_error_time.png`.", ""]
     capped = meas.get("capped", [])
