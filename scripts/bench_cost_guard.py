@@ -13,7 +13,6 @@ import argparse
 import json
 import math
 import random
-import re
 import statistics
 import subprocess
 import tempfile
@@ -82,15 +81,13 @@ def run(bin_: Path, scene: dict, solver: str, tmp: Path, limit: float) -> tuple[
         return None, ""
     took = time.monotonic() - t
     notes = " ".join(line[6:] for line in p.stderr.splitlines() if line.startswith("note: ") and "software adapter" not in line)
-    # auto's pick, in short (its whole sentence is on stderr): what ran, at what predicted cost.
-    picked = []
-    for line in p.stderr.splitlines():
-        if line.startswith("auto picked "):
-            m = re.search(r"predicted image error ([0-9.]+) in ([0-9.]+) s", line)
-            picked.append(line.split(": ", 1)[0].removeprefix("auto picked ") + (f" (predicted error {m[1]} in {m[2]} s)" if m else ""))
-    notes = "; ".join(x for x in [*picked, notes] if x)
     if p.returncode != 0:
         return took, "error: " + (p.stderr.strip().splitlines() or ["?"])[-1]
+    # auto's pick, in short, from the report's `auto` object: what ran, at what predicted cost.
+    pick = json.loads((tmp / "r.json").read_text()).get("auto")
+    if pick:
+        cost = f" (predicted error {pick['predicted_error']:.3f} in {pick['predicted_seconds']:.2f} s)" if pick.get("predicted_error") is not None else ""
+        notes = "; ".join(x for x in [f"{pick['solver']} {pick['quality']}{cost}", notes] if x)
     return took, notes
 
 
