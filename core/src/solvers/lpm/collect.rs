@@ -64,19 +64,25 @@ pub fn collect(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, ff: &FaceF
             acc.iter_mut().for_each(|a| *a = Vec3::ZERO);
             let view_row = j_plane.as_ref().map(|_| table.view_row(dirs.bin_of((camera - grid.centre(c)).normalize_or(Vec3::Z))));
             let mut jsum = Vec3::ZERO;
+            // An empty cell scatters nothing into U; its J still feeds the upsampling.
+            let scatters = sigma_s != Vec3::ZERO;
             for (li, gi) in face_dirs.clone().enumerate() {
                 let tv = t[li * slab_len + pos];
-                let wts = &by_incoming[li * m..(li + 1) * m];
-                for (a, &f) in acc.iter_mut().zip(wts) {
-                    *a += tv * f;
+                if scatters {
+                    let wts = &by_incoming[li * m..(li + 1) * m];
+                    for (a, &f) in acc.iter_mut().zip(wts) {
+                        *a += tv * f;
+                    }
                 }
                 if let Some(row) = view_row {
                     jsum += tv * row[gi];
                 }
             }
             let local = idx - (z - z0) * plane;
-            for (d, a) in acc.iter().enumerate() {
-                u_plane[local * m + d] += sigma_s * *a;
+            if scatters {
+                for (d, a) in acc.iter().enumerate() {
+                    u_plane[local * m + d] += sigma_s * *a;
+                }
             }
             if let Some(jp) = j_plane.as_deref_mut() {
                 jp[local] += jsum;

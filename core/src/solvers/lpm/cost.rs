@@ -2,9 +2,9 @@
 //! medium's to decide: a thick, white medium keeps scattering light for hundreds of orders
 //! before the last falls below `epsilon`. Before the orders run, the solve predicts their
 //! number from the medium's optical thickness and albedo; past twice a usual solve's the late
-//! orders run over fewer directions (coarse.rs), and where they cannot, a solve far beyond
-//! a usual one says so up front (the progress stage's text, which a host shows while it
-//! waits) and in a note.
+//! orders run over fewer directions (coarse.rs) and end on their geometric tail (tail.rs),
+//! and where they cannot, a solve far beyond a usual one says so up front (the progress
+//! stage's text, which a host shows while it waits) and in a note.
 
 use glam::Vec3;
 

@@ -6,7 +6,9 @@
 //! map of rays layer by layer through the grid (propagate.rs, Eq. 3), then collects what the
 //! rays left in each cell into U of the next order and, towards the camera, into J
 //! (collect.rs, Eq. 4); the split needs no atomics (Sec. 4.1). Orders run until the largest U
-//! falls below `epsilon` times the first order's (Fattal's criterion). The sweeps run in slabs
+//! falls below `epsilon` times the first order's (Fattal's criterion); a solve predicted to
+//! take hundreds runs its late ones over fewer directions (coarse.rs) and ends on their
+//! geometric tail (tail.rs). The sweeps run in slabs
 //! whose working memory fits `memory_budget` (stream.rs, Sec. 4.2).
 //!
 //! S = (the compositor's exact single scattering) + sigma_s x J upsampled by pop's
@@ -40,6 +42,7 @@ pub mod propagate;
 pub mod settings;
 pub mod slab_store;
 pub mod stream;
+pub mod tail;
 #[cfg(test)]
 mod out_of_core_tests;
 #[cfg(test)]
@@ -83,6 +86,9 @@ pub struct LpmReport {
     pub orders: usize,
     /// Of those, the late ones run over fewer directions (coarse.rs).
     pub coarse_orders: usize,
+    /// The factor of the last sweep, which added the geometric tail of the orders not run
+    /// (tail.rs); None when the orders ran to `epsilon` or `max_orders`.
+    pub tail_factor: Option<Vec3>,
     /// What the user should hear (the cost guard's prediction), passed on as the solve's notes.
     pub notes: Vec<String>,
     pub layers: [usize; FACES],
@@ -268,10 +274,21 @@ impl Lpm {
         };
         timings.time("lpm propagate", || -> Result<()> {
             let mut late_sweeper: Option<Box<dyn stream::Sweeper + '_>> = None;
+            // A solve of many orders ends on their geometric tail (tail.rs).
+            let mut tail = coarse_late_orders.then(|| tail::Tail::new(&j));
             while first_max > 0.0 && report.orders < s.max_orders as usize && *report.max_u.last().unwrap_or(&0.0) > s.epsilon * first_max {
                 if let Some(late) = late.as_ref().filter(|_| late_sweeper.is_none() && report.orders == coarse::FIRST_ORDERS) {
                     let setup = stream::SweepSetup { grid: &grid, dirs: &late.dirs, table: late.table(), layers: &late_layers, camera, albedo: delta.albedo };
                     late_sweeper = Some(backend.start(setup, progress)?);
+                    if let Some(t) = tail.as_mut() {
+                        t.restart();
+                    }
+                }
+                // The last sweep: U scaled so that it adds every order still to come.
+                let tail_factor = tail.as_ref().and_then(tail::Tail::factor);
+                if let Some(f) = tail_factor {
+                    u_prev.iter_mut().for_each(|v| *v *= f);
+                    report.tail_factor = Some(f);
                 }
                 u_cur.iter_mut().for_each(|v| *v = Vec3::ZERO);
                 let before = ov.keep_orders.then(|| j.clone());
@@ -289,6 +306,12 @@ impl Lpm {
                 std::mem::swap(&mut u_prev, &mut u_cur);
                 report.max_u.push(max_abs(&u_prev));
                 report.orders += 1;
+                if tail_factor.is_some() {
+                    break;
+                }
+                if let Some(t) = tail.as_mut() {
+                    t.push(&j);
+                }
                 let done = (report.orders as f32 / s.max_orders as f32).max((s.epsilon * first_max / report.max_u.last().unwrap_or(&1.0).max(1e-30)).min(1.0));
                 if !progress.update("lpm propagate", 0.1 + 0.8 * done) {
                     return Err(Error::Cancelled);

@@ -25,6 +25,11 @@ use super::grid::LpmGrid;
 /// closed forms cancel catastrophically).
 #[inline]
 pub fn segment(l_in: Vec3, q: Vec3, sigma_t: Vec3, dl: f32) -> (Vec3, Vec3) {
+    if sigma_t == Vec3::ZERO {
+        // An empty cell: the thin-cell series at optical depth 0, the same values without the
+        // exponential and the selects (a plume's box is mostly empty).
+        return (l_in + q * dl, (l_in * dl + q * (dl * dl * 0.5)) / dl);
+    }
     let od = sigma_t * dl;
     // The exponentials are most of a sweep's time: an empty cell needs none (exp(-0) = 1) and
     // a grey one (the usual case) one instead of three, with the same values as three.
