@@ -7,8 +7,10 @@ last: the one-off solves are most of the run's time); writes the "interactive" (
 
     python3 scripts/bench_interactive.py [--frames 30] [--scenes thin_smoke,...]
         [--solvers pop,photon-grid,network,vpl,lpm] [--preset preview] [--device cpu|gpu]
-        [--threads 2] [--check-every 1] [--resolution 64]
+        [--threads 2] [--check-every 1] [--resolution 64] [--merge]
 
+`--merge` keeps the section's rows of the scenes this run does not measure (a long run split
+in parts); the section says which rows are an earlier run's, with that run's command and date.
 `--resolution N` resamples each scene's medium (density and emission, trilinearly) to N voxels
 along its longest side first (the bench scenes are stored at 24-40): the section is then
 "interactive-N" ("interactive-gpu-N" on the GPU).
@@ -32,7 +34,7 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from benchlib import REPO_ROOT, cargo_example_benches, compare, publish, require_volscatter, set_args, solver_registry, table, written_line
+from benchlib import REPO_ROOT, cargo_example_benches, compare, publish, read_section, require_volscatter, set_args, solver_registry, table, written_line
 
 SCENES = ["thin_smoke", "smoke_point", "fire_smoke", "overcast", "dense_cloud"]
 SOLVERS = ["pop", "photon-grid", "network", "vpl", "lpm"]
@@ -69,13 +71,31 @@ def lpm_draft(repeats: int, threads: int) -> None:
     publish("lpm-draft", lines)
 
 
-def write(args: argparse.Namespace, rows: list[str], done: list[str]) -> None:
-    """The section with the rows so far (written after every scene: a run cut short keeps its scenes)."""
+def section_name(args: argparse.Namespace) -> str:
+    return ("interactive-gpu" if args.device == "gpu" else "interactive") + (f"-{args.resolution}" if args.resolution else "")
+
+
+def earlier(args: argparse.Namespace) -> tuple[list[str], str | None]:
+    """With --merge: the rows of the section as written before, of the scenes this run does not
+    measure, and that run's first line (what ran, when)."""
+    text = read_section(section_name(args)) if args.merge else None
+    if not text:
+        return [], None
+    scenes = set(args.scenes.split(","))
+    lines = text.splitlines()
+    rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| scene |") and ln.split("|")[1].strip() not in scenes]
+    first = next((ln for ln in lines if ln.startswith("`python3 scripts/bench_interactive.py")), None)
+    return rows, first
+
+
+def write(args: argparse.Namespace, rows: list[str], done: list[str], kept: tuple[list[str], str | None]) -> None:
+    """The section with the rows so far (written after every scene: a run cut short keeps its
+    scenes), after the rows `kept` from an earlier run (--merge)."""
     cmd = "python3 scripts/bench_interactive.py " + " ".join(
         f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
                                   ("motions", args.motions), ("preset", args.preset), ("device", args.device), ("threads", args.threads),
                                   ("check-every", args.check_every)]
-        + ([("resolution", args.resolution)] if args.resolution else []))
+        + ([("resolution", args.resolution)] if args.resolution else [])) + (" --merge" if args.merge else "")
     gpu = args.device == "gpu"
     lines = [
         "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads")
@@ -94,12 +114,14 @@ def write(args: argparse.Namespace, rows: list[str], done: list[str]) -> None:
         " one-off S (`rel. RMSE` the worst of them); `slowest stage` is where the second frame spent most (s); `kept` what it reused"
         " (its counters)." + (" On the GPU the second frame's device counters follow: MiB uploaded, buffers allocated,"
                               " pipelines compiled (issue 37: after a light move no medium upload, no buffer of a known size, no pipeline)." if gpu else "")
-        + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}."),
+        + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}.")
+        + (f" The rows of {', '.join(dict.fromkeys(r.split('|')[1].strip() for r in kept[0]))} are an earlier run's, kept"
+           f" (--merge): {kept[1] or 'its command line was not recorded'}" if kept[0] else ""),
         "",
         *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |"
-               + (" MiB up | buffers | pipelines |" if gpu else ""), rows),
+               + (" MiB up | buffers | pipelines |" if gpu else ""), kept[0] + rows),
     ]
-    publish(("interactive-gpu" if gpu else "interactive") + (f"-{args.resolution}" if args.resolution else ""), lines)
+    publish(section_name(args), lines)
 
 
 def main() -> None:
@@ -115,12 +137,14 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=0, help="resample each medium to N voxels along its longest side (0: as stored)")
     ap.add_argument("--lpm-draft", action="store_true", help="measure lpm's draft preset instead of sessions")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--merge", action="store_true", help="keep the section's rows of the scenes this run does not measure")
     args = ap.parse_args()
     if args.lpm_draft:
         lpm_draft(args.repeats, args.threads)
         return
     rows: list[str] = []
     done: list[str] = []
+    kept = earlier(args)
     for scene in args.scenes.split(","):
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
         found = cargo_example_benches("volscatter-gpu", "bench_interactive",
@@ -145,7 +169,7 @@ def main() -> None:
                         f" {ratio:.2f} | {aim} | {d['bit_identical_frames']}/{d['checked_frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {top} | {kept} |"
                         + (f" {c.get('bytes_uploaded', 0) / 2**20:.2f} | {c.get('buffers_created', 0)} | {c.get('pipelines_created', 0)} |" if args.device == "gpu" else ""))
         done.append(scene)
-        write(args, rows, done)
+        write(args, rows, done, kept)
 
 
 if __name__ == "__main__":
