@@ -144,7 +144,7 @@ def main() -> None:
         return
     rows: list[str] = []
     done: list[str] = []
-    kept = earlier(args)
+    before = earlier(args)
     for scene in args.scenes.split(","):
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
         found = cargo_example_benches("volscatter-gpu", "bench_interactive",
@@ -169,7 +169,7 @@ def main() -> None:
                         f" {ratio:.2f} | {aim} | {d['bit_identical_frames']}/{d['checked_frames']} | {d['max_rel_rmse_vs_one_off']:.1e} | {top} | {kept} |"
                         + (f" {c.get('bytes_uploaded', 0) / 2**20:.2f} | {c.get('buffers_created', 0)} | {c.get('pipelines_created', 0)} |" if args.device == "gpu" else ""))
         done.append(scene)
-        write(args, rows, done, kept)
+        write(args, rows, done, before)
 
 
 if __name__ == "__main__":

@@ -303,12 +303,13 @@ impl Lpm {
                 if let Some(b) = before {
                     report.j_per_order.push(j.iter().zip(&b).map(|(a, b)| *a - *b).collect());
                 }
-                std::mem::swap(&mut u_prev, &mut u_cur);
-                report.max_u.push(max_abs(&u_prev));
                 report.orders += 1;
                 if tail_factor.is_some() {
+                    // Its U is the scaled tail's, no order's: the last order's largest U stays last.
                     break;
                 }
+                std::mem::swap(&mut u_prev, &mut u_cur);
+                report.max_u.push(max_abs(&u_prev));
                 if let Some(t) = tail.as_mut() {
                     t.push(&j);
                 }
