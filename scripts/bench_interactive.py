@@ -9,8 +9,9 @@ last: the one-off solves are most of the run's time); writes the "interactive" (
         [--solvers pop,photon-grid,network,vpl,lpm] [--preset preview] [--device cpu|gpu]
         [--threads 2] [--check-every 1] [--resolution 64] [--merge]
 
-`--merge` keeps the section's rows of the scenes this run does not measure (a long run split
-in parts); the section says which rows are an earlier run's, with that run's command and date.
+`--merge` keeps the section's rows of the scenes and solvers this run does not measure (a long
+run split in parts); the section says which rows are an earlier run's, with that run's command
+and date.
 `--resolution N` resamples each scene's medium (density and emission, trilinearly) to N voxels
 along its longest side first (the bench scenes are stored at 24-40): the section is then
 "interactive-N" ("interactive-gpu-N" on the GPU).
@@ -75,20 +76,45 @@ def section_name(args: argparse.Namespace) -> str:
     return ("interactive-gpu" if args.device == "gpu" else "interactive") + (f"-{args.resolution}" if args.resolution else "")
 
 
-def earlier(args: argparse.Namespace) -> tuple[list[str], str | None]:
-    """With --merge: the rows of the section as written before, of the scenes this run does not
-    measure, and that run's first line (what ran, when)."""
+RUN_LINE = "`python3 scripts/bench_interactive.py"
+
+
+def pair(row: str) -> tuple[str, str]:
+    """A table row's (scene, solver)."""
+    cells = row.split("|")
+    return cells[1].strip(), cells[2].strip()
+
+
+def earlier(args: argparse.Namespace) -> tuple[list[str], list[tuple[set[tuple[str, str]], str]]]:
+    """With --merge: the rows of the section as written before that this run does not measure
+    again (another scene, or another solver), and where they came from: (scene, solver) pairs
+    with the first line of the run that measured them."""
     text = read_section(section_name(args)) if args.merge else None
     if not text:
-        return [], None
-    scenes = set(args.scenes.split(","))
+        return [], []
+    measured = {(scene, solver) for scene in args.scenes.split(",") for solver in args.solvers.split(",")}
     lines = text.splitlines()
-    rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| scene |") and ln.split("|")[1].strip() not in scenes]
-    first = next((ln for ln in lines if ln.startswith("`python3 scripts/bench_interactive.py")), None)
-    return rows, first
+    table_rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| scene |")]
+    rows = [ln for ln in table_rows if pair(ln) not in measured]
+    # Provenance: the runs listed under "Rows kept from earlier runs" (or, as the first merged
+    # section said it, "The rows of SCENES are an earlier run's, kept (--merge): LINE"); the
+    # section's own run measured the rest.
+    runs: list[tuple[set[tuple[str, str]], str]] = []
+    for ln in lines:
+        if ln.startswith("- ") and ": " + RUN_LINE in ln:
+            head, run = ln[2:].split(": " + RUN_LINE, 1)
+            runs.append(({tuple(p.split(" ", 1)) for p in head.split(", ")}, RUN_LINE + run))
+        elif " are an earlier run's, kept (--merge): " + RUN_LINE in ln:
+            scenes = ln.split("The rows of ", 1)[1].split(" are an earlier run's", 1)[0].split(", ")
+            runs.append(({pair(r) for r in table_rows if pair(r)[0] in scenes}, RUN_LINE + ln.split(RUN_LINE, 1)[1]))
+    listed = set().union(*(p for p, _ in runs)) if runs else set()
+    own = next((ln for ln in lines if ln.startswith(RUN_LINE)), None)
+    runs.append(({pair(r) for r in table_rows} - listed, own or "its command line was not recorded"))
+    kept = {pair(r) for r in rows}
+    return rows, [(p & kept, line) for p, line in runs if p & kept]
 
 
-def write(args: argparse.Namespace, rows: list[str], done: list[str], kept: tuple[list[str], str | None]) -> None:
+def write(args: argparse.Namespace, rows: list[str], done: list[str], kept: tuple[list[str], list[tuple[set[tuple[str, str]], str]]]) -> None:
     """The section with the rows so far (written after every scene: a run cut short keeps its
     scenes), after the rows `kept` from an earlier run (--merge)."""
     cmd = "python3 scripts/bench_interactive.py " + " ".join(
@@ -114,9 +140,9 @@ def write(args: argparse.Namespace, rows: list[str], done: list[str], kept: tupl
         " one-off S (`rel. RMSE` the worst of them); `slowest stage` is where the second frame spent most (s); `kept` what it reused"
         " (its counters)." + (" On the GPU the second frame's device counters follow: MiB uploaded, buffers allocated,"
                               " pipelines compiled (issue 37: after a light move no medium upload, no buffer of a known size, no pipeline)." if gpu else "")
-        + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}.")
-        + (f" The rows of {', '.join(dict.fromkeys(r.split('|')[1].strip() for r in kept[0]))} are an earlier run's, kept"
-           f" (--merge): {kept[1] or 'its command line was not recorded'}" if kept[0] else ""),
+        + ("" if len(done) == len(args.scenes.split(",")) else f" The run was cut off after {', '.join(done)}."),
+        *(["", "Rows kept from earlier runs (--merge), with the run that measured them:"]
+          + [f"- {', '.join(f'{a} {b}' for a, b in sorted(pairs))}: {line}" for pairs, line in kept[1]] if kept[0] else []),
         "",
         *table("| scene | solver | motion | device | first s | median s | p95 s | one-off s | ratio | target | identical | rel. RMSE | slowest stage | kept |"
                + (" MiB up | buffers | pipelines |" if gpu else ""), kept[0] + rows),
@@ -137,7 +163,7 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=0, help="resample each medium to N voxels along its longest side (0: as stored)")
     ap.add_argument("--lpm-draft", action="store_true", help="measure lpm's draft preset instead of sessions")
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--merge", action="store_true", help="keep the section's rows of the scenes this run does not measure")
+    ap.add_argument("--merge", action="store_true", help="keep the section's rows of the scenes and solvers this run does not measure")
     args = ap.parse_args()
     if args.lpm_draft:
         lpm_draft(args.repeats, args.threads)

@@ -133,7 +133,8 @@ fn view_independent_solvers_give_the_same_s_from_any_camera() {
 
 /// A camera move in an anisotropic medium (g 0.6, where S depends on the view): lpm, network and
 /// photon-grid recompute the single scattering's terms but replay its shadow rays (they depend
-/// on the point and the light, not on the view); photon-grid keeps its photons and their lobes,
+/// on the point and the light, not on the view); photon-grid keeps its photons and their lobes
+/// (and through a light move its cache cells' masses),
 /// network its visibility, direct light and iteration; after a sun move the sky's shadow rays are still kept for the next
 /// camera move. Every frame is bit for bit its one-off solve.
 #[test]
@@ -168,6 +169,13 @@ fn camera_moves_at_g_keep_what_does_not_depend_on_the_view() {
                 "photon-grid" => {
                     assert_eq!(c.was_reused("photons"), camera_only, "{name} frame {f}: {c:?}");
                     assert_eq!(c.was_reused("photon lobes"), camera_only, "{name} frame {f}: {c:?}");
+                    // The cache cells' masses are the medium's: made on the first frame, kept
+                    // through the sun's move.
+                    match f {
+                        0 => assert!(c.was_computed("photon cell mass"), "{name} frame {f}: {c:?}"),
+                        2 => assert!(c.was_reused("photon cell mass") && !c.was_computed("photon cell mass"), "{name} frame {f}: {c:?}"),
+                        _ => {}
+                    }
                 }
                 "network" => {
                     assert_eq!(c.was_reused("network iterate"), camera_only, "{name} frame {f}: {c:?}");

@@ -113,6 +113,12 @@ impl Tallies {
     /// Deposits carry each photon's power (the light's total over the photon count,
     /// `LightSampler`'s convention) already.
     pub fn from_fixed(medium: &Medium, cache: &Cache, fixed: &FixedTallies) -> Self {
+        Tallies::with_mass(cache, fixed, cell_mass(medium, &cache.frame))
+    }
+
+    /// As `from_fixed`, with each cell's mass given (`cell_mass` on `cache`'s frame): a solve
+    /// makes it once for both lobes, a session once while the medium stays.
+    pub fn with_mass(cache: &Cache, fixed: &FixedTallies, mass: Vec<f32>) -> Self {
         let cells = &fixed.cells;
         Tallies {
             frame: cache.frame.clone(),
@@ -122,14 +128,14 @@ impl Tallies {
             weight: cells.iter().map(|c| unfix(c.weight) as f32).collect(),
             order: cells.iter().map(|c| unfix(c.order) as f32).collect(),
             count: cells.iter().map(|c| c.count.min(u32::MAX as u64) as u32).collect(),
-            mass: cell_mass(medium, &cache.frame),
+            mass,
         }
     }
 }
 
 /// The integral of the density over each cache cell (the box of half a cell around each
 /// centre), by the midpoint rule on sub-points spaced at most half a medium voxel apart.
-fn cell_mass(medium: &Medium, frame: &ScatteringGrid) -> Vec<f32> {
+pub fn cell_mass(medium: &Medium, frame: &ScatteringGrid) -> Vec<f32> {
     use rayon::prelude::*;
     let step_world = Vec3::new(
         frame.index_to_world.transform_vector3(Vec3::X).length(),

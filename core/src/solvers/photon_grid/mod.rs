@@ -127,17 +127,19 @@ impl PhotonGrid {
     /// `kept`: the session's single-scattering parts, used on the CPU (None on a device);
     /// `lobes`: the ring's tallies as lobes when already made from it (else made and put there).
     #[allow(clippy::too_many_arguments)]
-    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, lobes: &mut Option<[cache::Tallies; 2]>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
+    /// `mass`: a session's kept cell masses (None in a one-off solve).
+    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, lobes: &mut Option<[cache::Tallies; 2]>, mass: Option<&mut KeptMass>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
         }
         let medium = &scene.medium;
-        let lobe = |t| if progress.cancelled() { Err(Error::Cancelled) } else { Ok(cache::Tallies::from_fixed(medium, ring.cache(), t)) };
+        let lobe = |t, mass| if progress.cancelled() { Err(Error::Cancelled) } else { Ok(cache::Tallies::with_mass(ring.cache(), t, mass)) };
         let [first, second] = ring.total();
         if lobes.is_some() {
             counters.kept("photon lobes");
         } else {
-            *lobes = Some(timings.time("cache", || Ok::<_, Error>([lobe(first)?, lobe(second)?]))?);
+            let m = timings.time("cell mass", || self.cell_mass(medium, ring.cache(), mass, counters));
+            *lobes = Some(timings.time("cache", || Ok::<_, Error>([lobe(first, m.clone())?, lobe(second, m)?]))?);
         }
         let Some(tallies) = lobes.as_ref() else { unreachable!("the lobes were set just above") };
         let res = self.settings.output_dim(medium);
@@ -176,7 +178,7 @@ impl PhotonGrid {
             return Err(Error::Cancelled);
         }
         let ring = self.fresh_ring(scene, first, &mut timings, progress, backend)?;
-        self.finish(scene, &ring, timings, progress, backend, kept, &mut None, counters)
+        self.finish(scene, &ring, timings, progress, backend, kept, &mut None, None, counters)
     }
 
     /// One frame of a session: the first frame (or one after the settings changed) fills the
@@ -205,7 +207,7 @@ impl PhotonGrid {
             None => kept.0 = Some(self.fresh_ring(scene, 0, &mut timings, progress, backend)?),
         }
         match kept.0.as_ref() {
-            Some(ring) => self.finish(scene, ring, timings, progress, backend, single, &mut None, counters),
+            Some(ring) => self.finish(scene, ring, timings, progress, backend, single, &mut None, None, counters),
             None => unreachable!("the ring was set just above"),
         }
     }
@@ -230,10 +232,13 @@ impl PhotonGrid {
                 (self.fresh_ring(scene, self.first, &mut timings, progress, backend)?, None)
             }
         };
+        let mut mass = std::mem::take(&mut state.kept(KeptPhotons::default).1);
         let single = on_cpu.then(|| Some(state.single()));
-        let out = self.finish(scene, &ring, timings, progress, backend, single, &mut lobes, counters)?;
+        let out = self.finish(scene, &ring, timings, progress, backend, single, &mut lobes, Some(&mut mass), counters)?;
+        let kept = state.kept(KeptPhotons::default);
+        kept.1 = mass;
         if let Some(k) = key {
-            state.kept(KeptPhotons::default).0 = Some((k, ring, lobes));
+            kept.0 = Some((k, ring, lobes));
         }
         Ok(out)
     }
@@ -259,9 +264,37 @@ fn traced_key(scene: &Scene) -> TracedKey {
 }
 
 /// What a one-generation session keeps: the last frame's photons under their key, and their
-/// lobes (view-independent too) once made.
+/// lobes (view-independent too) once made; and the cache cells' masses, which a light move
+/// leaves as they are.
 #[derive(Default)]
-struct KeptPhotons(Option<(TracedKey, Ring, Option<[cache::Tallies; 2]>)>);
+struct KeptPhotons(Option<(TracedKey, Ring, Option<[cache::Tallies; 2]>)>, KeptMass);
+
+/// The density integral over each cache cell (`cache::cell_mass`) under what decides it: the
+/// medium and the cache's resolution (its frame is the medium's box at that resolution). At
+/// 128^3 it is most of what a light move costs besides the photons.
+#[derive(Default)]
+struct KeptMass(Option<(((crate::medium::key::MediumKey, u64), u32), Vec<f32>)>);
+
+impl PhotonGrid {
+    /// The cache cells' masses: `kept`'s when made for this medium and resolution, else made
+    /// (and kept there).
+    fn cell_mass(&self, medium: &crate::medium::Medium, cache: &cache::Cache, kept: Option<&mut KeptMass>, counters: &mut Counters) -> Vec<f32> {
+        let Some(kept) = kept else {
+            return cache::cell_mass(medium, &cache.frame);
+        };
+        let key = (crate::stages::diff::medium_key(medium), self.settings.cache_resolution);
+        if let Some((k, mass)) = &kept.0 {
+            if *k == key {
+                counters.kept("photon cell mass");
+                return mass.clone();
+            }
+        }
+        counters.computed("photon cell mass");
+        let mass = cache::cell_mass(medium, &cache.frame);
+        kept.0 = Some((key, mass.clone()));
+        mass
+    }
+}
 
 impl Solver for PhotonGrid {
     fn name(&self) -> &'static str {
