@@ -273,7 +273,10 @@ struct KeptPhotons(Option<(TracedKey, Ring, Option<[cache::Tallies; 2]>)>, KeptM
 /// medium and the cache's resolution (its frame is the medium's box at that resolution). At
 /// 128^3 it is most of what a light move costs besides the photons.
 #[derive(Default)]
-struct KeptMass(Option<(((crate::medium::key::MediumKey, u64), u32), Vec<f32>)>);
+struct KeptMass(Option<(MassKey, Vec<f32>)>);
+
+/// The medium's key and the cache's resolution.
+type MassKey = ((crate::medium::key::MediumKey, u64), u32);
 
 impl PhotonGrid {
     /// The cache cells' masses: `kept`'s when made for this medium and resolution, else made
