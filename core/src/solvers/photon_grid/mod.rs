@@ -125,9 +125,9 @@ impl PhotonGrid {
 
     /// S from the ring's cache: its lobes towards the camera, plus exact single scattering.
     /// `kept`: the session's single-scattering parts, used on the CPU (None on a device);
-    /// `lobes`: the ring's tallies as lobes when already made from it (else made and put there).
-    #[allow(clippy::too_many_arguments)]
+    /// `lobes`: the ring's tallies as lobes when already made from it (else made and put there);
     /// `mass`: a session's kept cell masses (None in a one-off solve).
+    #[allow(clippy::too_many_arguments)]
     fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, lobes: &mut Option<[cache::Tallies; 2]>, mass: Option<&mut KeptMass>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
