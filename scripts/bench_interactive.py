@@ -96,17 +96,13 @@ def earlier(args: argparse.Namespace) -> tuple[list[str], list[tuple[set[tuple[s
     lines = text.splitlines()
     table_rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| scene |")]
     rows = [ln for ln in table_rows if pair(ln) not in measured]
-    # Provenance: the runs listed under "Rows kept from earlier runs" (or, as the first merged
-    # section said it, "The rows of SCENES are an earlier run's, kept (--merge): LINE"); the
-    # section's own run measured the rest.
+    # Provenance: the runs listed under "Rows kept from earlier runs"; the section's own run
+    # measured the rest.
     runs: list[tuple[set[tuple[str, str]], str]] = []
     for ln in lines:
         if ln.startswith("- ") and ": " + RUN_LINE in ln:
             head, run = ln[2:].split(": " + RUN_LINE, 1)
             runs.append(({tuple(p.split(" ", 1)) for p in head.split(", ")}, RUN_LINE + run))
-        elif " are an earlier run's, kept (--merge): " + RUN_LINE in ln:
-            scenes = ln.split("The rows of ", 1)[1].split(" are an earlier run's", 1)[0].split(", ")
-            runs.append(({pair(r) for r in table_rows if pair(r)[0] in scenes}, RUN_LINE + ln.split(RUN_LINE, 1)[1]))
     listed = set().union(*(p for p, _ in runs)) if runs else set()
     own = next((ln for ln in lines if ln.startswith(RUN_LINE)), None)
     runs.append(({pair(r) for r in table_rows} - listed, own or "its command line was not recorded"))
