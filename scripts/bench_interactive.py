@@ -19,6 +19,15 @@ along its longest side first (the bench scenes are stored at 24-40): the section
 Runs shaders/examples/bench_interactive.rs (`cargo run --release`; on a lent GPU machine the
 prebuilt binary through scripts/device/cargo, as scripts/bench_device.sh sets up).
 
+    python3 scripts/bench_interactive.py --errors [--reference-divisor 4] [--check-every 15] [--resolution 64] ...
+
+The session frames' image error against each checked frame's own reference: the path tracer
+with two seeds at the scene's reference paths a pixel (`bench_solvers.REF_SPP`, the bench
+references' count) over `--reference-divisor`, and its settings (`REF_SETTINGS`); the error
+with the reference's noise taken out. A session frame is bit for bit its one-off solve (the
+session tables' `identical`), so the one-off solve of the frame is what is measured. Writes
+"interactive-error" (or "interactive-error-N").
+
     python3 scripts/bench_interactive.py --lpm-draft [--repeats 5] [--threads 2]
 
 lpm's `draft` preset on the default scene (the 64^3 plume, sun and sky) against the path
@@ -29,6 +38,7 @@ and image error; writes the "lpm-draft" section.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 
 import statistics
@@ -73,7 +83,58 @@ def lpm_draft(repeats: int, threads: int) -> None:
 
 
 def section_name(args: argparse.Namespace) -> str:
-    return ("interactive-gpu" if args.device == "gpu" else "interactive") + (f"-{args.resolution}" if args.resolution else "")
+    kind = "interactive-error" if args.errors else "interactive-gpu" if args.device == "gpu" else "interactive"
+    return kind + (f"-{args.resolution}" if args.resolution else "")
+
+
+def errors(args: argparse.Namespace) -> None:
+    """--errors: per scene and motion, every solver's error against each checked frame's own
+    reference (see the docstring); the section is written after every scene."""
+    from bench_solvers import REF_SETTINGS, REF_SPP
+    rows: list[str] = []
+    solvers = args.solvers.split(",")
+    frames = sorted({f for f in range(args.frames) if f % args.check_every == 0 or f + 1 == args.frames})
+    for scene in args.scenes.split(","):
+        spp = max(1, REF_SPP[scene] // args.reference_divisor)
+        path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
+        found = cargo_example_benches("volscatter-gpu", "bench_interactive",
+                                      [str(path), "--solvers", args.solvers, "--preset", args.preset, "--frames", str(args.frames),
+                                       "--motions", args.motions, "--device", args.device, "--check-every", str(args.check_every),
+                                       "--errors", str(spp), "--reference-settings", json.dumps(REF_SETTINGS.get(scene, {}))]
+                                      + (["--resolution", str(args.resolution)] if args.resolution else []),
+                                      env={"RAYON_NUM_THREADS": str(args.threads)})
+        for motion in args.motions.split(","):
+            by_solver = {d["solver"]: d["checked"] for d in found.values() if d["motion"] == motion}
+            if not by_solver:
+                continue
+            noise = [c["reference_noise"] for c in next(iter(by_solver.values()))]
+            cells = []
+            for solver in solvers:
+                e = [c["error_noise_removed"] for c in by_solver.get(solver, [])]
+                cells.append(f"{statistics.median(e):.3f} / {max(e):.3f}" if e else "-")
+            rows.append(f"| {scene} | {motion} | {spp} x 2 | {min(noise):.3f}-{max(noise):.3f} | " + " | ".join(cells) + " |")
+        cmd = "python3 scripts/bench_interactive.py --errors " + " ".join(
+            f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers), ("motions", args.motions),
+                                      ("preset", args.preset), ("device", args.device), ("threads", args.threads),
+                                      ("check-every", args.check_every), ("reference-divisor", args.reference_divisor)]
+            + ([("resolution", args.resolution)] if args.resolution else []))
+        lines = [
+            "## Interactive sessions: each frame against its own reference"
+            + (f", media at {args.resolution}^3" if args.resolution else ""),
+            "",
+            written_line(cmd),
+            (f"The sessions of `interactive-{args.resolution}`" if args.resolution else "The sessions of `interactive`")
+            + f" (same scenes, motions and `{args.preset}` preset), frames {', '.join(map(str, frames))} of {args.frames}:"
+            " each frame's image (transparent film, no AOVs) against that frame's own reference, the path tracer at"
+            " `reference` paths a pixel with two seeds (the bench references' count over"
+            f" {args.reference_divisor}, their settings). The error is the image's relative RMSE with the reference's noise"
+            " taken out, sqrt(e^2 - noise^2) (`noise` is half the seeds' difference, over the checked frames), given as"
+            " median / worst over the checked frames. A session frame is bit for bit the one-off solve of the same frame"
+            " (`identical` in the session tables), so the one-off solve is what was composited.",
+            "",
+            *table("| scene | motion | reference | noise | " + " | ".join(solvers) + " |", rows),
+        ]
+        publish(section_name(args), lines)
 
 
 RUN_LINE = "`python3 scripts/bench_interactive.py"
@@ -160,9 +221,14 @@ def main() -> None:
     ap.add_argument("--lpm-draft", action="store_true", help="measure lpm's draft preset instead of sessions")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--merge", action="store_true", help="keep the section's rows of the scenes and solvers this run does not measure")
+    ap.add_argument("--errors", action="store_true", help="each checked frame's error against its own reference instead of sessions")
+    ap.add_argument("--reference-divisor", type=int, default=4, help="with --errors: the bench references' paths a pixel over this")
     args = ap.parse_args()
     if args.lpm_draft:
         lpm_draft(args.repeats, args.threads)
+        return
+    if args.errors:
+        errors(args)
         return
     rows: list[str] = []
     done: list[str] = []

@@ -69,7 +69,7 @@ QUESTIONS: list[tuple[str, str, list[str]]] = [
      ["solvers-gpu", "gpu", "photon-grid-gpu", "network-gpu", "vpl-gpu", "interactive-gpu", "interactive-gpu-64", "interactive-gpu-128"]),
     ("Sessions and interactivity: a frame after a change",
      "Session frames after a moved light or camera or a new frame of a sequence, against one-off solves; Blender's live mode.",
-     ["interactive", "interactive-64", "interactive-128", "lpm-draft", "session", "blender-live"]),
+     ["interactive", "interactive-64", "interactive-128", "interactive-error-64", "interactive-error-128", "lpm-draft", "session", "blender-live"]),
     ("Memory, files and out-of-core",
      "Media larger than memory, and reading VDB files.",
      ["lpm-region", "vdb"]),

@@ -14,12 +14,22 @@
 //! `--resolution N` resamples the medium (density and emission grids, trilinearly) to N voxels
 //! along its longest side first: the bench scenes are stored at 24-40 voxels, the issue asks
 //! for sessions at 64^3 and 128^3.
+//!
+//! `--errors SPP [--reference-settings JSON]` measures instead each checked frame's image error
+//! against that frame's own reference: the path tracer at SPP paths a pixel with two seeds,
+//! their mean the reference and half their difference its noise. A session frame is bit for bit
+//! its one-off solve (the session rows check it), so the one-off solve is what is composited
+//! (transparent film, no AOVs, as `scripts/bench_solvers.py` renders). Prints one line a
+//! (solver, motion) with every checked frame's raw error, the reference's noise and the error
+//! with the noise taken out, sqrt(e^2 - noise^2).
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::{Affine3A, IVec3, Quat, Vec3};
 use serde_json::json;
+use serde_json::{Map, Value};
+use volscatter_core::compositor::{Aovs, CompositeOptions};
 use volscatter_core::image::relative_rmse;
 use volscatter_core::pipeline::{self, DeviceChoice, Session};
 use volscatter_core::medium::{DensityGrid, GridLimits};
@@ -36,10 +46,13 @@ struct Args {
     device: DeviceChoice,
     check_every: usize,
     resolution: Option<usize>,
+    /// With `--errors`: the reference's paths a pixel (each of two seeds) and its settings.
+    errors: Option<u32>,
+    reference_settings: Map<String, Value>,
 }
 
 fn args() -> Args {
-    let mut a = Args { scene: PathBuf::new(), solvers: vec![], preset: "preview".into(), frames: 30, motions: vec![], device: DeviceChoice::Cpu, check_every: 1, resolution: None };
+    let mut a = Args { scene: PathBuf::new(), solvers: vec![], preset: "preview".into(), frames: 30, motions: vec![], device: DeviceChoice::Cpu, check_every: 1, resolution: None, errors: None, reference_settings: Map::new() };
     let list = |s: String| s.split(',').map(String::from).collect::<Vec<_>>();
     a.solvers = list("pop,photon-grid,network,vpl,lpm".into());
     a.motions = list("light,camera,sequence".into());
@@ -54,6 +67,8 @@ fn args() -> Args {
             "--device" => a.device = if v() == "gpu" { DeviceChoice::Gpu } else { DeviceChoice::Cpu },
             "--check-every" => a.check_every = v().parse::<usize>().expect("--check-every N").max(1),
             "--resolution" => a.resolution = Some(v().parse::<usize>().expect("--resolution N").max(2)),
+            "--errors" => a.errors = Some(v().parse::<u32>().expect("--errors SPP").max(1)),
+            "--reference-settings" => a.reference_settings = serde_json::from_str(&v()).expect("--reference-settings {JSON}"),
             path => a.scene = PathBuf::from(path),
         }
     }
@@ -148,11 +163,88 @@ fn percentile(v: &[f64], q: f64) -> f64 {
     s[((q * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)]
 }
 
+/// Whether `motion` has anything to move in `base`: a scene without a light to move (a uniform
+/// dome, emission only) skips `light`.
+fn can_move(base: &Scene, motion: &str, scene: &std::path::Path) -> bool {
+    let ok = motion != "light" || base.lights.iter().any(|l| matches!(l, Light::Distant { .. } | Light::Point { .. } | Light::Spot(_)));
+    if !ok {
+        eprintln!("{}: no light to move, `light` skipped", scene.display());
+    }
+    ok
+}
+
+/// The frames solved one-off: every `check_every`-th and the last.
+fn is_checked(f: usize, a: &Args) -> bool {
+    f % a.check_every == 0 || f + 1 == a.frames
+}
+
+/// The premultiplied RGB of a transparent film without AOVs.
+fn rgb(image: &volscatter_core::image::Image) -> Vec<Vec3> {
+    image.rgba.iter().map(|p| p.truncate()).collect()
+}
+
+/// `--errors`: each checked frame's reference (two seeds), then every solver's one-off image of
+/// that frame against it (see the module's doc).
+fn errors(a: &Args, base: &Scene, devices: pipeline::Devices) {
+    let opts = CompositeOptions { transparent: true, aovs: Aovs::NONE, ..Default::default() };
+    let spp = a.errors.expect("--errors");
+    for motion in &a.motions {
+        if !can_move(base, motion, &a.scene) {
+            continue;
+        }
+        let mut rows: Vec<Vec<Value>> = vec![vec![]; a.solvers.len()];
+        for f in (0..a.frames).filter(|&f| is_checked(f, a)) {
+            let sc = frame(base, motion, f);
+            let t = Instant::now();
+            let seeds: Vec<Vec<Vec3>> = [1u64, 2]
+                .iter()
+                .map(|&seed| {
+                    let mut settings = a.reference_settings.clone();
+                    settings.insert("spp".into(), spp.into());
+                    settings.insert("seed".into(), seed.into());
+                    let mut session = Session::new("reference", &settings, devices).expect("reference settings");
+                    rgb(&pipeline::render(&mut session, &sc, &opts, &NoProgress).expect("reference").image)
+                })
+                .collect();
+            let reference: Vec<Vec3> = seeds[0].iter().zip(&seeds[1]).map(|(x, y)| 0.5 * (*x + *y)).collect();
+            // The mean's own error: half the two seeds' difference (independent, equal variance).
+            let half: Vec<Vec3> = seeds[0].iter().zip(&seeds[1]).map(|(x, y)| 0.5 * (*x - *y)).collect();
+            let norm = |v: &[Vec3]| v.iter().map(|x| x.length_squared() as f64).sum::<f64>().sqrt();
+            let noise = norm(&half) / norm(&reference).max(f64::MIN_POSITIVE);
+            let reference_seconds = t.elapsed().as_secs_f64();
+            for (solver, row) in a.solvers.iter().zip(&mut rows) {
+                let mut settings = registry::preset_settings(solver, &a.preset);
+                settings.insert("name".into(), solver.clone().into());
+                let t = Instant::now();
+                let solved = pipeline::solve(&sc, solver, &settings, devices, &NoProgress).expect("one-off solve");
+                let image = pipeline::composite(&sc, &solved.output.scattering, &opts, devices).expect("composite").image;
+                let raw = relative_rmse(&rgb(&image), &reference);
+                row.push(json!({
+                    "frame": f, "error": raw, "reference_noise": noise, "error_noise_removed": (raw * raw - noise * noise).max(0.0).sqrt(),
+                    "seconds": t.elapsed().as_secs_f64(), "reference_seconds": reference_seconds,
+                }));
+            }
+        }
+        for (solver, row) in a.solvers.iter().zip(rows) {
+            let doc = json!({
+                "bench": format!("{}/{solver}/{motion}/errors", a.scene.display()),
+                "data": {"scene": a.scene.display().to_string(), "solver": solver, "preset": a.preset, "motion": motion,
+                         "frames": a.frames, "reference_spp": spp, "reference_settings": a.reference_settings, "checked": row},
+            });
+            println!("BENCH_JSON {doc}");
+        }
+    }
+}
+
 fn main() {
     let a = args();
     let mut base = Scene::load(&a.scene).unwrap_or_else(|e| panic!("{}: {e}", a.scene.display()));
     if let Some(n) = a.resolution {
         base = at_resolution(base, n);
+    }
+    if a.errors.is_some() {
+        errors(&a, &base, volscatter_gpu::devices(a.device));
+        return;
     }
     let dims = {
         let (lo, hi) = base.medium.grid.bbox();
@@ -163,8 +255,7 @@ fn main() {
         let mut settings = registry::preset_settings(solver, &a.preset);
         settings.insert("name".into(), solver.clone().into());
         for motion in &a.motions {
-            if motion == "light" && !base.lights.iter().any(|l| matches!(l, Light::Distant { .. } | Light::Point { .. } | Light::Spot(_))) {
-                eprintln!("{}: no light to move, `light` skipped", a.scene.display());
+            if !can_move(&base, motion, &a.scene) {
                 continue;
             }
             let mut session = Session::new(solver, &settings, devices).expect("settings");
@@ -179,7 +270,7 @@ fn main() {
                 if f == 1 {
                     second = Some((kept.output.counters.clone(), kept.output.timings.0.clone()));
                 }
-                if f % a.check_every != 0 && f + 1 != a.frames {
+                if !is_checked(f, &a) {
                     continue;
                 }
                 checked += 1;
