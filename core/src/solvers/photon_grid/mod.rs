@@ -126,9 +126,9 @@ impl PhotonGrid {
     /// S from the ring's cache: its lobes towards the camera, plus exact single scattering.
     /// `kept`: the session's single-scattering parts, used on the CPU (None on a device);
     /// `lobes`: the ring's tallies as lobes when already made from it (else made and put there);
-    /// `mass`: a session's kept cell masses (None in a one-off solve).
+    /// `mass`: a session's kept cell masses and the frame's medium key (None in a one-off solve).
     #[allow(clippy::too_many_arguments)]
-    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, lobes: &mut Option<[cache::Tallies; 2]>, mass: Option<&mut KeptMass>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
+    fn finish(&self, scene: &Scene, ring: &Ring, mut timings: Timings, progress: &dyn Progress, backend: &dyn PhotonBackend, kept: Option<Option<&mut SingleCache>>, lobes: &mut Option<[cache::Tallies; 2]>, mass: Option<(&mut KeptMass, &MediumOf)>, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
         if !progress.update("reconstruct", 0.8) {
             return Err(Error::Cancelled);
         }
@@ -216,7 +216,9 @@ impl PhotonGrid {
     /// the medium and the lights stay (a camera move: they do not depend on the camera, but
     /// with `angular = camera`), so the frame only reconstructs S towards the new camera.
     fn solve_keeping_photons(&self, scene: &Scene, progress: &dyn Progress, state: &mut SessionState, backend: &dyn PhotonBackend, on_cpu: bool, counters: &mut Counters) -> Result<(SolveOutput, PhotonGridReport)> {
-        let key = (self.settings.angular != Angular::Camera).then(|| traced_key(scene));
+        // The medium's key, hashed once a frame: the photons' key and the cell masses' both hold it.
+        let medium = crate::stages::diff::medium_key(&scene.medium);
+        let key = (self.settings.angular != Angular::Camera).then(|| traced_key(scene, &medium));
         let kept = state.kept(KeptPhotons::default).0.take().filter(|(k, r, _)| Some(k) == key.as_ref() && r.traced_with(&self.settings));
         let mut timings = Timings::default();
         if !progress.update("photons", 0.0) {
@@ -234,7 +236,7 @@ impl PhotonGrid {
         };
         let mut mass = std::mem::take(&mut state.kept(KeptPhotons::default).1);
         let single = on_cpu.then(|| Some(state.single()));
-        let out = self.finish(scene, &ring, timings, progress, backend, single, &mut lobes, Some(&mut mass), counters)?;
+        let out = self.finish(scene, &ring, timings, progress, backend, single, &mut lobes, Some((&mut mass, &medium)), counters)?;
         let kept = state.kept(KeptPhotons::default);
         kept.1 = mass;
         if let Some(k) = key {
@@ -256,11 +258,14 @@ impl PhotonGrid {
     }
 }
 
-/// What the photons of a frame depend on besides the settings: the medium and the lights.
-type TracedKey = ((crate::medium::key::MediumKey, u64), Vec<u64>);
+/// A medium's key (`diff::medium_key`): its density grid and parameters, and its emission.
+type MediumOf = (crate::medium::key::MediumKey, u64);
 
-fn traced_key(scene: &Scene) -> TracedKey {
-    (crate::stages::diff::medium_key(&scene.medium), scene.lights.iter().map(crate::stages::diff::light_key).collect())
+/// What the photons of a frame depend on besides the settings: the medium and the lights.
+type TracedKey = (MediumOf, Vec<u64>);
+
+fn traced_key(scene: &Scene, medium: &MediumOf) -> TracedKey {
+    (medium.clone(), scene.lights.iter().map(crate::stages::diff::light_key).collect())
 }
 
 /// What a one-generation session keeps: the last frame's photons under their key, and their
@@ -276,16 +281,16 @@ struct KeptPhotons(Option<(TracedKey, Ring, Option<[cache::Tallies; 2]>)>, KeptM
 struct KeptMass(Option<(MassKey, Vec<f32>)>);
 
 /// The medium's key and the cache's resolution.
-type MassKey = ((crate::medium::key::MediumKey, u64), u32);
+type MassKey = (MediumOf, u32);
 
 impl PhotonGrid {
-    /// The cache cells' masses: `kept`'s when made for this medium and resolution, else made
-    /// (and kept there).
-    fn cell_mass(&self, medium: &crate::medium::Medium, cache: &cache::Cache, kept: Option<&mut KeptMass>, counters: &mut Counters) -> Vec<f32> {
-        let Some(kept) = kept else {
+    /// The cache cells' masses: `kept`'s when made for this medium (its key `of`) and
+    /// resolution, else made (and kept there).
+    fn cell_mass(&self, medium: &crate::medium::Medium, cache: &cache::Cache, kept: Option<(&mut KeptMass, &MediumOf)>, counters: &mut Counters) -> Vec<f32> {
+        let Some((kept, of)) = kept else {
             return cache::cell_mass(medium, &cache.frame);
         };
-        let key = (crate::stages::diff::medium_key(medium), self.settings.cache_resolution);
+        let key = (of.clone(), self.settings.cache_resolution);
         if let Some((k, mass)) = &kept.0 {
             if *k == key {
                 counters.kept("photon cell mass");
