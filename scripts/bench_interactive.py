@@ -87,12 +87,33 @@ def section_name(args: argparse.Namespace) -> str:
     return kind + (f"-{args.resolution}" if args.resolution else "")
 
 
+def earlier_errors(args: argparse.Namespace) -> tuple[dict[tuple[str, str], dict[str, str]], str | None]:
+    """With --merge: the error section's cells as written before, by (scene, motion) and column,
+    and the command line of the run that wrote them."""
+    text = read_section(section_name(args)) if args.merge else None
+    if not text:
+        return {}, None
+    lines = text.splitlines()
+    header = next(ln for ln in lines if ln.startswith("| scene | motion |"))
+    names = [c.strip() for c in header.split("|")[1:-1]]
+    cells = {}
+    for ln in lines:
+        if ln.startswith("| ") and ln is not header and not ln.startswith("| scene |"):
+            row = dict(zip(names, (c.strip() for c in ln.split("|")[1:-1])))
+            cells[(row["scene"], row["motion"])] = row
+    return cells, next((ln for ln in lines if ln.startswith(RUN_LINE)), None)
+
+
 def errors(args: argparse.Namespace) -> None:
     """--errors: per scene and motion, every solver's error against each checked frame's own
-    reference (see the docstring); the section is written after every scene."""
+    reference (see the docstring); the section is written after every scene. With --merge the
+    solvers (columns) and scenes (rows) this run does not measure keep their earlier cells."""
     from bench_solvers import REF_SETTINGS, REF_SPP
-    rows: list[str] = []
-    solvers = args.solvers.split(",")
+    measured = args.solvers.split(",")
+    before, before_run = earlier_errors(args)
+    solvers = [s for s in SOLVERS if s in measured or any(s in row for row in before.values())]
+    solvers += [s for s in measured if s not in solvers]
+    rows: dict[tuple[str, str], dict[str, str]] = dict(before)
     frames = sorted({f for f in range(args.frames) if f % args.check_every == 0 or f + 1 == args.frames})
     for scene in args.scenes.split(","):
         spp = max(1, REF_SPP[scene] // args.reference_divisor)
@@ -108,16 +129,17 @@ def errors(args: argparse.Namespace) -> None:
             if not by_solver:
                 continue
             noise = [c["reference_noise"] for c in next(iter(by_solver.values()))]
-            cells = []
-            for solver in solvers:
+            row = rows.setdefault((scene, motion), {"scene": scene, "motion": motion})
+            row.update({"reference": f"{spp} x 2", "noise": f"{min(noise):.3f}-{max(noise):.3f}"})
+            for solver in measured:
                 e = [c["error_noise_removed"] for c in by_solver.get(solver, [])]
-                cells.append(f"{statistics.median(e):.3f} / {max(e):.3f}" if e else "-")
-            rows.append(f"| {scene} | {motion} | {spp} x 2 | {min(noise):.3f}-{max(noise):.3f} | " + " | ".join(cells) + " |")
+                row[solver] = f"{statistics.median(e):.3f} / {max(e):.3f}" if e else "-"
         cmd = "python3 scripts/bench_interactive.py --errors " + " ".join(
             f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers), ("motions", args.motions),
                                       ("preset", args.preset), ("device", args.device), ("threads", args.threads),
                                       ("check-every", args.check_every), ("reference-divisor", args.reference_divisor)]
-            + ([("resolution", args.resolution)] if args.resolution else []))
+            + ([("resolution", args.resolution)] if args.resolution else [])) + (" --merge" if args.merge else "")
+        kept = [s for s in solvers if s not in measured]
         lines = [
             "## Interactive sessions: each frame against its own reference"
             + (f", media at {args.resolution}^3" if args.resolution else ""),
@@ -131,8 +153,11 @@ def errors(args: argparse.Namespace) -> None:
             " taken out, sqrt(e^2 - noise^2) (`noise` is half the seeds' difference, over the checked frames), given as"
             " median / worst over the checked frames. A session frame is bit for bit the one-off solve of the same frame"
             " (`identical` in the session tables), so the one-off solve is what was composited.",
+            *(["", f"Columns kept from an earlier run (--merge, against that run's references): {', '.join(kept)}: {before_run}"]
+              if kept and before_run else []),
             "",
-            *table("| scene | motion | reference | noise | " + " | ".join(solvers) + " |", rows),
+            *table("| scene | motion | reference | noise | " + " | ".join(solvers) + " |",
+                   ["| " + " | ".join(r.get(c, "-") for c in ["scene", "motion", "reference", "noise", *solvers]) + " |" for r in rows.values()]),
         ]
         publish(section_name(args), lines)
 

@@ -47,7 +47,7 @@ fn limits_of(name: &str) -> Limits {
         "vpl" => Limits { g: (-0.98, 0.95), g_dome: (-0.9, 0.9), max_depth_per_voxel: 30.0, max_thickness_dome: 30.0, camera_inside: true },
         "photon-grid" => Limits { g: (-0.9, 0.98), g_dome: (-0.95, 0.9), max_depth_per_voxel: 100.0, ..ANY },
         "network" => Limits { g: (-0.95, 0.95), max_depth_per_voxel: 30.0, ..ANY },
-        "lpm" => Limits { g: (-0.95, 0.98), g_dome: (-0.85, 0.98), max_depth_per_voxel: 100.0, ..ANY },
+        "lpm" => Limits { g: (-0.95, 0.98), g_dome: (-0.85, 0.98), max_depth_per_voxel: 100.0, camera_inside: true, ..ANY },
         _ => ANY,
     }
 }
@@ -58,7 +58,7 @@ fn limits_of(name: &str) -> Limits {
 const FOR_G: [&str; 0] = [];
 const FOR_DEPTH: [&str; 3] = ["pop", "reference", "lpm"];
 const FOR_DEPTH_DOME: [&str; 3] = ["lpm", "photon-grid", "network"];
-const FOR_CAMERA_INSIDE: [&str; 2] = ["photon-grid", "lpm"];
+const FOR_CAMERA_INSIDE: [&str; 2] = ["photon-grid", "network"];
 
 /// The largest optical depth of one voxel of the medium (largest extinction x largest voxel
 /// edge).

@@ -71,7 +71,7 @@ impl DeltaM {
     /// The propagated orders' phase table: fine and storage rows from p', the view rows
     /// (J towards the camera) from the true table `truth`.
     pub fn table(&self, dirs: &Directions, truth: &PhaseTable) -> Result<PhaseTable> {
-        Ok(PhaseTable::new(dirs, self.g_scaled)?.with_view(truth.fine.clone()))
+        Ok(PhaseTable::keeping_mean_cosine(dirs, self.g_scaled)?.with_view(truth.fine.clone()))
     }
 
     /// Transmittance along the beam through sigma_t' from the true transmittance `t`

@@ -31,6 +31,8 @@ pub struct PhaseTable {
     pub raw_row_solid_angle: Vec<f32>,
     /// n x n rows towards the viewer when they differ from `fine` (delta-M).
     pub view: Option<Vec<f32>>,
+    /// The Henyey-Greenstein parameter the table was made from.
+    pub g: f32,
 }
 
 impl PhaseTable {
@@ -66,7 +68,38 @@ impl PhaseTable {
                 storage[dj.storage * n + i] += w * fine[j * n + i];
             }
         }
-        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw, view: None })
+        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw, view: None, g })
+    }
+
+    /// The table whose scattering, as the propagation sees it, keeps the phase function's mean
+    /// cosine `g`. Averaging over the bins (each pair's sub-samples, then a storage bin's
+    /// directions sharing one value) widens the lobe: the table made from `g` itself sends the
+    /// light on with a smaller mean cosine, so in a thick medium it diffuses back out too soon
+    /// (too bright from the lit side). The HG parameter is raised until the table's
+    /// `mean_cosine` is `g` (found once per process for a set of bins and `g`). A sun's first
+    /// scattering into the storage bins (lights.rs) takes the same parameter, so that the exact
+    /// first order and the boundary sweep through the table stay one method.
+    pub fn keeping_mean_cosine(dirs: &Directions, g: f32) -> Result<Self> {
+        if g.abs() < 1e-3 {
+            return Self::new(dirs, g);
+        }
+        Self::new(dirs, matched_parameter(dirs, g)?)
+    }
+
+    /// The mean cosine between light arriving along a bin and the light its scattering sends
+    /// on (each outgoing direction carrying its storage bin's U), over incoming bins weighted by
+    /// their solid angle (isotropic incoming radiance).
+    pub fn mean_cosine(&self, dirs: &Directions) -> f64 {
+        let n = self.n;
+        let (mut num, mut den) = (0f64, 0f64);
+        for (i, di) in dirs.dirs.iter().enumerate() {
+            for dj in &dirs.dirs {
+                let e = (self.storage[dj.storage * n + i] * dj.solid_angle * di.solid_angle) as f64;
+                num += e * dj.w.dot(di.w) as f64;
+                den += e;
+            }
+        }
+        num / den.max(f64::MIN_POSITIVE)
     }
 
     /// Mean over storage bin `d` of p(w_out . w) for light travelling along unit `w` (a
@@ -115,6 +148,67 @@ impl PhaseTable {
     }
 }
 
+/// The HG parameter keeping the mean cosine `g` on `dirs`' bins (`keeping_mean_cosine`), found
+/// once per process for the bins and `g` (a session's frames and the coarse late orders ask
+/// again).
+fn matched_parameter(dirs: &Directions, g: f32) -> Result<f32> {
+    static FOUND: std::sync::Mutex<Vec<((usize, usize, u32), f32)>> = std::sync::Mutex::new(Vec::new());
+    let key = (dirs.k, dirs.s, g.to_bits());
+    if let Some(&(_, t)) = FOUND.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(k, _)| *k == key) {
+        return Ok(t);
+    }
+    let mut err = None;
+    let t = raise_until(g, |t| match PhaseTable::new(dirs, t) {
+        Ok(table) => table.mean_cosine(dirs),
+        Err(e) => {
+            err = Some(e);
+            g as f64
+        }
+    });
+    if let Some(e) = err {
+        return Err(e);
+    }
+    FOUND.lock().unwrap_or_else(|e| e.into_inner()).push((key, t));
+    Ok(t)
+}
+
+/// The parameter t between `g` and +-0.995 (on `g`'s side) where `mean(t)`, which rises with t,
+/// is `g`; the end itself when the mean cannot reach `g` there. Regula falsi (Illinois): the
+/// mean is smooth in t, and each evaluation builds a table.
+fn raise_until(g: f32, mut mean: impl FnMut(f32) -> f64) -> f32 {
+    let target = g as f64;
+    let (mut a, mut b) = if g > 0.0 { (g as f64, 0.995) } else { (-0.995, g as f64) };
+    let (mut fa, mut fb) = (mean(a as f32) - target, mean(b as f32) - target);
+    if fa >= 0.0 {
+        return a as f32;
+    }
+    if fb <= 0.0 {
+        return b as f32;
+    }
+    let mut side = 0;
+    for _ in 0..20 {
+        let c = (a * fb - b * fa) / (fb - fa);
+        let fc = mean(c as f32) - target;
+        if fc.abs() < 2e-4 {
+            return c as f32;
+        }
+        if fc < 0.0 {
+            (a, fa) = (c, fc);
+            if side == -1 {
+                fb *= 0.5;
+            }
+            side = -1;
+        } else {
+            (b, fb) = (c, fc);
+            if side == 1 {
+                fa *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    (0.5 * (a + b)) as f32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -151,6 +245,29 @@ mod tests {
                     assert!((t.fine[i] - want).abs() < 1e-4 * want.max(1e-3) + 1e-6);
                 }
             }
+        }
+    }
+
+    /// The table made from g sends scattered light on with a smaller mean cosine than g (the
+    /// bins widen the lobe); `keeping_mean_cosine` raises its parameter until the mean cosine
+    /// is g again, to 1e-3, on the presets' bins (draft 2 x 2 a face, preview 5 x 5, final 6 x 6
+    /// with 3 x 3 storage bins a face), for the residual lobes of g 0.6-0.9 under delta-M and
+    /// a backward g. Isotropic tables are left as they are.
+    #[test]
+    fn matched_table_keeps_the_mean_cosine() {
+        for (k, s) in [(2, 1), (5, 1), (6, 3)] {
+            let dirs = Directions::new(k, s);
+            for g in [0.6f32 / 1.6, 0.9 / 1.9, -0.3] {
+                let plain = PhaseTable::new(&dirs, g).unwrap().mean_cosine(&dirs);
+                let t = PhaseTable::keeping_mean_cosine(&dirs, g).unwrap();
+                let kept = t.mean_cosine(&dirs);
+                eprintln!("{k} x {k} a face, {s} x {s} storage: g {g:.3}: plain table {plain:.3}, parameter {:.3} keeps {kept:.4}", t.g);
+                assert!(plain.abs() < g.abs() as f64 - 0.01, "the plain table should lose some of g: {plain}");
+                assert!((kept - g as f64).abs() < 1e-3, "{kept} vs {g}");
+            }
+            let iso = PhaseTable::keeping_mean_cosine(&dirs, 0.0).unwrap();
+            assert_eq!(iso.g, 0.0);
+            assert!(iso.mean_cosine(&dirs).abs() < 1e-4);
         }
     }
 }
