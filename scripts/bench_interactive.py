@@ -87,6 +87,25 @@ def section_name(args: argparse.Namespace) -> str:
     return kind + (f"-{args.resolution}" if args.resolution else "")
 
 
+def command_line(args: argparse.Namespace) -> str:
+    """The run's command line, as a section's first line gives it."""
+    opts = [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers), ("motions", args.motions),
+            ("preset", args.preset), ("device", args.device), ("threads", args.threads), ("check-every", args.check_every)]
+    opts += [("reference-divisor", args.reference_divisor)] if args.errors else []
+    opts += [("resolution", args.resolution)] if args.resolution else []
+    return ("python3 scripts/bench_interactive.py " + ("--errors " if args.errors else "")
+            + " ".join(f"--{k} {v}" for k, v in opts) + (" --merge" if args.merge else ""))
+
+
+def run_example(args: argparse.Namespace, scene: Path, extra: list[str] = ()) -> dict:
+    """shaders/examples/bench_interactive.rs on `scene` with the run's options (and `extra`)."""
+    return cargo_example_benches("volscatter-gpu", "bench_interactive",
+                                 [str(scene), "--solvers", args.solvers, "--preset", args.preset, "--frames", str(args.frames),
+                                  "--motions", args.motions, "--device", args.device, "--check-every", str(args.check_every), *extra]
+                                 + (["--resolution", str(args.resolution)] if args.resolution else []),
+                                 env={"RAYON_NUM_THREADS": str(args.threads)})
+
+
 def earlier_errors(args: argparse.Namespace) -> tuple[dict[tuple[str, str], dict[str, str]], str | None]:
     """With --merge: the error section's cells as written before, by (scene, motion) and column,
     and the command line of the run that wrote them."""
@@ -118,12 +137,7 @@ def errors(args: argparse.Namespace) -> None:
     for scene in args.scenes.split(","):
         spp = max(1, REF_SPP[scene] // args.reference_divisor)
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
-        found = cargo_example_benches("volscatter-gpu", "bench_interactive",
-                                      [str(path), "--solvers", args.solvers, "--preset", args.preset, "--frames", str(args.frames),
-                                       "--motions", args.motions, "--device", args.device, "--check-every", str(args.check_every),
-                                       "--errors", str(spp), "--reference-settings", json.dumps(REF_SETTINGS.get(scene, {}))]
-                                      + (["--resolution", str(args.resolution)] if args.resolution else []),
-                                      env={"RAYON_NUM_THREADS": str(args.threads)})
+        found = run_example(args, path, ["--errors", str(spp), "--reference-settings", json.dumps(REF_SETTINGS.get(scene, {}))])
         for motion in args.motions.split(","):
             by_solver = {d["solver"]: d["checked"] for d in found.values() if d["motion"] == motion}
             if not by_solver:
@@ -134,11 +148,7 @@ def errors(args: argparse.Namespace) -> None:
             for solver in measured:
                 e = [c["error_noise_removed"] for c in by_solver.get(solver, [])]
                 row[solver] = f"{statistics.median(e):.3f} / {max(e):.3f}" if e else "-"
-        cmd = "python3 scripts/bench_interactive.py --errors " + " ".join(
-            f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers), ("motions", args.motions),
-                                      ("preset", args.preset), ("device", args.device), ("threads", args.threads),
-                                      ("check-every", args.check_every), ("reference-divisor", args.reference_divisor)]
-            + ([("resolution", args.resolution)] if args.resolution else [])) + (" --merge" if args.merge else "")
+        cmd = command_line(args)
         kept = [s for s in solvers if s not in measured]
         lines = [
             "## Interactive sessions: each frame against its own reference"
@@ -199,11 +209,7 @@ def earlier(args: argparse.Namespace) -> tuple[list[str], list[tuple[set[tuple[s
 def write(args: argparse.Namespace, rows: list[str], done: list[str], kept: tuple[list[str], list[tuple[set[tuple[str, str]], str]]]) -> None:
     """The section with the rows so far (written after every scene: a run cut short keeps its
     scenes), after the rows `kept` from an earlier run (--merge)."""
-    cmd = "python3 scripts/bench_interactive.py " + " ".join(
-        f"--{k} {v}" for k, v in [("frames", args.frames), ("scenes", args.scenes), ("solvers", args.solvers),
-                                  ("motions", args.motions), ("preset", args.preset), ("device", args.device), ("threads", args.threads),
-                                  ("check-every", args.check_every)]
-        + ([("resolution", args.resolution)] if args.resolution else [])) + (" --merge" if args.merge else "")
+    cmd = command_line(args)
     gpu = args.device == "gpu"
     lines = [
         "## Interactive sessions" + (" on the GPU" if gpu else f", CPU {args.threads} threads")
@@ -260,11 +266,7 @@ def main() -> None:
     before = earlier(args)
     for scene in args.scenes.split(","):
         path = REPO_ROOT / "bench" / "scenes" / scene / "scene.json"
-        found = cargo_example_benches("volscatter-gpu", "bench_interactive",
-                                      [str(path), "--solvers", args.solvers, "--preset", args.preset, "--frames", str(args.frames),
-                                       "--motions", args.motions, "--device", args.device, "--check-every", str(args.check_every)]
-                                      + (["--resolution", str(args.resolution)] if args.resolution else []),
-                                      env={"RAYON_NUM_THREADS": str(args.threads)})
+        found = run_example(args, path)
         for d in found.values():
             ratio = d["frame_median_seconds"] / d["one_off_median_seconds"] if d["one_off_median_seconds"] else float("nan")
             c = d.get("second_frame_counters") or {}

@@ -152,22 +152,14 @@ impl PhaseTable {
 /// once per process for the bins and `g` (a session's frames and the coarse late orders ask
 /// again).
 fn matched_parameter(dirs: &Directions, g: f32) -> Result<f32> {
-    static FOUND: std::sync::Mutex<Vec<((usize, usize, u32), f32)>> = std::sync::Mutex::new(Vec::new());
+    /// (directions a face side, storage bins a face side, g's bits) -> the parameter.
+    type Found = Vec<((usize, usize, u32), f32)>;
+    static FOUND: std::sync::Mutex<Found> = std::sync::Mutex::new(Vec::new());
     let key = (dirs.k, dirs.s, g.to_bits());
     if let Some(&(_, t)) = FOUND.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(k, _)| *k == key) {
         return Ok(t);
     }
-    let mut err = None;
-    let t = raise_until(g, |t| match PhaseTable::new(dirs, t) {
-        Ok(table) => table.mean_cosine(dirs),
-        Err(e) => {
-            err = Some(e);
-            g as f64
-        }
-    });
-    if let Some(e) = err {
-        return Err(e);
-    }
+    let t = raise_until(g, |t| Ok(PhaseTable::new(dirs, t)?.mean_cosine(dirs)))?;
     FOUND.lock().unwrap_or_else(|e| e.into_inner()).push((key, t));
     Ok(t)
 }
@@ -175,22 +167,22 @@ fn matched_parameter(dirs: &Directions, g: f32) -> Result<f32> {
 /// The parameter t between `g` and +-0.995 (on `g`'s side) where `mean(t)`, which rises with t,
 /// is `g`; the end itself when the mean cannot reach `g` there. Regula falsi (Illinois): the
 /// mean is smooth in t, and each evaluation builds a table.
-fn raise_until(g: f32, mut mean: impl FnMut(f32) -> f64) -> f32 {
+fn raise_until(g: f32, mut mean: impl FnMut(f32) -> Result<f64>) -> Result<f32> {
     let target = g as f64;
     let (mut a, mut b) = if g > 0.0 { (g as f64, 0.995) } else { (-0.995, g as f64) };
-    let (mut fa, mut fb) = (mean(a as f32) - target, mean(b as f32) - target);
+    let (mut fa, mut fb) = (mean(a as f32)? - target, mean(b as f32)? - target);
     if fa >= 0.0 {
-        return a as f32;
+        return Ok(a as f32);
     }
     if fb <= 0.0 {
-        return b as f32;
+        return Ok(b as f32);
     }
     let mut side = 0;
     for _ in 0..20 {
         let c = (a * fb - b * fa) / (fb - fa);
-        let fc = mean(c as f32) - target;
+        let fc = mean(c as f32)? - target;
         if fc.abs() < 2e-4 {
-            return c as f32;
+            return Ok(c as f32);
         }
         if fc < 0.0 {
             (a, fa) = (c, fc);
@@ -206,7 +198,7 @@ fn raise_until(g: f32, mut mean: impl FnMut(f32) -> f64) -> f32 {
             side = 1;
         }
     }
-    (0.5 * (a + b)) as f32
+    Ok((0.5 * (a + b)) as f32)
 }
 
 #[cfg(test)]
