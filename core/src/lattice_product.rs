@@ -27,14 +27,17 @@ use rayon::prelude::*;
 use crate::medium::Medium;
 use crate::stages::ScatteringGrid;
 
-/// Whether the grid's points are the medium's voxel centres (same spacing and axes, integer
-/// offset): what `ScatteringGrid::over_medium` gives when the medium has no more voxels than
-/// the grid's largest side allows.
+/// Whether the grid's points are the medium's voxel centres, or the points of that lattice
+/// refined n times (spacing 1 / n voxel along the same axes, offset a multiple of it): what
+/// `ScatteringGrid::over_medium` gives when the medium has no more voxels than the grid's
+/// largest side allows. On either the medium's trilinear density is trilinear between the
+/// grid's points, which the module's terms assume.
 pub fn on_voxel_lattice(medium: &Medium, grid_index_to_world: &Affine3A) -> bool {
     let m = medium.world_to_index * *grid_index_to_world;
-    let unit = (glam::Mat3::from(m.matrix3) - glam::Mat3::IDENTITY).to_cols_array().iter().all(|e| e.abs() < 1e-4);
-    let t = Vec3::from(m.translation);
-    unit && (t - t.round()).abs().max_element() < 1e-3
+    let n = (1.0 / m.matrix3.x_axis.x).round().max(1.0);
+    let unit = (glam::Mat3::from(m.matrix3) * n - glam::Mat3::IDENTITY).to_cols_array().iter().all(|e| e.abs() < 1e-4 * n);
+    let t = Vec3::from(m.translation) * n;
+    unit && (t - t.round()).abs().max_element() < 1e-3 * n
 }
 
 /// S's node values for trilinear rendering (the module's formula), in place, where `grid` is on

@@ -110,10 +110,10 @@ impl<'a> SolveCtx<'a> {
     /// The single-scattering grid of `scene` (stages/single_scattering.rs), in a session from
     /// the parts kept from the last frame where their inputs did not change; what it computed
     /// and kept goes to `counters`.
-    pub fn single_scattering(&mut self, scene: &Scene, max_dim: u32, dome_directions: u32, dome_spacing: u32, counters: &mut Counters) -> Result<ScatteringGrid> {
+    pub fn single_scattering(&mut self, scene: &Scene, size: impl Into<crate::stages::grid::GridSize>, dome_directions: u32, dome_spacing: u32, counters: &mut Counters) -> Result<ScatteringGrid> {
         let progress = self.progress;
         let cache = self.session().map(|s| s.single());
-        crate::stages::single_scattering::single_scattering_kept(scene, max_dim, dome_directions, dome_spacing, progress, cache, counters)
+        crate::stages::single_scattering::single_scattering_kept(scene, size, dome_directions, dome_spacing, progress, cache, counters)
     }
 
     /// Whether this solve runs on a device's backend (else on the CPU).

@@ -8,6 +8,24 @@ use crate::medium::Medium;
 /// Largest scattering grid a solver may allocate (512^3 points, 1.5 GiB of RGB floats).
 pub const MAX_SCATTERING_GRID_POINTS: u64 = 1 << 27;
 
+/// How finely a scattering grid is laid over a medium: `max_dim` points along its longest
+/// side, and where the medium has fewer voxels than that, up to `points_per_voxel` points a
+/// voxel, n with n times the voxels within `max_dim` (on the voxels' lattice refined n times,
+/// so that the medium's trilinear density is still exact between the points; the one-voxel
+/// ramp around the voxels adds 2n - 1 points: a 32-voxel medium at 64 gets 67). A plain `u32`
+/// is `max_dim` with one point a voxel at most.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct GridSize {
+    pub max_dim: u32,
+    pub points_per_voxel: u32,
+}
+
+impl From<u32> for GridSize {
+    fn from(max_dim: u32) -> Self {
+        GridSize { max_dim, points_per_voxel: 1 }
+    }
+}
+
 /// A dense RGB grid with its own index-to-world map (voxel centres at integer indices),
 /// x fastest. Trilinear between voxel centres, zero outside.
 #[derive(Clone, Debug)]
@@ -19,8 +37,11 @@ pub struct ScatteringGrid {
 
 impl ScatteringGrid {
     /// An all-zero grid covering the medium's bounds: on the medium's own voxel grid when its
-    /// extent fits in `max_dim` per axis, else on cells of k x k x k voxels.
-    pub fn over_medium(medium: &Medium, max_dim: u32) -> Result<Self> {
+    /// extent fits in `size.max_dim` per axis (on that lattice refined n times, n up to
+    /// `size.points_per_voxel`, when n times the extent fits), else on cells of k x k x k
+    /// voxels.
+    pub fn over_medium(medium: &Medium, size: impl Into<GridSize>) -> Result<Self> {
+        let GridSize { max_dim, points_per_voxel } = size.into();
         let (lo, hi) = medium.grid.bbox();
         if medium.grid.is_empty() {
             return Ok(ScatteringGrid { dims: [1, 1, 1], index_to_world: medium.index_to_world, data: vec![Vec3::ZERO] });
@@ -30,7 +51,10 @@ impl ScatteringGrid {
         let hi = hi + IVec3::ONE;
         let extent = (hi - lo + IVec3::ONE).as_vec3();
         let k = (extent.max_element() / max_dim.max(2) as f32).max(1.0);
-        let dims = (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2));
+        // n points a voxel where n times the stored voxels (the extent less its ramp) fit in
+        // max_dim; then points 1 / n apart from lo to hi, (extent - 1) n + 1 of them a side.
+        let n = (max_dim.max(2) as f32 / (extent.max_element() - 2.0).max(1.0)).floor().clamp(1.0, points_per_voxel.max(1) as f32);
+        let dims = if n > 1.0 { ((extent - Vec3::ONE) * n + Vec3::ONE).round().as_uvec3() } else { (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2)) };
         let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
         // Checked before allocating (an allocation failure aborts the host): 2^27 points is
         // 1.5 GiB of RGB, a 512^3 grid, beyond anything a preview needs.

@@ -9,6 +9,7 @@ use std::ops::Range;
 use std::sync::Arc;
 
 use super::diff::{light_key, medium_key, Bits};
+use super::grid::GridSize;
 use super::{Counters, Progress, ScatteringGrid};
 use crate::error::{Error, Result};
 use crate::medium::dense_march::Marcher;
@@ -37,8 +38,8 @@ pub fn single_scattering_grid(scene: &Scene, max_dim: u32, dome_directions: u32)
 
 /// `single_scattering_grid` that stops within a row of grid points (each a few shadow rays)
 /// once `progress` is cancelled, with `Error::Cancelled` (issue 22: a 1024^3 grid takes minutes).
-pub fn single_scattering_grid_cancellable(scene: &Scene, max_dim: u32, dome_directions: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
-    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
+pub fn single_scattering_grid_cancellable(scene: &Scene, size: impl Into<GridSize>, dome_directions: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
+    let mut grid = ScatteringGrid::over_medium(&scene.medium, size)?;
     single_scattering_onto(scene, &mut grid, dome_directions, progress)?;
     Ok(grid)
 }
@@ -78,14 +79,14 @@ fn single_scattering_onto_spaced(scene: &Scene, grid: &mut ScatteringGrid, dome_
 /// order); `counters` says which parts were computed and which kept.
 pub fn single_scattering_kept(
     scene: &Scene,
-    max_dim: u32,
+    size: impl Into<GridSize>,
     dome_directions: u32,
     dome_spacing: u32,
     progress: &dyn Progress,
     cache: Option<&mut SingleCache>,
     counters: &mut Counters,
 ) -> Result<ScatteringGrid> {
-    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
+    let mut grid = ScatteringGrid::over_medium(&scene.medium, size)?;
     single_scattering_by_parts(scene, &mut grid, dome_directions, dome_spacing, progress, cache, counters)?;
     Ok(grid)
 }

@@ -20,8 +20,8 @@ use crate::medium::Medium;
 /// (pop, vpl, lpm: the same names and ranges in each one's settings table).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Upsampling {
-    /// The output grid's longest side in points (`ScatteringGrid::over_medium`).
-    pub output_resolution: u32,
+    /// The output grid's size (`ScatteringGrid::over_medium`).
+    pub output_resolution: super::grid::GridSize,
     /// Joint bilateral (true) or plain trilinear (false) interpolation of J.
     pub upsample: bool,
     /// The range Gaussian's width, as a fraction of the largest coarse density.

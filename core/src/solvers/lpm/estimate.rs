@@ -8,7 +8,7 @@
 //!
 //! Not counted: the medium itself (the host knows its voxels; with `medium.max_resolution` it
 //! is the coarse grid), the density mip (about 1/7 of the medium) and the output grid
-//! (`output_resolution`^3 RGB values), all the same in memory and out of core.
+//! (about `output_resolution`^3 RGB values), all the same in memory and out of core.
 
 use glam::Vec3;
 

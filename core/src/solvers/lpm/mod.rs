@@ -161,12 +161,12 @@ impl Lpm {
         let medium = &scene.medium;
         let mut timings = Timings::default();
         let mut report = LpmReport::default();
-        let out_probe = crate::stages::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
+        let out_probe = crate::stages::ScatteringGrid::over_medium(&scene.medium, s.output_size())?;
         // In a session, the parts of the single scattering whose lights did not change are kept.
         let single = if ov.j_only {
             out_probe.clone()
         } else {
-            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_resolution, s.dome_directions, 1, counters))?
+            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions, 1, counters))?
         };
         if !scatters(scene) {
             return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
@@ -349,11 +349,11 @@ impl Lpm {
 /// The output grid (its frame) and S's exact single scattering on it (the empty grid when
 /// only J is asked for).
 fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Overrides, timings: &mut Timings) -> Result<(crate::stages::ScatteringGrid, crate::stages::ScatteringGrid)> {
-    let out_probe = crate::stages::ScatteringGrid::over_medium(&scene.medium, s.output_resolution)?;
+    let out_probe = crate::stages::ScatteringGrid::over_medium(&scene.medium, s.output_size())?;
     let single = if ov.j_only {
         out_probe.clone()
     } else {
-        timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_resolution, s.dome_directions, progress))?
+        timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_size(), s.dome_directions, progress))?
     };
     Ok((out_probe, single))
 }

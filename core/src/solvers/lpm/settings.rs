@@ -54,6 +54,10 @@ crate::settings! {
             "keep the per-cell arrays in scratch files a slab at a time, so that memory_budget bounds the whole solve (CPU, first_order boundary, no local lights)";
         output_resolution: u32 = 64, range(>= 2, <= 1024),
             "largest side of the returned scattering grid";
+        /// A dense cloud's light falls by e^2 across a voxel of its lit face, which S's points
+        /// at the voxel centres cannot carry (docs/solvers/lpm.md, "Two points a voxel").
+        points_per_voxel: u32 = 2, range(>= 1, <= 4),
+            "grid points a voxel of the returned grid, where output_resolution has room for them (a medium of fewer voxels)";
         /// pop's upsample.rs.
         upsample: bool = true,
             "joint bilateral upsampling guided by the density (off: trilinear)";
@@ -112,6 +116,12 @@ impl LpmSettings {
     /// The settings of the shared upsampling stage (stages/upsample.rs), declared here with the
     /// same names and ranges as in every solver that upsamples.
     pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
-        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+        crate::stages::upsample::Upsampling { output_resolution: self.output_size(), upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+    }
+
+    /// The returned grid's size: `output_resolution` along the longest side, up to
+    /// `points_per_voxel` points a voxel.
+    pub fn output_size(&self) -> crate::stages::grid::GridSize {
+        crate::stages::grid::GridSize { max_dim: self.output_resolution, points_per_voxel: self.points_per_voxel }
     }
 }

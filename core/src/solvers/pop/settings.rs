@@ -136,6 +136,6 @@ impl PopSettings {
     /// The settings of the shared upsampling stage (stages/upsample.rs), declared here with the
     /// same names and ranges as in every solver that upsamples.
     pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
-        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution, upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+        crate::stages::upsample::Upsampling { output_resolution: self.output_resolution.into(), upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
     }
 }

@@ -932,7 +932,7 @@ fn vpl_near_ratio_stage_cancels() {
     let fp = crate::stages::upsample::footprint(&sc.medium, &out).min(crate::stages::upsample::footprint(&sc.medium, &gather));
     let mip = crate::stages::mip::MediumMip::new(&sc.medium, fp);
     let merged = super::gather::gather(&sc, &mip, &walks, &s, &NoProgress).unwrap().merged;
-    let pop_like = crate::stages::upsample::Upsampling { output_resolution: s.output_resolution, ..crate::solvers::pop::PopSettings::default().upsampling() };
+    let pop_like = crate::stages::upsample::Upsampling { output_resolution: s.output_resolution.into(), ..crate::solvers::pop::PopSettings::default().upsampling() };
     let plain = |m: &crate::stages::upsample::Merged| crate::stages::upsample::upsample(&sc.medium, &mip, m, &pop_like);
     let r = super::near_ratio::upsample(&sc, &mip, &walks, &merged, &s, &pop_like, &Cancelled, plain);
     assert!(matches!(r, Err(crate::error::Error::Cancelled)), "{:?}", r.map(|g| g.dims));
