@@ -20,6 +20,19 @@ pub struct GridSize {
     pub points_per_voxel: u32,
 }
 
+impl GridSize {
+    /// The points a voxel `ScatteringGrid::over_medium` lays over `medium`: n where n times its
+    /// stored voxels fit in `max_dim`, at most `points_per_voxel`, at least 1.
+    pub fn refinement(self, medium: &Medium) -> u32 {
+        if medium.grid.is_empty() {
+            return 1;
+        }
+        let (lo, hi) = medium.grid.bbox();
+        let voxels = (hi - lo + IVec3::ONE).max_element().max(1) as u32;
+        (self.max_dim.max(2) / voxels).clamp(1, self.points_per_voxel.max(1))
+    }
+}
+
 impl From<u32> for GridSize {
     fn from(max_dim: u32) -> Self {
         GridSize { max_dim, points_per_voxel: 1 }
@@ -51,9 +64,8 @@ impl ScatteringGrid {
         let hi = hi + IVec3::ONE;
         let extent = (hi - lo + IVec3::ONE).as_vec3();
         let k = (extent.max_element() / max_dim.max(2) as f32).max(1.0);
-        // n points a voxel where n times the stored voxels (the extent less its ramp) fit in
-        // max_dim; then points 1 / n apart from lo to hi, (extent - 1) n + 1 of them a side.
-        let n = (max_dim.max(2) as f32 / (extent.max_element() - 2.0).max(1.0)).floor().clamp(1.0, points_per_voxel.max(1) as f32);
+        // Points 1 / n apart from lo to hi, (extent - 1) n + 1 of them a side.
+        let n = GridSize { max_dim, points_per_voxel }.refinement(medium) as f32;
         let dims = if n > 1.0 { ((extent - Vec3::ONE) * n + Vec3::ONE).round().as_uvec3() } else { (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2)) };
         let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
         // Checked before allocating (an allocation failure aborts the host): 2^27 points is

@@ -56,8 +56,8 @@ pub(crate) fn single_scattering_onto(scene: &Scene, grid: &mut ScatteringGrid, d
 /// scene's 64^3 grid: 33 rays a point, 0.44 s of a vpl render on 2 cores), and the light it
 /// brings, integrated over the sky, varies slowly in space: it is the sun's part that draws
 /// the sharp shadows. Measured: vpl's `dome_spacing` (settings.rs).
-pub fn single_scattering_grid_dome_spaced(scene: &Scene, max_dim: u32, dome_directions: u32, dome_spacing: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
-    let mut grid = ScatteringGrid::over_medium(&scene.medium, max_dim)?;
+pub fn single_scattering_grid_dome_spaced(scene: &Scene, size: impl Into<GridSize>, dome_directions: u32, dome_spacing: u32, progress: &dyn Progress) -> Result<ScatteringGrid> {
+    let mut grid = ScatteringGrid::over_medium(&scene.medium, size)?;
     single_scattering_onto_spaced(scene, &mut grid, dome_directions, dome_spacing, progress)?;
     Ok(grid)
 }

@@ -253,14 +253,15 @@ fn runs_what_it_says_it_picked() {
 /// The default target is one the measured solvers reach on every measured scene whose reference
 /// is converged enough to tell (its own noise under half the target: fig10_g08's fixture has
 /// 0.31 of noise, so no error against it can be below about that), so that the hosts' default
-/// never asks for the impossible.
+/// never asks for the impossible. An error is judged as issue 36 states its aim, with the
+/// reference's own noise taken out: sqrt(e^2 - noise^2).
 /// Measured scenes no solver reaches the default (0.10) on, with the best measured (2026-11-29):
-/// a dense white ball (s23_sphere_dense lpm preview 0.126) and the spot lamp inside a smoke
-/// (s12_spot_inside 0.27: every solver's error sits in the few pixels at the lamp, the
-/// radial-path bias of docs/scene-format.md "Sphere lamps"; fluxes within 0.93-1.28x).
+/// the spot lamp inside a smoke (s12_spot_inside: lpm final 0.176, 0.065 without the four
+/// pixels at the lamp, where S's grid blurs the cone's apex; docs/solvers/auto.md).
 /// s05_cloud_sun left the list when lpm's table kept the residual lobe's mean cosine (lpm
-/// preview 0.252 -> 0.071).
-const UNREACHED: &[&str] = &["s12_spot_inside", "s23_sphere_dense"];
+/// preview 0.252 -> 0.071), s23_sphere_dense when lpm's grid took two points a voxel (0.126 ->
+/// 0.101, 0.091 without its reference's noise of 0.045).
+const UNREACHED: &[&str] = &["s12_spot_inside"];
 
 #[test]
 fn default_target_is_reached_on_every_measured_scene() {
@@ -269,6 +270,7 @@ fn default_target_is_reached_on_every_measured_scene() {
     for (scene, _) in &model.scenes {
         let noise = m.scenes.iter().find(|s| &s.name == scene).and_then(|s| s.reference_noise).unwrap_or(0.0);
         let best = cpu_runs(&m, scene).map(|r| r.image_error).fold(f64::INFINITY, f64::min);
+        let best = (best * best - noise * noise).max(0.0).sqrt();
         if UNREACHED.contains(&scene.as_str()) {
             // Listed so that the day a solver reaches it, this fails and the list shrinks.
             assert!(best > t, "{scene} is listed as unreached but {best} <= {t}: remove it from UNREACHED");

@@ -57,7 +57,7 @@ use crate::stages::mip::MediumMip;
 use crate::stages::upsample::upsample;
 use super::{parse_settings, SolveCtx, SolveOutput, Solver};
 use crate::stages::{Counters, Progress, Timings};
-use crate::stages::single_scattering::single_scattering_grid_cancellable;
+use crate::stages::single_scattering::single_scattering_grid_dome_spaced;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use directions::{Directions, FACES};
@@ -166,7 +166,10 @@ impl Lpm {
         let single = if ov.j_only {
             out_probe.clone()
         } else {
-            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions, 1, counters))?
+            // The dome's part on the voxels' points, blended between (its light varies slowly;
+            // a sun's is what changes within a voxel): on a refined grid it cost 7x.
+            let dome_spacing = s.output_size().refinement(medium);
+            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions, dome_spacing, counters))?
         };
         if !scatters(scene) {
             return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
@@ -353,7 +356,7 @@ fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Ove
     let single = if ov.j_only {
         out_probe.clone()
     } else {
-        timings.time("lpm single scattering", || single_scattering_grid_cancellable(scene, s.output_size(), s.dome_directions, progress))?
+        timings.time("lpm single scattering", || single_scattering_grid_dome_spaced(scene, s.output_size(), s.dome_directions, s.output_size().refinement(&scene.medium), progress))?
     };
     Ok((out_probe, single))
 }
