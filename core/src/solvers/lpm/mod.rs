@@ -166,10 +166,10 @@ impl Lpm {
         let single = if ov.j_only {
             out_probe.clone()
         } else {
-            // The dome's part on the voxels' points, blended between (its light varies slowly;
-            // a sun's is what changes within a voxel): on a refined grid it cost 7x.
-            let dome_spacing = s.output_size().refinement(medium);
-            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions, dome_spacing, counters))?
+            // The dome's part on the coarsest points the stage allows (`MIN_DOME_POINTS` a side),
+            // blended between: its light varies slowly, a sun's is what changes within a voxel,
+            // and a forward lobe takes up to 8x the directions.
+            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions_for(medium.g), u32::MAX, counters))?
         };
         if !scatters(scene) {
             return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
@@ -356,7 +356,7 @@ fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Ove
     let single = if ov.j_only {
         out_probe.clone()
     } else {
-        timings.time("lpm single scattering", || single_scattering_grid_dome_spaced(scene, s.output_size(), s.dome_directions, s.output_size().refinement(&scene.medium), progress))?
+        timings.time("lpm single scattering", || single_scattering_grid_dome_spaced(scene, s.output_size(), s.dome_directions_for(scene.medium.g), u32::MAX, progress))?
     };
     Ok((out_probe, single))
 }

@@ -65,9 +65,9 @@ crate::settings! {
             "range sigma of the bilateral filter, a fraction of the largest density";
         spatial_sigma: f32 = 0.7, range(> 0, <= 4),
             "spatial sigma of the bilateral filter, in propagation cells";
-        /// The compositor's grid.
+        /// For a medium of g <= 0.5; `dome_directions_for` takes more for a forward lobe.
         dome_directions: u32 = 32, range(>= 1, <= 1024),
-            "dome directions of the exact single scattering";
+            "dome directions of the exact single scattering (g up to 0.5; a forward-scattering medium takes up to 8x more)";
     }
     check = cross_checks;
 }
@@ -117,6 +117,17 @@ impl LpmSettings {
     /// same names and ranges as in every solver that upsamples.
     pub fn upsampling(&self) -> crate::stages::upsample::Upsampling {
         crate::stages::upsample::Upsampling { output_resolution: self.output_size(), upsample: self.upsample, range_sigma: self.range_sigma, spatial_sigma: self.spatial_sigma }
+    }
+
+    /// The dome directions of the single scattering for a medium of mean cosine `g`. The fixed
+    /// set follows the dome's brightness, not the phase function, and a forward lobe towards
+    /// the camera narrower than the set's spacing falls between its directions: a cloud's
+    /// sky-lit silhouette came out 2-3x off (docs/solvers/lpm.md, "The dome's directions").
+    /// The lobe's solid angle goes as (1 - g)^2, so past g 0.5 the count grows as
+    /// (0.5 / (1 - g))^2, up to 8x `dome_directions`.
+    pub fn dome_directions_for(&self, g: f32) -> u32 {
+        let lobe = (0.5 / (1.0 - g.clamp(-1.0, 0.999))).powi(2).clamp(1.0, 8.0);
+        (self.dome_directions as f32 * lobe).round() as u32
     }
 
     /// The returned grid's size: `output_resolution` along the longest side, up to
