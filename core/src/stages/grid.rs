@@ -51,8 +51,8 @@ pub struct ScatteringGrid {
 impl ScatteringGrid {
     /// An all-zero grid covering the medium's bounds: on the medium's own voxel grid when its
     /// extent fits in `size.max_dim` per axis (on that lattice refined n times, n up to
-    /// `size.points_per_voxel`, when n times the extent fits), else on cells of k x k x k
-    /// voxels.
+    /// `size.points_per_voxel`, when n times its voxels fit: `GridSize::refinement`), else on
+    /// cells of k x k x k voxels.
     pub fn over_medium(medium: &Medium, size: impl Into<GridSize>) -> Result<Self> {
         let GridSize { max_dim, points_per_voxel } = size.into();
         let (lo, hi) = medium.grid.bbox();

@@ -260,7 +260,7 @@ fn runs_what_it_says_it_picked() {
 /// pixels at the lamp, where S's grid blurs the cone's apex; docs/solvers/auto.md).
 /// s05_cloud_sun left the list when lpm's table kept the residual lobe's mean cosine (lpm
 /// preview 0.252 -> 0.071), s23_sphere_dense when lpm's grid took two points a voxel (0.126 ->
-/// 0.101, 0.091 without its reference's noise of 0.045).
+/// 0.0996, 0.089 without its reference's noise of 0.045).
 const UNREACHED: &[&str] = &["s12_spot_inside"];
 
 #[test]
