@@ -21,15 +21,10 @@ pub struct GridSize {
 }
 
 impl GridSize {
-    /// The points a voxel `ScatteringGrid::over_medium` lays over `medium`: n where n times its
-    /// stored voxels fit in `max_dim`, at most `points_per_voxel`, at least 1.
-    pub fn refinement(self, medium: &Medium) -> u32 {
-        if medium.grid.is_empty() {
-            return 1;
-        }
-        let (lo, hi) = medium.grid.bbox();
-        let voxels = (hi - lo + IVec3::ONE).max_element().max(1) as u32;
-        (self.max_dim.max(2) / voxels).clamp(1, self.points_per_voxel.max(1))
+    /// The points a voxel over a medium of `voxels` along its longest side: n where n times
+    /// them fit in `max_dim`, at most `points_per_voxel`, at least 1.
+    fn refinement(self, voxels: u32) -> u32 {
+        (self.max_dim.max(2) / voxels.max(1)).clamp(1, self.points_per_voxel.max(1))
     }
 }
 
@@ -51,10 +46,10 @@ pub struct ScatteringGrid {
 impl ScatteringGrid {
     /// An all-zero grid covering the medium's bounds: on the medium's own voxel grid when its
     /// extent fits in `size.max_dim` per axis (on that lattice refined n times, n up to
-    /// `size.points_per_voxel`, when n times its voxels fit: `GridSize::refinement`), else on
-    /// cells of k x k x k voxels.
+    /// `size.points_per_voxel`, when n times its voxels fit), else on cells of k x k x k
+    /// voxels.
     pub fn over_medium(medium: &Medium, size: impl Into<GridSize>) -> Result<Self> {
-        let GridSize { max_dim, points_per_voxel } = size.into();
+        let size = size.into();
         let (lo, hi) = medium.grid.bbox();
         if medium.grid.is_empty() {
             return Ok(ScatteringGrid { dims: [1, 1, 1], index_to_world: medium.index_to_world, data: vec![Vec3::ZERO] });
@@ -63,10 +58,15 @@ impl ScatteringGrid {
         let lo = lo - IVec3::ONE;
         let hi = hi + IVec3::ONE;
         let extent = (hi - lo + IVec3::ONE).as_vec3();
-        let k = (extent.max_element() / max_dim.max(2) as f32).max(1.0);
-        // Points 1 / n apart from lo to hi, (extent - 1) n + 1 of them a side.
-        let n = GridSize { max_dim, points_per_voxel }.refinement(medium) as f32;
-        let dims = if n > 1.0 { ((extent - Vec3::ONE) * n + Vec3::ONE).round().as_uvec3() } else { (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2)) };
+        // The stored voxels are the extent less its ramp.
+        let n = size.refinement(extent.max_element() as u32 - 2) as f32;
+        let dims = if n > 1.0 {
+            // Points 1 / n apart from lo to hi, (extent - 1) n + 1 of them a side.
+            ((extent - Vec3::ONE) * n + Vec3::ONE).round().as_uvec3()
+        } else {
+            let k = (extent.max_element() / size.max_dim.max(2) as f32).max(1.0);
+            (extent / k).ceil().as_uvec3().max(glam::UVec3::splat(2))
+        };
         let count = dims.x as u64 * dims.y as u64 * dims.z as u64;
         // Checked before allocating (an allocation failure aborts the host): 2^27 points is
         // 1.5 GiB of RGB, a 512^3 grid, beyond anything a preview needs.

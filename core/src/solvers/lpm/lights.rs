@@ -114,8 +114,7 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
         let sigma_s = medium.albedo * sigma;
         let tp = delta.scaled_transmittance(t);
         // The cell's mean along the beam, not its centre's (`cell_mean_over_centre`).
-        let scaled = if delta.active() { sigma * delta.extinction } else { sigma };
-        let (t, tp) = ((t * cell_mean_over_centre(sigma, grid.h, w)).min(Vec3::ONE), (tp * cell_mean_over_centre(scaled, grid.h, w)).min(Vec3::ONE));
+        let (t, tp) = ((t * cell_mean_over_centre(sigma, grid.h, w)).min(Vec3::ONE), (tp * cell_mean_over_centre(sigma * delta.extinction, grid.h, w)).min(Vec3::ONE));
         let lit = sigma_s * (1.0 - delta.f) * arriving * tp;
         for (d, v) in cell.iter_mut().enumerate() {
             *v += lit * pbar(d);

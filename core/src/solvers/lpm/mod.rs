@@ -166,10 +166,7 @@ impl Lpm {
         let single = if ov.j_only {
             out_probe.clone()
         } else {
-            // The dome's part on the coarsest points the stage allows (`MIN_DOME_POINTS` a side),
-            // blended between: its light varies slowly, a sun's is what changes within a voxel,
-            // and a forward lobe takes up to 8x the directions.
-            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions_for(medium.g), u32::MAX, counters))?
+            timings.time("lpm single scattering", || ctx.single_scattering(scene, s.output_size(), s.dome_directions_for(medium.g), COARSEST_DOME, counters))?
         };
         if !scatters(scene) {
             return Ok((SolveOutput::new(crate::lattice_product::finished(medium, single), timings), report));
@@ -349,6 +346,11 @@ impl Lpm {
     }
 }
 
+/// The single scattering's dome spacing: the dome's part on the coarsest points the stage allows
+/// (`MIN_DOME_POINTS` a side), blended between. Its light varies slowly, a sun's is what
+/// changes within a voxel, and a forward lobe takes up to 8x the directions.
+const COARSEST_DOME: u32 = u32::MAX;
+
 /// The output grid (its frame) and S's exact single scattering on it (the empty grid when
 /// only J is asked for).
 fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Overrides, timings: &mut Timings) -> Result<(crate::stages::ScatteringGrid, crate::stages::ScatteringGrid)> {
@@ -356,7 +358,7 @@ fn output_start(s: &LpmSettings, scene: &Scene, progress: &dyn Progress, ov: Ove
     let single = if ov.j_only {
         out_probe.clone()
     } else {
-        timings.time("lpm single scattering", || single_scattering_grid_dome_spaced(scene, s.output_size(), s.dome_directions_for(scene.medium.g), u32::MAX, progress))?
+        timings.time("lpm single scattering", || single_scattering_grid_dome_spaced(scene, s.output_size(), s.dome_directions_for(scene.medium.g), COARSEST_DOME, progress))?
     };
     Ok((out_probe, single))
 }
