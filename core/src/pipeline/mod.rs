@@ -37,7 +37,8 @@ pub struct Composited {
     pub image: Image,
     pub device: DeviceUsed,
     pub notes: Vec<String>,
-    /// "composite: single-scattering AOV" (when an AOV needs it) and "composite".
+    /// "composite: single-scattering AOV" (when an AOV needs it), "composite: near lamps" (when
+    /// asked for) and "composite" (all of it).
     pub timings: Timings,
 }
 
@@ -58,10 +59,13 @@ pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions, dev
     } else {
         None
     };
-    let (image, device) = devices.run(&mut notes, true, |on| match on {
+    let (mut image, device) = devices.run(&mut notes, true, |on| match on {
         Some((accelerator, choice)) => accelerator.composite(choice, scene, s, single.as_ref(), opts),
         None => compositor::composite_with_single(scene, s, single.as_ref(), opts).map(|i| Attempt::Ran(i, DeviceUsed::Cpu)),
     })?;
+    if opts.near_lamps {
+        timings.time("composite: near lamps", || compositor::add_near_lamps(scene, s, single.as_ref(), opts, &mut image));
+    }
     timings.0.push(("composite".into(), start.elapsed().as_secs_f64()));
     Ok(Composited { image, device, notes, timings })
 }

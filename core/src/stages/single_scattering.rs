@@ -633,7 +633,7 @@ pub fn shadow_step(medium: &Medium, grid: &ScatteringGrid) -> f32 {
 /// field (`PointEmitter::inverse_square`: 1/d^2, a sphere lamp's, spread over `near`, the grid's
 /// cell). On the emitter's centre the phase function's mean, 1/4 pi, is used.
 #[inline]
-fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &mut dyn FnMut(Vec3, f32) -> Vec3) -> Vec3 {
+pub(crate) fn emitter_single(e: &crate::translate::PointEmitter, x: Vec3, view: Vec3, g: f32, near: f32, tr: &mut dyn FnMut(Vec3, f32) -> Vec3) -> Vec3 {
     let to = e.position - x;
     let dist = to.length();
     if dist > 1e-6 {

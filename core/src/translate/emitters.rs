@@ -139,7 +139,51 @@ impl PointEmitter {
     pub fn power(&self) -> Vec3 {
         self.intensity * self.profile.solid_angle()
     }
+
+    /// The directions a sphere lamp's light reaches `x` from, `n` of them even in solid angle
+    /// (a Fibonacci spiral): over the cap the lamp subtends from outside it, over every
+    /// direction inside a lit one. Each comes with the distance to the surface along it and its
+    /// share of the field, the shares summing to `inverse_square(d, 0)`. Empty for anything but
+    /// a sphere lamp, and inside a dark one. Why: light near an optically thick lamp crosses
+    /// the medium along each of these, and the direction to the centre alone crosses less of it.
+    pub fn sphere_directions(&self, x: Vec3, n: u32) -> Vec<(Vec3, f32, f32)> {
+        let Extent::Sphere(interior) = self.extent else { return Vec::new() };
+        let to = self.position - x;
+        let (d2, r2) = (to.length_squared(), self.radius * self.radius);
+        let d = d2.sqrt();
+        let outside = d > self.radius;
+        if self.radius <= 0.0 || n == 0 || (!outside && interior == SphereInterior::Dark) {
+            return Vec::new();
+        }
+        // Outside: the cap of half-angle asin(r / d), radiance 1 / (pi r^2) per W/sr; inside a
+        // lit lamp: every direction, half that radiance (docs/scene-format.md, sphere lamps).
+        let (axis, one_minus_cos, radiance) = if outside {
+            let sin2 = r2 / d2;
+            let omc = if sin2 < 1e-4 { 0.5 * sin2 + 0.125 * sin2 * sin2 } else { 1.0 - (1.0 - sin2).sqrt() };
+            (to / d, omc, 1.0 / (std::f32::consts::PI * r2))
+        } else {
+            (Vec3::Z, 2.0, 0.5 / (std::f32::consts::PI * r2))
+        };
+        let share = radiance * 2.0 * std::f32::consts::PI * one_minus_cos / n as f32;
+        let (u, v) = axis.any_orthonormal_pair();
+        (0..n)
+            .map(|j| {
+                let cos = 1.0 - one_minus_cos * (j as f32 + 0.5) / n as f32;
+                let sin = (1.0 - cos * cos).max(0.0).sqrt();
+                let phi = j as f32 * GOLDEN_ANGLE;
+                let w = axis * cos + (u * phi.cos() + v * phi.sin()) * sin;
+                let b = w.dot(to);
+                let root = (b * b - d2 + r2).max(0.0).sqrt();
+                // The near side of the surface from outside, the far side from inside.
+                let t = if outside { b - root } else { b + root };
+                (w, t.max(0.0), share)
+            })
+            .collect()
+    }
 }
+
+/// The golden angle, 2 pi (2 - phi), in radians: a Fibonacci spiral's turn per point.
+const GOLDEN_ANGLE: f32 = 2.399_963_2;
 
 pub fn spot_emitter(s: &Spot) -> PointEmitter {
     PointEmitter {
@@ -199,6 +243,28 @@ mod tests {
     use super::*;
     use crate::scene::light::AreaShape;
     use crate::sampling::uniform_sphere;
+
+    /// A sphere lamp's directions: their shares sum to its field outside it and inside a lit
+    /// one, each direction reaches the surface at the distance given, and a dark lamp's inside
+    /// and a point lamp have none.
+    #[test]
+    fn sphere_directions_add_up_to_the_field() {
+        let lamp = |interior| PointEmitter { position: Vec3::new(0.2, -0.1, 0.3), intensity: Vec3::ONE, radius: 0.5, extent: Extent::Sphere(interior), profile: Profile::Isotropic };
+        for (interior, x) in [(SphereInterior::Dark, Vec3::new(1.5, 0.4, -0.2)), (SphereInterior::Lit, Vec3::new(0.9, -0.1, 0.3)), (SphereInterior::Lit, Vec3::new(0.3, 0.0, 0.1))] {
+            let e = lamp(interior);
+            let dirs = e.sphere_directions(x, 64);
+            let sum: f32 = dirs.iter().map(|d| d.2).sum();
+            let field = e.inverse_square((e.position - x).length(), 0.0);
+            assert!((sum / field - 1.0).abs() < 1e-4, "{interior:?} at {x}: {sum} vs {field}");
+            for (w, t, _) in dirs {
+                let on = (x + w * t - e.position).length();
+                assert!((on - e.radius).abs() < 1e-4, "{w} {t}: {on}");
+            }
+        }
+        assert!(lamp(SphereInterior::Dark).sphere_directions(Vec3::new(0.3, 0.0, 0.1), 16).is_empty());
+        let point = PointEmitter { radius: 0.0, ..lamp(SphereInterior::Lit) };
+        assert!(point.sphere_directions(Vec3::ONE, 16).is_empty());
+    }
 
     /// Monte Carlo integral of a profile over the sphere (stratified), to check solid_angle.
     fn integrate(p: &Profile) -> f32 {

@@ -36,6 +36,10 @@ pub struct RenderArgs {
     /// Leave the directly seen environment out (alpha from the medium only).
     #[arg(long)]
     pub transparent: bool,
+    /// Composite the grid alone, as a host renders it: without the point and spot lamps'
+    /// single scattering made exact near them (docs/compositor.md).
+    #[arg(long)]
+    pub grid_only: bool,
     /// Multiplier applied to the PNG only.
     #[arg(long, default_value_t = 1.0)]
     pub exposure: f32,
@@ -131,7 +135,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         return Err(Error::InvalidArgument("--out-vdb: `reference` renders an image, not a scattering grid; pick a scattering solver".into()));
     }
     let progress = StderrProgress::new(args.quiet);
-    let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, ..Default::default() };
+    let opts = compositor::CompositeOptions { transparent: args.transparent, aovs, near_lamps: !args.grid_only, ..Default::default() };
     let rendered = pipeline::render(&mut session, &scene, &opts, &progress)?;
     progress.finish();
     if !args.quiet {

@@ -161,12 +161,31 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
                     }
                     let arriving = intensity * field;
                     let bin = dirs.bin_of(-towards);
-                    add(cell, jv, p, sigma, -towards, arriving, grid.transmittance(p, towards, em.shadow_length(dist)), &|d| table.storage_mean_from_bin(dirs, d, bin));
+                    let t = if em.radius > near && dist < SPHERE_DISTANCE * em.radius {
+                        // Near a sphere lamp its light crosses the medium along every direction
+                        // it arrives from, not along the centre's alone (`sphere_directions`):
+                        // their transmittances' mean, weighted by their shares.
+                        let (mut sum, mut total) = (Vec3::ZERO, 0.0);
+                        for (w, t, share) in em.sphere_directions(p, SPHERE_DIRECTIONS) {
+                            sum += share * grid.transmittance(p, w, t);
+                            total += share;
+                        }
+                        if total > 0.0 { sum / total } else { grid.transmittance(p, towards, em.shadow_length(dist)) }
+                    } else {
+                        grid.transmittance(p, towards, em.shadow_length(dist))
+                    };
+                    add(cell, jv, p, sigma, -towards, arriving, t, &|d| table.storage_mean_from_bin(dirs, d, bin));
                 });
             }
         }
     });
 }
+
+/// Within this many radii of a sphere lamp the first order's transmittance is the mean over
+/// the directions its light arrives from, `SPHERE_DIRECTIONS` of them (the compositor's
+/// `near_lamps` sums the single scattering the same way there).
+const SPHERE_DISTANCE: f32 = 4.0;
+const SPHERE_DIRECTIONS: u32 = 16;
 
 /// The mean over a cubic cell of side `h` of e^(-sigma (x - c) . w), x uniform in the cell: a
 /// beam's transmittance averaged over the cell, over its value at the centre c, for sigma

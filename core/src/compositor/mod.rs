@@ -12,6 +12,8 @@
 //! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
 
+mod near_lamps;
+
 use glam::{Affine3A, IVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -96,11 +98,14 @@ pub struct CompositeOptions {
     /// them keeps working; the image-making front ends (the CLI's `render --aov`, the C ABI's
     /// `vs_result_composite_aovs`, the hosts) pass only what was asked for.
     pub aovs: Aovs,
+    /// The single scattering of point and spot lamps exact near them (`near_lamps`), not the
+    /// grid's interpolation of it. Off: the image is the grid's march alone, as a host renders it.
+    pub near_lamps: bool,
 }
 
 impl Default for CompositeOptions {
     fn default() -> Self {
-        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: DOME_DIRECTIONS, aovs: Aovs::ALL }
+        CompositeOptions { transparent: false, subpixels: 2, step_voxels: 0.5, single_resolution: 48, dome_directions: DOME_DIRECTIONS, aovs: Aovs::ALL, near_lamps: true }
     }
 }
 
@@ -210,7 +215,20 @@ struct Marched {
 /// Renders the scattering grid `s` as seen by the scene's camera, with the AOVs `opts` asks for.
 pub fn composite(scene: &Scene, s: &ScatteringGrid, opts: &CompositeOptions) -> Result<Image> {
     let single = single_for(scene, opts)?;
-    composite_with_single(scene, s, single.as_ref(), opts)
+    let mut img = composite_with_single(scene, s, single.as_ref(), opts)?;
+    add_near_lamps(scene, s, single.as_ref(), opts, &mut img);
+    Ok(img)
+}
+
+/// Adds to an image of `s` (either compositor's) the lamps' exact single scattering near them
+/// in place of the grid's (`near_lamps`), when `opts` asks for it and a lamp is near the medium.
+pub fn add_near_lamps(scene: &Scene, s: &ScatteringGrid, single: Option<&ScatteringGrid>, opts: &CompositeOptions, img: &mut Image) {
+    if !opts.near_lamps {
+        return;
+    }
+    if let Some(lamps) = near_lamps::NearLamps::new(scene, s, single.filter(|_| opts.aovs.needs_single()), opts) {
+        lamps.add_to(scene, img, opts.subpixels);
+    }
 }
 
 /// The single-scattering grid `opts`' AOVs need, or None when none needs it (then it is not
