@@ -31,8 +31,8 @@ use crate::medium::trilinear::{inside, trilinear_cell};
 use crate::medium::{near_field_radius, ray_box, Medium};
 use crate::scene::{Light, Scene};
 use crate::stages::single_scattering::{emitter_single, exp_neg, is_grey, shadow_step};
-use crate::stages::ScatteringGrid;
 use crate::phase::hg;
+use crate::stages::ScatteringGrid;
 use crate::translate::{Extent, PointEmitter};
 
 use super::CompositeOptions;
@@ -46,8 +46,12 @@ const OUTER: f32 = 6.0;
 /// At most this many lamps are corrected, the brightest first: each costs a march of its own
 /// over the pixels near it, and a scene of thousands of lamps merges them in the grid anyway.
 const MAX_LAMPS: usize = 16;
-/// At most this many rays a side in a pixel near a lamp.
+/// At most this many rays a side in a pixel that sees a lamp.
 const MAX_RAYS: u32 = 16;
+/// At most this many grid points a lamp and grid (12 MiB): an isotropic grid needs 17^3.
+const MAX_NODES: usize = 1 << 20;
+/// Within this many radii of a sphere lamp the march steps an eighth of its radius.
+const FINE_RADII: f32 = 2.0;
 
 /// The lamps near which the composite corrects a grid, and the grid's single scattering of each
 /// at the points around it.
@@ -119,7 +123,7 @@ impl<'a> NearLamps<'a> {
         let lamps = emitters
             .into_iter()
             .map(|emitter| {
-                let nodes = |g: Option<&ScatteringGrid>| g.filter(|g| g.dims.iter().all(|&d| d >= 2)).map(|g| Nodes::new(scene, &density, g, &emitter));
+                let nodes = |g: Option<&ScatteringGrid>| g.filter(|g| g.dims.iter().all(|&d| d >= 2)).and_then(|g| Nodes::new(scene, &density, g, &emitter));
                 let grids = [nodes(Some(s)), nodes(single)];
                 let reach = grids.iter().flatten().map(|n| n.outer).fold(0.0, f32::max);
                 Lamp { emitter, grids, reach }
@@ -129,31 +133,37 @@ impl<'a> NearLamps<'a> {
     }
 
     /// Adds the corrections to `img` (the scattered light, and the `single` and `multiple`
-    /// AOVs where it has them). Each pixel near a lamp takes at least the composite's
-    /// `subpixels` rays a side, and as many as put eight across the lamp's radius (a sphere
-    /// lamp's lit cap is a sliver of a pixel wide: with 2 x 2 rays the apex pixels of the
-    /// benchmark's spot were 2.4x dark or bright by where the rays fell).
+    /// AOVs where it has them), with the composite's `subpixels` rays a side, and in the
+    /// pixels that see a lamp as many as put eight across its radius (a sphere lamp's lit cap
+    /// is a sliver of a pixel wide: with 2 x 2 rays the apex pixels of the benchmark's spot
+    /// were 2.4x dark or bright by where the rays fell).
     pub fn add_to(&self, scene: &Scene, img: &mut Image, subpixels: u32) {
         let cam = &scene.camera;
         let w = cam.width as usize;
         // A pixel's width at unit distance.
         let pixel = 2.0 * (0.5 * cam.fov_deg.to_radians()).tan() / cam.width.max(1) as f32;
-        let rays: Vec<u32> = self
+        let base = subpixels.clamp(1, 16);
+        // Per lamp: the rays a side where a pixel sees the lamp, and how near its centre the
+        // pixel's central ray must pass for that (the lamp's radius twice, and a pixel and a half).
+        let sees: Vec<(u32, f32)> = self
             .lamps
             .iter()
             .map(|lamp| {
                 let footprint = pixel * (lamp.emitter.position - cam.position).length();
                 let scale = lamp.emitter.radius.max(self.near);
-                ((8.0 * footprint / scale).ceil() as u32).clamp(subpixels.clamp(1, 16), MAX_RAYS)
+                (((8.0 * footprint / scale).ceil() as u32).clamp(base, MAX_RAYS), 2.0 * lamp.emitter.radius + 1.5 * footprint)
             })
             .collect();
         let sums: Vec<(usize, [Vec3; 2])> = (0..img.rgba.len())
             .into_par_iter()
             .filter_map(|idx| {
                 let (x, y) = ((idx % w) as f32, (idx / w) as f32);
+                let centre = cam.ray_dir(x + 0.5, y + 0.5);
                 let mut sum = [Vec3::ZERO; 2];
                 let mut any = false;
-                for (lamp, &k) in self.lamps.iter().zip(&rays) {
+                for (lamp, &(rays, within)) in self.lamps.iter().zip(&sees) {
+                    let to = lamp.emitter.position - cam.position;
+                    let k = if (to - centre * to.dot(centre)).length() < within { rays } else { base };
                     let inv = 1.0 / (k * k) as f32;
                     for sy in 0..k {
                         for sx in 0..k {
@@ -192,38 +202,48 @@ impl<'a> NearLamps<'a> {
             return None;
         }
         // The camera's transmittance to where the lamp's reach begins, then the same march as
-        // the compositor's over the reach: T's exact integral over each step.
+        // the compositor's over the reach (T's exact integral over each step), finer where the
+        // ray passes within `FINE_RADII` of a sphere lamp: its field rises from zero inside it to
+        // its peak on the surface within a fraction of its radius.
         let entry = b0.max(0.0);
         let mut tr = exp_neg(self.density.optical_depth(o + d * entry, d, t0 - entry, self.step, 8192), self.grey);
-        // A sphere lamp's field rises from zero inside it to its peak on the surface within a
-        // fraction of its radius: a step of an eighth of it follows that.
-        let step = if lamp.emitter.radius > 0.0 { self.step.min(lamp.emitter.radius / 8.0) } else { self.step };
-        let n = (((t1 - t0) / step).ceil() as u32).clamp(1, 8192);
-        let h = (t1 - t0) / n as f32;
         let mut out = [Vec3::ZERO; 2];
-        for i in 0..n {
-            if tr.max_element() < 1e-5 {
-                break;
+        let r = lamp.emitter.radius;
+        let fine = if r > 0.0 { ray_sphere(o, d, lamp.emitter.position, FINE_RADII * r).map(|(a, b)| (a.clamp(t0, t1), b.clamp(t0, t1))) } else { None };
+        let pieces = match fine {
+            Some((a, b)) if b > a => [(t0, a, self.step), (a, b, self.step.min(r / 8.0)), (b, t1, self.step)],
+            _ => [(t0, t1, self.step), (t1, t1, self.step), (t1, t1, self.step)],
+        };
+        for (ta, tb, step) in pieces {
+            if tb <= ta {
+                continue;
             }
-            let x = o + d * (t0 + (i as f32 + 0.5) * h);
-            let dens = self.medium.density_world(x);
-            let sigma_t = self.medium.sigma_t(dens);
-            let od = sigma_t * h;
-            let seg_t = exp_neg(od, self.grey);
-            let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
-            let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
-            let dist = (x - lamp.emitter.position).length();
-            let mut exact = None;
-            for (slot, nodes) in lamp.grids.iter().enumerate() {
-                let Some(nodes) = nodes else { continue };
-                let w = nodes.weight(dist);
-                if w <= 0.0 {
-                    continue;
+            let n = (((tb - ta) / step).ceil() as u32).clamp(1, 8192);
+            let h = (tb - ta) / n as f32;
+            for i in 0..n {
+                if tr.max_element() < 1e-5 {
+                    return Some(out);
                 }
-                let s1 = *exact.get_or_insert_with(|| if dens > 0.0 { self.medium.sigma_s(dens) * self.term(&lamp.emitter, x, d, self.near) } else { Vec3::ZERO });
-                out[slot] += tr * weight * w * (s1 - nodes.interpolated(x));
+                let x = o + d * (ta + (i as f32 + 0.5) * h);
+                let dens = self.medium.density_world(x);
+                let sigma_t = self.medium.sigma_t(dens);
+                let od = sigma_t * h;
+                let seg_t = exp_neg(od, self.grey);
+                let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
+                let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
+                let dist = (x - lamp.emitter.position).length();
+                let mut exact = None;
+                for (slot, nodes) in lamp.grids.iter().enumerate() {
+                    let Some(nodes) = nodes else { continue };
+                    let w = nodes.weight(dist);
+                    if w <= 0.0 {
+                        continue;
+                    }
+                    let s1 = *exact.get_or_insert_with(|| if dens > 0.0 { self.medium.sigma_s(dens) * self.term(&lamp.emitter, x, d, self.near) } else { Vec3::ZERO });
+                    out[slot] += tr * weight * w * (s1 - nodes.interpolated(x));
+                }
+                tr *= seg_t;
             }
-            tr *= seg_t;
         }
         Some(out)
     }
@@ -252,7 +272,12 @@ impl<'a> NearLamps<'a> {
             return Vec3::ZERO;
         }
         let mut sum = Vec3::ZERO;
-        for (w, t, share) in e.sphere_directions(x, CAP_DIRECTIONS) {
+        // As many directions as the cap is wide: CAP_DIRECTIONS over a hemisphere (or inside),
+        // fewer over the narrow cap further out, where the transmittances differ less.
+        let d2 = to.length_squared();
+        let sin2 = (e.radius * e.radius / d2).min(1.0);
+        let n = ((CAP_DIRECTIONS as f32 * (1.0 - (1.0 - sin2).sqrt()).sqrt()).ceil() as u32).clamp(MIN_CAP_DIRECTIONS, CAP_DIRECTIONS);
+        for (w, t, share) in e.sphere_directions(x, n) {
             sum += share * hg(w.dot(view), self.g) * exp_neg(self.density.optical_depth(x, w, t, self.step, 512), self.grey);
         }
         profile * sum
@@ -262,8 +287,9 @@ impl<'a> NearLamps<'a> {
 /// Within this many radii of a sphere lamp its light is summed over the directions it arrives
 /// from (past it the cap is under 30 degrees across, and one direction does).
 const CAP_DISTANCE: f32 = 4.0;
-/// Directions over the cap (`sphere_term`).
+/// Directions over a hemisphere's cap, and at least over any (`sphere_term`).
 const CAP_DIRECTIONS: u32 = 32;
+const MIN_CAP_DIRECTIONS: u32 = 4;
 
 /// `emitter_single` with its shadow ray marched through `density` at `step`.
 #[allow(clippy::too_many_arguments)]
@@ -274,8 +300,9 @@ fn term(density: &Marcher, grey: bool, g: f32, e: &PointEmitter, x: Vec3, view: 
 impl Nodes {
     /// `g`'s single scattering of `e` at its points within `OUTER` spacings of it, as the
     /// shared stage computes it: the field spread over a cell, the shadow ray at the stage's
-    /// step, the view from the camera, times sigma_s.
-    fn new(scene: &Scene, density: &Marcher, g: &ScatteringGrid, e: &PointEmitter) -> Nodes {
+    /// step, the view from the camera, times sigma_s. None past `MAX_NODES` points (a grid far
+    /// finer along one axis than another), where the grid is left as it is.
+    fn new(scene: &Scene, density: &Marcher, g: &ScatteringGrid, e: &PointEmitter) -> Option<Nodes> {
         let medium = &scene.medium;
         let spacing = max_spacing(&g.index_to_world);
         let (inner, outer) = (INNER * spacing, OUTER * spacing);
@@ -284,12 +311,15 @@ impl Nodes {
         let centre = world_to_index.transform_point3(e.position);
         // Every point of a cell the reach touches (the reach in index units, and one cell more),
         // and their neighbours, which the lattice product reads.
-        let r = Vec3::splat(outer / min_axis(&g.index_to_world) + 2.0);
+        let r = Vec3::splat(outer / crate::medium::min_spacing(&g.index_to_world) + 2.0);
         let lo = (centre - r).floor().as_ivec3().max(IVec3::ZERO);
         let top = (centre + r).ceil().as_ivec3().min(dims - IVec3::ONE);
         let size = (top - lo + IVec3::ONE).max(IVec3::ZERO);
         let (near, step, grey) = (near_field_radius(&g.index_to_world), shadow_step(medium, g), is_grey(medium));
-        let count = (size.x * size.y * size.z) as usize;
+        let count = size.x as usize * size.y as usize * size.z as usize;
+        if count > MAX_NODES {
+            return None;
+        }
         let world = |i: usize| {
             let i = i as i32;
             g.index_to_world.transform_point3((lo + IVec3::new(i % size.x, (i / size.x) % size.y, i / (size.x * size.y))).as_vec3())
@@ -313,7 +343,7 @@ impl Nodes {
             let plane = (size.x * size.y) as usize;
             product_nodes(size.as_uvec3().to_array(), |z| (z * plane..(z + 1) * plane).map(|i| medium.density_world(world(i))).collect(), &mut values);
         }
-        Nodes { world_to_index, hi: (dims - IVec3::ONE).as_vec3(), dims, lo, size, values, inner, outer }
+        Some(Nodes { world_to_index, hi: (dims - IVec3::ONE).as_vec3(), dims, lo, size, values, inner, outer })
     }
 
     /// 1 within `inner` of the lamp, 0 past `outer`, a smoothstep between.
@@ -344,11 +374,6 @@ impl Nodes {
 fn max_spacing(index_to_world: &Affine3A) -> f32 {
     let m = index_to_world.matrix3;
     m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length())
-}
-
-/// The smallest spacing of a grid along its axes.
-fn min_axis(index_to_world: &Affine3A) -> f32 {
-    crate::medium::min_spacing(index_to_world)
 }
 
 /// Where the ray o + t d (unit d) is inside the sphere about `c` of radius `r`.

@@ -255,13 +255,13 @@ fn runs_what_it_says_it_picked() {
 /// 0.31 of noise, so no error against it can be below about that), so that the hosts' default
 /// never asks for the impossible. An error is judged as issue 36 states its aim, with the
 /// reference's own noise taken out: sqrt(e^2 - noise^2).
-/// Measured scenes no solver reaches the default (0.10) on, with the best measured (2026-11-29):
-/// the spot lamp inside a smoke (s12_spot_inside: lpm final 0.176, 0.065 without the four
-/// pixels at the lamp, where S's grid blurs the cone's apex; docs/solvers/auto.md).
+/// Measured scenes no solver reaches the default (0.10) on: none since 2026-11-29.
 /// s05_cloud_sun left the list when lpm's table kept the residual lobe's mean cosine (lpm
 /// preview 0.252 -> 0.071), s23_sphere_dense when lpm's grid took two points a voxel (0.126 ->
-/// 0.0996, 0.089 without its reference's noise of 0.045).
-const UNREACHED: &[&str] = &["s12_spot_inside"];
+/// 0.0996, 0.089 without its reference's noise of 0.045), s12_spot_inside when the composite
+/// made a lamp's single scattering exact near it (photon-grid preview 0.375 -> 0.075, lpm final
+/// 0.176 -> 0.086; compositor/near_lamps.rs).
+const UNREACHED: &[&str] = &[];
 
 #[test]
 fn default_target_is_reached_on_every_measured_scene() {
