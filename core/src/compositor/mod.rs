@@ -11,6 +11,10 @@
 //! (environment through the medium), `emission` (the emission seen directly). The first two need the single-scattering grid, which costs
 //! more than the march itself: without them it is not computed at all.
 //! Pixels use a box filter: `subpixels`^2 stratified rays each.
+//!
+//! `composite` (and the pipeline's, after either device's march) then makes the single
+//! scattering of point and spot lamps exact near them, where no grid follows it
+//! (`near_lamps`; `CompositeOptions::near_lamps`, the CLI's `--grid-only` to leave it out).
 
 mod near_lamps;
 
