@@ -180,13 +180,7 @@ impl CameraMarch<'_> {
         let emission = self.medium.emission.as_ref();
         for i in 0..n {
             let t = t0 + (i as f32 + 0.5) * h;
-            let sigma_t = self.medium.sigma_t(self.density.density_lattice(dp + dd * t));
-            // Exact integral of T over the step for constant sigma_t: (1 - e^{-sigma h}) / sigma,
-            // by its series where sigma h is small (the difference would cancel catastrophically).
-            let od = sigma_t * h;
-            let seg_t = exp_neg(od, self.grey);
-            let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
-            let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
+            let (weight, seg_t) = step_weight(self.medium.sigma_t(self.density.density_lattice(dp + dd * t)), h, self.grey);
             l += tr * weight * self.s.at_index(sp + sd * t);
             if let Some((s1, (p1, d1))) = &s1_ray {
                 l1 += tr * weight * s1.at_index(*p1 + *d1 * t);
@@ -202,6 +196,17 @@ impl CameraMarch<'_> {
         }
         Marched { scattered: l, single: l1, emitted: le, transmittance: tr }
     }
+}
+
+/// A march step of length `h` through constant `sigma_t`: the exact integral of T over it,
+/// (1 - e^{-sigma h}) / sigma, by its series where sigma h is small (the difference would cancel
+/// catastrophically), and the step's transmittance.
+#[inline]
+fn step_weight(sigma_t: Vec3, h: f32, grey: bool) -> (Vec3, Vec3) {
+    let od = sigma_t * h;
+    let seg_t = exp_neg(od, grey);
+    let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
+    (Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series), seg_t)
 }
 
 /// What one camera ray's march gathered.

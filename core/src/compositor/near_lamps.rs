@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use crate::image::Image;
 use crate::lattice_product::{on_voxel_lattice, product_nodes};
 use crate::medium::dense_march::Marcher;
-use crate::medium::trilinear::{inside, trilinear_cell};
+use crate::medium::trilinear::inside;
 use crate::medium::{near_field_radius, ray_box, Medium};
 use crate::scene::{Light, Scene};
 use crate::stages::single_scattering::{emitter_single, exp_neg, is_grey, shadow_step};
@@ -35,7 +35,7 @@ use crate::phase::hg;
 use crate::stages::ScatteringGrid;
 use crate::translate::{Extent, PointEmitter};
 
-use super::CompositeOptions;
+use super::{step_weight, CompositeOptions};
 
 /// Within this many grid spacings of a lamp the exact single scattering replaces the grid's:
 /// 1/d^2's linear interpolation is off by about 0.75 (h/d)^2 of it, 8% at three spacings.
@@ -77,16 +77,12 @@ struct Lamp {
     reach: f32,
 }
 
-/// One grid's single scattering of one lamp at the grid's points within `OUTER` spacings of it.
+/// One grid's single scattering of one lamp at the grid's points within `OUTER` spacings of it:
+/// the box of the grid's points that holds them, as a grid of its own, read as the compositor
+/// reads the whole (`ScatteringGrid::sample_index`).
 struct Nodes {
+    points: ScatteringGrid,
     world_to_index: Affine3A,
-    /// The grid's largest index coordinate (dims - 1): its lookups read zero past it.
-    hi: Vec3,
-    dims: IVec3,
-    /// The box of points held: its lowest corner and size.
-    lo: IVec3,
-    size: IVec3,
-    values: Vec<Vec3>,
     inner: f32,
     outer: f32,
 }
@@ -226,11 +222,7 @@ impl<'a> NearLamps<'a> {
                 }
                 let x = o + d * (ta + (i as f32 + 0.5) * h);
                 let dens = self.medium.density_world(x);
-                let sigma_t = self.medium.sigma_t(dens);
-                let od = sigma_t * h;
-                let seg_t = exp_neg(od, self.grey);
-                let series = Vec3::splat(h) * (Vec3::ONE - od * 0.5 + od * od / 6.0);
-                let weight = Vec3::select(od.cmpgt(Vec3::splat(0.01)), (Vec3::ONE - seg_t) / sigma_t, series);
+                let (weight, seg_t) = step_weight(self.medium.sigma_t(dens), h, self.grey);
                 let dist = (x - lamp.emitter.position).length();
                 let mut exact = None;
                 for (slot, nodes) in lamp.grids.iter().enumerate() {
@@ -343,7 +335,8 @@ impl Nodes {
             let plane = (size.x * size.y) as usize;
             product_nodes(size.as_uvec3().to_array(), |z| (z * plane..(z + 1) * plane).map(|i| medium.density_world(world(i))).collect(), &mut values);
         }
-        Some(Nodes { world_to_index, hi: (dims - IVec3::ONE).as_vec3(), dims, lo, size, values, inner, outer })
+        let index_to_world = g.index_to_world * Affine3A::from_translation(lo.as_vec3());
+        Some(Nodes { points: ScatteringGrid { dims: size.as_uvec3().to_array(), index_to_world, data: values }, world_to_index: index_to_world.inverse(), inner, outer })
     }
 
     /// 1 within `inner` of the lamp, 0 past `outer`, a smoothstep between.
@@ -352,21 +345,10 @@ impl Nodes {
         t * t * (3.0 - 2.0 * t)
     }
 
-    /// The points' values read at `x` as the compositor reads the grid (`GridLookup`): zero
-    /// outside it, else trilinear in the cell that holds `x`.
+    /// The points' values read at `x` as the compositor reads the grid: zero outside it, else
+    /// trilinear in the cell that holds `x` (past the box, where `weight` is zero, zero too).
     fn interpolated(&self, x: Vec3) -> Vec3 {
-        let p = self.world_to_index.transform_point3(x);
-        if !inside(p, Vec3::ZERO, self.hi) {
-            return Vec3::ZERO;
-        }
-        let i = p.as_ivec3().min(self.dims - IVec3::splat(2));
-        trilinear_cell(i, p - i.as_vec3(), |c: IVec3| {
-            let q = c - self.lo;
-            if q.cmplt(IVec3::ZERO).any() || q.cmpge(self.size).any() {
-                return Vec3::ZERO;
-            }
-            self.values[(q.x + self.size.x * (q.y + self.size.y * q.z)) as usize]
-        })
+        self.points.sample_index(self.world_to_index.transform_point3(x))
     }
 }
 

@@ -37,7 +37,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub transparent: bool,
     /// Composite the grid alone, as a host renders it: without the point and spot lamps'
-    /// single scattering made exact near them (docs/compositor.md).
+    /// single scattering made exact near them (docs/cli.md).
     #[arg(long)]
     pub grid_only: bool,
     /// Multiplier applied to the PNG only.
