@@ -91,7 +91,7 @@ pub fn add_first_order(scene: &Scene, grid: &LpmGrid, dirs: &Directions, table: 
             .filter_map(|l| match l {
                 Light::Distant { direction, irradiance, .. } => {
                     let w = direction.normalize();
-                    Some((w, *irradiance, (0..m).map(|d| PhaseTable::storage_mean_towards(dirs, d, w, table.g)).collect()))
+                    Some((w, *irradiance, (0..m).map(|d| PhaseTable::storage_mean_towards(dirs, d, w, table.lobe)).collect()))
                 }
                 _ => None,
             })

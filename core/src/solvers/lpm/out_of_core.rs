@@ -313,7 +313,7 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
     // The delta-M split as in memory (mod.rs): the first propagation runs through the true
     // medium and then through sigma_t' with the residual lobe, J keeping their difference;
     // the later orders run through sigma_t' alone.
-    let delta = DeltaM::new(s.delta_m, medium.g, medium.albedo);
+    let delta = DeltaM::for_bins(s.delta_m, s.peak_split, medium.g, medium.albedo, &dirs)?;
     let scaled_table = if delta.active() { Some(timings.time("lpm phase table", || delta.table(&dirs, &table))?) } else { None };
     let truth = Sweeps { geometry, dirs: &dirs, table: &table, layers: report.layers, camera: scene.camera.position, albedo: medium.albedo };
     let sweeps = Sweeps { table: scaled_table.as_ref().unwrap_or(&table), albedo: delta.albedo, ..truth };

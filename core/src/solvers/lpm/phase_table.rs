@@ -17,7 +17,47 @@ use rayon::prelude::*;
 
 use super::directions::Directions;
 use crate::error::Result;
-use crate::phase::hg;
+use crate::phase::{hg, hg_cone_fraction};
+
+/// The phase function the propagated orders scatter with: Henyey-Greenstein of parameter `g`,
+/// its forward peak flattened above the cosine `cap` (1: the whole lobe) and the rest scaled
+/// to integrate to 1. Flattened, the lobe keeps the true phase function's sideways and
+/// backward scattering, which the delta-M split's residual HG overstates (delta_m.rs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lobe {
+    pub g: f32,
+    pub cap: f32,
+    scale: f32,
+}
+
+impl Lobe {
+    pub fn hg(g: f32) -> Self {
+        Lobe { g, cap: 1.0, scale: 1.0 }
+    }
+
+    /// HG of `g` flattened above the cosine `cap`.
+    pub fn flattened(g: f32, cap: f32) -> Self {
+        Lobe { g, cap, scale: 1.0 / (1.0 - peak_fraction(g, cap)) }
+    }
+
+    /// The share of the HG lobe above its value at `cap` (what flattening takes off).
+    pub fn peak(&self) -> f32 {
+        if self.cap >= 1.0 { 0.0 } else { peak_fraction(self.g, self.cap) }
+    }
+
+    #[inline]
+    pub fn eval(&self, mu: f32) -> f32 {
+        // HG rises with mu for g > 0: the flattened lobe is its value at min(mu, cap).
+        if self.cap >= 1.0 { hg(mu, self.g) } else { self.scale * hg(mu.min(self.cap), self.g) }
+    }
+}
+
+/// The share of HG(`g`) above its own value at the cosine `cap`: the cone's mass less the
+/// cone's solid angle times p(cap).
+pub fn peak_fraction(g: f32, cap: f32) -> f32 {
+    let cone = hg_cone_fraction(cap, g) as f64;
+    (cone - 2.0 * std::f64::consts::PI * (1.0 - cap as f64) * hg(cap, g) as f64).max(0.0) as f32
+}
 
 pub struct PhaseTable {
     pub n: usize,
@@ -31,12 +71,16 @@ pub struct PhaseTable {
     pub raw_row_solid_angle: Vec<f32>,
     /// n x n rows towards the viewer when they differ from `fine` (delta-M).
     pub view: Option<Vec<f32>>,
-    /// The Henyey-Greenstein parameter the table was made from.
-    pub g: f32,
+    /// The phase function the table was made from.
+    pub lobe: Lobe,
 }
 
 impl PhaseTable {
     pub fn new(dirs: &Directions, g: f32) -> Result<Self> {
+        Self::from_lobe(dirs, Lobe::hg(g))
+    }
+
+    pub fn from_lobe(dirs: &Directions, lobe: Lobe) -> Result<Self> {
         let n = dirs.len();
         let m = dirs.storage_len();
         let count = crate::budget::check_elements::<f32>("lpm phase table (directions^2)", (n as u64) * (n as u64 + m as u64))?;
@@ -49,7 +93,7 @@ impl PhaseTable {
                     let mut sum = 0.0f64;
                     for &(wj, oj) in &dirs.sub[j] {
                         for &(wi, oi) in &dirs.sub[i] {
-                            sum += (oj * oi * hg(wj.dot(wi), g)) as f64;
+                            sum += (oj * oi * lobe.eval(wj.dot(wi))) as f64;
                         }
                     }
                     *out = (sum / dirs.dirs[j].solid_angle as f64) as f32;
@@ -68,7 +112,7 @@ impl PhaseTable {
                 storage[dj.storage * n + i] += w * fine[j * n + i];
             }
         }
-        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw, view: None, g })
+        Ok(PhaseTable { n, m, fine, storage, raw_row_solid_angle: raw, view: None, lobe })
     }
 
     /// The table whose scattering, as the propagation sees it, keeps the phase function's mean
@@ -104,11 +148,11 @@ impl PhaseTable {
 
     /// Mean over storage bin `d` of p(w_out . w) for light travelling along unit `w` (a
     /// collimated beam's first scattering), by the bin's sub-samples.
-    pub fn storage_mean_towards(dirs: &Directions, d: usize, w: Vec3, g: f32) -> f32 {
+    pub fn storage_mean_towards(dirs: &Directions, d: usize, w: Vec3, lobe: Lobe) -> f32 {
         let mut sum = 0.0f32;
         for (j, dj) in dirs.dirs.iter().enumerate() {
             if dj.storage == d {
-                sum += dirs.sub[j].iter().map(|&(wj, oj)| oj * hg(wj.dot(w), g)).sum::<f32>();
+                sum += dirs.sub[j].iter().map(|&(wj, oj)| oj * lobe.eval(wj.dot(w))).sum::<f32>();
             }
         }
         sum / dirs.storage_solid_angle[d]
@@ -160,6 +204,55 @@ fn matched_parameter(dirs: &Directions, g: f32) -> Result<f32> {
         return Ok(t);
     }
     let t = raise_until(g, |t| Ok(PhaseTable::new(dirs, t)?.mean_cosine(dirs)))?;
+    FOUND.lock().unwrap_or_else(|e| e.into_inner()).push((key, t));
+    Ok(t)
+}
+
+/// The cosine above which HG(`g`) is flattened so that the propagation, through `dirs`'
+/// bins, carries light on with the mean cosine `g`: the peak's share goes straight on (mean
+/// cosine 1), the flattened rest with the table's `mean_cosine`. Found once per process.
+pub fn flattening_cap(dirs: &Directions, g: f32) -> Result<f32> {
+    type Found = Vec<((usize, usize, u32), f32)>;
+    static FOUND: std::sync::Mutex<Found> = std::sync::Mutex::new(Vec::new());
+    let key = (dirs.k, dirs.s, g.to_bits());
+    if let Some(&(_, t)) = FOUND.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(k, _)| *k == key) {
+        return Ok(t);
+    }
+    // The transport's mean cosine against the cap's angle: from the bins' loss at no
+    // flattening (below g) to nearly 1 - (1 - f) at a flattening over the whole sphere.
+    let transport = |angle: f64| -> Result<f64> {
+        let lobe = Lobe::flattened(g, angle.cos() as f32);
+        let f = lobe.peak() as f64;
+        Ok(f + (1.0 - f) * PhaseTable::from_lobe(dirs, lobe)?.mean_cosine(dirs) - g as f64)
+    };
+    let (mut a, mut b) = (1e-3f64, std::f64::consts::PI);
+    let (mut fa, mut fb) = (transport(a)?, transport(b)?);
+    let mut cap = if fa >= 0.0 { a } else if fb <= 0.0 { b } else { f64::NAN };
+    if cap.is_nan() {
+        let mut side = 0;
+        for _ in 0..30 {
+            let c = (a * fb - b * fa) / (fb - fa);
+            let fc = transport(c)?;
+            cap = c;
+            if fc.abs() < 2e-4 {
+                break;
+            }
+            if fc < 0.0 {
+                (a, fa) = (c, fc);
+                if side == -1 {
+                    fb *= 0.5;
+                }
+                side = -1;
+            } else {
+                (b, fb) = (c, fc);
+                if side == 1 {
+                    fa *= 0.5;
+                }
+                side = 1;
+            }
+        }
+    }
+    let t = cap.cos() as f32;
     FOUND.lock().unwrap_or_else(|e| e.into_inner()).push((key, t));
     Ok(t)
 }
@@ -253,13 +346,62 @@ mod tests {
                 let plain = PhaseTable::new(&dirs, g).unwrap().mean_cosine(&dirs);
                 let t = PhaseTable::keeping_mean_cosine(&dirs, g).unwrap();
                 let kept = t.mean_cosine(&dirs);
-                eprintln!("{k} x {k} a face, {s} x {s} storage: g {g:.3}: plain table {plain:.3}, parameter {:.3} keeps {kept:.4}", t.g);
+                eprintln!("{k} x {k} a face, {s} x {s} storage: g {g:.3}: plain table {plain:.3}, parameter {:.3} keeps {kept:.4}", t.lobe.g);
                 assert!(plain.abs() < g.abs() as f64 - 0.01, "the plain table should lose some of g: {plain}");
                 assert!((kept - g as f64).abs() < 1e-3, "{kept} vs {g}");
             }
             let iso = PhaseTable::keeping_mean_cosine(&dirs, 0.0).unwrap();
-            assert_eq!(iso.g, 0.0);
+            assert_eq!(iso.lobe.g, 0.0);
             assert!(iso.mean_cosine(&dirs).abs() < 1e-4);
         }
+    }
+
+    /// The flattened lobe is a phase function (integrates to 1), equals the true HG scaled by
+    /// 1 / (1 - f) below its cap, and f is the mass above the cap's value (midpoint rules over
+    /// mu, 2e5 steps: 1e-4 is their error at g 0.9).
+    #[test]
+    fn flattened_lobe_keeps_the_true_lobe_below_its_cap() {
+        for (g, angle) in [(0.9f32, 10.0f32), (0.9, 45.0), (0.6, 25.0)] {
+            let cap = angle.to_radians().cos();
+            let lobe = Lobe::flattened(g, cap);
+            let f = lobe.peak();
+            let n = 200_000;
+            let (mut total, mut above) = (0f64, 0f64);
+            for i in 0..n {
+                let mu = -1.0 + (i as f64 + 0.5) * 2.0 / n as f64;
+                let dmu = 2.0 / n as f64;
+                total += 2.0 * std::f64::consts::PI * lobe.eval(mu as f32) as f64 * dmu;
+                above += 2.0 * std::f64::consts::PI * (hg(mu as f32, g) - hg(cap, g)).max(0.0) as f64 * dmu;
+                if (mu as f32) < cap {
+                    let want = hg(mu as f32, g) / (1.0 - f);
+                    assert!((lobe.eval(mu as f32) - want).abs() <= 1e-5 * want, "g {g} mu {mu}");
+                }
+            }
+            assert!((total - 1.0).abs() < 1e-3, "g {g} cap {angle}: integral {total}");
+            assert!((above - f as f64).abs() < 1e-3, "g {g} cap {angle}: f {f} vs {above}");
+        }
+        assert_eq!(Lobe::hg(0.9).peak(), 0.0);
+    }
+
+    /// The fitted cap keeps the transport's mean cosine through the bins, f + (1 - f) x the
+    /// flattened table's, at g (to the search's 2e-4, with 1e-3 for the table's rounding), on
+    /// the preview's and the final preset's bins; more bins leave more of the lobe below it.
+    #[test]
+    fn flattening_cap_keeps_the_transport_mean_cosine() {
+        let mut caps = Vec::new();
+        for (k, s) in [(5, 1), (6, 3)] {
+            let dirs = Directions::new(k, s);
+            for g in [0.6f32, 0.9] {
+                let cap = flattening_cap(&dirs, g).unwrap();
+                let lobe = Lobe::flattened(g, cap);
+                let f = lobe.peak() as f64;
+                let kept = f + (1.0 - f) * PhaseTable::from_lobe(&dirs, lobe).unwrap().mean_cosine(&dirs);
+                eprintln!("{k} x {k} a face, {s} x {s} storage, g {g}: cap {:.1} degrees, f {f:.3}, mean cosine {kept:.4}", cap.acos().to_degrees());
+                assert!((kept - g as f64).abs() < 1e-3, "{kept} vs {g}");
+                assert!(cap < 1.0 && f > 0.0 && f < 1.0);
+                caps.push(cap);
+            }
+        }
+        assert!(caps[2] > caps[0] && caps[3] > caps[1], "finer bins should flatten less: {caps:?}");
     }
 }

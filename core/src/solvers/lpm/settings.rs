@@ -15,6 +15,17 @@ crate::setting_choices! {
     }
 }
 
+crate::setting_choices! {
+    /// What the delta-M split leaves the direction bins (delta_m.rs).
+    pub enum PeakSplit {
+        /// Wiscombe's: the peak f = g^2, the rest a Henyey-Greenstein lobe of g / (1 + g).
+        Hg = "hg",
+        /// The true lobe flattened above a cone fitted to the bins: the rest keeps the true
+        /// phase function's sideways and backward scattering.
+        Flattened = "flattened",
+    }
+}
+
 crate::settings! {
     pub struct LpmSettings {
         /// The propagation costs cells x 6 x `directions` per order; 32 keeps an order of the
@@ -45,6 +56,11 @@ crate::settings! {
         /// represent; S's single scattering keeps the true medium. Also 3-4x fewer orders.
         delta_m: bool = true,
             "delta-M split of the phase function's forward peak (f = g^2): the peak's light goes on unscattered, the direction bins carry the broad rest";
+        /// The HG residual scatters more light sideways and back than the true lobe: a g 0.9
+        /// cloud comes out 10% bright even with a bin per direction (docs/solvers/lpm.md,
+        /// "The flattened peak"). Flattened, it needs storage bins that carry a lobe.
+        peak_split: PeakSplit = PeakSplit::Hg,
+            "what the delta-M split leaves the bins: hg (a Henyey-Greenstein lobe of g / (1 + g)) or flattened (the true lobe with its peak cut off flat; closer with 3 or more storage bins a face side)";
         /// Sec. 4.2. Refused with the size needed when a one-layer slice does not fit.
         memory_budget: u64 = 0,
             "bytes for the propagation's slice buffers, which set the slice thickness (with out_of_core: everything a slice holds; 0: one slice)";
@@ -96,8 +112,9 @@ pub const ENTRY: SolverEntry = SolverEntry {
         // 64 cells and 49 directions took over 30 s on most of the scene set's 40 x 30 scenes
         // (issue 36): this one costs a few times the preview (BENCHMARKS.md `solvers`). Nine
         // storage bins a face carry the residual lobe that one flattens, the cause of most of
-        // the sun-lit dense clouds' excess light (docs/solvers/lpm.md, `storage_per_face`).
-        Preset::final_(r#"{"grid_resolution": 40, "directions": 36, "output_resolution": 96, "storage_per_face": 3}"#),
+        // the sun-lit dense clouds' excess light (docs/solvers/lpm.md, `storage_per_face`); with
+        // them the flattened peak keeps the true lobe's back scattering (`peak_split`).
+        Preset::final_(r#"{"grid_resolution": 40, "directions": 36, "output_resolution": 96, "storage_per_face": 3, "peak_split": "flattened"}"#),
     ],
     // furnace.rs's (its bounds were measured with them).
     test: Preset::test(r#"{"grid_resolution": 16, "output_resolution": 16}"#),
