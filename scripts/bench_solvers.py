@@ -112,6 +112,32 @@ def split_phases(report: dict) -> tuple[float, float]:
     return solve, composite
 
 
+def near_lamp_seconds(report: dict) -> float:
+    """The composite's near-lamp pass (a part of the composite phase): auto's time model scales
+    it with the lamps."""
+    return report["phases_seconds"].get("composite: near lamps", 0.0)
+
+
+def near_lamps_from(work: Path) -> int:
+    """--near-lamps-from: fills near_lamp_seconds of measurements.json's runs from the reports of
+    the run that measured them, left in `work` (a run's report is taken only where its times
+    are the row's to the digit)."""
+    meas = json.loads(MEASUREMENTS.read_text())
+    filled = 0
+    for r in meas["runs"]:
+        rep = work / f"{r['scene']}_{r['solver']}_{r['quality']}.json"
+        if not rep.exists():
+            continue
+        report = json.loads(rep.read_text())
+        solve, comp = split_phases(report)
+        if abs(solve - r["solve_seconds"]) < 1e-9 and abs(comp - r["composite_seconds"]) < 1e-9:
+            r["near_lamp_seconds"] = near_lamp_seconds(report)
+            filled += 1
+    MEASUREMENTS.write_text(json.dumps(meas, indent=1) + "\n")
+    log(f"near_lamp_seconds filled in {filled} of {len(meas['runs'])} runs from {work}")
+    return 0 if filled == len(meas["runs"]) else 1
+
+
 def make_references(scenes: list[str], work: Path, spp_div: int = 1) -> None:
     REF_DIR.mkdir(parents=True, exist_ok=True)
     for name in scenes:
@@ -265,7 +291,7 @@ def solver_runs(name: str, ref: np.ndarray, entries: list[dict], qualities: tupl
             solve, comp = split_phases(rep)
             r = {"scene": name, "solver": e["name"], "quality": q, "settings": settings, "device": "cpu",
                  "seconds": solve + comp, "solve_seconds": solve, "composite_seconds": comp,
-                 "image_error": rel_rmse(img, ref), "grid_error": None, "load_average": round(load, 2)}
+                 "near_lamp_seconds": near_lamp_seconds(rep), "image_error": rel_rmse(img, ref), "grid_error": None, "load_average": round(load, 2)}
             runs.append(r)
             images[(e["name"], q)] = img
             log(f"{e['name']:12s} {q:8s} {name}: {r['seconds']:.2f} s (solve {solve:.2f}), error {r['image_error']:.4f}")
@@ -350,7 +376,9 @@ def markdown(meas: dict, note_gpu: str) -> str:
              "Written by `scripts/bench_solvers.py`; measurements in `core/src/pipeline/auto/measurements.json`, "
              "plots `docs/bench_error_time.png` and `docs/bench_strip_<scene>.png`.", "",
              f"Machine: {meas['machine']}; date {meas['date']}"
-             + (f" (then {meas['updated']}; the plots are from the full run)" if meas.get("updated") else "")
+             + (f" (then {meas['updated']}; the plots are from the full run; the speed-ups set those runs' times against "
+                f"Cycles' of {meas['date']}, two runs apart, so they carry the machine's drift between the runs, the time "
+                "ratios above)" if meas.get("updated") else "")
              + f"; {note_gpu}. Times are wall clock on this shared "
              "2-core machine (other work ran beside it: Cycles and the solvers were interleaved per scene so that "
              "load falls on both alike; compare ratios within a scene, not absolute times across sections).", "",
@@ -475,19 +503,24 @@ LPM_CLASSES = {"thin smoke under sun and sky": ("thin_smoke", "s01_thin_sun", "s
 
 
 def lpm_classes(meas: dict) -> list[str]:
-    """lpm at its preview preset on the issue's three classes: the image error, the reference's
-    own noise and the error with that noise removed (sqrt(e^2 - noise^2))."""
+    """lpm on the issue's three classes at its preview preset (the aim's cost) and, beside it,
+    at its final preset: the image error, the reference's own noise and the error with that
+    noise removed (sqrt(e^2 - noise^2))."""
     noise = {s["name"]: s["reference_noise"] for s in meas["scenes"]}
     cell = {(r["scene"], r["quality"]): r for r in meas["runs"] if r["solver"] == "lpm"}
-    lines = ["#### lpm at preview on the issue's accuracy classes (aim: <= 0.05)", "",
-             "| class | scene | time (s) | image error | reference noise | noise removed |", "|---|---|---:|---:|---:|---:|"]
+    removed = lambda e, nz: math.sqrt(max(e * e - nz * nz, 0.0))
+    lines = ["#### lpm at preview on the issue's accuracy classes (aim: <= 0.05), and at final", "",
+             "| class | scene | time (s) | image error | reference noise | noise removed | final: time (s) | final: noise removed |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
     for cls, names in LPM_CLASSES.items():
         for n in names:
             r = cell.get((n, "preview"))
             if r is None or n not in noise:
                 continue
             e, nz = r["image_error"], noise[n]
-            lines.append(f"| {cls} | {n} | {r['seconds']:.2f} | {e:.3f} | {nz:.3f} | {math.sqrt(max(e * e - nz * nz, 0.0)):.3f} |")
+            f = cell.get((n, "final"))
+            final = f"{f['seconds']:.2f} | {removed(f['image_error'], nz):.3f}" if f else "- | -"
+            lines.append(f"| {cls} | {n} | {r['seconds']:.2f} | {e:.3f} | {nz:.3f} | {removed(e, nz):.3f} | {final} |")
     return lines + [""]
 
 
@@ -763,9 +796,13 @@ def main() -> int:
     ap.add_argument("--timeout", type=float, help="kill a solver run past this many seconds and list it as capped")
     ap.add_argument("--skip-after", type=float, default=SKIP_AFTER_SECONDS,
                     help=f"skip a preset when the solver's cheaper one took longer than this (seconds, default {SKIP_AFTER_SECONDS:.0f})")
+    ap.add_argument("--near-lamps-from", metavar="WORK", help="fill near_lamp_seconds of measurements.json's runs "
+                    "from the reports their run left in WORK (its --work folder), then stop")
     ap.add_argument("--auto-acceptance", action="store_true", help="run auto's leave-one-scene-out test and write its "
                     "table to BENCHMARKS.md (auto-acceptance), then stop")
     args = ap.parse_args()
+    if args.near_lamps_from:
+        return near_lamps_from(Path(args.near_lamps_from))
     if args.auto_acceptance:
         return auto_acceptance()
     RUN_TIMEOUT, SKIP_AFTER_SECONDS = args.timeout, args.skip_after

@@ -17,6 +17,8 @@
 //! (`near_lamps`; `CompositeOptions::near_lamps`, the CLI's `--grid-only` to leave it out).
 
 mod near_lamps;
+/// At most this many lamps get the near-lamp pass (auto's time model counts them).
+pub use near_lamps::MAX_LAMPS as NEAR_LAMPS_MAX;
 
 use glam::{Affine3A, IVec3, Vec3, Vec4};
 use rayon::prelude::*;

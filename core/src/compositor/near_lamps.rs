@@ -45,7 +45,7 @@ const INNER: f32 = 3.0;
 const OUTER: f32 = 6.0;
 /// At most this many lamps are corrected, the brightest first: each costs a march of its own
 /// over the pixels near it, and a scene of thousands of lamps merges them in the grid anyway.
-const MAX_LAMPS: usize = 16;
+pub const MAX_LAMPS: usize = 16;
 /// At most this many rays a side in a pixel that sees a lamp.
 const MAX_RAYS: u32 = 16;
 /// At most this many grid points a lamp and grid (12 MiB): an isotropic grid needs 17^3.

@@ -33,6 +33,10 @@ pub struct Features {
     /// Light types present: a distant light, a dome, a point/spot/area light inside the
     /// medium's box, one outside it, an emissive medium.
     pub lights: LightClasses,
+    /// Point and spot lights inside the medium's box, at most 16: the composite computes each
+    /// one's single scattering exactly near it (compositor/near_lamps.rs), at a cost per lamp.
+    #[serde(default)]
+    pub lamps: f64,
     /// Voxels of the medium's index box, and pixels of the camera's image.
     pub voxels: f64,
     pub pixels: f64,
@@ -115,6 +119,7 @@ impl Features {
         }
         let inside = |p: Vec3| p.cmpge(lo).all() && p.cmple(hi).all();
         let mut lights = LightClasses { emission: m.emission.is_some(), ..Default::default() };
+        let mut lamps = 0usize;
         for l in &scene.lights {
             let local = match l {
                 Light::Distant { .. } => {
@@ -141,6 +146,7 @@ impl Features {
             if let Some(p) = local {
                 if inside(p) {
                     lights.local_inside = true;
+                    lamps += usize::from(matches!(l, Light::Point { .. } | Light::Spot(_)));
                 } else {
                     lights.local_outside = true;
                 }
@@ -154,6 +160,7 @@ impl Features {
             albedo: ((m.albedo.x + m.albedo.y + m.albedo.z) / 3.0) as f64,
             g: m.g as f64,
             lights,
+            lamps: lamps.min(crate::compositor::NEAR_LAMPS_MAX) as f64,
             voxels: extent.x as f64 * extent.y as f64 * extent.z as f64,
             pixels: scene.camera.width as f64 * scene.camera.height as f64,
         }

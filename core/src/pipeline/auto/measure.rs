@@ -166,7 +166,7 @@ fn scene_features_are_up_to_date() {
         let g = &stored.scenes[name];
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * a.abs().max(b.abs()).max(1e-12);
         assert!(
-            close(f.tau_mean, g.tau_mean) && close(f.tau_max, g.tau_max) && close(f.albedo, g.albedo) && close(f.g, g.g) && f.lights == g.lights && close(f.voxels, g.voxels) && close(f.pixels, g.pixels),
+            close(f.tau_mean, g.tau_mean) && close(f.tau_max, g.tau_max) && close(f.albedo, g.albedo) && close(f.g, g.g) && f.lights == g.lights && f.lamps == g.lamps && close(f.voxels, g.voxels) && close(f.pixels, g.pixels),
             "{name}: features now {f:?}, stored {g:?} (bless with VOLSCATTER_BLESS=1)"
         );
     }

@@ -68,6 +68,9 @@ pub struct Run {
     pub solve_seconds: Option<f64>,
     #[serde(default)]
     pub composite_seconds: Option<f64>,
+    /// The near-lamp pass's share of the composite (compositor/near_lamps.rs).
+    #[serde(default)]
+    pub near_lamp_seconds: Option<f64>,
     pub image_error: f64,
     #[serde(default)]
     pub grid_error: Option<f64>,
@@ -128,6 +131,8 @@ pub struct Observation {
     pub seconds: f64,
     pub solve_seconds: f64,
     pub composite_seconds: f64,
+    /// The near-lamp pass's share of `composite_seconds`.
+    pub near_lamp_seconds: f64,
 }
 
 /// The fitted model: the measured scenes with their features, and per configuration its
@@ -245,6 +250,7 @@ impl Model {
                 seconds: r.seconds,
                 solve_seconds: r.solve_seconds.unwrap_or(r.seconds - composite).max(1e-6),
                 composite_seconds: composite,
+                near_lamp_seconds: r.near_lamp_seconds.unwrap_or(0.0).clamp(0.0, composite),
             };
             match configs.iter_mut().find(|(c, _)| *c == config) {
                 Some((_, v)) => v.push(obs),
@@ -354,15 +360,24 @@ impl Model {
             None => 1.0,
         };
         let solve = mean_ln(&wt, &|o| o.solve_seconds * solve_voxels(o) * orders(o)).exp();
+        // The composite's march scales with the pixels and the voxels it crosses; its near-lamp
+        // pass with the lamps (each a march of its own over the pixels near it), from the
+        // per-lamp cost of the nearest runs that had lamps.
         let composite = obs
             .iter()
             .zip(&wt)
             .map(|(o, w)| {
                 let s = &self.scenes[o.scene].1;
-                w * o.composite_seconds * (f.pixels / s.pixels.max(1.0)) * voxels(o)
+                w * (o.composite_seconds - o.near_lamp_seconds) * (f.pixels / s.pixels.max(1.0)) * voxels(o)
             })
             .sum::<f64>()
             / wt.iter().sum::<f64>();
+        let (per_lamp, lit) = obs.iter().zip(&wt).filter(|(o, _)| self.scenes[o.scene].1.lamps > 0.0).fold((0.0, 0.0), |(sum, total), (o, w)| {
+            let s = &self.scenes[o.scene].1;
+            (sum + w * o.near_lamp_seconds / s.lamps * (f.pixels / s.pixels.max(1.0)), total + w)
+        });
+        let near_lamps = if lit > 0.0 { f.lamps * per_lamp / lit } else { 0.0 };
+        let composite = composite + near_lamps;
         Some(Prediction { error, seconds: solve + composite, nearest })
     }
 }

@@ -321,9 +321,9 @@ fn lpm_time_follows_the_scattering_orders_of_a_dense_white_furnace() {
 #[test]
 fn a_configuration_beaten_on_one_neighbour_alone_stays_a_candidate() {
     use super::model::{Config, Observation};
-    let scene = |g: f64| Features { tau_mean: 2.0, tau_max: 4.0, albedo: 0.9, g, lights: Default::default(), voxels: 32768.0, pixels: 1200.0 };
+    let scene = |g: f64| Features { tau_mean: 2.0, tau_max: 4.0, albedo: 0.9, g, lights: Default::default(), lamps: 0.0, voxels: 32768.0, pixels: 1200.0 };
     let config = |solver: &str| Config { solver: solver.into(), quality: "preview".into(), settings: Map::new() };
-    let obs = |scene: usize, error: f64, seconds: f64| Observation { scene, error, seconds, solve_seconds: seconds, composite_seconds: 0.0 };
+    let obs = |scene: usize, error: f64, seconds: f64| Observation { scene, error, seconds, solve_seconds: seconds, composite_seconds: 0.0, near_lamp_seconds: 0.0 };
     let scenes = vec![("near".to_string(), scene(0.15)), ("b".to_string(), scene(0.18)), ("c".to_string(), scene(0.21))];
     // `fast` beats `slow` (better and faster) on the nearest scene only, then on two of three.
     let model = |beaten_on: &[usize]| Model {

@@ -32,12 +32,12 @@
 //! The split was measured against keeping the first order whole: docs/solvers/lpm.md.
 //!
 //! The residual need not be an HG lobe (`PeakSplit`). HG(g / (1 + g)) scatters half as much
-//! again sideways and back as the true HG(g) does at g 0.9 (3.5% of the light into the back
-//! hemisphere against 2.3%): a thick cloud lit from the camera's side comes out ~10% bright
-//! even with a storage bin per direction. `Flattened` cuts the true lobe off flat above a
-//! cosine `cap` (Lobe::flattened): f is the share above the cap's value, the rest keeps the
-//! true phase function below it. The cap is fitted to the bins: where the transport's mean
-//! cosine through them, f + (1 - f) x the table's, is g (phase_table::flattening_cap).
+//! again into the back hemisphere as the true HG(g) at g 0.9, so light turned back at a lit
+//! face comes out too bright whatever the bins (docs/solvers/lpm.md, "The flattened peak").
+//! `Flattened` cuts the true lobe off flat above a cosine `cap` (Lobe::flattened): f is the
+//! share above the cap's value, and below it the residual is the true phase function. The cap
+//! is fitted to the bins: where the transport's mean cosine through them, f + (1 - f) x the
+//! table's, is g (phase_table::flattening_cap).
 
 use glam::Vec3;
 

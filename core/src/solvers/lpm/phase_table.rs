@@ -192,90 +192,71 @@ impl PhaseTable {
     }
 }
 
-/// The HG parameter keeping the mean cosine `g` on `dirs`' bins (`keeping_mean_cosine`), found
-/// once per process for the bins and `g` (a session's frames and the coarse late orders ask
-/// again).
-fn matched_parameter(dirs: &Directions, g: f32) -> Result<f32> {
-    /// (directions a face side, storage bins a face side, g's bits) -> the parameter.
-    type Found = Vec<((usize, usize, u32), f32)>;
+/// What is fitted to a set of bins and a g: the HG parameter of `keeping_mean_cosine`, or the
+/// cap of a flattened lobe.
+#[derive(Clone, Copy, PartialEq)]
+enum Fitted {
+    Parameter,
+    Cap,
+}
+
+/// `find()`, once per process for `what`, the bins and `g` (a session's frames and the coarse
+/// late orders ask again; each search builds several tables).
+fn fitted_once(what: Fitted, dirs: &Directions, g: f32, find: impl FnOnce() -> Result<f32>) -> Result<f32> {
+    /// (what, directions a face side, storage bins a face side, g's bits) -> the value.
+    type Found = Vec<((Fitted, usize, usize, u32), f32)>;
     static FOUND: std::sync::Mutex<Found> = std::sync::Mutex::new(Vec::new());
-    let key = (dirs.k, dirs.s, g.to_bits());
+    let key = (what, dirs.k, dirs.s, g.to_bits());
     if let Some(&(_, t)) = FOUND.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(k, _)| *k == key) {
         return Ok(t);
     }
-    let t = raise_until(g, |t| Ok(PhaseTable::new(dirs, t)?.mean_cosine(dirs)))?;
+    let t = find()?;
     FOUND.lock().unwrap_or_else(|e| e.into_inner()).push((key, t));
     Ok(t)
 }
 
+/// The HG parameter keeping the mean cosine `g` on `dirs`' bins (`keeping_mean_cosine`).
+fn matched_parameter(dirs: &Directions, g: f32) -> Result<f32> {
+    fitted_once(Fitted::Parameter, dirs, g, || raise_until(g, |t| Ok(PhaseTable::new(dirs, t)?.mean_cosine(dirs))))
+}
+
 /// The cosine above which HG(`g`) is flattened so that the propagation, through `dirs`'
 /// bins, carries light on with the mean cosine `g`: the peak's share goes straight on (mean
-/// cosine 1), the flattened rest with the table's `mean_cosine`. Found once per process.
+/// cosine 1), the flattened rest with the table's `mean_cosine`.
 pub fn flattening_cap(dirs: &Directions, g: f32) -> Result<f32> {
-    type Found = Vec<((usize, usize, u32), f32)>;
-    static FOUND: std::sync::Mutex<Found> = std::sync::Mutex::new(Vec::new());
-    let key = (dirs.k, dirs.s, g.to_bits());
-    if let Some(&(_, t)) = FOUND.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(k, _)| *k == key) {
-        return Ok(t);
-    }
-    // The transport's mean cosine against the cap's angle: from the bins' loss at no
-    // flattening (below g) to nearly 1 - (1 - f) at a flattening over the whole sphere.
+    // The transport's mean cosine less g against the cap's angle: it rises from the bins'
+    // loss at no flattening (below g) to nearly 1 at a flattening over the whole sphere.
     let transport = |angle: f64| -> Result<f64> {
         let lobe = Lobe::flattened(g, angle.cos() as f32);
         let f = lobe.peak() as f64;
         Ok(f + (1.0 - f) * PhaseTable::from_lobe(dirs, lobe)?.mean_cosine(dirs) - g as f64)
     };
-    let (mut a, mut b) = (1e-3f64, std::f64::consts::PI);
-    let (mut fa, mut fb) = (transport(a)?, transport(b)?);
-    let mut cap = if fa >= 0.0 { a } else if fb <= 0.0 { b } else { f64::NAN };
-    if cap.is_nan() {
-        let mut side = 0;
-        for _ in 0..30 {
-            let c = (a * fb - b * fa) / (fb - fa);
-            let fc = transport(c)?;
-            cap = c;
-            if fc.abs() < 2e-4 {
-                break;
-            }
-            if fc < 0.0 {
-                (a, fa) = (c, fc);
-                if side == -1 {
-                    fb *= 0.5;
-                }
-                side = -1;
-            } else {
-                (b, fb) = (c, fc);
-                if side == 1 {
-                    fa *= 0.5;
-                }
-                side = 1;
-            }
-        }
-    }
-    let t = cap.cos() as f32;
-    FOUND.lock().unwrap_or_else(|e| e.into_inner()).push((key, t));
-    Ok(t)
+    fitted_once(Fitted::Cap, dirs, g, || Ok(rising_root(1e-3, std::f64::consts::PI, transport)?.cos() as f32))
 }
 
 /// The parameter t between `g` and +-0.995 (on `g`'s side) where `mean(t)`, which rises with t,
-/// is `g`; the end itself when the mean cannot reach `g` there. Regula falsi (Illinois): the
-/// mean is smooth in t, and each evaluation builds a table.
+/// is `g`; the end itself when the mean cannot reach `g` there.
 fn raise_until(g: f32, mut mean: impl FnMut(f32) -> Result<f64>) -> Result<f32> {
-    let target = g as f64;
-    let (mut a, mut b) = if g > 0.0 { (g as f64, 0.995) } else { (-0.995, g as f64) };
-    let (mut fa, mut fb) = (mean(a as f32)? - target, mean(b as f32)? - target);
+    let (a, b) = if g > 0.0 { (g as f64, 0.995) } else { (-0.995, g as f64) };
+    Ok(rising_root(a, b, |t| Ok(mean(t as f32)? - g as f64))? as f32)
+}
+
+/// Where `h`, which rises from `a` to `b`, crosses 0 (to 2e-4); `a` itself when h(a) >= 0, `b`
+/// when h(b) <= 0. Regula falsi (Illinois): h is smooth, and each evaluation builds a table.
+fn rising_root(mut a: f64, mut b: f64, mut h: impl FnMut(f64) -> Result<f64>) -> Result<f64> {
+    let (mut fa, mut fb) = (h(a)?, h(b)?);
     if fa >= 0.0 {
-        return Ok(a as f32);
+        return Ok(a);
     }
     if fb <= 0.0 {
-        return Ok(b as f32);
+        return Ok(b);
     }
     let mut side = 0;
     for _ in 0..20 {
         let c = (a * fb - b * fa) / (fb - fa);
-        let fc = mean(c as f32)? - target;
+        let fc = h(c)?;
         if fc.abs() < 2e-4 {
-            return Ok(c as f32);
+            return Ok(c);
         }
         if fc < 0.0 {
             (a, fa) = (c, fc);
@@ -291,7 +272,7 @@ fn raise_until(g: f32, mut mean: impl FnMut(f32) -> Result<f64>) -> Result<f32> 
             side = 1;
         }
     }
-    Ok((0.5 * (a + b)) as f32)
+    Ok(0.5 * (a + b))
 }
 
 #[cfg(test)]

@@ -56,9 +56,9 @@ crate::settings! {
         /// represent; S's single scattering keeps the true medium. Also 3-4x fewer orders.
         delta_m: bool = true,
             "delta-M split of the phase function's forward peak (f = g^2): the peak's light goes on unscattered, the direction bins carry the broad rest";
-        /// The HG residual scatters more light sideways and back than the true lobe: a g 0.9
-        /// cloud comes out 10% bright even with a bin per direction (docs/solvers/lpm.md,
-        /// "The flattened peak"). Flattened, it needs storage bins that carry a lobe.
+        /// The HG residual scatters more light sideways and back than the true lobe; the
+        /// flattened one does not, but it is only as close as the storage bins carry the lobe
+        /// below its cap (docs/solvers/lpm.md, "The flattened peak").
         peak_split: PeakSplit = PeakSplit::Hg,
             "what the delta-M split leaves the bins: hg (a Henyey-Greenstein lobe of g / (1 + g)) or flattened (the true lobe with its peak cut off flat; closer with 3 or more storage bins a face side)";
         /// Sec. 4.2. Refused with the size needed when a one-layer slice does not fit.
