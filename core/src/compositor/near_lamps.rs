@@ -139,15 +139,17 @@ impl<'a> NearLamps<'a> {
         // A pixel's width at unit distance.
         let pixel = 2.0 * (0.5 * cam.fov_deg.to_radians()).tan() / cam.width.max(1) as f32;
         let base = subpixels.clamp(1, 16);
-        // Per lamp: the rays a side where a pixel sees the lamp, and how near its centre the
-        // pixel's central ray must pass for that (the lamp's radius twice, and a pixel and a half).
-        let sees: Vec<(u32, f32)> = self
+        // Per lamp: where it is from the camera, the rays a side where a pixel sees it, and how
+        // near its centre the pixel's central ray must pass for that (the lamp's radius twice,
+        // and a pixel and a half).
+        let sees: Vec<(Vec3, u32, f32)> = self
             .lamps
             .iter()
             .map(|lamp| {
-                let footprint = pixel * (lamp.emitter.position - cam.position).length();
+                let to = lamp.emitter.position - cam.position;
+                let footprint = pixel * to.length();
                 let scale = lamp.emitter.radius.max(self.near);
-                (((8.0 * footprint / scale).ceil() as u32).clamp(base, MAX_RAYS), 2.0 * lamp.emitter.radius + 1.5 * footprint)
+                (to, ((8.0 * footprint / scale).ceil() as u32).clamp(base, MAX_RAYS), 2.0 * lamp.emitter.radius + 1.5 * footprint)
             })
             .collect();
         let sums: Vec<(usize, [Vec3; 2])> = (0..img.rgba.len())
@@ -157,8 +159,7 @@ impl<'a> NearLamps<'a> {
                 let centre = cam.ray_dir(x + 0.5, y + 0.5);
                 let mut sum = [Vec3::ZERO; 2];
                 let mut any = false;
-                for (lamp, &(rays, within)) in self.lamps.iter().zip(&sees) {
-                    let to = lamp.emitter.position - cam.position;
+                for (lamp, &(to, rays, within)) in self.lamps.iter().zip(&sees) {
                     let k = if (to - centre * to.dot(centre)).length() < within { rays } else { base };
                     let inv = 1.0 / (k * k) as f32;
                     for sy in 0..k {

@@ -53,7 +53,8 @@ pub struct DeltaM {
     pub f: f32,
     /// The medium's g.
     pub g: f32,
-    /// The residual lobe's g' = (g - f) / (1 - f).
+    /// The residual HG lobe's g' = (g - f) / (1 - f) (g itself when the peak is flattened:
+    /// the residual is then the true lobe, `cap`).
     pub g_scaled: f32,
     /// sigma_t' / sigma_t = 1 - albedo f.
     pub extinction: Vec3,
@@ -70,10 +71,7 @@ impl DeltaM {
     pub fn new(on: bool, g: f32, albedo: Vec3) -> Self {
         let f = if on && g > 0.0 { g * g } else { 0.0 };
         let g_scaled = if f > 0.0 { (g - f) / (1.0 - f) } else { g };
-        let extinction = Vec3::ONE - albedo * f;
-        // albedo f < 1 whenever g < 1 (the medium's range): no division by zero.
-        let scaled_albedo = if f > 0.0 { albedo * (1.0 - f) / extinction } else { albedo };
-        DeltaM { f, g, g_scaled, extinction, albedo: scaled_albedo, cap: None }
+        Self::with_peak(f, g, g_scaled, albedo, None)
     }
 
     /// The split `split` for the propagation bins `dirs`. Flattened: the cap is where the
@@ -84,9 +82,15 @@ impl DeltaM {
             return Ok(Self::new(on, g, albedo));
         }
         let cap = flattening_cap(dirs, g)?;
-        let f = Lobe::flattened(g, cap).peak();
+        Ok(Self::with_peak(Lobe::flattened(g, cap).peak(), g, g, albedo, Some(cap)))
+    }
+
+    /// The scales of a split whose peak holds the fraction `f` of the scattered light.
+    fn with_peak(f: f32, g: f32, g_scaled: f32, albedo: Vec3, cap: Option<f32>) -> Self {
         let extinction = Vec3::ONE - albedo * f;
-        Ok(DeltaM { f, g, g_scaled: g, extinction, albedo: albedo * (1.0 - f) / extinction, cap: Some(cap) })
+        // albedo f < 1 whenever g < 1 (the medium's range): no division by zero.
+        let scaled_albedo = if f > 0.0 { albedo * (1.0 - f) / extinction } else { albedo };
+        DeltaM { f, g, g_scaled, extinction, albedo: scaled_albedo, cap }
     }
 
     pub fn active(&self) -> bool {
@@ -96,6 +100,8 @@ impl DeltaM {
     /// The propagated orders' phase table: fine and storage rows from p', the view rows
     /// (J towards the camera) from the true table `truth`.
     pub fn table(&self, dirs: &Directions, truth: &PhaseTable) -> Result<PhaseTable> {
+        // A flattened split keeps the cap fitted to the solve's bins on any others (the late
+        // orders' coarse ones, coarse.rs): f, and so sigma_t', is one for the whole solve.
         if let Some(cap) = self.cap {
             return Ok(PhaseTable::from_lobe(dirs, Lobe::flattened(self.g, cap))?.with_view(truth.fine.clone()));
         }
