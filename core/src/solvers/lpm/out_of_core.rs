@@ -43,14 +43,14 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use super::collect::{collect, Targets};
+use super::collect::Targets;
 use super::delta_m::DeltaM;
 use super::directions::{Directions, FACES};
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
 use super::propagate::FaceFrame;
 use super::slab_store::SlabStore;
-use super::stream::{propagate_slab, SweepStats};
+use super::stream::{sweep_slab, SweepStats};
 use super::{lights, FirstOrder, Lpm, LpmReport, Overrides};
 use crate::error::{Error, Result};
 use crate::scene::{Light, Scene};
@@ -190,9 +190,8 @@ impl Sweeps<'_> {
                 }
                 let slab = (w1 - w0) * ff.map_len();
                 t.resize(p * slab, Vec3::ZERO);
-                propagate_slab(&sub, &ff, self.dirs, m, &u_prev, &boundary[f * p..(f + 1) * p], &mut maps, &mut t, (w0, w1), progress);
                 let targets = Targets { u_cur: &mut u_cur, j: with_j.then_some(&mut j[..]), camera: self.camera, albedo: self.albedo };
-                collect(&sub, self.dirs, self.table, &ff, &t, w0, w1, targets, progress);
+                sweep_slab(&sub, &ff, self.dirs, self.table, &u_prev, &boundary[f * p..(f + 1) * p], &mut maps, &mut t, (w0, w1), targets, progress);
                 if progress.cancelled() {
                     return Err(Error::Cancelled);
                 }

@@ -16,6 +16,7 @@
 //! L (1 - e^{-sigma_s dl}); with it a non-absorbing medium conserves energy cell by cell.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::directions::{face_axes, Direction};
 use super::grid::LpmGrid;
@@ -30,22 +31,31 @@ pub fn segment(l_in: Vec3, q: Vec3, sigma_t: Vec3, dl: f32) -> (Vec3, Vec3) {
         // exponential and the selects (a plume's box is mostly empty).
         return (l_in + q * dl, (l_in * dl + q * (dl * dl * 0.5)) / dl);
     }
-    let od = sigma_t * dl;
-    // The exponentials are most of a sweep's time: an empty cell needs none (exp(-0) = 1) and
-    // a grey one (the usual case) one instead of three, with the same values as three.
-    let e = if od.x == od.y && od.x == od.z {
-        if od.x == 0.0 { Vec3::ONE } else { Vec3::splat((-od.x).exp()) }
+    // The exponential and the divisions are most of a sweep's time: a grey cell (the usual
+    // case) takes one of each for all three channels.
+    let inv_dl = 1.0 / dl;
+    if sigma_t.x == sigma_t.y && sigma_t.x == sigma_t.z {
+        let (e, f1, f2) = coefficients(sigma_t.x, dl);
+        return (l_in * e + q * f1, (l_in * f1 + q * f2) * inv_dl);
+    }
+    let c = [coefficients(sigma_t.x, dl), coefficients(sigma_t.y, dl), coefficients(sigma_t.z, dl)];
+    let (e, f1, f2) = (Vec3::new(c[0].0, c[1].0, c[2].0), Vec3::new(c[0].1, c[1].1, c[2].1), Vec3::new(c[0].2, c[1].2, c[2].2));
+    (l_in * e + q * f1, (l_in * f1 + q * f2) * inv_dl)
+}
+
+/// A segment's coefficients for one channel: e^{-sigma dl}, f1 = integral_0^dl e^{-sigma s} ds
+/// and f2 = (dl - f1) / sigma, by their series where sigma dl is at most 1e-3.
+#[inline]
+fn coefficients(sigma: f32, dl: f32) -> (f32, f32, f32) {
+    let od = sigma * dl;
+    let e = if od == 0.0 { 1.0 } else { (-od).exp() };
+    if od > 1e-3 {
+        let inv = 1.0 / sigma;
+        let f1 = (1.0 - e) * inv;
+        (e, f1, (dl - f1) * inv)
     } else {
-        (-od).exp()
-    };
-    let thick = od.cmpgt(Vec3::splat(1e-3));
-    let safe = sigma_t.max(Vec3::splat(1e-30));
-    // f1 = integral_0^dl e^{-sigma s} ds; f2 = (dl - f1) / sigma.
-    let f1 = Vec3::select(thick, (Vec3::ONE - e) / safe, Vec3::splat(dl) * (Vec3::ONE - od * 0.5 + od * od / 6.0));
-    let f2 = Vec3::select(thick, (Vec3::splat(dl) - f1) / safe, Vec3::splat(dl * dl) * (Vec3::splat(0.5) - od / 6.0 + od * od / 24.0));
-    let out = l_in * e + q * f1;
-    let mean = (l_in * f1 + q * f2) / dl;
-    (out, mean)
+        (e, dl * (1.0 - od * 0.5 + od * od / 6.0), dl * dl * (0.5 - od / 6.0 + od * od / 24.0))
+    }
 }
 
 /// The lateral shift of the map from layer w - 1 to layer w for slope `a`.
@@ -106,48 +116,67 @@ fn shift_map(map: &mut [Vec3], nu: usize, nv: usize, du: i32, dv: i32, boundary:
     }
 }
 
-/// Propagates direction `dir`'s map through layers `w0..w1` of face frame `ff`: `map` holds
-/// the rays leaving layer w0 - 1 (or is filled with `boundary` when w0 = 0), and on return
-/// those leaving layer w1 - 1 (the radiance carried to the next slice, Sec. 4.2). `t` gets
-/// the mean radiance of each cell of the slab, layer-major. `u_prev` is U of the previous
-/// order, m values a cell.
-#[allow(clippy::too_many_arguments)]
-pub fn propagate(
-    grid: &LpmGrid,
-    ff: &FaceFrame,
-    dir: &Direction,
-    m: usize,
-    u_prev: &[Vec3],
-    boundary: Vec3,
-    map: &mut [Vec3],
-    w0: usize,
-    w1: usize,
-    t: &mut [Vec3],
-    progress: &dyn crate::stages::Progress,
-) {
-    let (nu, nv) = (ff.nu, ff.nv);
-    let dl = grid.h * (1.0 + dir.a * dir.a + dir.b * dir.b).sqrt();
-    let d = dir.storage;
-    for w in w0..w1 {
-        // A layer is at most a few ms; the caller reports the cancel.
-        if progress.cancelled() {
-            return;
-        }
-        if w == 0 {
-            map.fill(boundary);
-        } else {
-            shift_map(map, nu, nv, shift(dir.a, w), shift(dir.b, w), boundary);
-        }
-        let layer = &mut t[(w - w0) * nu * nv..(w - w0 + 1) * nu * nv];
-        for v in 0..nv {
-            for u in 0..nu {
+/// One layer of a face's cells in the map's order (k = v nu + u): sigma_t, and U of the
+/// previous order in each storage bin the face's directions read (`bins`, m values per map
+/// cell). Gathered once a layer for all the face's directions: read straight from the grid,
+/// a face whose map runs across the grid's rows made every direction load a cache line per
+/// cell.
+pub struct Layer {
+    pub bins: Vec<usize>,
+    pub sigma_t: Vec<Vec3>,
+    pub source: Vec<Vec3>,
+}
+
+impl Layer {
+    /// Empty buffers for a map of `map_len` cells and the storage bins of the face's
+    /// directions `dirs`.
+    pub fn new(dirs: &[Direction], map_len: usize) -> Self {
+        let mut bins: Vec<usize> = dirs.iter().map(|d| d.storage).collect();
+        bins.sort_unstable();
+        bins.dedup();
+        Layer { sigma_t: vec![Vec3::ZERO; map_len], source: vec![Vec3::ZERO; map_len * bins.len()], bins }
+    }
+
+    /// Where direction `dir`'s source is: its bin's index among `bins`.
+    pub fn slot(&self, dir: &Direction) -> usize {
+        self.bins.binary_search(&dir.storage).expect("a face's directions' bins are gathered")
+    }
+
+    /// Fills the buffers from sweep layer `w` of `ff`, rows in parallel. `u_prev` is U of the
+    /// previous order, m values a cell.
+    pub fn gather(&mut self, grid: &LpmGrid, ff: &FaceFrame, w: usize, m: usize, u_prev: &[Vec3]) {
+        let nb = self.bins.len();
+        let bins = &self.bins;
+        self.sigma_t.par_chunks_mut(ff.nu).zip(self.source.par_chunks_mut(ff.nu * nb)).enumerate().for_each(|(v, (sig, src))| {
+            for u in 0..ff.nu {
                 let idx = grid.index(ff.cell(u, v, w));
-                let k = v * nu + u;
-                let (out, mean) = segment(map[k], u_prev[idx * m + d], grid.sigma_t[idx], dl);
-                map[k] = out;
-                layer[k] = mean;
+                sig[u] = grid.sigma_t[idx];
+                for (b, &d) in bins.iter().enumerate() {
+                    src[u * nb + b] = u_prev[idx * m + d];
+                }
             }
-        }
+        });
+    }
+}
+
+/// Moves direction `dir`'s map through sweep layer `w` of `ff` (gathered in `layer`; `slot`
+/// its source's index there): `map` holds the rays leaving layer w - 1 (ignored at w = 0,
+/// where the rays enter with `boundary`), and on return those leaving layer w. `t` gets the
+/// mean radiance of each of the layer's cells in the map's order.
+#[allow(clippy::too_many_arguments)]
+pub fn propagate_layer(ff: &FaceFrame, h: f32, dir: &Direction, layer: &Layer, slot: usize, boundary: Vec3, map: &mut [Vec3], w: usize, t: &mut [Vec3]) {
+    let (nu, nv) = (ff.nu, ff.nv);
+    let dl = h * (1.0 + dir.a * dir.a + dir.b * dir.b).sqrt();
+    if w == 0 {
+        map.fill(boundary);
+    } else {
+        shift_map(map, nu, nv, shift(dir.a, w), shift(dir.b, w), boundary);
+    }
+    let nb = layer.bins.len();
+    for (k, ((l, mean), &sigma)) in map.iter_mut().zip(t.iter_mut()).zip(&layer.sigma_t).enumerate() {
+        let (out, m) = segment(*l, layer.source[k * nb + slot], sigma, dl);
+        *l = out;
+        *mean = m;
     }
 }
 

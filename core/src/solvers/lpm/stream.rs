@@ -13,11 +13,11 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::collect::{collect, Targets};
+use super::collect::{by_incoming, collect_layer, Targets};
 use super::directions::{Directions, FACES};
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
-use super::propagate::{propagate, FaceFrame};
+use super::propagate::{propagate_layer, FaceFrame, Layer};
 use crate::error::{Error, Result};
 use crate::stages::Progress;
 
@@ -179,7 +179,6 @@ pub fn sweep(
     progress: &dyn Progress,
 ) -> Result<()> {
     let p = dirs.per_face();
-    let m = table.m;
     stats.peak_working_bytes = stats.peak_working_bytes.max(buffers.bytes());
     for (f, &layers) in layers.iter().enumerate() {
         let ff = FaceFrame::new(grid, f);
@@ -191,9 +190,8 @@ pub fn sweep(
         while w0 < ff.nw {
             let w1 = (w0 + s).min(ff.nw);
             let slab = (w1 - w0) * ff.map_len();
-            propagate_slab(grid, &ff, dirs, m, u_prev, &boundary[first..first + p], maps, &mut t[..p * slab], (w0, w1), progress);
             let targets = Targets { u_cur: &mut *u_cur, j: j.as_deref_mut(), camera, albedo };
-            collect(grid, dirs, table, &ff, &t[..p * slab], w0, w1, targets, progress);
+            sweep_slab(grid, &ff, dirs, table, u_prev, &boundary[first..first + p], maps, &mut t[..p * slab], (w0, w1), targets, progress);
             if progress.cancelled() {
                 return Err(Error::Cancelled);
             }
@@ -204,14 +202,31 @@ pub fn sweep(
     Ok(())
 }
 
-/// Propagates layers `w0..w1` of face `ff` for each of its directions in parallel: direction
-/// i's map is `maps`' i-th map-sized chunk, its T the i-th slab-sized chunk of `t`, its
-/// boundary radiance `boundary[i]`.
+/// Propagates and collects layers `w0..w1` of face `ff`, a layer at a time: each layer is
+/// gathered once for all the face's directions, which then run in parallel, and collected
+/// while their T is in cache. Direction i's map is `maps`' i-th map-sized chunk, its T the
+/// i-th slab-sized chunk of `t`, its boundary radiance `boundary[i]`. A layer is at most a few
+/// ms; the caller reports a cancel.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn propagate_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, m: usize, u_prev: &[Vec3], boundary: &[Vec3], maps: &mut [Vec3], t: &mut [Vec3], (w0, w1): (usize, usize), progress: &dyn Progress) {
+pub(super) fn sweep_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, table: &PhaseTable, u_prev: &[Vec3], boundary: &[Vec3], maps: &mut [Vec3], t: &mut [Vec3], (w0, w1): (usize, usize), mut targets: Targets, progress: &dyn Progress) {
     let first = ff.face * dirs.per_face();
-    let slab = (w1 - w0) * ff.map_len();
-    t.par_chunks_mut(slab).zip(maps.par_chunks_mut(ff.map_len())).enumerate().for_each(|(li, (tc, map))| {
-        propagate(grid, ff, &dirs.dirs[first + li], m, u_prev, boundary[li], map, w0, w1, tc, progress);
-    });
+    let face_dirs = &dirs.dirs[first..first + dirs.per_face()];
+    let map_len = ff.map_len();
+    let slab = (w1 - w0) * map_len;
+    let weights = by_incoming(dirs, table, ff.face);
+    let mut layer = Layer::new(face_dirs, map_len);
+    let slots: Vec<usize> = face_dirs.iter().map(|d| layer.slot(d)).collect();
+    for w in w0..w1 {
+        if progress.cancelled() {
+            return;
+        }
+        layer.gather(grid, ff, w, table.m, u_prev);
+        let gathered = &layer;
+        let at = (w - w0) * map_len;
+        t.par_chunks_mut(slab).zip(maps.par_chunks_mut(map_len)).enumerate().for_each(|(li, (tc, map))| {
+            propagate_layer(ff, grid.h, &face_dirs[li], gathered, slots[li], boundary[li], map, w, &mut tc[at..at + map_len]);
+        });
+        let layer_targets = Targets { u_cur: &mut *targets.u_cur, j: targets.j.as_deref_mut(), camera: targets.camera, albedo: targets.albedo };
+        collect_layer(grid, dirs, table, &weights, ff, &t[at..], slab, w, layer_targets);
+    }
 }
