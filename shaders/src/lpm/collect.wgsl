@@ -9,9 +9,10 @@
 @group(0) @binding(2) var<storage, read> t_in: array<vec4<f32>>;
 // The storage table by incoming direction: weight of direction i into bin d at i * m + d.
 @group(0) @binding(3) var<storage, read> by_incoming: array<f32>;
-// The view table (the fine table, or the true phase's under delta-M), n x n, row = outgoing bin.
+// The view table (the true phase function's, lpm/phase_table.rs `view_rows`), n x 16 rows of
+// n: row = the outgoing sub-sample of a bin.
 @group(0) @binding(4) var<storage, read> fine: array<f32>;
-// Each cell's bin towards the camera (lpm/directions.rs `bin_of`, on the host).
+// Each cell's row towards the camera (lpm/directions.rs `view_index`, on the host).
 @group(0) @binding(5) var<storage, read> view_bin: array<u32>;
 @group(0) @binding(6) var<storage, read_write> u_out: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> j_out: array<vec4<f32>>;

@@ -150,7 +150,7 @@ impl<'a> GpuSweeper<'a> {
             .map(|idx| {
                 let [nx, ny, _] = grid.dims;
                 let c = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
-                dirs.bin_of((camera - grid.centre(c)).normalize_or(Vec3::Z)) as u32
+                dirs.view_index((camera - grid.centre(c)).normalize_or(Vec3::Z)) as u32
             })
             .collect();
         let v4 = 16u64;
@@ -162,7 +162,7 @@ impl<'a> GpuSweeper<'a> {
             dirs: ctx.zeroed_storage("lpm directions", n as u64 * size_of::<GpuDir>() as u64)?,
             offsets: ctx.storage_buffer("lpm ray offsets", bytemuck::cast_slice(&offsets))?,
             by_incoming: ctx.storage_buffer("lpm storage table", bytemuck::cast_slice(&by_incoming))?,
-            fine: ctx.storage_buffer("lpm phase table", bytemuck::cast_slice(table.view_table()))?,
+            fine: ctx.storage_buffer("lpm phase table", bytemuck::cast_slice(&table.view_table()))?,
             sigma: ctx.zeroed_storage("lpm slab sigma_t", slab_cells * v4)?,
             u_in: ctx.zeroed_storage("lpm slab U in", slab_cells * m as u64 * v4)?,
             view_slab: ctx.zeroed_storage("lpm slab view bins", slab_cells * 4)?,

@@ -44,7 +44,7 @@ impl LateOrders {
         // Never below U's storage side, so that the storage bins stay the same.
         let dirs = Directions::new((LATE_SIDE as usize).max(solve_dirs.s), solve_dirs.s);
         debug_assert_eq!(dirs.storage_solid_angle.len(), solve_dirs.storage_solid_angle.len());
-        let truth = PhaseTable::new(&dirs, g)?;
+        let truth = PhaseTable::true_phase(&dirs, g)?;
         let table = if delta.active() { delta.table(&dirs, &truth)? } else { truth };
         let zero_boundary = vec![Vec3::ZERO; dirs.len()];
         Ok(LateOrders { dirs, table, zero_boundary })

@@ -5,10 +5,11 @@
 //! is written by one thread: no atomics.
 //!
 //! Departure from the paper: J towards the viewer is read from the fine propagation bins
-//! (J += sum_i F[view bin][i] T_i), not from the m storage bins' I: the fine table keeps an
+//! (J += sum_i F[view][i] T_i), not from the m storage bins' I: the fine table keeps an
 //! anisotropic lobe that m = 6 flattens, and costs one table row per cell. The rows are the
-//! table's `view` ones: the true phase's under the delta-M split (delta_m.rs), whose U uses the
-//! residual lobe.
+//! table's `view` ones (phase_table.rs): the true phase function's, towards the sub-sample of
+//! the camera's bin that the camera's direction falls in, so that a lobe narrower than a bin
+//! is not blurred across it; under the delta-M split (delta_m.rs) U uses the residual lobe.
 
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
@@ -59,7 +60,7 @@ pub fn collect_layer(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, weig
         let sigma_s = albedo * grid.sigma_t[idx];
         let k = c[ff.axes.1] * ff.nu + c[ff.axes.0];
         acc.iter_mut().for_each(|a| *a = Vec3A::ZERO);
-        let view_row = j_chunk.as_ref().map(|_| table.view_row(dirs.bin_of((camera - grid.centre(c)).normalize_or(Vec3::Z))));
+        let view_row = j_chunk.as_ref().map(|_| table.view_row(dirs.view_index((camera - grid.centre(c)).normalize_or(Vec3::Z))));
         let mut jsum = Vec3A::ZERO;
         // An empty cell scatters nothing into U; its J still feeds the upsampling.
         let scatters = sigma_s != Vec3::ZERO;

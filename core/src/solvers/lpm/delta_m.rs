@@ -103,9 +103,9 @@ impl DeltaM {
         // A flattened split keeps the cap fitted to the solve's bins on any others (the late
         // orders' coarse ones, coarse.rs): f, and so sigma_t', is one for the whole solve.
         if let Some(cap) = self.cap {
-            return Ok(PhaseTable::from_lobe(dirs, Lobe::flattened(self.g, cap))?.with_view(truth.fine.clone()));
+            return Ok(PhaseTable::from_lobe(dirs, Lobe::flattened(self.g, cap))?.with_view(truth.view_table().into_owned()));
         }
-        Ok(PhaseTable::keeping_mean_cosine(dirs, self.g_scaled)?.with_view(truth.fine.clone()))
+        Ok(PhaseTable::keeping_mean_cosine(dirs, self.g_scaled)?.with_view(truth.view_table().into_owned()))
     }
 
     /// Transmittance along the beam through sigma_t' from the true transmittance `t`

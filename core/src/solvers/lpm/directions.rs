@@ -63,6 +63,9 @@ pub struct Directions {
 /// (which are 1 exactly) come out within 0.3% for g 0.9 at 25 directions (tests.rs).
 const SUB: usize = 4;
 
+/// Sub-samples per bin.
+pub const SUBS: usize = SUB * SUB;
+
 fn face_vector(f: usize, a: f64, b: f64) -> Vec3 {
     let (u, v, w) = face_axes(f);
     let mut c = [0.0f64; 3];
@@ -125,15 +128,28 @@ impl Directions {
 
     /// The bin containing unit direction `w`.
     pub fn bin_of(&self, w: Vec3) -> usize {
+        let (f, u, v) = self.face_coordinates(w, self.k);
+        f * self.per_face() + v * self.k + u
+    }
+
+    /// The sub-sample of its bin that unit `w` falls in, as `bin x SUBS + sub` (`sub` indexes
+    /// `self.sub[bin]`): the rows of the table towards the viewer (phase_table.rs).
+    pub fn view_index(&self, w: Vec3) -> usize {
+        let (f, u, v) = self.face_coordinates(w, self.k * SUB);
+        let bin = f * self.per_face() + (v / SUB) * self.k + u / SUB;
+        bin * SUBS + (v % SUB) * SUB + u % SUB
+    }
+
+    /// The face of unit `w` and its cell (u, v) on an n x n lattice over the face.
+    fn face_coordinates(&self, w: Vec3, n: usize) -> (usize, usize, usize) {
         let abs = w.abs();
         let axis = if abs.x >= abs.y && abs.x >= abs.z { 0 } else if abs.y >= abs.z { 1 } else { 2 };
         let c = w.to_array();
         let f = 2 * axis + usize::from(c[axis] < 0.0);
         let (u, v, _) = face_axes(f);
         let inv = 1.0 / abs.max_element().max(1e-30);
-        let k = self.k as f32;
-        let cell = |x: f32| (((x * inv + 1.0) * 0.5 * k).floor().max(0.0) as usize).min(self.k - 1);
-        f * self.per_face() + cell(c[v]) * self.k + cell(c[u])
+        let cell = |x: f32| (((x * inv + 1.0) * 0.5 * n as f32).floor().max(0.0) as usize).min(n - 1);
+        (f, cell(c[u]), cell(c[v]))
     }
 }
 
@@ -156,6 +172,21 @@ mod tests {
                 assert!((sub - dir.solid_angle).abs() < 1e-5 * dir.solid_angle.max(1.0), "bin {i}");
                 assert_eq!(d.bin_of(dir.w), i, "k {k} direction {i} {:?}", dir.w);
                 assert!(dir.a.abs() < 1.0 && dir.b.abs() < 1.0);
+            }
+        }
+    }
+
+    /// Every sub-sample's direction has its own view index (its bin's, then its place among
+    /// the bin's sub-samples), and a view index's bin is the direction's bin.
+    #[test]
+    fn view_index_finds_the_sub_sample() {
+        for k in [2, 5, 6] {
+            let d = Directions::new(k, 1);
+            for (i, subs) in d.sub.iter().enumerate() {
+                for (s, &(w, _)) in subs.iter().enumerate() {
+                    assert_eq!(d.view_index(w), i * SUBS + s, "k {k} bin {i} sub {s}");
+                    assert_eq!(d.view_index(w) / SUBS, d.bin_of(w));
+                }
             }
         }
     }

@@ -190,7 +190,7 @@ impl Lpm {
             }
             report.notes.push(n.clone());
         }
-        let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
+        let table = timings.time("lpm phase table", || PhaseTable::true_phase(&dirs, medium.g))?;
         let delta = timings.time("lpm phase table", || delta_m::DeltaM::for_bins(s.delta_m, s.peak_split, medium.g, medium.albedo, &dirs))?;
         let scaled_table = if delta.active() { Some(timings.time("lpm phase table", || delta.table(&dirs, &table))?) } else { None };
         let m = table.m;

@@ -299,7 +299,7 @@ pub(super) fn solve(lpm: &Lpm, scene: &Scene, progress: &dyn Progress, ov: Overr
     let mip = timings.time("lpm mip", || MediumMip::new(medium, cell_fp.min(footprint(medium, &out_probe))));
     report.grid_dims = dims;
     let dirs = Directions::new(s.lattice_side() as usize, s.storage_per_face as usize);
-    let table = timings.time("lpm phase table", || PhaseTable::new(&dirs, medium.g))?;
+    let table = timings.time("lpm phase table", || PhaseTable::true_phase(&dirs, medium.g))?;
     let m = table.m;
     report.layers = match ov.layers {
         Some(l) => [l.max(1); FACES],

@@ -8,14 +8,14 @@
 //!
 //! `storage[d][i]`: the same mean over a storage bin d (what collect.rs adds to U_d).
 //!
-//! `view`: the rows J towards the camera is read from (collect.rs): `fine` itself, or, under
-//! the delta-M split (delta_m.rs), the true phase's table while `fine` and `storage` hold the
-//! residual lobe's.
+//! `view`: the rows J towards the camera is read from (collect.rs), one per sub-sample of each
+//! bin (`view_rows`), always the true phase function's: under the delta-M split (delta_m.rs)
+//! `fine` and `storage` hold the residual lobe's.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::directions::Directions;
+use super::directions::{Directions, SUBS};
 use crate::error::Result;
 use crate::phase::{hg, hg_cone_fraction};
 
@@ -69,7 +69,8 @@ pub struct PhaseTable {
     /// Row sums of `fine` times |Omega_j| before normalisation (the paper's F rows), for the
     /// tests.
     pub raw_row_solid_angle: Vec<f32>,
-    /// n x n rows towards the viewer when they differ from `fine` (delta-M).
+    /// Rows towards the viewer, one per sub-sample of each bin (`view_rows`), n x SUBS x n:
+    /// the true phase function's. None: `fine`'s rows (tests).
     pub view: Option<Vec<f32>>,
     /// The phase function the table was made from.
     pub lobe: Lobe,
@@ -78,6 +79,13 @@ pub struct PhaseTable {
 impl PhaseTable {
     pub fn new(dirs: &Directions, g: f32) -> Result<Self> {
         Self::from_lobe(dirs, Lobe::hg(g))
+    }
+
+    /// The medium's own table (HG of `g`) with its rows towards the viewer (`view_rows`): what
+    /// a solve scatters with, and what J is read from under the delta-M split too.
+    pub fn true_phase(dirs: &Directions, g: f32) -> Result<Self> {
+        let view = Self::view_rows(dirs, Lobe::hg(g))?;
+        Ok(Self::new(dirs, g)?.with_view(view))
     }
 
     pub fn from_lobe(dirs: &Directions, lobe: Lobe) -> Result<Self> {
@@ -165,20 +173,53 @@ impl PhaseTable {
         self.storage[d * self.n + i] / dirs.dirs[i].solid_angle
     }
 
-    /// The same table with `view` (n x n) as the rows towards the viewer.
+    /// The same table with `view` (`view_rows`) as the rows towards the viewer.
     pub fn with_view(self, view: Vec<f32>) -> Self {
-        debug_assert_eq!(view.len(), self.n * self.n);
+        debug_assert_eq!(view.len(), self.n * self.n * SUBS);
         PhaseTable { view: Some(view), ..self }
     }
 
-    /// The n x n table J towards the viewer is read from, row = outgoing (view) bin.
-    pub fn view_table(&self) -> &[f32] {
-        self.view.as_deref().unwrap_or(&self.fine)
+    /// The rows towards the viewer of phase function `lobe`, one per sub-sample of each bin
+    /// (`Directions::view_index`): row (j, s) holds, for each bin i, the share of light arriving
+    /// along bin i that scatters into the sub-sample's direction. A bin's mean over its outgoing
+    /// directions blurs a lobe narrower than a bin (g 0.9: about 6 degrees, against a preview
+    /// bin's 18) across the bin, so J depended on where in its bin the camera's direction fell
+    /// (docs/solvers/lpm.md, "The view rows").
+    pub fn view_rows(dirs: &Directions, lobe: Lobe) -> Result<Vec<f32>> {
+        let n = dirs.len();
+        let count = crate::budget::check_elements::<f32>("lpm view table (directions^2 x sub-samples)", (n * SUBS) as u64 * n as u64)?;
+        let mut rows = vec![0.0f32; count];
+        rows.par_chunks_mut(n).enumerate().for_each(|(r, row)| {
+            let w = dirs.sub[r / SUBS][r % SUBS].0;
+            let mut total = 0.0f64;
+            for (i, out) in row.iter_mut().enumerate() {
+                let v: f64 = dirs.sub[i].iter().map(|&(wi, oi)| (oi * lobe.eval(w.dot(wi))) as f64).sum();
+                *out = v as f32;
+                total += v;
+            }
+            for x in row.iter_mut() {
+                *x = (*x as f64 / total) as f32;
+            }
+        });
+        Ok(rows)
     }
 
+    /// The rows towards the viewer, indexed by `Directions::view_index`: `view`, or without
+    /// it each bin's `fine` row for all its sub-samples.
+    pub fn view_table(&self) -> std::borrow::Cow<'_, [f32]> {
+        match &self.view {
+            Some(v) => std::borrow::Cow::Borrowed(v),
+            None => std::borrow::Cow::Owned((0..self.n * SUBS).flat_map(|r| self.fine_row(r / SUBS).iter().copied()).collect()),
+        }
+    }
+
+    /// Row `r` (`Directions::view_index`) of `view_table`.
     #[inline]
-    pub fn view_row(&self, j: usize) -> &[f32] {
-        &self.view_table()[j * self.n..(j + 1) * self.n]
+    pub fn view_row(&self, r: usize) -> &[f32] {
+        match &self.view {
+            Some(v) => &v[r * self.n..(r + 1) * self.n],
+            None => self.fine_row(r / SUBS),
+        }
     }
 
     #[inline]
@@ -384,5 +425,45 @@ mod tests {
             }
         }
         assert!(caps[2] > caps[0] && caps[3] > caps[1], "finer bins should flatten less: {caps:?}");
+    }
+
+    /// The rows towards the viewer: each sums to 1; isotropic, every entry is the incoming
+    /// bin's share of the sphere; at g 0.9 a bin's sub-sample rows differ (the lobe is narrower
+    /// than a bin: the point of them) and their mean over the bin is its `fine` row, to the
+    /// quadrature's 2% on the entries that carry 1% of a row or more.
+    #[test]
+    fn view_rows_resolve_the_lobe_within_a_bin() {
+        let dirs = Directions::new(5, 1);
+        let n = dirs.len();
+        for g in [0.0f32, 0.9] {
+            let t = PhaseTable::true_phase(&dirs, g).unwrap();
+            let view = t.view_table();
+            assert_eq!(view.len(), n * n * SUBS);
+            for r in 0..n * SUBS {
+                let row = t.view_row(r);
+                assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-4, "row {r}");
+                if g == 0.0 {
+                    for (i, x) in row.iter().enumerate() {
+                        let want = dirs.dirs[i].solid_angle / (4.0 * std::f32::consts::PI);
+                        assert!((x - want).abs() < 1e-4 * want.max(1e-3) + 1e-6);
+                    }
+                }
+            }
+            if g == 0.9 {
+                let j = 2 * 5 + 2; // the centre bin of face 0
+                let (corner, centre) = (t.view_row(j * SUBS), t.view_row(j * SUBS + 5));
+                let spread = (0..n).map(|i| (corner[i] - centre[i]).abs()).fold(0.0f32, f32::max);
+                assert!(spread > 0.05, "sub-sample rows of one bin nearly equal at g 0.9: {spread}");
+                let worst = (0..n)
+                    .filter(|&i| t.fine_row(j)[i] >= 0.01)
+                    .map(|i| {
+                        let mean: f32 = (0..SUBS).map(|s| dirs.sub[j][s].1 * t.view_row(j * SUBS + s)[i]).sum::<f32>() / dirs.dirs[j].solid_angle;
+                        (mean / t.fine_row(j)[i] - 1.0).abs()
+                    })
+                    .fold(0.0f32, f32::max);
+                eprintln!("g 0.9: sub-sample rows of the centre bin differ by up to {spread:.3}; their mean against the bin's row: worst {worst:.4}");
+                assert!(worst < 0.02, "{worst}");
+            }
+        }
     }
 }
