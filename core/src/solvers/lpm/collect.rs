@@ -12,7 +12,7 @@
 //! is not blurred across it; under the delta-M split (delta_m.rs) U uses the residual lobe.
 
 use glam::{Vec3, Vec3A};
-use rayon::prelude::*;
+use super::stream::for_each_chunk;
 
 use super::directions::Directions;
 use super::grid::LpmGrid;
@@ -35,14 +35,15 @@ pub fn by_incoming(dirs: &Directions, table: &PhaseTable, face: usize) -> Vec<f3
     (first..first + dirs.per_face()).flat_map(|i| (0..table.m).map(move |d| table.storage[d * table.n + i])).collect()
 }
 
-/// Adds layer `w` of face `ff`, right after it was propagated: `t` holds the face's
-/// directions' rays' mean radiance over the layer's cells, direction after direction, each a
-/// map long (`t[li * stride + k]`, k = v nu + u). `weights` is `by_incoming` for the face.
-/// Collected a layer at a time, T is read while it is still in cache: the whole slab's T of
-/// every direction, read cell by cell, made each cell wait on memory once a direction. Rows
-/// of the layer (or the grid's z-planes, for a face across z) run in parallel.
+/// Adds layers `ws` of face `ff`, right after they were propagated: `t` holds the face's
+/// directions' rays' mean radiance over the layers' cells, direction after direction, each
+/// `stride` long, layer after layer within (`t[li * stride + (w - ws.start) * map + k]`, k = v nu
+/// + u). `weights` is `by_incoming` for the face. Collected a few layers at a time (stream.rs
+/// `sweep_slab`), T is read while it is still in cache: the whole slab's T of every direction,
+/// read cell by cell, made each cell wait on memory once a direction. Rows (or the grid's
+/// z-planes, for a face across z) run in parallel where `parallel`.
 #[allow(clippy::too_many_arguments)]
-pub fn collect_layer(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, weights: &[f32], ff: &FaceFrame, t: &[Vec3], stride: usize, w: usize, targets: Targets) {
+pub fn collect_layers(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, weights: &[f32], ff: &FaceFrame, t: &[Vec3], stride: usize, ws: std::ops::Range<usize>, targets: Targets, parallel: bool) {
     let m = table.m;
     let [nx, ny, _] = grid.dims;
     let plane = nx * ny;
@@ -50,15 +51,15 @@ pub fn collect_layer(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, weig
     let p = dirs.per_face();
     let Targets { u_cur, j, camera, albedo } = targets;
     let (z0, o) = (grid.offset[2], grid.offset);
-    // The layer's grid coordinate along the face's axis.
-    let wg = if ff.forward { w } else { ff.nw - 1 - w };
+    // A layer's grid coordinate along the face's axis.
+    let grid_w = |w: usize| if ff.forward { w } else { ff.nw - 1 - w };
     // One cell: its U (m values) and J, both within the caller's chunk at `local`.
     // `acc`: the row's m accumulators, SIMD: the sums over the face's directions are most of a
     // sweep's time.
     let cell = |c: [usize; 3], acc: &mut [Vec3A], u_chunk: &mut [Vec3], j_chunk: Option<&mut [Vec3]>, local: usize| {
         let idx = grid.index(c);
         let sigma_s = albedo * grid.sigma_t[idx];
-        let k = c[ff.axes.1] * ff.nu + c[ff.axes.0];
+        let k = (grid_w(c[ff.axes.2]) - ws.start) * ff.map_len() + c[ff.axes.1] * ff.nu + c[ff.axes.0];
         acc.iter_mut().for_each(|a| *a = Vec3A::ZERO);
         let view_row = j_chunk.as_ref().map(|_| table.view_row(dirs.view_index((camera - grid.centre(c)).normalize_or(Vec3::Z))));
         let mut jsum = Vec3A::ZERO;
@@ -86,40 +87,35 @@ pub fn collect_layer(grid: &LpmGrid, dirs: &Directions, table: &PhaseTable, weig
     };
     let [dx, dy, _] = grid.dims;
     if ff.axes.2 == 2 {
-        // A z-layer is one plane of the grid: its rows in parallel.
-        let zl = wg - z0;
-        let u_plane = &mut u_cur[zl * plane * m..(zl + 1) * plane * m];
-        match j {
-            Some(j) => u_plane.par_chunks_mut(nx * m).zip(j[zl * plane..(zl + 1) * plane].par_chunks_mut(nx)).enumerate().for_each(|(y, (ur, jr))| {
-                let mut acc = vec![Vec3A::ZERO; m];
-                for x in 0..dx {
-                    cell([x + o[0], y + o[1], wg], &mut acc, ur, Some(jr), x);
-                }
-            }),
-            None => u_plane.par_chunks_mut(nx * m).enumerate().for_each(|(y, ur)| {
-                let mut acc = vec![Vec3A::ZERO; m];
-                for x in 0..dx {
-                    cell([x + o[0], y + o[1], wg], &mut acc, ur, None, x);
-                }
-            }),
-        }
-    } else {
-        // An x- or y-layer crosses every plane in one row: the planes in parallel.
-        let row = |z: usize, up: &mut [Vec3], mut jp: Option<&mut [Vec3]>| {
+        // z-layers are planes of the grid: their rows.
+        let (za, zb) = (grid_w(ws.start).min(grid_w(ws.end - 1)), grid_w(ws.start).max(grid_w(ws.end - 1)) + 1);
+        let (pa, pb) = (za - z0, zb - z0);
+        let u_planes = &mut u_cur[pa * plane * m..pb * plane * m];
+        let j_planes = j.map(|j| &mut j[pa * plane..pb * plane]);
+        for_each_chunk(parallel, u_planes, nx * m, j_planes, nx, |r, ur, mut jr| {
+            let (z, y) = (za + r / ny, r % ny);
             let mut acc = vec![Vec3A::ZERO; m];
-            if ff.axes.2 == 0 {
-                for y in 0..dy {
-                    cell([wg, y + o[1], z], &mut acc, up, jp.as_deref_mut(), (wg - o[0]) + nx * y);
-                }
-            } else {
-                for x in 0..dx {
-                    cell([x + o[0], wg, z], &mut acc, up, jp.as_deref_mut(), x + nx * (wg - o[1]));
+            for x in 0..dx {
+                cell([x + o[0], y + o[1], z], &mut acc, ur, jr.as_deref_mut(), x);
+            }
+        });
+    } else {
+        // x- or y-layers cross every plane, a row each: the planes.
+        for_each_chunk(parallel, u_cur, plane * m, j, plane, |k, up, mut jp| {
+            let z = k + z0;
+            let mut acc = vec![Vec3A::ZERO; m];
+            for w in ws.clone() {
+                let wg = grid_w(w);
+                if ff.axes.2 == 0 {
+                    for y in 0..dy {
+                        cell([wg, y + o[1], z], &mut acc, up, jp.as_deref_mut(), (wg - o[0]) + nx * y);
+                    }
+                } else {
+                    for x in 0..dx {
+                        cell([x + o[0], wg, z], &mut acc, up, jp.as_deref_mut(), x + nx * (wg - o[1]));
+                    }
                 }
             }
-        };
-        match j {
-            Some(j) => u_cur.par_chunks_mut(plane * m).zip(j.par_chunks_mut(plane)).enumerate().for_each(|(k, (up, jp))| row(k + z0, up, Some(jp))),
-            None => u_cur.par_chunks_mut(plane * m).enumerate().for_each(|(k, up)| row(k + z0, up, None)),
-        }
+        });
     }
 }

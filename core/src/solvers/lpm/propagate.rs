@@ -16,7 +16,6 @@
 //! L (1 - e^{-sigma_s dl}); with it a non-absorbing medium conserves energy cell by cell.
 
 use glam::Vec3;
-use rayon::prelude::*;
 
 use super::directions::{face_axes, Direction};
 use super::grid::LpmGrid;
@@ -116,25 +115,26 @@ fn shift_map(map: &mut [Vec3], nu: usize, nv: usize, du: i32, dv: i32, boundary:
     }
 }
 
-/// One layer of a face's cells in the map's order (k = v nu + u): sigma_t, and U of the
-/// previous order in each storage bin the face's directions read (`bins`, m values per map
-/// cell). Gathered once a layer for all the face's directions: read straight from the grid,
-/// a face whose map runs across the grid's rows made every direction load a cache line per
-/// cell.
-pub struct Layer {
+/// A run of layers of a face's cells in the map's order (layer after layer, k = v nu + u
+/// within): sigma_t, and U of the previous order in each storage bin the face's directions read
+/// (`bins`, `bins.len()` values per cell). Gathered once for all the face's directions: read
+/// straight from the grid, a face whose map runs across the grid's rows made every direction
+/// load a cache line per cell.
+pub struct Layers {
     pub bins: Vec<usize>,
+    map_len: usize,
     pub sigma_t: Vec<Vec3>,
     pub source: Vec<Vec3>,
 }
 
-impl Layer {
-    /// Empty buffers for a map of `map_len` cells and the storage bins of the face's
-    /// directions `dirs`.
-    pub fn new(dirs: &[Direction], map_len: usize) -> Self {
+impl Layers {
+    /// Buffers for runs of up to `layers` layers of a map of `map_len` cells, and the storage
+    /// bins of the face's directions `dirs`.
+    pub fn new(dirs: &[Direction], map_len: usize, layers: usize) -> Self {
         let mut bins: Vec<usize> = dirs.iter().map(|d| d.storage).collect();
         bins.sort_unstable();
         bins.dedup();
-        Layer { sigma_t: vec![Vec3::ZERO; map_len], source: vec![Vec3::ZERO; map_len * bins.len()], bins }
+        Layers { map_len, sigma_t: vec![Vec3::ZERO; map_len * layers], source: vec![Vec3::ZERO; map_len * layers * bins.len()], bins }
     }
 
     /// Where direction `dir`'s source is: its bin's index among `bins`.
@@ -142,12 +142,15 @@ impl Layer {
         self.bins.binary_search(&dir.storage).expect("a face's directions' bins are gathered")
     }
 
-    /// Fills the buffers from sweep layer `w` of `ff`, rows in parallel. `u_prev` is U of the
-    /// previous order, m values a cell.
-    pub fn gather(&mut self, grid: &LpmGrid, ff: &FaceFrame, w: usize, m: usize, u_prev: &[Vec3]) {
+    /// Fills the buffers from sweep layers `ws` of `ff`, rows in parallel where `parallel`.
+    /// `u_prev` is U of the previous order, m values a cell.
+    pub fn gather(&mut self, grid: &LpmGrid, ff: &FaceFrame, ws: std::ops::Range<usize>, m: usize, u_prev: &[Vec3], parallel: bool) {
         let nb = self.bins.len();
         let bins = &self.bins;
-        self.sigma_t.par_chunks_mut(ff.nu).zip(self.source.par_chunks_mut(ff.nu * nb)).enumerate().for_each(|(v, (sig, src))| {
+        let cells = ws.len() * self.map_len;
+        super::stream::for_each_chunk(parallel, &mut self.sigma_t[..cells], ff.nu, Some(&mut self.source[..cells * nb]), ff.nu * nb, |r, sig, src| {
+            let src = src.expect("sources for every row");
+            let (w, v) = (ws.start + r / ff.nv, r % ff.nv);
             for u in 0..ff.nu {
                 let idx = grid.index(ff.cell(u, v, w));
                 sig[u] = grid.sigma_t[idx];
@@ -157,26 +160,37 @@ impl Layer {
             }
         });
     }
+
+    /// Layer `i` of the run: its sigma_t, and its sources (`bins.len()` a cell).
+    fn layer(&self, i: usize) -> (&[Vec3], &[Vec3]) {
+        let (n, nb) = (self.map_len, self.bins.len());
+        (&self.sigma_t[i * n..(i + 1) * n], &self.source[i * n * nb..(i + 1) * n * nb])
+    }
 }
 
-/// Moves direction `dir`'s map through sweep layer `w` of `ff` (gathered in `layer`; `slot`
-/// its source's index there): `map` holds the rays leaving layer w - 1 (ignored at w = 0,
-/// where the rays enter with `boundary`), and on return those leaving layer w. `t` gets the
-/// mean radiance of each of the layer's cells in the map's order.
+/// Moves direction `dir`'s map through the sweep layers `ws` of `ff` (gathered in `layers`;
+/// `slot` its source's index there): `map` holds the rays leaving layer ws.start - 1 (ignored
+/// at 0, where the rays enter with `boundary`), and on return those leaving the run's last
+/// layer. `t` gets the mean radiance of each of the run's cells, layer after layer, in the
+/// map's order.
 #[allow(clippy::too_many_arguments)]
-pub fn propagate_layer(ff: &FaceFrame, h: f32, dir: &Direction, layer: &Layer, slot: usize, boundary: Vec3, map: &mut [Vec3], w: usize, t: &mut [Vec3]) {
+pub fn propagate_layers(ff: &FaceFrame, h: f32, dir: &Direction, layers: &Layers, slot: usize, boundary: Vec3, map: &mut [Vec3], ws: std::ops::Range<usize>, t: &mut [Vec3]) {
     let (nu, nv) = (ff.nu, ff.nv);
     let dl = h * (1.0 + dir.a * dir.a + dir.b * dir.b).sqrt();
-    if w == 0 {
-        map.fill(boundary);
-    } else {
-        shift_map(map, nu, nv, shift(dir.a, w), shift(dir.b, w), boundary);
-    }
-    let nb = layer.bins.len();
-    for (k, ((l, mean), &sigma)) in map.iter_mut().zip(t.iter_mut()).zip(&layer.sigma_t).enumerate() {
-        let (out, m) = segment(*l, layer.source[k * nb + slot], sigma, dl);
-        *l = out;
-        *mean = m;
+    let nb = layers.bins.len();
+    for (i, w) in ws.enumerate() {
+        if w == 0 {
+            map.fill(boundary);
+        } else {
+            shift_map(map, nu, nv, shift(dir.a, w), shift(dir.b, w), boundary);
+        }
+        let (sigma_t, source) = layers.layer(i);
+        let out = &mut t[i * nu * nv..(i + 1) * nu * nv];
+        for (k, ((l, mean), &sigma)) in map.iter_mut().zip(out.iter_mut()).zip(sigma_t).enumerate() {
+            let (o, m) = segment(*l, source[k * nb + slot], sigma, dl);
+            *l = o;
+            *mean = m;
+        }
     }
 }
 

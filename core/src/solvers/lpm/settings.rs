@@ -37,11 +37,11 @@ crate::settings! {
         directions: u32 = 25, range(>= 1, <= 256),
             "propagation directions per cube face (a perfect square; the paper's 25)";
         /// With delta-M on, the paper's 6 bins (1 per face) are close on most scenes at the
-        /// least cost; 54 (3, the final preset's) take most of the excess light off dense
-        /// clouds under a sun at about 2x the time. Above sqrt(directions) it acts as
-        /// sqrt(directions).
+        /// least cost; 54 (3, the final preset's) carry the flattened peak's lobe
+        /// (`peak_split`), which 6 bins flatten, at about 2x the time. Above sqrt(directions) it
+        /// acts as sqrt(directions).
         storage_per_face: u32 = 1, range(>= 1, <= 32),
-            "storage directions m = 6 x this^2 (1: the paper's 6; 3, the final preset's, carries a forward lobe better: dense clouds under a sun)";
+            "storage directions m = 6 x this^2 (1: the paper's 6; 3, the final preset's, carries the flattened peak's lobe: dense clouds under a sun)";
         /// Fattal's criterion, relative so that it does not depend on the lights' units.
         epsilon: f32 = 1e-3, range(> 0, < 1),
             "stop when an order's largest U falls below this fraction of the first order's";
@@ -110,10 +110,10 @@ pub const ENTRY: SolverEntry = SolverEntry {
         Preset::draft(r#"{"grid_resolution": 12, "directions": 4, "output_resolution": 24, "dome_directions": 8}"#),
         Preset::preview(r#"{"grid_resolution": 32, "directions": 25, "output_resolution": 64}"#),
         // 64 cells and 49 directions took over 30 s on most of the scene set's 40 x 30 scenes
-        // (issue 36): this one costs a few times the preview (BENCHMARKS.md `solvers`). Nine
-        // storage bins a face carry the residual lobe that one flattens, the cause of most of
-        // the sun-lit dense clouds' excess light (docs/solvers/lpm.md, `storage_per_face`); with
-        // them the flattened peak keeps the true lobe's back scattering (`peak_split`).
+        // (issue 36): this one costs a few times the preview (BENCHMARKS.md `solvers`). The
+        // flattened peak keeps the true lobe's back scattering (`peak_split`), and nine storage
+        // bins a face carry its lobe, which one bin a face flattens (docs/solvers/lpm.md, "The
+        // flattened peak", "The view rows").
         Preset::final_(r#"{"grid_resolution": 40, "directions": 36, "output_resolution": 96, "storage_per_face": 3, "peak_split": "flattened"}"#),
     ],
     // furnace.rs's (its bounds were measured with them).

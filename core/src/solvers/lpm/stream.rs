@@ -13,11 +13,11 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::collect::{by_incoming, collect_layer, Targets};
+use super::collect::{by_incoming, collect_layers, Targets};
 use super::directions::{Directions, FACES};
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
-use super::propagate::{propagate_layer, FaceFrame, Layer};
+use super::propagate::{propagate_layers, FaceFrame, Layers};
 use crate::error::{Error, Result};
 use crate::stages::Progress;
 
@@ -202,11 +202,33 @@ pub fn sweep(
     Ok(())
 }
 
-/// Propagates and collects layers `w0..w1` of face `ff`, a layer at a time: each layer is
-/// gathered once for all the face's directions, which then run in parallel, and collected
-/// while their T is in cache. Direction i's map is `maps`' i-th map-sized chunk, its T the
-/// i-th slab-sized chunk of `t`, its boundary radiance `boundary[i]`. A layer is at most a few
-/// ms; the caller reports a cancel.
+/// A face's slab is swept in runs of layers whose T (every direction's) is at most this many
+/// bytes, each run propagated and then collected while its T is in cache; at least a layer.
+const RUN_BYTES: usize = 256 << 10;
+
+/// A run of fewer cells x directions than this runs on one thread: handing it to the thread
+/// pool costs more than its work.
+const PARALLEL_RUN: usize = 4096;
+
+/// `f(k, chunk k of a, chunk k of b)` over `a` in chunks of `a_size` and `b` (when given) in
+/// chunks of `b_size`, on the thread pool or on this thread.
+pub(super) fn for_each_chunk<F>(parallel: bool, a: &mut [Vec3], a_size: usize, b: Option<&mut [Vec3]>, b_size: usize, f: F)
+where
+    F: Fn(usize, &mut [Vec3], Option<&mut [Vec3]>) + Send + Sync,
+{
+    match (b, parallel) {
+        (Some(b), true) => a.par_chunks_mut(a_size).zip(b.par_chunks_mut(b_size)).enumerate().for_each(|(k, (x, y))| f(k, x, Some(y))),
+        (Some(b), false) => a.chunks_mut(a_size).zip(b.chunks_mut(b_size)).enumerate().for_each(|(k, (x, y))| f(k, x, Some(y))),
+        (None, true) => a.par_chunks_mut(a_size).enumerate().for_each(|(k, x)| f(k, x, None)),
+        (None, false) => a.chunks_mut(a_size).enumerate().for_each(|(k, x)| f(k, x, None)),
+    }
+}
+
+/// Propagates and collects layers `w0..w1` of face `ff`, a run of layers at a time (`RUN_BYTES`):
+/// each run is gathered once for all the face's directions, which then run in parallel, and
+/// collected while its T is in cache. Direction i's map is `maps`' i-th map-sized chunk, its T
+/// the i-th slab-sized chunk of `t`, its boundary radiance `boundary[i]`. A run is at most a
+/// few ms; the caller reports a cancel.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn sweep_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, table: &PhaseTable, u_prev: &[Vec3], boundary: &[Vec3], maps: &mut [Vec3], t: &mut [Vec3], (w0, w1): (usize, usize), mut targets: Targets, progress: &dyn Progress) {
     let first = ff.face * dirs.per_face();
@@ -214,19 +236,26 @@ pub(super) fn sweep_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, tabl
     let map_len = ff.map_len();
     let slab = (w1 - w0) * map_len;
     let weights = by_incoming(dirs, table, ff.face);
-    let mut layer = Layer::new(face_dirs, map_len);
-    let slots: Vec<usize> = face_dirs.iter().map(|d| layer.slot(d)).collect();
-    for w in w0..w1 {
+    let layer_bytes = face_dirs.len() * map_len * std::mem::size_of::<Vec3>();
+    let run = (RUN_BYTES / layer_bytes.max(1)).clamp(1, (w1 - w0).max(1));
+    let parallel = map_len * face_dirs.len() * run >= PARALLEL_RUN;
+    let mut layers = Layers::new(face_dirs, map_len, run);
+    let slots: Vec<usize> = face_dirs.iter().map(|d| layers.slot(d)).collect();
+    let mut wa = w0;
+    while wa < w1 {
         if progress.cancelled() {
             return;
         }
-        layer.gather(grid, ff, w, table.m, u_prev);
-        let gathered = &layer;
-        let at = (w - w0) * map_len;
-        t.par_chunks_mut(slab).zip(maps.par_chunks_mut(map_len)).enumerate().for_each(|(li, (tc, map))| {
-            propagate_layer(ff, grid.h, &face_dirs[li], gathered, slots[li], boundary[li], map, w, &mut tc[at..at + map_len]);
+        let ws = wa..(wa + run).min(w1);
+        layers.gather(grid, ff, ws.clone(), table.m, u_prev, parallel);
+        let gathered = &layers;
+        let (at, end) = ((ws.start - w0) * map_len, (ws.end - w0) * map_len);
+        for_each_chunk(parallel, t, slab, Some(maps), map_len, |li, tc, map| {
+            let map = map.expect("a map per direction");
+            propagate_layers(ff, grid.h, &face_dirs[li], gathered, slots[li], boundary[li], map, ws.clone(), &mut tc[at..end]);
         });
-        let layer_targets = Targets { u_cur: &mut *targets.u_cur, j: targets.j.as_deref_mut(), camera: targets.camera, albedo: targets.albedo };
-        collect_layer(grid, dirs, table, &weights, ff, &t[at..], slab, w, layer_targets);
+        let run_targets = Targets { u_cur: &mut *targets.u_cur, j: targets.j.as_deref_mut(), camera: targets.camera, albedo: targets.albedo };
+        collect_layers(grid, dirs, table, &weights, ff, &t[at..], slab, ws.clone(), run_targets, parallel);
+        wa = ws.end;
     }
 }
