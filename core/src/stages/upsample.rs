@@ -6,7 +6,8 @@
 //! after upsampling restores the density's full resolution exactly where the medium is. The
 //! range weight keeps J from bleeding across density edges: at the rim of a cloud the coarse
 //! cells half outside hold the bright unshadowed light, and a fine voxel inside the cloud should
-//! take its light from coarse cells of similar density.
+//! take its light from coarse cells of similar density. With `spatial_sigma` 0 (lpm's) the
+//! spatial weights are trilinear: the filter interpolates a J that needs no smoothing.
 
 use glam::{Affine3A, IVec3, Vec3};
 use rayon::prelude::*;
@@ -26,7 +27,8 @@ pub struct Upsampling {
     pub upsample: bool,
     /// The range Gaussian's width, as a fraction of the largest coarse density.
     pub range_sigma: f32,
-    /// The spatial Gaussian's width, in coarse cells.
+    /// The spatial Gaussian's width, in coarse cells; 0: no Gaussian, the trilinear (tent)
+    /// weights of the coarse points around the output point (`Bilateral::visit`).
     pub spatial_sigma: f32,
 }
 
@@ -59,7 +61,8 @@ pub struct Bilateral<'m> {
     /// The window's dims (the whole grid's but for z).
     dims: IVec3,
     inv_range: f32,
-    inv_spatial: f32,
+    /// 1 / (2 sigma^2) of the spatial Gaussian; None: tent weights.
+    inv_spatial: Option<f32>,
     radius: i32,
 }
 
@@ -75,14 +78,15 @@ impl<'m> Bilateral<'m> {
             to_coarse,
             dims: IVec3::new(coarse.dims[0] as i32, coarse.dims[1] as i32, coarse.dims[2] as i32),
             inv_range: 1.0 / (2.0 * (settings.range_sigma * max_density).powi(2)),
-            inv_spatial: 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma),
+            inv_spatial: (settings.spatial_sigma > 0.0).then(|| 1.0 / (2.0 * settings.spatial_sigma * settings.spatial_sigma)),
             radius: (2.0 * settings.spatial_sigma).ceil().max(1.0) as i32,
         }
     }
 
     /// `f(coarse point's index, q - its position, weight)` for each coarse point around `q`
     /// (coarse index coordinates, relative to the window) of an output point of density
-    /// `rho`, in a fixed order.
+    /// `rho`, in a fixed order. With tent weights only the 8 points of q's coarse cell have
+    /// a weight: the filter interpolates, where the Gaussian also smooths.
     #[inline(always)]
     pub fn visit(&self, q: Vec3, rho: f32, mut f: impl FnMut(usize, Vec3, f32)) {
         let (cd, radius) = (self.dims, self.radius);
@@ -96,8 +100,19 @@ impl<'m> Bilateral<'m> {
                     }
                     let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
                     let d = q - c.as_vec3();
+                    let spatial = match self.inv_spatial {
+                        Some(inv) => -d.length_squared() * inv,
+                        None => {
+                            let t = (Vec3::ONE - d.abs()).max(Vec3::ZERO);
+                            let w = t.x * t.y * t.z;
+                            if w <= 0.0 {
+                                continue;
+                            }
+                            w.ln()
+                        }
+                    };
                     let dr = rho - self.density[ci];
-                    f(ci, d, (-d.length_squared() * self.inv_spatial - dr * dr * self.inv_range).exp());
+                    f(ci, d, (spatial - dr * dr * self.inv_range).exp());
                 }
             }
         }
@@ -166,5 +181,63 @@ pub fn fill_plane(medium: &Medium, mip: &MediumMip, out: ([u32; 3], glam::Affine
             }
             slab[(i + nx * j) as usize] = medium.sigma_s(rho) * estimate(x, rho);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A coarse J falling e^2 a cell along x (a lit face of a medium two free paths thick a
+    /// cell) over a uniform density, and what the filter makes of it at q (coarse index space).
+    fn filtered(spatial_sigma: f32, q: Vec3) -> Vec3 {
+        let n = 6u32;
+        let data = (0..n * n * n).map(|i| Vec3::splat((-2.0 * (i % n) as f32).exp())).collect();
+        let merged = Merged { j: ScatteringGrid { dims: [n; 3], index_to_world: Affine3A::IDENTITY, data }, density: vec![1.0; (n * n * n) as usize] };
+        let settings = Upsampling { output_resolution: 12.into(), upsample: true, range_sigma: 0.25, spatial_sigma };
+        let filter = Bilateral::new(&merged, &settings);
+        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
+        filter.visit(q, 1.0, |ci, _, w| {
+            sum += merged.j.data[ci] * w;
+            wsum += w;
+        });
+        sum / wsum
+    }
+
+    #[test]
+    fn tent_weights_interpolate_where_the_gaussian_smooths() {
+        // At a cell's centre the tent gives the cell's J, between centres the linear blend:
+        // exact to f32 rounding. The Gaussian of 0.7 cells (pop's kind of filter) pulls the
+        // lit face's cell (x = 0) towards the darker cells behind it: 0.76 of its J.
+        let at = |x: f32| filtered(0.0, Vec3::new(x, 2.0, 2.0)).x;
+        assert!((at(1.0) - (-2.0f32).exp()).abs() < 1e-6, "{}", at(1.0));
+        let mid = 0.75 * (-2.0f32).exp() + 0.25 * (-4.0f32).exp();
+        assert!((at(1.25) - mid).abs() < 1e-6, "{} {mid}", at(1.25));
+        assert!((at(0.0) - 1.0).abs() < 1e-6, "{}", at(0.0));
+        let smoothed = filtered(0.7, Vec3::new(0.0, 2.0, 2.0)).x;
+        assert!(smoothed < 0.85, "the Gaussian kept the cell's value ({smoothed}): the test no longer shows what the tent is for");
+    }
+
+    #[test]
+    fn tent_weights_keep_the_range_weight_at_density_edges() {
+        // An empty coarse cell full of bright J beside a dense one: the output point of the
+        // dense cell's density, a quarter cell from the empty one, takes almost none of it.
+        let mut data = vec![Vec3::ONE; 8];
+        let mut density = vec![1.0; 8];
+        for i in (0..8).filter(|i| i % 2 == 0) {
+            data[i] = Vec3::splat(100.0);
+            density[i] = 0.0;
+        }
+        let merged = Merged { j: ScatteringGrid { dims: [2; 3], index_to_world: Affine3A::IDENTITY, data }, density };
+        let settings = Upsampling { output_resolution: 4.into(), upsample: true, range_sigma: 0.25, spatial_sigma: 0.0 };
+        let filter = Bilateral::new(&merged, &settings);
+        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
+        filter.visit(Vec3::new(0.75, 0.5, 0.5), 1.0, |ci, _, w| {
+            sum += merged.j.data[ci] * w;
+            wsum += w;
+        });
+        let j = (sum / wsum).x;
+        // Range weight e^-8 on the empty cells, a third of the tent's: J 1 + 99 x 1.1e-4.
+        assert!(j < 1.02, "{j}");
     }
 }

@@ -12,9 +12,10 @@
 //! whose working memory fits `memory_budget` (stream.rs, Sec. 4.2).
 //!
 //! S = (the compositor's exact single scattering) + sigma_s x J upsampled by pop's
-//! density-guided filter. The first propagation (dome, emission, and the sun in `boundary`
-//! mode) and the exact first order of the other lights (lights.rs) make U of the first order;
-//! J gathers orders two and up.
+//! density-guided filter, with trilinear weights in place of its Gaussian (`spatial_sigma` 0:
+//! J is interpolated, not smoothed). The first propagation (dome, emission, and the sun in
+//! `boundary` mode) and the exact first order of the other lights (lights.rs) make U of the
+//! first order; J gathers orders two and up.
 //!
 //! Departures from the paper, each where it is made: T is the exact segment mean
 //! (propagate.rs); J from the fine bins (collect.rs); exact first order for distant and local

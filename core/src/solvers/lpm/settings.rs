@@ -79,8 +79,11 @@ crate::settings! {
             "joint bilateral upsampling guided by the density (off: trilinear)";
         range_sigma: f32 = 0.25, range(> 0),
             "range sigma of the bilateral filter, a fraction of the largest density";
-        spatial_sigma: f32 = 0.7, range(> 0, <= 4),
-            "spatial sigma of the bilateral filter, in propagation cells";
+        /// 0: J is deterministic and, in a medium a free path or more thick a cell, changes
+        /// across a cell; a Gaussian moved the lit face's light inward (docs/solvers/lpm.md,
+        /// "J interpolated, not smoothed").
+        spatial_sigma: f32 = 0.0, range(>= 0, <= 4),
+            "spatial sigma of the bilateral filter, in propagation cells (0: trilinear weights, J interpolated between the cells, not smoothed)";
         /// For a medium of g <= 0.5; `dome_directions_for` takes more for a forward lobe.
         dome_directions: u32 = 32, range(>= 1, <= 1024),
             "dome directions of the exact single scattering (g up to 0.5; a forward-scattering medium takes up to 8x more)";
