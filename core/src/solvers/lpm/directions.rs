@@ -110,6 +110,20 @@ impl Directions {
         Directions { k, s, dirs, storage_solid_angle, sub }
     }
 
+    /// The most storage bins the directions of one face read from (what a sweep gathers a
+    /// cell: `propagate::Layers`).
+    pub fn bins_per_face(&self) -> usize {
+        (0..FACES)
+            .map(|f| {
+                let mut bins: Vec<usize> = self.dirs[f * self.per_face()..(f + 1) * self.per_face()].iter().map(|d| d.storage).collect();
+                bins.sort_unstable();
+                bins.dedup();
+                bins.len()
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
     pub fn per_face(&self) -> usize {
         self.k * self.k
     }

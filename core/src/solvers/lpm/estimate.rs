@@ -54,15 +54,15 @@ pub fn memory(lo: Vec3, hi: Vec3, settings: &LpmSettings) -> Result<LpmMemory> {
     settings.validate()?;
     let (dims, _, _) = LpmGrid::geometry_of_box(lo, hi, settings.grid_resolution);
     let dirs = Directions::new(settings.lattice_side() as usize, settings.storage_per_face as usize);
-    let (p, m) = (dirs.per_face(), dirs.storage_len());
+    let (p, m, bins) = (dirs.per_face(), dirs.storage_len(), dirs.bins_per_face());
     let cells = dims.iter().map(|&d| d as u64).product::<u64>();
     let largest = |bytes: &dyn Fn(usize, usize) -> u64, layers: [usize; FACES]| (0..FACES).map(|f| bytes(FaceFrame::from_dims(dims, f).map_len(), layers[f])).max().unwrap_or(0);
     let in_memory_bytes = match stream::plan(dims, &dirs, settings.memory_budget) {
-        Ok(layers) => cell_bytes(cells, m) + largest(&|map, l| stream::working_bytes(map, p, l), layers),
+        Ok(layers) => cell_bytes(cells, m) + largest(&|map, l| stream::working_bytes(map, p, bins, l), layers),
         Err(_) => 0,
     };
     let out_of_core_bytes = match out_of_core::plan(dims, &dirs, m, settings.memory_budget) {
-        Ok(layers) => largest(&|map, l| out_of_core::slab_bytes(map, p, m, l), layers),
+        Ok(layers) => largest(&|map, l| out_of_core::slab_bytes(map, p, bins, m, l), layers),
         Err(_) => 0,
     };
     Ok(LpmMemory { grid_dims: dims, in_memory_bytes, out_of_core_bytes, scratch_bytes: scratch_bytes(cells, m) })

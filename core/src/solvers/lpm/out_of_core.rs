@@ -48,7 +48,7 @@ use super::delta_m::DeltaM;
 use super::directions::{Directions, FACES};
 use super::grid::LpmGrid;
 use super::phase_table::PhaseTable;
-use super::propagate::FaceFrame;
+use super::propagate::{FaceFrame, Layers};
 use super::slab_store::SlabStore;
 use super::stream::{sweep_slab, SweepStats};
 use super::{lights, FirstOrder, Lpm, LpmReport, Overrides};
@@ -63,17 +63,18 @@ use crate::vdb::RgbVdbStream;
 
 const VEC3: u64 = std::mem::size_of::<Vec3>() as u64;
 
-/// Bytes one slab of `layers` layers needs out of core: the maps and T (`stream::working_bytes`)
-/// plus the slab's boxes of sigma_t, U in, U out (m values a cell each) and J.
-pub fn slab_bytes(map_len: usize, p: usize, m: usize, layers: usize) -> u64 {
-    super::stream::working_bytes(map_len, p, layers) + map_len as u64 * layers as u64 * (2 * m as u64 + 2) * VEC3
+/// Bytes one slab of `layers` layers needs out of core: the maps, T and the gathered run
+/// (`stream::working_bytes`, `bins` storage bins a face) plus the slab's boxes of sigma_t, U
+/// in, U out (m values a cell each) and J.
+pub fn slab_bytes(map_len: usize, p: usize, bins: usize, m: usize, layers: usize) -> u64 {
+    super::stream::working_bytes(map_len, p, bins, layers) + map_len as u64 * layers as u64 * (2 * m as u64 + 2) * VEC3
 }
 
 /// Slab thickness of each face out of core: the most layers whose `slab_bytes` fit
 /// `memory_budget` (the whole depth when it is 0); refused, with the size needed, when one
 /// layer does not fit.
 pub fn plan(dims: [usize; 3], dirs: &Directions, m: usize, memory_budget: u64) -> Result<[usize; FACES]> {
-    let p = dirs.per_face();
+    let (p, bins) = (dirs.per_face(), dirs.bins_per_face());
     let mut layers = [0usize; FACES];
     for (f, l) in layers.iter_mut().enumerate() {
         let ff = FaceFrame::from_dims(dims, f);
@@ -81,7 +82,7 @@ pub fn plan(dims: [usize; 3], dirs: &Directions, m: usize, memory_budget: u64) -
             *l = ff.nw;
             continue;
         }
-        let one = slab_bytes(ff.map_len(), p, m, 1);
+        let one = slab_bytes(ff.map_len(), p, bins, m, 1);
         if one > memory_budget {
             return Err(Error::TooLarge(format!(
                 "lpm out of core: one slice (1 layer of {}x{} cells, {p} directions, {m} storage bins) needs {} but memory_budget is {}; lower grid_resolution or directions, or raise memory_budget",
@@ -91,7 +92,7 @@ pub fn plan(dims: [usize; 3], dirs: &Directions, m: usize, memory_budget: u64) -
                 crate::budget::human(memory_budget)
             )));
         }
-        *l = (1..=ff.nw).rev().find(|&k| slab_bytes(ff.map_len(), p, m, k) <= memory_budget).unwrap_or(1);
+        *l = (1..=ff.nw).rev().find(|&k| slab_bytes(ff.map_len(), p, bins, m, k) <= memory_budget).unwrap_or(1);
     }
     Ok(layers)
 }
@@ -165,6 +166,7 @@ impl Sweeps<'_> {
         let p = self.dirs.per_face();
         let m = self.table.m;
         let (mut maps, mut t, mut u_prev, mut u_cur, mut j) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut gathered = Layers::with_capacity(0, 0);
         let mut sub = LpmGrid { dims, lo: lo_world, h, offset: [0; 3], density: Vec::new(), sigma_t: Vec::new() };
         let mut largest = 0.0f32;
         for f in 0..FACES {
@@ -191,7 +193,7 @@ impl Sweeps<'_> {
                 let slab = (w1 - w0) * ff.map_len();
                 t.resize(p * slab, Vec3::ZERO);
                 let targets = Targets { u_cur: &mut u_cur, j: with_j.then_some(&mut j[..]), camera: self.camera, albedo: self.albedo };
-                sweep_slab(&sub, &ff, self.dirs, self.table, &u_prev, &boundary[f * p..(f + 1) * p], &mut maps, &mut t, (w0, w1), targets, progress);
+                sweep_slab(&sub, &ff, self.dirs, self.table, &u_prev, &boundary[f * p..(f + 1) * p], &mut maps, &mut t, &mut gathered, (w0, w1), targets, progress);
                 if progress.cancelled() {
                     return Err(Error::Cancelled);
                 }
@@ -204,7 +206,7 @@ impl Sweeps<'_> {
                     largest = u_cur.iter().fold(largest, |a, x| a.max(x.abs().max_element()));
                 }
                 let held = maps.capacity() + t.capacity() + sub.sigma_t.capacity() + u_prev.capacity() + u_cur.capacity() + j.capacity();
-                stats.peak_working_bytes = stats.peak_working_bytes.max(held as u64 * VEC3);
+                stats.peak_working_bytes = stats.peak_working_bytes.max(held as u64 * VEC3 + gathered.bytes());
                 stats.slabs += 1;
                 w0 = w1;
             }

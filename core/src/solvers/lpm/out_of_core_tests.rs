@@ -123,12 +123,12 @@ fn lpm_out_of_core_equals_in_memory_with_emission_and_dome() {
 #[test]
 fn lpm_out_of_core_memory_is_a_slab() {
     let dirs = super::directions::Directions::new(5, 1);
-    let one = slab_bytes(128 * 128, 25, 6, 1);
+    let one = slab_bytes(128 * 128, 25, 1, 6, 1);
     let err = plan([128; 3], &dirs, 6, one - 1).unwrap_err().to_string();
     assert!(err.contains("memory_budget") && err.contains("out of core"), "{err}");
-    assert_eq!(plan([128; 3], &dirs, 6, slab_bytes(128 * 128, 25, 6, 8)).unwrap(), [8; 6]);
-    assert_eq!(plan([128; 3], &dirs, 6, slab_bytes(128 * 128, 25, 6, 9) - 1).unwrap(), [8; 6]);
-    assert_eq!(slab_bytes(256 * 256, 25, 6, 16) / slab_bytes(128 * 128, 25, 6, 16), 4);
+    assert_eq!(plan([128; 3], &dirs, 6, slab_bytes(128 * 128, 25, 1, 6, 8)).unwrap(), [8; 6]);
+    assert_eq!(plan([128; 3], &dirs, 6, slab_bytes(128 * 128, 25, 1, 6, 9) - 1).unwrap(), [8; 6]);
+    assert_eq!(slab_bytes(256 * 256, 25, 1, 6, 16) / slab_bytes(128 * 128, 25, 1, 6, 16), 4);
     let sc = case("dome_uniform");
     let dir = scratch("memory");
     let peak = |res: u32| {
@@ -142,10 +142,13 @@ fn lpm_out_of_core_memory_is_a_slab() {
     let (n32, p32, disk32) = peak(32);
     eprintln!("out of core, slabs of 4: {n16}^3 {p16} B ({disk16} B on disk), {n32}^3 {p32} B ({disk32} B on disk): x{:.2} in memory, x{:.2} on disk", p32 as f64 / p16 as f64, disk32 as f64 / disk16 as f64);
     for (n, p) in [(n16, p16), (n32, p32)] {
-        let formula = slab_bytes(n * n, 9, 6, 4);
+        let formula = slab_bytes(n * n, 9, 1, 6, 4);
         assert!(p >= formula && p <= formula + 64 * (n * n) as u64, "{n}: {p} vs formula {formula}");
     }
-    assert!((p32 as f64 / p16 as f64 - 4.0).abs() < 0.05, "{p16} {p32}");
+    // A little under 4x: the gathered run of layers is at most `RUN_BYTES` of T (4 layers of
+    // the 16^3 grid's map, 2 of the 32^3's).
+    let grows = p32 as f64 / p16 as f64;
+    assert!(grows > 3.5 && grows < 4.05, "{p16} {p32}");
     assert!((disk32 as f64 / disk16 as f64 - 8.0).abs() < 0.05, "the arrays themselves grow with the volume, on disk");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -282,8 +285,8 @@ fn lpm_estimate_matches_the_solves_plan() {
     let dir = scratch("estimate");
     let base = LpmSettings { grid_resolution: 16, directions: 9, max_orders: 1, first_order: FirstOrder::Boundary, ..Default::default() };
     let n2 = 16 * 16;
-    let budget = slab_bytes(n2, 9, 6, 5) + 100;
-    for (out_of_core, memory_budget) in [(false, 0), (false, super::stream::working_bytes(n2, 9, 3)), (true, budget), (true, 0)] {
+    let budget = slab_bytes(n2, 9, 1, 6, 5) + 100;
+    for (out_of_core, memory_budget) in [(false, 0), (false, super::stream::working_bytes(n2, 9, 1, 3)), (true, budget), (true, 0)] {
         let s = LpmSettings { out_of_core, memory_budget, ..base.clone() };
         let est = super::estimate::memory(lo, hi, &s).unwrap();
         let (_, rep) = solve(&sc, s.clone(), Overrides { j_only: true, ..Default::default() }, Some(&dir), &NoProgress).unwrap();
@@ -299,7 +302,7 @@ fn lpm_estimate_matches_the_solves_plan() {
         assert!(peak >= formula && peak <= formula + 64 * n2 as u64, "{what}: peak {peak} vs estimate {formula}");
         assert!(memory_budget == 0 || formula <= memory_budget, "{what}: {formula} over the budget {memory_budget}");
     }
-    let tiny = LpmSettings { out_of_core: true, memory_budget: slab_bytes(n2, 9, 6, 1) - 1, ..base.clone() };
+    let tiny = LpmSettings { out_of_core: true, memory_budget: slab_bytes(n2, 9, 1, 6, 1) - 1, ..base.clone() };
     assert_eq!(super::estimate::memory(lo, hi, &tiny).unwrap().out_of_core_bytes, 0);
     assert!(solve(&sc, tiny, Overrides::default(), Some(&dir), &NoProgress).is_err());
     assert!(super::estimate::memory(lo, hi, &LpmSettings { directions: 7, ..base }).is_err(), "invalid settings are refused");

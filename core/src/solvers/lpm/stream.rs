@@ -22,15 +22,26 @@ use crate::error::{Error, Result};
 use crate::stages::Progress;
 
 /// Bytes of the propagation's working buffers for a face whose map has `map_len` cells, `p`
-/// directions and slabs of `layers` layers: the maps and the slab's T.
-pub fn working_bytes(map_len: usize, p: usize, layers: usize) -> u64 {
-    (p as u64) * (map_len as u64) * (layers as u64 + 1) * std::mem::size_of::<Vec3>() as u64
+/// directions reading `bins` storage bins and slabs of `layers` layers: the maps, the slab's
+/// T, and the run of layers gathered for the sweep (`propagate::Layers`: sigma_t and the bins'
+/// U, `run_layers` layers).
+pub fn working_bytes(map_len: usize, p: usize, bins: usize, layers: usize) -> u64 {
+    let gathered = (1 + bins as u64) * (map_len as u64) * run_layers(map_len, p, layers) as u64;
+    ((p as u64) * (map_len as u64) * (layers as u64 + 1) + gathered) * std::mem::size_of::<Vec3>() as u64
+}
+
+/// Layers a sweep gathers and collects at a time in a slab of `layers` (`RUN_BYTES`): at
+/// least one, at most the slab.
+pub fn run_layers(map_len: usize, p: usize, layers: usize) -> usize {
+    let layer_bytes = p * map_len * std::mem::size_of::<Vec3>();
+    (RUN_BYTES / layer_bytes.max(1)).clamp(1, layers.max(1))
 }
 
 /// Slab thickness of each face: the whole depth when `memory_budget` is 0, else the most
 /// layers whose working buffers fit it. Refused, with the size needed, when one layer does
 /// not fit.
 pub fn plan(dims: [usize; 3], dirs: &Directions, memory_budget: u64) -> Result<[usize; FACES]> {
+    let (p, bins) = (dirs.per_face(), dirs.bins_per_face());
     let mut layers = [0usize; FACES];
     for (f, l) in layers.iter_mut().enumerate() {
         let ff = FaceFrame::from_dims(dims, f);
@@ -38,7 +49,7 @@ pub fn plan(dims: [usize; 3], dirs: &Directions, memory_budget: u64) -> Result<[
             *l = ff.nw;
             continue;
         }
-        let one = working_bytes(ff.map_len(), dirs.per_face(), 1);
+        let one = working_bytes(ff.map_len(), p, bins, 1);
         if one > memory_budget {
             return Err(Error::TooLarge(format!(
                 "lpm: one slice (1 layer of {}x{} cells, {} directions) needs {} but memory_budget is {}; lower grid_resolution or directions, or raise memory_budget",
@@ -49,8 +60,7 @@ pub fn plan(dims: [usize; 3], dirs: &Directions, memory_budget: u64) -> Result<[
                 crate::budget::human(memory_budget)
             )));
         }
-        let per_layer = working_bytes(ff.map_len(), dirs.per_face(), 0);
-        *l = ((memory_budget / per_layer) as usize - 1).clamp(1, ff.nw);
+        *l = (1..=ff.nw).rev().find(|&k| working_bytes(ff.map_len(), p, bins, k) <= memory_budget).unwrap_or(1);
     }
     Ok(layers)
 }
@@ -63,13 +73,14 @@ pub struct SweepStats {
     pub slabs: usize,
 }
 
-/// The propagation's working buffers (the maps and one slab's T), sized for the largest face
-/// and allocated once per solve: at 128^3 and 25 directions T is 630 MB, whose first touch
-/// alone takes about a second, too long to repeat per face and order or to do without
-/// looking at the cancel flag.
+/// The propagation's working buffers (the maps, one slab's T and the gathered run of layers),
+/// sized for the largest face and allocated once per solve: at 128^3 and 25 directions T is
+/// 630 MB, whose first touch alone takes about a second, too long to repeat per face and order
+/// or to do without looking at the cancel flag.
 pub struct SweepBuffers {
     maps: Vec<Vec3>,
     t: Vec<Vec3>,
+    gathered: Layers,
 }
 
 /// Bytes touched between two looks at the cancel flag while the buffers are first filled.
@@ -78,20 +89,23 @@ const FILL_CHUNK: usize = 1 << 20;
 impl SweepBuffers {
     pub fn new(grid: &LpmGrid, dirs: &Directions, layers: &[usize; FACES], progress: &dyn Progress) -> Result<Self> {
         let p = dirs.per_face();
-        let (mut maps_len, mut t_len) = (0u64, 0u64);
+        let (mut maps_len, mut t_len, mut run_cells) = (0u64, 0u64, 0usize);
         for (f, &l) in layers.iter().enumerate() {
             let ff = FaceFrame::new(grid, f);
-            let s = l.clamp(1, ff.nw.max(1)) as u64;
+            let s = l.clamp(1, ff.nw.max(1));
             maps_len = maps_len.max(p as u64 * ff.map_len() as u64);
-            t_len = t_len.max(p as u64 * s * ff.map_len() as u64);
+            t_len = t_len.max(p as u64 * s as u64 * ff.map_len() as u64);
+            run_cells = run_cells.max(ff.map_len() * run_layers(ff.map_len(), p, s));
         }
         let maps = filled("lpm propagation maps", maps_len, progress)?;
         let t = filled("lpm slice buffer", t_len, progress)?;
-        Ok(SweepBuffers { maps, t })
+        let bins = dirs.bins_per_face();
+        crate::budget::check_elements::<Vec3>("lpm gathered layers", (run_cells * (1 + bins)) as u64)?;
+        Ok(SweepBuffers { maps, t, gathered: Layers::with_capacity(run_cells, bins) })
     }
 
     fn bytes(&self) -> u64 {
-        ((self.maps.capacity() + self.t.capacity()) * std::mem::size_of::<Vec3>()) as u64
+        ((self.maps.capacity() + self.t.capacity()) * std::mem::size_of::<Vec3>()) as u64 + self.gathered.bytes()
     }
 }
 
@@ -191,7 +205,7 @@ pub fn sweep(
             let w1 = (w0 + s).min(ff.nw);
             let slab = (w1 - w0) * ff.map_len();
             let targets = Targets { u_cur: &mut *u_cur, j: j.as_deref_mut(), camera, albedo };
-            sweep_slab(grid, &ff, dirs, table, u_prev, &boundary[first..first + p], maps, &mut t[..p * slab], (w0, w1), targets, progress);
+            sweep_slab(grid, &ff, dirs, table, u_prev, &boundary[first..first + p], maps, &mut t[..p * slab], &mut buffers.gathered, (w0, w1), targets, progress);
             if progress.cancelled() {
                 return Err(Error::Cancelled);
             }
@@ -227,19 +241,19 @@ where
 /// Propagates and collects layers `w0..w1` of face `ff`, a run of layers at a time (`RUN_BYTES`):
 /// each run is gathered once for all the face's directions, which then run in parallel, and
 /// collected while its T is in cache. Direction i's map is `maps`' i-th map-sized chunk, its T
-/// the i-th slab-sized chunk of `t`, its boundary radiance `boundary[i]`. A run is at most a
-/// few ms; the caller reports a cancel.
+/// the i-th slab-sized chunk of `t`, its boundary radiance `boundary[i]`; `layers` is the
+/// caller's buffers for the gathered run (reset here). A run is at most a few ms; the caller
+/// reports a cancel.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn sweep_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, table: &PhaseTable, u_prev: &[Vec3], boundary: &[Vec3], maps: &mut [Vec3], t: &mut [Vec3], (w0, w1): (usize, usize), mut targets: Targets, progress: &dyn Progress) {
+pub(super) fn sweep_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, table: &PhaseTable, u_prev: &[Vec3], boundary: &[Vec3], maps: &mut [Vec3], t: &mut [Vec3], layers: &mut Layers, (w0, w1): (usize, usize), mut targets: Targets, progress: &dyn Progress) {
     let first = ff.face * dirs.per_face();
     let face_dirs = &dirs.dirs[first..first + dirs.per_face()];
     let map_len = ff.map_len();
     let slab = (w1 - w0) * map_len;
     let weights = by_incoming(dirs, table, ff.face);
-    let layer_bytes = face_dirs.len() * map_len * std::mem::size_of::<Vec3>();
-    let run = (RUN_BYTES / layer_bytes.max(1)).clamp(1, (w1 - w0).max(1));
+    let run = run_layers(map_len, face_dirs.len(), w1 - w0);
     let parallel = map_len * face_dirs.len() * run >= PARALLEL_RUN;
-    let mut layers = Layers::new(face_dirs, map_len, run);
+    layers.reset(face_dirs, map_len, run);
     let slots: Vec<usize> = face_dirs.iter().map(|d| layers.slot(d)).collect();
     let mut wa = w0;
     while wa < w1 {
@@ -248,7 +262,7 @@ pub(super) fn sweep_slab(grid: &LpmGrid, ff: &FaceFrame, dirs: &Directions, tabl
         }
         let ws = wa..(wa + run).min(w1);
         layers.gather(grid, ff, ws.clone(), table.m, u_prev, parallel);
-        let gathered = &layers;
+        let gathered = &*layers;
         let (at, end) = ((ws.start - w0) * map_len, (ws.end - w0) * map_len);
         for_each_chunk(parallel, t, slab, Some(maps), map_len, |li, tc, map| {
             let map = map.expect("a map per direction");
