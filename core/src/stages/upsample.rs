@@ -83,6 +83,17 @@ impl<'m> Bilateral<'m> {
         }
     }
 
+    /// The weighted mean of `data` (a value per coarse point) around `q` for an output point
+    /// of density `rho`; None where the weights all but vanish.
+    pub fn mean(&self, data: &[Vec3], q: Vec3, rho: f32) -> Option<Vec3> {
+        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0f32);
+        self.visit(q, rho, |ci, _, w| {
+            sum += data[ci] * w;
+            wsum += w;
+        });
+        (wsum > 1e-20).then(|| sum / wsum)
+    }
+
     /// `f(coarse point's index, q - its position, weight)` for each coarse point around `q`
     /// (coarse index coordinates, relative to the window) of an output point of density
     /// `rho`, in a fixed order. With tent weights only the 8 points of q's coarse cell have
@@ -100,19 +111,18 @@ impl<'m> Bilateral<'m> {
                     }
                     let ci = (c.x + cd.x * (c.y + cd.y * c.z)) as usize;
                     let d = q - c.as_vec3();
-                    let spatial = match self.inv_spatial {
-                        Some(inv) => -d.length_squared() * inv,
+                    let dr = rho - self.density[ci];
+                    let range = -dr * dr * self.inv_range;
+                    match self.inv_spatial {
+                        Some(inv) => f(ci, d, (range - d.length_squared() * inv).exp()),
                         None => {
                             let t = (Vec3::ONE - d.abs()).max(Vec3::ZERO);
-                            let w = t.x * t.y * t.z;
-                            if w <= 0.0 {
-                                continue;
+                            let tent = t.x * t.y * t.z;
+                            if tent > 0.0 {
+                                f(ci, d, tent * range.exp());
                             }
-                            w.ln()
                         }
-                    };
-                    let dr = rho - self.density[ci];
-                    f(ci, d, (spatial - dr * dr * self.inv_range).exp());
+                    }
                 }
             }
         }
@@ -154,13 +164,7 @@ pub fn upsample_plane(medium: &Medium, mip: &MediumMip, win: &CoarseWindow, sett
         if !settings.upsample {
             return coarse.sample_index(q);
         }
-        let mut sum = Vec3::ZERO;
-        let mut wsum = 0.0f32;
-        filter.visit(q, rho, |ci, _, w| {
-            sum += coarse.data[ci] * w;
-            wsum += w;
-        });
-        if wsum > 1e-20 { sum / wsum } else { coarse.sample_index(q) }
+        filter.mean(&coarse.data, q, rho).unwrap_or_else(|| coarse.sample_index(q))
     });
 }
 
@@ -195,13 +199,7 @@ mod tests {
         let data = (0..n * n * n).map(|i| Vec3::splat((-2.0 * (i % n) as f32).exp())).collect();
         let merged = Merged { j: ScatteringGrid { dims: [n; 3], index_to_world: Affine3A::IDENTITY, data }, density: vec![1.0; (n * n * n) as usize] };
         let settings = Upsampling { output_resolution: 12.into(), upsample: true, range_sigma: 0.25, spatial_sigma };
-        let filter = Bilateral::new(&merged, &settings);
-        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
-        filter.visit(q, 1.0, |ci, _, w| {
-            sum += merged.j.data[ci] * w;
-            wsum += w;
-        });
-        sum / wsum
+        Bilateral::new(&merged, &settings).mean(&merged.j.data, q, 1.0).expect("weights")
     }
 
     #[test]
@@ -230,13 +228,7 @@ mod tests {
         }
         let merged = Merged { j: ScatteringGrid { dims: [2; 3], index_to_world: Affine3A::IDENTITY, data }, density };
         let settings = Upsampling { output_resolution: 4.into(), upsample: true, range_sigma: 0.25, spatial_sigma: 0.0 };
-        let filter = Bilateral::new(&merged, &settings);
-        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
-        filter.visit(Vec3::new(0.75, 0.5, 0.5), 1.0, |ci, _, w| {
-            sum += merged.j.data[ci] * w;
-            wsum += w;
-        });
-        let j = (sum / wsum).x;
+        let j = Bilateral::new(&merged, &settings).mean(&merged.j.data, Vec3::new(0.75, 0.5, 0.5), 1.0).expect("weights").x;
         // Range weight e^-8 on the empty cells, a third of the tent's: J 1 + 99 x 1.1e-4.
         assert!(j < 1.02, "{j}");
     }

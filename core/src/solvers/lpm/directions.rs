@@ -76,6 +76,14 @@ fn face_vector(f: usize, a: f64, b: f64) -> Vec3 {
     Vec3::new((c[0] / n) as f32, (c[1] / n) as f32, (c[2] / n) as f32)
 }
 
+/// The storage bins `dirs` read from, sorted, each once, into `out`.
+pub fn storage_bins(dirs: &[Direction], out: &mut Vec<usize>) {
+    out.clear();
+    out.extend(dirs.iter().map(|d| d.storage));
+    out.sort_unstable();
+    out.dedup();
+}
+
 impl Directions {
     pub fn new(k: usize, s: usize) -> Self {
         let k = k.max(1);
@@ -113,11 +121,10 @@ impl Directions {
     /// The most storage bins the directions of one face read from (what a sweep gathers a
     /// cell: `propagate::Layers`).
     pub fn bins_per_face(&self) -> usize {
+        let mut bins = Vec::new();
         (0..FACES)
             .map(|f| {
-                let mut bins: Vec<usize> = self.dirs[f * self.per_face()..(f + 1) * self.per_face()].iter().map(|d| d.storage).collect();
-                bins.sort_unstable();
-                bins.dedup();
+                storage_bins(&self.dirs[f * self.per_face()..(f + 1) * self.per_face()], &mut bins);
                 bins.len()
             })
             .max()

@@ -128,27 +128,17 @@ pub struct Layers {
 }
 
 impl Layers {
-    /// Buffers for runs of up to `layers` layers of a map of `map_len` cells, and the storage
-    /// bins of the face's directions `dirs`.
-    pub fn new(dirs: &[Direction], map_len: usize, layers: usize) -> Self {
-        let mut l = Layers::with_capacity(0, 0);
-        l.reset(dirs, map_len, layers);
-        l
-    }
-
     /// Empty buffers with room for `cells` cells of `bins` bins each: a solve allocates them
     /// once, for its largest face, and `reset`s them for each face.
     pub fn with_capacity(cells: usize, bins: usize) -> Self {
         Layers { bins: Vec::with_capacity(bins), map_len: 0, sigma_t: Vec::with_capacity(cells), source: Vec::with_capacity(cells * bins) }
     }
 
-    /// Makes the buffers those of `new(dirs, map_len, layers)`, within their capacity when
-    /// it is enough.
+    /// Makes the buffers hold runs of up to `layers` layers of a map of `map_len` cells, and
+    /// the storage bins of the face's directions `dirs`: within their capacity when it is
+    /// enough.
     pub fn reset(&mut self, dirs: &[Direction], map_len: usize, layers: usize) {
-        self.bins.clear();
-        self.bins.extend(dirs.iter().map(|d| d.storage));
-        self.bins.sort_unstable();
-        self.bins.dedup();
+        super::directions::storage_bins(dirs, &mut self.bins);
         self.map_len = map_len;
         self.sigma_t.resize(map_len * layers, Vec3::ZERO);
         self.source.resize(map_len * layers * self.bins.len(), Vec3::ZERO);
